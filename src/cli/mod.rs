@@ -1,0 +1,7 @@
+//! Subcommand implementations; each returns an error value, never panics on user input.
+
+pub mod model;
+pub mod preview;
+
+/// Error type of the command line: any displayable cause, rendered once by `main`.
+pub type CliResult = Result<(), Box<dyn std::error::Error + Send + Sync>>;

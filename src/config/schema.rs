@@ -1,0 +1,242 @@
+//! The typed configuration. Defaults live in `config/default.toml` (embedded), not in code, so a
+//! user reads every value in one file.
+
+use serde::Deserialize;
+
+use super::{ConfigError, Layers};
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    pub robot: RobotConfig,
+    pub support: SupportConfig,
+    pub preview: PreviewConfig,
+    pub hand: HandConfig,
+    pub gain_search: GainSearchConfig,
+}
+
+/// Reduced-model parameters of the robot (SPEC §1, §3).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotConfig {
+    /// Total mass M (kg).
+    pub mass: f64,
+    /// Constant CoM height z_c above the soles (m).
+    pub com_height: f64,
+    /// Gravity g (m/s²).
+    pub gravity: f64,
+}
+
+/// The support interval of the ZMP along each ground axis (m, in the feet frame).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SupportConfig {
+    pub x: [f64; 2],
+    pub y: [f64; 2],
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LqSolverKind {
+    /// Backward Riccati recursion, O(N).
+    Riccati,
+    /// Condensed dense normal equations (SPEC §2), O(N³): the reference.
+    Dense,
+}
+
+/// ZMP preview controller parameters (SPEC §2–3).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PreviewConfig {
+    /// Preview sampling period T (s).
+    pub period: f64,
+    /// Horizon length N (steps); the preview time is N·T.
+    pub horizon: usize,
+    /// ZMP tracking weight Q_e.
+    pub q_e: f64,
+    /// Jerk weight R.
+    pub r: f64,
+    pub solver: LqSolverKind,
+    /// Keep the predicted ZMP inside the support bounds as hard constraints (QP, clarabel).
+    pub zmp_constraints: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DampingMode {
+    /// K_d = 2 ζ √K_p follows the stiffness.
+    Critical,
+    /// K_d is a decision variable of its own.
+    Free,
+}
+
+/// Hand impedance (SPEC §4).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HandConfig {
+    /// Operational-space inertia M_e of the chest→hand chain (kg, 3×3 SPD), used by the reduced
+    /// models; the whole-body controller computes it from the robot model instead.
+    pub effective_mass: [[f64; 3]; 3],
+    /// Nominal stiffness K_p (1/s²), the fixed gain of C0 and C1.
+    pub kp: f64,
+    pub damping: DampingMode,
+    /// ζ for `damping = "critical"`.
+    pub damping_ratio: f64,
+    /// Nominal K_d (1/s) for `damping = "free"`.
+    pub kd: f64,
+    /// Desired hand position (m), held while the door pushes.
+    pub desired_position: [f64; 3],
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum GainSolverKind {
+    /// Bounded Gauss–Newton with exact Jacobians through the LQ solve (the default).
+    GaussNewton,
+    /// The paper's baseline: Nelder–Mead over a coarse gain schedule.
+    NelderMead,
+}
+
+/// C2's gain search (SPEC §5, eq. 26).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GainSearchConfig {
+    pub solver: GainSolverKind,
+    /// Q_t weights on the hand's [position, velocity, acceleration] errors.
+    pub q_t: [f64; 3],
+    /// S: weight on the gains themselves.
+    pub s: f64,
+    /// T_w: weight on gain changes between steps.
+    pub t_w: f64,
+    pub kp_bounds: [f64; 2],
+    pub kd_bounds: [f64; 2],
+    /// Knots of the piecewise-linear gain schedule searched by Gauss–Newton.
+    pub knots: usize,
+    /// Knots of the Nelder–Mead baseline (fewer: simplex methods scale badly).
+    pub nm_knots: usize,
+    pub max_iterations: usize,
+    pub nm_max_iterations: usize,
+    /// Relative cost decrease below which the search stops.
+    pub tolerance: f64,
+}
+
+impl Layers {
+    /// Deserialize and range-check the merged layers into a [`Config`].
+    pub fn build(&self) -> Result<Config, ConfigError> {
+        let c: Config = self.typed()?;
+        c.validate(self)?;
+        Ok(c)
+    }
+}
+
+impl Config {
+    fn validate(&self, l: &Layers) -> Result<(), ConfigError> {
+        let pos = |key: &str, v: f64| -> Result<(), ConfigError> {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(l.range_error(key, format!("must be finite and > 0, got {v}")))
+            }
+        };
+        let nonneg = |key: &str, v: f64| -> Result<(), ConfigError> {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(l.range_error(key, format!("must be finite and ≥ 0, got {v}")))
+            }
+        };
+        let interval = |key: &str, b: [f64; 2]| -> Result<(), ConfigError> {
+            if b.iter().all(|v| v.is_finite()) && b[0] < b[1] {
+                Ok(())
+            } else {
+                Err(l.range_error(key, format!("must be [min, max] with min < max, got {b:?}")))
+            }
+        };
+        pos("robot.mass", self.robot.mass)?;
+        pos("robot.com_height", self.robot.com_height)?;
+        pos("robot.gravity", self.robot.gravity)?;
+        interval("support.x", self.support.x)?;
+        interval("support.y", self.support.y)?;
+        pos("preview.period", self.preview.period)?;
+        if !(2..=20_000).contains(&self.preview.horizon) {
+            return Err(l.range_error(
+                "preview.horizon",
+                format!("must be in 2..=20000 steps, got {}", self.preview.horizon),
+            ));
+        }
+        pos("preview.q_e", self.preview.q_e)?;
+        pos("preview.r", self.preview.r)?;
+        let m = &self.hand.effective_mass;
+        let sym = (0..3)
+            .all(|i| (0..3).all(|j| (m[i][j] - m[j][i]).abs() <= 1e-9 * (1.0 + m[i][j].abs())));
+        let spd = nalgebra::Matrix3::from_fn(|i, j| m[i][j])
+            .cholesky()
+            .is_some();
+        if !sym || !spd || m.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(l.range_error(
+                "hand.effective_mass",
+                "must be a finite symmetric positive-definite 3×3 matrix",
+            ));
+        }
+        pos("hand.kp", self.hand.kp)?;
+        pos("hand.damping_ratio", self.hand.damping_ratio)?;
+        pos("hand.kd", self.hand.kd)?;
+        if self.hand.desired_position.iter().any(|v| !v.is_finite()) {
+            return Err(l.range_error("hand.desired_position", "must be finite"));
+        }
+        let g = &self.gain_search;
+        for (i, q) in g.q_t.iter().enumerate() {
+            nonneg(&format!("gain_search.q_t[{i}]"), *q)?;
+        }
+        nonneg("gain_search.s", g.s)?;
+        nonneg("gain_search.t_w", g.t_w)?;
+        interval("gain_search.kp_bounds", g.kp_bounds)?;
+        interval("gain_search.kd_bounds", g.kd_bounds)?;
+        if g.kp_bounds[0] <= 0.0 {
+            return Err(l.range_error(
+                "gain_search.kp_bounds",
+                "the lower stiffness bound must be > 0",
+            ));
+        }
+        if !(self.hand.kp >= g.kp_bounds[0] && self.hand.kp <= g.kp_bounds[1]) {
+            return Err(l.range_error(
+                "hand.kp",
+                format!(
+                    "nominal K_p {} lies outside gain_search.kp_bounds {:?}",
+                    self.hand.kp, g.kp_bounds
+                ),
+            ));
+        }
+        // The discrete impedance of eq. (24) must stay stable at the stiffest, most damped gains:
+        // the acceleration feedback factor K_p T²/2 + K_d T below 1 keeps it so.
+        let t = self.preview.period;
+        let kd_max = match self.hand.damping {
+            DampingMode::Critical => 2.0 * self.hand.damping_ratio * g.kp_bounds[1].sqrt(),
+            DampingMode::Free => g.kd_bounds[1],
+        };
+        if g.kp_bounds[1] * t * t / 2.0 + kd_max * t >= 1.0 {
+            return Err(l.range_error("gain_search.kp_bounds", format!("upper gains too stiff for preview.period = {t} s: K_p T²/2 + K_d T must stay < 1")));
+        }
+        for (key, n) in [
+            ("gain_search.knots", g.knots),
+            ("gain_search.nm_knots", g.nm_knots),
+        ] {
+            if !(2..=self.preview.horizon).contains(&n) {
+                return Err(l.range_error(key, format!("must be in 2..=preview.horizon, got {n}")));
+            }
+        }
+        if g.max_iterations == 0 || g.nm_max_iterations == 0 {
+            return Err(l.range_error("gain_search.max_iterations", "iteration limits must be ≥ 1"));
+        }
+        pos("gain_search.tolerance", g.tolerance)?;
+        Ok(())
+    }
+
+    /// The nominal damping for a stiffness, per the configured damping mode.
+    pub fn nominal_kd(&self, kp: f64) -> f64 {
+        match self.hand.damping {
+            DampingMode::Critical => 2.0 * self.hand.damping_ratio * kp.sqrt(),
+            DampingMode::Free => self.hand.kd,
+        }
+    }
+}

@@ -1,0 +1,1 @@
+//! Rigid-body dynamics from URDF (Model / Data split, as in Pinocchio).

@@ -1,0 +1,14 @@
+//! upc — unified preview control for humanoid balance under hand interaction.
+//!
+//! Layout (each module has one job):
+//! - [`preview`]: the paper's reduced models and controllers (cart-table, C0/C1, hand previewer, C2).
+//! - [`dynamics`]: rigid-body dynamics from URDF (Model / Data, RNEA, CRBA, ABA, Jacobians).
+//! - [`scenario`]: hand force profiles (impacts, CSV) and the ZMP reference of a run.
+//! - [`offline`]: the closed loop of the reduced models behind `upc preview`, with its metrics.
+//! - [`config`]: TOML configuration with errors that name the offending key.
+
+pub mod config;
+pub mod dynamics;
+pub mod offline;
+pub mod preview;
+pub mod scenario;

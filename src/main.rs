@@ -1,0 +1,46 @@
+//! The `upc` command line: one binary, one subcommand per job.
+
+use clap::{Parser, Subcommand};
+use tracing_subscriber::EnvFilter;
+
+mod cli;
+
+#[derive(Parser)]
+#[command(
+    name = "upc",
+    version,
+    about = "Unified preview control for humanoid balance and hand interaction"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run the closed loop of the reduced models (cart-table + hand impedance) on a scenario.
+    Preview(cli::preview::PreviewArgs),
+    /// Inspect a URDF: joints, DoF, mass, CoM; dump M(q), h(q, v), CoM and a frame Jacobian as JSON.
+    Model(cli::model::ModelArgs),
+}
+
+fn main() -> std::process::ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Preview(args) => cli::preview::run(args),
+        Command::Model(args) => cli::model::run(args),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,1 @@
+//! Closed loop of the reduced models.

@@ -1,0 +1,1 @@
+//! The paper's reduced models and preview controllers.
