@@ -240,3 +240,25 @@ impl Config {
         }
     }
 }
+
+/// Which balance controller runs (SPEC §6).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum ControllerKind {
+    /// Kajita–Wieber ZMP preview, disturbance ignored.
+    C0,
+    /// C0 with the hand force forecast turned into a CoM disturbance by the hand previewer.
+    C1,
+    /// C1 with the hand's impedance gains optimised over the horizon.
+    C2,
+}
+
+impl ControllerKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            ControllerKind::C0 => "c0",
+            ControllerKind::C1 => "c1",
+            ControllerKind::C2 => "c2",
+        }
+    }
+}

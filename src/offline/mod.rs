@@ -1,1 +1,163 @@
-//! Closed loop of the reduced models.
+//! The closed loop of the reduced models behind `upc preview`: the cart-table CoM (plant and
+//! model) and the hand impedance model under the scenario's hand force, driven by C0, C1 or C2
+//! at the preview period T. The plants are the controllers' own models, so this isolates what
+//! the controllers do from model error (the multibody simulator is the other test bed).
+
+mod metrics;
+
+use std::time::Instant;
+
+use nalgebra::{Matrix3, Vector3};
+
+pub use metrics::{Metrics, Row};
+
+use crate::config::{Config, ControllerKind};
+use crate::preview::constrained::ConstrainedPreview;
+use crate::preview::gain_search::{GainSearch, GainSearchInputs, GainSearchReport};
+use crate::preview::{
+    AxisState, CartTable, GainSchedule, HandPreviewer, HandState, PreviewError, ZmpPreview,
+};
+use crate::scenario::Scenario;
+
+/// A finished run.
+#[derive(Debug, Clone)]
+pub struct RunResult {
+    pub controller: ControllerKind,
+    pub rows: Vec<Row>,
+    pub metrics: Metrics,
+    /// One report per step for C2 (empty otherwise).
+    pub gain_search: Vec<GainSearchReport>,
+}
+
+/// Closed loop of the reduced models.
+pub struct ReducedLoop<'a> {
+    config: &'a Config,
+    scenario: &'a Scenario,
+    controller: ControllerKind,
+}
+
+impl<'a> ReducedLoop<'a> {
+    pub fn new(config: &'a Config, scenario: &'a Scenario, controller: ControllerKind) -> Self {
+        Self {
+            config,
+            scenario,
+            controller,
+        }
+    }
+
+    pub fn run(&self) -> Result<RunResult, PreviewError> {
+        self.run_with(|_, _| {})
+    }
+
+    /// Run, calling `progress(step, steps)` after each step.
+    pub fn run_with(
+        &self,
+        mut progress: impl FnMut(usize, usize),
+    ) -> Result<RunResult, PreviewError> {
+        let c = self.config;
+        let p = &c.preview;
+        let (n, t) = (p.horizon, p.period);
+        let model = CartTable {
+            period: t,
+            com_height: c.robot.com_height,
+            mass: c.robot.mass,
+            gravity: c.robot.gravity,
+        };
+        let m_e = Matrix3::from_fn(|i, j| c.hand.effective_mass[i][j]);
+        let mut zmp = ZmpPreview::new(model, p.q_e, p.r, n, p.solver);
+        let mut constrained = p
+            .zmp_constraints
+            .then(|| ConstrainedPreview::new(model, p.q_e, p.r, n, [c.support.x, c.support.y]));
+        let mut previewer = HandPreviewer::new(t, m_e, n)?;
+        let plant_hand = HandPreviewer::new(t, m_e, 1)?;
+        let mut search = match self.controller {
+            ControllerKind::C2 => Some(GainSearch::from_config(c)?),
+            _ => None,
+        };
+        let nominal = GainSchedule::constant(n, c.hand.kp, c.nominal_kd(c.hand.kp));
+
+        let desired = HandState {
+            pos: Vector3::from(c.hand.desired_position),
+            ..Default::default()
+        };
+        let hand_desired = vec![desired; n];
+        let zmp_ref = vec![self.scenario.zmp_reference; n];
+        let mut f_ext = vec![[0.0; 3]; n];
+        let mut com: [AxisState; 2] =
+            [0, 1].map(|a| Vector3::new(self.scenario.zmp_reference[a], 0.0, 0.0));
+        let mut hand = desired;
+        let mut applied = [c.hand.kp, c.nominal_kd(c.hand.kp)];
+
+        let steps = (self.scenario.duration / t).round() as usize;
+        let mut rows = Vec::with_capacity(steps);
+        let mut reports = Vec::new();
+        for k in 0..steps {
+            let now = k as f64 * t;
+            let start = Instant::now();
+            // The known force forecast at k+1…k+N.
+            self.scenario.force.sample_into(now + t, t, &mut f_ext);
+            let gains = match search.as_mut() {
+                Some(s) => {
+                    let inputs = GainSearchInputs {
+                        com,
+                        zmp_ref: &zmp_ref,
+                        hand,
+                        hand_desired: &hand_desired,
+                        f_ext: &f_ext,
+                        applied,
+                    };
+                    reports.push(s.search(&inputs, 1)?);
+                    s.schedule()
+                }
+                None => &nominal,
+            };
+            let u = match self.controller {
+                ControllerKind::C0 => zmp.solve_c0(&com, &zmp_ref)?,
+                ControllerKind::C1 | ControllerKind::C2 => {
+                    previewer.predict(&hand, &hand_desired, gains, &f_ext, n)?;
+                    match constrained.as_mut() {
+                        Some(q) => q.solve(&com, &zmp_ref, previewer.disturbance())?,
+                        None => zmp.solve_c1(&com, &zmp_ref, previewer.disturbance())?,
+                    }
+                }
+            };
+            let solve_time = start.elapsed().as_secs_f64();
+            applied = [gains.kp[0], gains.kd[0]];
+
+            // Plants: the CoM follows the jerk; the hand feels the actual force.
+            for a in 0..2 {
+                com[a] = model.step(&com[a], u[a]);
+            }
+            let (next_hand, f_dis) = plant_hand.step(
+                &hand,
+                &desired,
+                applied[0],
+                applied[1],
+                &Vector3::from(f_ext[0]),
+            );
+            hand = next_hand;
+            let alpha0 = 1.0 / (model.mass * model.gravity - f_dis[2]);
+            let zmp_now = [0, 1].map(|a| model.zmp(&com[a], alpha0, f_dis[a] * alpha0));
+            rows.push(Row {
+                t: now + t,
+                com: [com[0][0], com[1][0]],
+                zmp: zmp_now,
+                zmp_ref: zmp_ref[0],
+                hand_error: (hand.pos - desired.pos).norm(),
+                kp: applied[0],
+                kd: applied[1],
+                f_ext: f_ext[0],
+                f_dis: f_dis.into(),
+                solve_time,
+            });
+            progress(k + 1, steps);
+        }
+        let metrics = Metrics::from_rows(&rows, t, [c.support.x, c.support.y]);
+        Ok(RunResult {
+            controller: self.controller,
+            rows,
+            metrics,
+            gain_search: reports,
+        })
+    }
+}

@@ -1,1 +1,163 @@
-//! Scenarios.
+//! Scenarios: the hand force profile the door applies (known ahead, so it is also the forecast),
+//! the ZMP reference, the duration, and optional config overrides.
+//!
+//! ```toml
+//! name = "single_impact"
+//! duration = 5.0
+//! zmp_reference = [0.0, 0.0]
+//! [force]
+//! kind = "impacts"                # or kind = "csv", path = "forces.csv" (t, fx, fy, fz)
+//! [[force.impacts]]
+//! start = 1.0                     # s
+//! rise = 0.25                     # raised-cosine rise (s)
+//! hold = 0.1                      # plateau (s)
+//! fall = 0.35                     # raised-cosine fall (s)
+//! force = [-50.0, 0.0, 0.0]       # peak force on the hand (N, feet frame)
+//! [config]                        # optional: any config keys, e.g. preview.horizon = 300
+//! ```
+
+mod profile;
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+pub use profile::{ForceProfile, Impact};
+
+use crate::config::{ConfigError, Layers};
+
+/// The scenarios shipped with upc, embedded so they run without files: (name, TOML).
+pub const EMBEDDED: [(&str, &str); 2] = [
+    (
+        "single_impact",
+        include_str!("../../config/scenarios/single_impact.toml"),
+    ),
+    (
+        "multiple_impacts",
+        include_str!("../../config/scenarios/multiple_impacts.toml"),
+    ),
+];
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ScenarioFile {
+    name: String,
+    #[serde(default)]
+    description: String,
+    duration: f64,
+    zmp_reference: [f64; 2],
+    force: ForceSpec,
+    #[serde(default)]
+    config: Option<toml::Table>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+enum ForceSpec {
+    Impacts { impacts: Vec<Impact> },
+    Csv { path: PathBuf },
+}
+
+/// A loaded scenario.
+#[derive(Debug, Clone)]
+pub struct Scenario {
+    pub name: String,
+    pub description: String,
+    pub duration: f64,
+    pub zmp_reference: [f64; 2],
+    pub force: ForceProfile,
+    /// Config overrides carried by the scenario (a layer over the defaults).
+    pub config: Option<toml::Table>,
+    /// Where it came from, for messages.
+    pub origin: String,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    #[error("scenario file {path} cannot be read: {source}")]
+    Read {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error(
+        "no scenario named `{0}`: give a path to a .toml file, or one of: single_impact, multiple_impacts"
+    )]
+    Unknown(String),
+    #[error(transparent)]
+    Key(#[from] ConfigError),
+    #[error("{origin}: {message}")]
+    Invalid { origin: String, message: String },
+}
+
+impl Scenario {
+    /// Load by embedded name (`single_impact`) or by path to a TOML file.
+    pub fn load(name_or_path: &str) -> Result<Scenario, ScenarioError> {
+        if let Some((name, text)) = EMBEDDED.iter().find(|(n, _)| *n == name_or_path) {
+            return Self::parse(
+                text,
+                &format!("<embedded scenario {name}>"),
+                Path::new("config/scenarios"),
+            );
+        }
+        let path = Path::new(name_or_path);
+        if !path.exists() && !name_or_path.ends_with(".toml") && !name_or_path.contains('/') {
+            return Err(ScenarioError::Unknown(name_or_path.to_string()));
+        }
+        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::parse(
+            &text,
+            &path.display().to_string(),
+            path.parent().unwrap_or(Path::new(".")),
+        )
+    }
+
+    /// Parse scenario text; relative CSV paths resolve against `dir`.
+    pub fn parse(text: &str, origin: &str, dir: &Path) -> Result<Scenario, ScenarioError> {
+        let mut layers = Layers::new();
+        layers.push_str(origin, text)?;
+        let file: ScenarioFile = layers.typed()?;
+        let invalid = |message: String| ScenarioError::Invalid {
+            origin: origin.to_string(),
+            message,
+        };
+        if !(file.duration.is_finite() && file.duration > 0.0) {
+            return Err(invalid(format!(
+                "key `duration` must be > 0, got {}",
+                file.duration
+            )));
+        }
+        if file.zmp_reference.iter().any(|v| !v.is_finite()) {
+            return Err(invalid("key `zmp_reference` must be finite".into()));
+        }
+        let force = match file.force {
+            ForceSpec::Impacts { impacts } => {
+                for (i, imp) in impacts.iter().enumerate() {
+                    imp.validate()
+                        .map_err(|m| invalid(format!("key `force.impacts[{i}]`: {m}")))?;
+                }
+                ForceProfile::Impacts(impacts)
+            }
+            ForceSpec::Csv { path } => {
+                let full = if path.is_absolute() {
+                    path
+                } else {
+                    dir.join(path)
+                };
+                ForceProfile::from_csv(&full)
+                    .map_err(|m| invalid(format!("key `force.path`: {m}")))?
+            }
+        };
+        Ok(Scenario {
+            name: file.name,
+            description: file.description,
+            duration: file.duration,
+            zmp_reference: file.zmp_reference,
+            force,
+            config: file.config,
+            origin: origin.to_string(),
+        })
+    }
+}

@@ -1,0 +1,194 @@
+//! C0 and C1: ZMP preview control of the CoM along x and y (SPEC §2–3).
+
+use nalgebra::Vector3;
+
+use super::dense::CondensedHorizon;
+use super::{CartTable, Disturbance, PreviewError, Riccati};
+use crate::config::LqSolverKind;
+
+/// The cart-table state [x, ẋ, ẍ] of one axis.
+pub type AxisState = Vector3<f64>;
+
+/// ZMP preview controller with its preallocated workspace. One instance per control loop; the
+/// Riccati path (the default) allocates nothing per solve.
+#[derive(Debug, Clone)]
+pub struct ZmpPreview {
+    pub model: CartTable,
+    pub q_e: f64,
+    pub r: f64,
+    horizon: usize,
+    solver: LqSolverKind,
+    disturbance: Disturbance,
+    c2: Vec<f64>,
+    targets: [Vec<f64>; 2],
+    riccati: Riccati,
+    /// Set by the dense path, which solves the whole horizon at once.
+    dense_first: [f64; 2],
+}
+
+/// The predicted horizon of the last solve: jerks u_0…u_{N−1}, CoM states and ZMP at k+1…k+N.
+#[derive(Debug, Clone)]
+pub struct PreviewPlan {
+    pub jerk: [Vec<f64>; 2],
+    pub com: [Vec<AxisState>; 2],
+    pub zmp: [Vec<f64>; 2],
+}
+
+impl PreviewPlan {
+    pub fn with_capacity(n: usize) -> Self {
+        Self {
+            jerk: [vec![0.0; n], vec![0.0; n]],
+            com: [vec![Vector3::zeros(); n], vec![Vector3::zeros(); n]],
+            zmp: [vec![0.0; n], vec![0.0; n]],
+        }
+    }
+}
+
+impl ZmpPreview {
+    pub fn new(model: CartTable, q_e: f64, r: f64, horizon: usize, solver: LqSolverKind) -> Self {
+        Self {
+            model,
+            q_e,
+            r,
+            horizon,
+            solver,
+            disturbance: Disturbance::with_capacity(horizon),
+            c2: vec![0.0; horizon],
+            targets: [vec![0.0; horizon], vec![0.0; horizon]],
+            riccati: Riccati::with_capacity(horizon),
+            dense_first: [0.0; 2],
+        }
+    }
+
+    pub fn horizon(&self) -> usize {
+        self.horizon
+    }
+
+    /// C0 (Kajita–Wieber): track `zmp_ref` (samples at k+1…k+N, [x, y]) ignoring any disturbance.
+    /// Returns the CoM jerk to apply now, [u_x, u_y].
+    pub fn solve_c0(
+        &mut self,
+        state: &[AxisState; 2],
+        zmp_ref: &[[f64; 2]],
+    ) -> Result<[f64; 2], PreviewError> {
+        self.disturbance.set_none(&self.model, self.horizon)?;
+        self.solve(state, zmp_ref)
+    }
+
+    /// C1: the same on the disturbed model, with the CoM-disturbance forecast `f_dis`
+    /// (3-D, samples at k+1…k+N).
+    pub fn solve_c1(
+        &mut self,
+        state: &[AxisState; 2],
+        zmp_ref: &[[f64; 2]],
+        f_dis: &[[f64; 3]],
+    ) -> Result<[f64; 2], PreviewError> {
+        self.disturbance
+            .set_forces(&self.model, f_dis, self.horizon)?;
+        self.solve(state, zmp_ref)
+    }
+
+    fn solve(
+        &mut self,
+        state: &[AxisState; 2],
+        zmp_ref: &[[f64; 2]],
+    ) -> Result<[f64; 2], PreviewError> {
+        let n = self.horizon;
+        if zmp_ref.len() < n {
+            return Err(PreviewError::ForecastTooShort {
+                what: "ZMP reference",
+                got: zmp_ref.len(),
+                need: n,
+            });
+        }
+        for axis in 0..2 {
+            if !state[axis].iter().all(|v| v.is_finite()) {
+                return Err(PreviewError::NotFinite {
+                    what: "CoM state",
+                    step: 0,
+                });
+            }
+        }
+        for i in 0..n {
+            if !(zmp_ref[i][0].is_finite() && zmp_ref[i][1].is_finite()) {
+                return Err(PreviewError::NotFinite {
+                    what: "ZMP reference",
+                    step: i + 1,
+                });
+            }
+            self.c2[i] = self.model.output_acc_coeff(self.disturbance.alpha0[i]);
+            for axis in 0..2 {
+                // eq. (16): p_rd = p_ref − D.
+                self.targets[axis][i] =
+                    zmp_ref[i][axis] - self.disturbance.shift(&self.model, axis, i);
+            }
+        }
+        match self.solver {
+            LqSolverKind::Riccati => {
+                self.riccati
+                    .factor(&self.model, self.q_e, self.r, &self.c2[..n]);
+                self.riccati.feedforward(
+                    &self.model,
+                    self.q_e,
+                    &self.c2[..n],
+                    [&self.targets[0][..n], &self.targets[1][..n]],
+                );
+                Ok([
+                    self.riccati.first_input(0, &state[0]),
+                    self.riccati.first_input(1, &state[1]),
+                ])
+            }
+            LqSolverKind::Dense => {
+                let horizon = CondensedHorizon::build(&self.model, &self.c2[..n]);
+                let u = horizon
+                    .solve(
+                        self.q_e,
+                        self.r,
+                        [&state[0], &state[1]],
+                        [&self.targets[0][..n], &self.targets[1][..n]],
+                    )
+                    .ok_or_else(|| {
+                        PreviewError::Qp("dense normal matrix is not positive definite".into())
+                    })?;
+                // The dense path still factors Riccati so that `plan` works the same for both.
+                self.riccati
+                    .factor(&self.model, self.q_e, self.r, &self.c2[..n]);
+                self.riccati.feedforward(
+                    &self.model,
+                    self.q_e,
+                    &self.c2[..n],
+                    [&self.targets[0][..n], &self.targets[1][..n]],
+                );
+                self.dense_first = [u[0][0], u[1][0]];
+                Ok(self.dense_first)
+            }
+        }
+    }
+
+    /// The predicted horizon of the last solve from `state` (CoM states, jerks and the ZMP that the
+    /// disturbed model predicts, eq. (11)).
+    pub fn plan(&self, state: &[AxisState; 2], out: &mut PreviewPlan) {
+        let n = self.horizon;
+        for axis in 0..2 {
+            self.riccati.rollout(
+                &self.model,
+                axis,
+                &state[axis],
+                &mut out.jerk[axis][..n],
+                &mut out.com[axis][..n],
+            );
+            for i in 0..n {
+                out.zmp[axis][i] = self.model.zmp(
+                    &out.com[axis][i],
+                    self.disturbance.alpha0[i],
+                    self.disturbance.alpha[axis][i],
+                );
+            }
+        }
+    }
+
+    /// Output-row coefficients c2 and references of the last solve (for C2's Jacobians).
+    pub(crate) fn last_problem(&self) -> (&[f64], &Riccati, &Disturbance) {
+        (&self.c2[..self.horizon], &self.riccati, &self.disturbance)
+    }
+}

@@ -1,0 +1,138 @@
+//! Hand force profiles: smooth impacts, or samples from a CSV file.
+
+use std::path::Path;
+
+use serde::Deserialize;
+
+/// One impact: raised-cosine rise, plateau, raised-cosine fall (C¹, so the preview sees no
+/// artificial jerk spikes).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Impact {
+    pub start: f64,
+    pub rise: f64,
+    #[serde(default)]
+    pub hold: f64,
+    pub fall: f64,
+    pub force: [f64; 3],
+}
+
+impl Impact {
+    pub(crate) fn validate(&self) -> Result<(), String> {
+        let ok = |v: f64| v.is_finite() && v >= 0.0;
+        if !(ok(self.start)
+            && ok(self.hold)
+            && self.rise.is_finite()
+            && self.rise > 0.0
+            && self.fall.is_finite()
+            && self.fall > 0.0)
+        {
+            return Err("start, hold must be ≥ 0 and rise, fall > 0 (s)".into());
+        }
+        if self.force.iter().any(|v| !v.is_finite()) {
+            return Err("force must be finite".into());
+        }
+        Ok(())
+    }
+
+    /// The impact's envelope in [0, 1] at time t.
+    fn envelope(&self, t: f64) -> f64 {
+        let tau = t - self.start;
+        let (r, h, f) = (self.rise, self.hold, self.fall);
+        if tau <= 0.0 || tau >= r + h + f {
+            0.0
+        } else if tau < r {
+            0.5 * (1.0 - (std::f64::consts::PI * tau / r).cos())
+        } else if tau <= r + h {
+            1.0
+        } else {
+            0.5 * (1.0 + (std::f64::consts::PI * (tau - r - h) / f).cos())
+        }
+    }
+}
+
+/// The force the door applies on the hand over time (N, feet frame).
+#[derive(Debug, Clone)]
+pub enum ForceProfile {
+    /// A sum of impacts.
+    Impacts(Vec<Impact>),
+    /// Samples (t, F) sorted by time, linearly interpolated, zero outside.
+    Samples(Vec<(f64, [f64; 3])>),
+}
+
+impl ForceProfile {
+    pub fn at(&self, t: f64) -> [f64; 3] {
+        match self {
+            ForceProfile::Impacts(impacts) => {
+                let mut f = [0.0; 3];
+                for imp in impacts {
+                    let e = imp.envelope(t);
+                    for c in 0..3 {
+                        f[c] += e * imp.force[c];
+                    }
+                }
+                f
+            }
+            ForceProfile::Samples(s) => {
+                let i = s.partition_point(|(ts, _)| *ts <= t);
+                if i == 0 || i == s.len() {
+                    return [0.0; 3];
+                }
+                let ((t0, f0), (t1, f1)) = (s[i - 1], s[i]);
+                let w = (t - t0) / (t1 - t0);
+                [0, 1, 2].map(|c| f0[c] + w * (f1[c] - f0[c]))
+            }
+        }
+    }
+
+    /// Fill `out[i]` with the force at `t0 + i·dt`.
+    pub fn sample_into(&self, t0: f64, dt: f64, out: &mut [[f64; 3]]) {
+        for (i, f) in out.iter_mut().enumerate() {
+            *f = self.at(t0 + i as f64 * dt);
+        }
+    }
+
+    /// Read `t,fx,fy,fz` rows (a header line is allowed; `#` starts a comment).
+    pub fn from_csv(path: &Path) -> Result<ForceProfile, String> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        Self::parse_csv(&text).map_err(|e| format!("{}: {e}", path.display()))
+    }
+
+    pub fn parse_csv(text: &str) -> Result<ForceProfile, String> {
+        let mut samples: Vec<(f64, [f64; 3])> = Vec::new();
+        for (n, line) in text.lines().enumerate() {
+            let line = line.split('#').next().unwrap_or("").trim();
+            if line.is_empty() {
+                continue;
+            }
+            let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+            let nums: Result<Vec<f64>, _> = fields.iter().map(|f| f.parse::<f64>()).collect();
+            let nums = match nums {
+                Ok(v) => v,
+                Err(_) if samples.is_empty() && n == 0 => continue, // header
+                Err(_) => return Err(format!("line {}: expected numbers t,fx,fy,fz", n + 1)),
+            };
+            if nums.len() != 4 || nums.iter().any(|v| !v.is_finite()) {
+                return Err(format!(
+                    "line {}: expected 4 finite values t,fx,fy,fz",
+                    n + 1
+                ));
+            }
+            if let Some((tp, _)) = samples.last()
+                && nums[0] <= *tp
+            {
+                return Err(format!(
+                    "line {}: time {} does not increase",
+                    n + 1,
+                    nums[0]
+                ));
+            }
+            samples.push((nums[0], [nums[1], nums[2], nums[3]]));
+        }
+        if samples.len() < 2 {
+            return Err("needs at least two samples".into());
+        }
+        Ok(ForceProfile::Samples(samples))
+    }
+}
