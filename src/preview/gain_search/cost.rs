@@ -9,7 +9,7 @@
 //!   changes √T_w ΔK_p,i, √T_w ΔK_d,i               2N   (ΔK_1 against the gains applied now)
 
 use faer::Mat;
-use nalgebra::Vector3;
+use nalgebra::{DMatrix, DVector, Vector3};
 
 use super::KnotSchedule;
 use crate::preview::{
@@ -223,5 +223,37 @@ impl Eq26 {
                 }
             }
         }
+    }
+
+    /// Gauss–Newton normal equations JᵀJ and Jᵀr from the last [`Eq26::jacobian`].
+    pub(crate) fn normal_equations(&self, dim: usize) -> (DMatrix<f64>, DVector<f64>) {
+        let jac = self.jacobian.as_ref().subcols(0, dim);
+        let jtj = jac.transpose() * jac;
+        let h = DMatrix::from_fn(dim, dim, |a, b| jtj[(a, b)]);
+        let g = DVector::from_fn(dim, |a, _| {
+            jac.col(a)
+                .iter()
+                .zip(&self.residual)
+                .map(|(x, y)| x * y)
+                .sum()
+        });
+        (h, g)
+    }
+
+    /// The gradient of eq. (26) with respect to θ (the jerks re-optimised at every θ).
+    pub fn gradient(
+        &mut self,
+        knots: &KnotSchedule,
+        theta: &[f64],
+        inp: &GainSearchInputs,
+    ) -> Result<Vec<f64>, PreviewError> {
+        self.evaluate(knots, theta, inp)?;
+        self.jacobian(knots, inp);
+        Ok(self
+            .normal_equations(knots.dim())
+            .1
+            .iter()
+            .copied()
+            .collect())
     }
 }

@@ -1,7 +1,7 @@
 //! The default C2 solver: bounded Gauss–Newton (Levenberg–Marquardt damped) on eq. (26) with the
 //! exact Jacobian through the LQ solve. Monotone: every accepted step lowers the cost.
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DVector;
 
 use super::box_qp::solve_box_qp;
 use super::{Eq26, GainSearchInputs, KnotSchedule, SolveStats};
@@ -17,25 +17,14 @@ pub fn solve(
 ) -> Result<SolveStats, PreviewError> {
     let n = knots.dim();
     let mut cost = problem.evaluate(knots, theta, inp)?;
-    let mut mu = 1e-4;
+    let mut mu: f64 = 1e-4;
     let mut iterations = 0;
     let mut trial = vec![0.0; n];
-    let lo = DVector::from_fn(n, |j, _| knots.lower(j) - theta[j]);
-    let hi = DVector::from_fn(n, |j, _| knots.upper(j) - theta[j]);
-    let (mut lo, mut hi) = (lo, hi);
+    let (mut lo, mut hi) = (DVector::zeros(n), DVector::zeros(n));
     'outer: while iterations < max_iterations {
         iterations += 1;
         problem.jacobian(knots, inp);
-        let jac = problem.jacobian.as_ref().subcols(0, n);
-        let jtj = jac.transpose() * jac;
-        let h = DMatrix::from_fn(n, n, |a, b| jtj[(a, b)]);
-        let g = DVector::from_fn(n, |a, _| {
-            jac.col(a)
-                .iter()
-                .zip(&problem.residual)
-                .map(|(x, y)| x * y)
-                .sum()
-        });
+        let (h, g) = problem.normal_equations(n);
         for j in 0..n {
             lo[j] = knots.lower(j) - theta[j];
             hi[j] = knots.upper(j) - theta[j];
