@@ -1,0 +1,190 @@
+//! Articulated-body algorithm: forward dynamics `q̈ = M⁻¹(τ − h)` in O(n) (RBDA Table 7.1).
+//!
+//! Articulated inertias are 6×6 matrices (`[lin; ang]` ordering); they are carried to the parent
+//! by a block-wise congruence, and the 1-DoF joints use rank-one updates.
+
+use nalgebra::{DVector, Matrix6, Vector6};
+
+use super::data::Data;
+use super::error::DynamicsError;
+use super::joint::JointKind;
+use super::model::Model;
+use super::spatial::{Force, Motion};
+
+/// Forward dynamics: `q̈` in `data.ddq` for torques `tau` (free-flyer entries of `tau` are the
+/// wrench applied on the root, normally zero).
+pub fn aba<'d>(
+    model: &Model,
+    data: &'d mut Data,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+) -> Result<&'d DVector<f64>, DynamicsError> {
+    check(model, q, v, tau)?;
+    aba_unchecked(
+        model,
+        data,
+        q.as_slice(),
+        v.as_slice(),
+        tau.as_slice(),
+        None,
+    )?;
+    Ok(&data.ddq)
+}
+
+/// As [`aba`] with external wrenches `fext[i]` acting on body `i`, expressed in the body frame
+/// at its origin (one per joint).
+pub fn aba_with_external_forces<'d>(
+    model: &Model,
+    data: &'d mut Data,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+    fext: &[Force],
+) -> Result<&'d DVector<f64>, DynamicsError> {
+    check(model, q, v, tau)?;
+    if fext.len() != model.njoints() {
+        return Err(DynamicsError::DimensionMismatch {
+            what: "fext",
+            expected: model.njoints(),
+            got: fext.len(),
+        });
+    }
+    aba_unchecked(
+        model,
+        data,
+        q.as_slice(),
+        v.as_slice(),
+        tau.as_slice(),
+        Some(fext),
+    )?;
+    Ok(&data.ddq)
+}
+
+fn check(
+    model: &Model,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+) -> Result<(), DynamicsError> {
+    model.check_q(q)?;
+    model.check_v("v", v)?;
+    model.check_v("tau", tau)
+}
+
+/// Kernel. Preconditions: slice lengths nq / nv / nv (/ njoints). Fails only when an
+/// articulated inertia is singular (a massless terminal body on a moving joint).
+pub(crate) fn aba_unchecked(
+    model: &Model,
+    data: &mut Data,
+    q: &[f64],
+    v: &[f64],
+    tau: &[f64],
+    fext: Option<&[Force]>,
+) -> Result<(), DynamicsError> {
+    // Pass 1: kinematics, bias accelerations c, rigid inertias, bias forces p (eq. 7.36-7.38).
+    for (i, j) in model.joints.iter().enumerate() {
+        let li = j
+            .placement
+            .compose(&j.kind.transform(&q[j.idx_q..j.idx_q + j.nq()]));
+        data.li_m_i[i] = li;
+        let vj = j.kind.motion(&v[j.idx_v..j.idx_v + j.nv()]);
+        let vi = match j.parent {
+            Some(p) => li.act_inv_motion(&data.v[p]) + vj,
+            None => vj,
+        };
+        data.v[i] = vi;
+        data.c[i] = vi.cross_motion(&vj);
+        let y = &j.inertia;
+        data.ia[i] = y.to_matrix();
+        let mut pa = vi.cross_force(&y.mul_motion(&vi));
+        if let Some(fext) = fext {
+            pa -= fext[i];
+        }
+        data.f[i] = pa;
+    }
+    // Pass 2: articulated inertias and bias forces, leaves to root (eq. 7.39-7.45).
+    for i in (0..model.joints.len()).rev() {
+        let j = &model.joints[i];
+        let ia = data.ia[i];
+        let pa = data.f[i].to_vector();
+        let c = data.c[i].to_vector();
+        match j.kind {
+            JointKind::FreeFlyer => {
+                // S = 1: U = I^A, D = I^A, u = τ − p.
+                let d_inv = ia
+                    .cholesky()
+                    .ok_or_else(|| DynamicsError::SingularJoint {
+                        joint: j.name.clone(),
+                    })?
+                    .inverse();
+                data.d_inv[i] = d_inv;
+                let mut u = Vector6::zeros();
+                for k in 0..6 {
+                    u[k] = tau[j.idx_v + k] - pa[k];
+                    data.u_vec[j.idx_v + k] = u[k];
+                }
+                if let Some(p) = j.parent {
+                    // I^a = I^A − I^A (I^A)⁻¹ I^A = 0; p^a = p + u = τ-side wrench.
+                    let pa_new = pa + u;
+                    let fp = data.li_m_i[i].act_force(&Force::from_vector(&pa_new));
+                    data.f[p] += fp;
+                }
+            }
+            _ => {
+                let s = j.kind.subspace_column(0).to_vector();
+                let u_col: Vector6<f64> = ia * s;
+                let d = s.dot(&u_col);
+                if d.abs() <= 1e-14 * (1.0 + ia.abs().max()) || !d.is_finite() {
+                    return Err(DynamicsError::SingularJoint {
+                        joint: j.name.clone(),
+                    });
+                }
+                let d_inv = 1.0 / d;
+                data.d_inv[i][(0, 0)] = d_inv;
+                data.u_mat[i][0] = Force::from_vector(&u_col);
+                let u = tau[j.idx_v] - s.dot(&pa);
+                data.u_vec[j.idx_v] = u;
+                if let Some(p) = j.parent {
+                    let ia_a: Matrix6<f64> = ia - (u_col * d_inv) * u_col.transpose();
+                    let pa_a: Vector6<f64> = pa + ia_a * c + u_col * (d_inv * u);
+                    let li = data.li_m_i[i];
+                    data.ia[p] += li.act_matrix6(&ia_a);
+                    data.f[p] += li.act_force(&Force::from_vector(&pa_a));
+                }
+            }
+        }
+    }
+    // Pass 3: accelerations, root to leaves (eq. 7.46-7.48).
+    let a0 = Motion::new(-model.gravity, nalgebra::Vector3::zeros());
+    for (i, j) in model.joints.iter().enumerate() {
+        let li = data.li_m_i[i];
+        let ap = match j.parent {
+            Some(p) => li.act_inv_motion(&data.a[p]),
+            None => li.act_inv_motion(&a0),
+        };
+        let a_pre = ap + data.c[i];
+        match j.kind {
+            JointKind::FreeFlyer => {
+                let a_vec = a_pre.to_vector();
+                let mut u = Vector6::zeros();
+                for k in 0..6 {
+                    u[k] = data.u_vec[j.idx_v + k];
+                }
+                // q̈ = D⁻¹(u − Uᵀ a) with U = D = I^A.
+                let ddq = data.d_inv[i] * u - a_vec;
+                for k in 0..6 {
+                    data.ddq[j.idx_v + k] = ddq[k];
+                }
+                data.a[i] = Motion::from_vector(&(a_vec + ddq));
+            }
+            _ => {
+                let uf = &data.u_mat[i][0];
+                let ddq = data.d_inv[i][(0, 0)] * (data.u_vec[j.idx_v] - a_pre.dot(uf));
+                data.ddq[j.idx_v] = ddq;
+                data.a[i] = a_pre + j.kind.motion(&[ddq]);
+            }
+        }
+    }
+    Ok(())
+}

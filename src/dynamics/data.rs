@@ -1,0 +1,83 @@
+//! Preallocated workspace of the algorithms. Sized once from the model; the algorithms only
+//! overwrite it, so a control tick never allocates.
+
+use nalgebra::{DMatrix, DVector, Matrix6, Vector3};
+
+use super::model::Model;
+use super::spatial::{Force, Inertia, Motion, SE3};
+
+/// Results and scratch space of every algorithm, indexed like `Model::joints` / `Model::frames`.
+/// Spatial quantities of a joint are expressed in its body frame unless the name starts with `o`
+/// (world frame).
+#[derive(Clone, Debug)]
+pub struct Data {
+    /// Parent body → body placement (`liMi`).
+    pub li_m_i: Vec<SE3>,
+    /// World placement of each body (`oMi`).
+    pub o_m_i: Vec<SE3>,
+    /// World placement of each frame (`oMf`).
+    pub o_m_f: Vec<SE3>,
+    /// Body twists (local).
+    pub v: Vec<Motion>,
+    /// Body spatial accelerations (local; include −gravity after RNEA/ABA).
+    pub a: Vec<Motion>,
+    /// Net body wrenches (RNEA) / articulated bias forces (ABA), local.
+    pub f: Vec<Force>,
+    /// Composite rigid-body inertias (CRBA), local.
+    pub ycrb: Vec<Inertia>,
+    /// Joint-space inertia matrix `M(q)` (both triangles filled).
+    pub m: DMatrix<f64>,
+    /// Joint torques (RNEA output) or bias `h(q, v)` (nonlinear_effects output).
+    pub tau: DVector<f64>,
+    /// Joint accelerations (ABA output).
+    pub ddq: DVector<f64>,
+    /// World Jacobian of all joints (`J`, 6×nv, columns are `oMi · S` at the world origin).
+    pub j: DMatrix<f64>,
+    /// Frame Jacobian output (6×nv).
+    pub frame_j: DMatrix<f64>,
+    /// ABA: articulated inertias, `U = I^A S`, `D⁻¹`, `u`, bias accelerations `c`.
+    pub(crate) ia: Vec<Matrix6<f64>>,
+    pub(crate) u_mat: Vec<[Force; 6]>,
+    pub(crate) d_inv: Vec<Matrix6<f64>>,
+    pub(crate) u_vec: DVector<f64>,
+    pub(crate) c: Vec<Motion>,
+    /// CoM: subtree mass and subtree first moment (world frame).
+    pub subtree_mass: Vec<f64>,
+    pub(crate) subtree_h: Vec<Vector3<f64>>,
+    /// Centre of mass, its velocity (world frame) and Jacobian (3×nv).
+    pub com: Vector3<f64>,
+    pub vcom: Vector3<f64>,
+    pub jcom: DMatrix<f64>,
+}
+
+impl Data {
+    pub fn new(model: &Model) -> Self {
+        let n = model.njoints();
+        let nf = model.frames.len();
+        let nv = model.nv;
+        Self {
+            li_m_i: vec![SE3::identity(); n],
+            o_m_i: vec![SE3::identity(); n],
+            o_m_f: vec![SE3::identity(); nf],
+            v: vec![Motion::zero(); n],
+            a: vec![Motion::zero(); n],
+            f: vec![Force::zero(); n],
+            ycrb: vec![Inertia::zero(); n],
+            m: DMatrix::zeros(nv, nv),
+            tau: DVector::zeros(nv),
+            ddq: DVector::zeros(nv),
+            j: DMatrix::zeros(6, nv),
+            frame_j: DMatrix::zeros(6, nv),
+            ia: vec![Matrix6::zeros(); n],
+            u_mat: vec![[Force::zero(); 6]; n],
+            d_inv: vec![Matrix6::zeros(); n],
+            u_vec: DVector::zeros(nv),
+            c: vec![Motion::zero(); n],
+            subtree_mass: vec![0.0; n],
+            subtree_h: vec![Vector3::zeros(); n],
+            com: Vector3::zeros(),
+            vcom: Vector3::zeros(),
+            jcom: DMatrix::zeros(3, nv),
+        }
+    }
+}

@@ -1,0 +1,357 @@
+//! URDF → [`Model`] (parsing by urdf-rs, checks and tree building here).
+//!
+//! - Links are bodies; a link hanging from a `fixed` joint is merged into its parent body
+//!   (inertia added, Pinocchio-style) and keeps a frame of its own name. Every link is a frame.
+//! - `revolute`, `continuous` (angle coordinate, unbounded), `prismatic`, `fixed` are supported;
+//!   `floating`, `planar`, `spherical` or unknown types are errors naming the joint.
+//! - Floating base: a free-flyer joint `root_joint` carries the root link (see
+//!   [`JointKind::FreeFlyer`] for the coordinates). [`BaseJoint::Auto`] picks a fixed base when
+//!   the URDF root link is called `world`, a floating one otherwise.
+//! - Geometry (meshes included) is ignored: a missing mesh file is not an error.
+//! - A zero `velocity`/`effort` limit (URDF 1.0's value for a missing attribute) reads as
+//!   unbounded. Mimic tags are ignored (the joint stays independent).
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+
+use super::error::DynamicsError;
+use super::joint::JointKind;
+use super::model::{JointLimits, Model};
+use super::spatial::{Inertia, SE3};
+
+/// How the URDF root is attached to the world.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BaseJoint {
+    /// Fixed when the root link is named `world`, floating otherwise.
+    #[default]
+    Auto,
+    /// A free-flyer joint `root_joint` on the root link (if the root is a `world` link with a
+    /// single child, the child becomes the floating root).
+    Floating,
+    /// The root link is welded to the world.
+    Fixed,
+}
+
+/// Name of the free-flyer joint added for a floating base (as in Pinocchio).
+pub const ROOT_JOINT_NAME: &str = "root_joint";
+
+impl Model {
+    /// Reads and builds a URDF file.
+    pub fn from_urdf_file(path: impl AsRef<Path>, base: BaseJoint) -> Result<Model, DynamicsError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|e| DynamicsError::Io {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })?;
+        Self::from_urdf_str(&text, base)
+    }
+
+    /// Builds a model from URDF text.
+    pub fn from_urdf_str(text: &str, base: BaseJoint) -> Result<Model, DynamicsError> {
+        let robot = urdf_rs::read_from_string(text).map_err(|e| diagnose(text, &e.to_string()))?;
+        build(&robot, base)
+    }
+}
+
+const KNOWN_TYPES: [&str; 7] = [
+    "revolute",
+    "continuous",
+    "prismatic",
+    "fixed",
+    "floating",
+    "planar",
+    "spherical",
+];
+
+/// urdf-rs reports an unknown joint type without naming the joint: find it in the raw text.
+fn diagnose(text: &str, message: &str) -> DynamicsError {
+    for chunk in text.split("<joint").skip(1) {
+        let tag = chunk.split('>').next().unwrap_or_default();
+        let (Some(name), Some(kind)) = (attribute(tag, "name"), attribute(tag, "type")) else {
+            continue;
+        };
+        if !KNOWN_TYPES.contains(&kind) {
+            return DynamicsError::UnsupportedJointType {
+                joint: name.to_owned(),
+                kind: kind.to_owned(),
+            };
+        }
+    }
+    DynamicsError::Parse(message.to_owned())
+}
+
+fn attribute<'t>(tag: &'t str, key: &str) -> Option<&'t str> {
+    for quote in ['"', '\''] {
+        let pat = format!("{key}={quote}");
+        let mut rest = tag;
+        while let Some(at) = rest.find(&pat) {
+            // Require a word boundary so `name` does not match inside `xname`.
+            let boundary = at == 0 || rest[..at].ends_with(char::is_whitespace);
+            let after = &rest[at + pat.len()..];
+            if boundary {
+                return after.split(quote).next();
+            }
+            rest = after;
+        }
+    }
+    None
+}
+
+fn finite3(v: &[f64; 3]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+fn pose(p: &urdf_rs::Pose) -> SE3 {
+    SE3::from_xyz_rpy(p.xyz.0, p.rpy.0)
+}
+
+/// Spatial inertia of a link in its own frame, after checking it is physical.
+fn link_inertia(link: &urdf_rs::Link) -> Result<Inertia, DynamicsError> {
+    let bad = |reason: String| DynamicsError::InvalidInertia {
+        link: link.name.clone(),
+        reason,
+    };
+    let inl = &link.inertial;
+    let m = inl.mass.value;
+    if !m.is_finite() || m < 0.0 {
+        return Err(bad(format!("mass {m} is not a finite non-negative number")));
+    }
+    if !finite3(&inl.origin.xyz.0) || !finite3(&inl.origin.rpy.0) {
+        return Err(bad("inertial origin is not finite".into()));
+    }
+    let i = &inl.inertia;
+    let vals = [i.ixx, i.ixy, i.ixz, i.iyy, i.iyz, i.izz];
+    if vals.iter().any(|x| !x.is_finite()) {
+        return Err(bad(format!(
+            "inertia tensor has a non-finite entry {vals:?}"
+        )));
+    }
+    let tensor = Matrix3::new(
+        i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz,
+    );
+    let eig = SymmetricEigen::new(tensor).eigenvalues;
+    let min = eig.min();
+    let scale = eig.amax().max(f64::MIN_POSITIVE);
+    if m > 0.0 && min <= 0.0 {
+        return Err(bad(format!(
+            "inertia tensor is not positive definite (eigenvalues {:.3e}, {:.3e}, {:.3e})",
+            eig[0], eig[1], eig[2]
+        )));
+    }
+    if m == 0.0 && min < -1e-9 * scale {
+        return Err(bad("massless link with a negative principal inertia".into()));
+    }
+    let origin = pose(&inl.origin);
+    let inertia_com = origin.rot * tensor * origin.rot.transpose();
+    Ok(Inertia::from_com(m, origin.trans, inertia_com))
+}
+
+fn joint_kind(j: &urdf_rs::Joint) -> Result<Option<(JointKind, JointLimits)>, DynamicsError> {
+    use urdf_rs::JointType as T;
+    let invalid = |reason: String| DynamicsError::InvalidJoint {
+        joint: j.name.clone(),
+        reason,
+    };
+    if !finite3(&j.origin.xyz.0) || !finite3(&j.origin.rpy.0) {
+        return Err(invalid("origin is not finite".into()));
+    }
+    let axis = Vector3::from(j.axis.xyz.0);
+    let unit_axis = || {
+        let n = axis.norm();
+        if n.is_finite() && n > 1e-12 {
+            Ok(axis / n)
+        } else {
+            Err(invalid(format!(
+                "axis {:?} is not a non-zero finite vector",
+                j.axis.xyz.0
+            )))
+        }
+    };
+    let l = &j.limit;
+    let unbounded_if_zero = |x: f64| if x > 0.0 { x } else { f64::INFINITY };
+    let mut limits = JointLimits {
+        lower: l.lower,
+        upper: l.upper,
+        velocity: unbounded_if_zero(l.velocity),
+        effort: unbounded_if_zero(l.effort),
+    };
+    if limits.lower.is_nan() || limits.upper.is_nan() || limits.lower > limits.upper {
+        return Err(invalid(format!(
+            "position limits [{}, {}] are not an interval",
+            l.lower, l.upper
+        )));
+    }
+    let kind = match j.joint_type {
+        T::Fixed => return Ok(None),
+        T::Revolute => JointKind::Revolute { axis: unit_axis()? },
+        T::Continuous => {
+            limits.lower = f64::NEG_INFINITY;
+            limits.upper = f64::INFINITY;
+            JointKind::Revolute { axis: unit_axis()? }
+        }
+        T::Prismatic => JointKind::Prismatic { axis: unit_axis()? },
+        T::Floating | T::Planar | T::Spherical => {
+            return Err(DynamicsError::UnsupportedJointType {
+                joint: j.name.clone(),
+                kind: format!("{:?}", j.joint_type).to_lowercase(),
+            });
+        }
+    };
+    Ok(Some((kind, limits)))
+}
+
+fn build(robot: &urdf_rs::Robot, base: BaseJoint) -> Result<Model, DynamicsError> {
+    if robot.links.is_empty() {
+        return Err(DynamicsError::Empty);
+    }
+    let mut link_index: HashMap<&str, usize> = HashMap::new();
+    for (k, l) in robot.links.iter().enumerate() {
+        if link_index.insert(l.name.as_str(), k).is_some() {
+            return Err(DynamicsError::DuplicateName {
+                what: "link",
+                name: l.name.clone(),
+            });
+        }
+    }
+    let inertias = robot
+        .links
+        .iter()
+        .map(link_inertia)
+        .collect::<Result<Vec<_>, _>>()?;
+
+    // Parent joint of each link, children of each link (in listing order).
+    let mut parent_joint: Vec<Option<usize>> = vec![None; robot.links.len()];
+    let mut children: Vec<Vec<usize>> = vec![Vec::new(); robot.links.len()];
+    let mut joint_names: HashMap<&str, ()> = HashMap::new();
+    for (k, j) in robot.joints.iter().enumerate() {
+        if joint_names.insert(j.name.as_str(), ()).is_some() {
+            return Err(DynamicsError::DuplicateName {
+                what: "joint",
+                name: j.name.clone(),
+            });
+        }
+        let find = |role: &'static str, name: &str| {
+            link_index
+                .get(name)
+                .copied()
+                .ok_or_else(|| DynamicsError::MissingLink {
+                    joint: j.name.clone(),
+                    role,
+                    link: name.to_owned(),
+                })
+        };
+        let p = find("parent", &j.parent.link)?;
+        let c = find("child", &j.child.link)?;
+        if let Some(first) = parent_joint[c] {
+            return Err(DynamicsError::MultipleParents {
+                link: j.child.link.clone(),
+                first: robot.joints[first].name.clone(),
+                second: j.name.clone(),
+            });
+        }
+        if p == c {
+            return Err(DynamicsError::Cycle {
+                link: j.child.link.clone(),
+            });
+        }
+        parent_joint[c] = Some(k);
+        children[p].push(k);
+    }
+    let roots: Vec<usize> = (0..robot.links.len())
+        .filter(|&k| parent_joint[k].is_none())
+        .collect();
+    let root = match roots.as_slice() {
+        [] => return Err(DynamicsError::NoRoot),
+        [r] => *r,
+        many => {
+            let names: Vec<&str> = many.iter().map(|&k| robot.links[k].name.as_str()).collect();
+            return Err(DynamicsError::MultipleRoots(names.join(", ")));
+        }
+    };
+
+    let mut model = Model::new(robot.name.clone());
+    let root_name = robot.links[root].name.as_str();
+    let floating = match base {
+        BaseJoint::Auto => root_name != "world",
+        BaseJoint::Floating => true,
+        BaseJoint::Fixed => false,
+    };
+    // A `world` root with one child: that child is the robot's real root.
+    let mut start = root;
+    if floating && root_name == "world" && children[root].len() == 1 {
+        start = link_index[robot.joints[children[root][0]].child.link.as_str()];
+    }
+
+    // Depth-first walk, preorder, children in listing order, so each sub-tree gets contiguous
+    // joint indices (legs, arms… stay together in q). Stack items: (link, URDF joint reaching
+    // it, carrying body of its parent, link placement in that body).
+    let mut visited = vec![false; robot.links.len()];
+    let mut stack: Vec<(usize, Option<usize>, Option<usize>, SE3)> =
+        vec![(start, None, None, SE3::identity())];
+    while let Some((link, via, parent_body, x)) = stack.pop() {
+        if visited[link] {
+            return Err(DynamicsError::Cycle {
+                link: robot.links[link].name.clone(),
+            });
+        }
+        visited[link] = true;
+        let name = robot.links[link].name.clone();
+        let (body, link_in_body) = match via {
+            None if floating => {
+                let id = model.add_joint(
+                    ROOT_JOINT_NAME,
+                    None,
+                    SE3::identity(),
+                    JointKind::FreeFlyer,
+                    inertias[link],
+                    name,
+                )?;
+                (Some(id), SE3::identity())
+            }
+            None => {
+                model.add_frame(name, None, SE3::identity())?;
+                (None, SE3::identity())
+            }
+            Some(k) => {
+                let j = &robot.joints[k];
+                match joint_kind(j)? {
+                    Some((kind, limits)) => {
+                        let id = model.add_joint(
+                            j.name.clone(),
+                            parent_body,
+                            x,
+                            kind,
+                            inertias[link],
+                            name,
+                        )?;
+                        model.set_limits(id, limits);
+                        (Some(id), SE3::identity())
+                    }
+                    None => {
+                        // Fixed joint: merge into the parent body (Pinocchio-style).
+                        if let Some(b) = parent_body {
+                            let merged = x.act_inertia(&inertias[link]);
+                            model.joints[b].inertia += merged;
+                        }
+                        model.add_frame(name, parent_body, x)?;
+                        (parent_body, x)
+                    }
+                }
+            }
+        };
+        for &k in children[link].iter().rev() {
+            let j = &robot.joints[k];
+            let child = link_index[j.child.link.as_str()];
+            stack.push((child, Some(k), body, link_in_body.compose(&pose(&j.origin))));
+        }
+    }
+    // Links never reached hang on a cycle (each link has at most one parent joint).
+    if let Some(k) = (0..robot.links.len()).find(|&k| !visited[k] && k != root) {
+        return Err(DynamicsError::Cycle {
+            link: robot.links[k].name.clone(),
+        });
+    }
+    Ok(model)
+}
