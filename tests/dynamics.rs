@@ -180,6 +180,10 @@ fn humanoid_home_posture_matches_spec_section_7() {
     assert!((0.95..=1.05).contains(&head), "height {head}");
     let com = center_of_mass(&model, &mut data, &q).expect("com");
     assert!((0.50..=0.54).contains(&com.z), "CoM height {}", com.z);
+    eprintln!(
+        "home: CoM {com:?}, root height {:.4}, head top {head:.4}",
+        q[2]
+    );
     // CoM above the support polygon.
     let (lf, rr2) = (at(&data, "l_sole_fl").trans, at(&data, "r_sole_rr").trans);
     assert!(com.x < lf.x && com.x > rr2.x && com.y < lf.y && com.y > rr2.y);
