@@ -672,6 +672,12 @@ fn wrong_lengths_are_errors_not_panics() {
             index: 5
         })
     ));
+    let mut zero_quat = q.clone();
+    zero_quat[6] = 0.0;
+    assert!(matches!(
+        crba(&model, &mut data, &zero_quat),
+        Err(DynamicsError::InvalidJoint { joint, .. }) if joint == "root_joint"
+    ));
     let mut out = DMatrix::zeros(6, 3);
     assert!(get_frame_jacobian(&model, &data, 0, ReferenceFrame::Local, &mut out).is_err());
 }

@@ -244,8 +244,22 @@ impl Model {
     }
 
     /// Checks `q` has length nq and finite entries.
+    /// A free-flyer quaternion need not be exactly unit (it is normalised where used) but must
+    /// not be zero.
     pub fn check_q(&self, q: &DVector<f64>) -> Result<(), DynamicsError> {
-        check_vec("q", q, self.nq)
+        check_vec("q", q, self.nq)?;
+        for j in &self.joints {
+            if j.kind == JointKind::FreeFlyer {
+                let n2: f64 = (3..7).map(|k| q[j.idx_q + k] * q[j.idx_q + k]).sum();
+                if n2 < 1e-12 {
+                    return Err(DynamicsError::InvalidJoint {
+                        joint: j.name.clone(),
+                        reason: "the base quaternion in q is zero".into(),
+                    });
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Checks a velocity-sized vector (v, a, τ).
