@@ -179,6 +179,27 @@ fn condensed_matrices_match_the_state_space_model() {
 }
 
 #[test]
+fn reused_factorisation_is_invalidated_when_alpha0_changes() {
+    let c = config_with(&[]);
+    let n = 150;
+    let (state, refs) = busy_problem(n);
+    let a = busy_forces(n);
+    let b: Vec<[f64; 3]> = a.iter().map(|f| [f[0], f[1], -f[2]]).collect();
+    let mut p = preview(&c, n, LqSolverKind::Riccati);
+    p.solve_c1(&state, &refs, &a).unwrap();
+    let again = p.solve_c1(&state, &refs, &b).unwrap();
+    let fresh = preview(&c, n, LqSolverKind::Riccati)
+        .solve_c1(&state, &refs, &b)
+        .unwrap();
+    assert_eq!(again, fresh);
+    let back = p.solve_c1(&state, &refs, &a).unwrap();
+    let fresh = preview(&c, n, LqSolverKind::Riccati)
+        .solve_c1(&state, &refs, &a)
+        .unwrap();
+    assert_eq!(back, fresh);
+}
+
+#[test]
 fn c1_with_zero_disturbance_equals_c0() {
     let c = config_with(&[]);
     let n = 300;

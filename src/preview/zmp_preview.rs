@@ -22,8 +22,11 @@ pub struct ZmpPreview {
     c2: Vec<f64>,
     targets: [Vec<f64>; 2],
     riccati: Riccati,
-    /// Set by the dense path, which solves the whole horizon at once.
-    dense_first: [f64; 2],
+    /// Output rows of the current factorisation: with an unchanged α0 horizon (no vertical
+    /// disturbance, or C0) the gains are reused and a solve is two O(N) dot products.
+    factored_c2: Vec<f64>,
+    factored: bool,
+    ff: [Vec<f64>; 2],
 }
 
 /// The predicted horizon of the last solve: jerks u_0…u_{N−1}, CoM states and ZMP at k+1…k+N.
@@ -56,7 +59,9 @@ impl ZmpPreview {
             c2: vec![0.0; horizon],
             targets: [vec![0.0; horizon], vec![0.0; horizon]],
             riccati: Riccati::with_capacity(horizon),
-            dense_first: [0.0; 2],
+            factored_c2: vec![0.0; horizon],
+            factored: false,
+            ff: [vec![0.0; horizon], vec![0.0; horizon]],
         }
     }
 
@@ -123,20 +128,15 @@ impl ZmpPreview {
                     zmp_ref[i][axis] - self.disturbance.shift(&self.model, axis, i);
             }
         }
+        if !self.factored || self.factored_c2[..n] != self.c2[..n] {
+            self.riccati
+                .factor(&self.model, self.q_e, self.r, &self.c2[..n]);
+            self.factored_c2[..n].copy_from_slice(&self.c2[..n]);
+            self.factored = true;
+        }
         match self.solver {
             LqSolverKind::Riccati => {
-                self.riccati
-                    .factor(&self.model, self.q_e, self.r, &self.c2[..n]);
-                self.riccati.feedforward(
-                    &self.model,
-                    self.q_e,
-                    &self.c2[..n],
-                    [&self.targets[0][..n], &self.targets[1][..n]],
-                );
-                Ok([
-                    self.riccati.first_input(0, &state[0]),
-                    self.riccati.first_input(1, &state[1]),
-                ])
+                Ok([0, 1].map(|a| self.riccati.first_input(&state[a], &self.targets[a][..n])))
             }
             LqSolverKind::Dense => {
                 let horizon = CondensedHorizon::build(&self.model, &self.c2[..n]);
@@ -150,29 +150,27 @@ impl ZmpPreview {
                     .ok_or_else(|| {
                         PreviewError::Qp("dense normal matrix is not positive definite".into())
                     })?;
-                // The dense path still factors Riccati so that `plan` works the same for both.
-                self.riccati
-                    .factor(&self.model, self.q_e, self.r, &self.c2[..n]);
-                self.riccati.feedforward(
-                    &self.model,
-                    self.q_e,
-                    &self.c2[..n],
-                    [&self.targets[0][..n], &self.targets[1][..n]],
-                );
-                self.dense_first = [u[0][0], u[1][0]];
-                Ok(self.dense_first)
+                Ok([u[0][0], u[1][0]])
             }
         }
     }
 
     /// The predicted horizon of the last solve from `state` (CoM states, jerks and the ZMP that the
     /// disturbed model predicts, eq. (11)).
-    pub fn plan(&self, state: &[AxisState; 2], out: &mut PreviewPlan) {
+    pub fn plan(&mut self, state: &[AxisState; 2], out: &mut PreviewPlan) {
         let n = self.horizon;
         for axis in 0..2 {
-            self.riccati.rollout(
+            let ff = &mut self.ff[axis][..n];
+            self.riccati.feedforward_into(
                 &self.model,
-                axis,
+                self.q_e,
+                &self.c2[..n],
+                &self.targets[axis][..n],
+                ff,
+            );
+            self.riccati.rollout_with(
+                &self.model,
+                ff,
                 &state[axis],
                 &mut out.jerk[axis][..n],
                 &mut out.com[axis][..n],
