@@ -6,9 +6,11 @@
 //! - [`scenario`]: hand force profiles (impacts, CSV) and the ZMP reference of a run.
 //! - [`offline`]: the closed loop of the reduced models behind `upc preview`, with its metrics.
 //! - [`config`]: TOML configuration with errors that name the offending key.
+//! - [`wbc`]: the whole-body torque controller (LQP over q̈ and contact forces, clarabel).
 
 pub mod config;
 pub mod dynamics;
 pub mod offline;
 pub mod preview;
 pub mod scenario;
+pub mod wbc;

@@ -1,0 +1,855 @@
+//! The whole-body LQP (Salini, Padois, Bidaud 2011; SPEC §6), solved with clarabel each tick.
+//!
+//! Decision variables `z = [q̈ (nv); f (24)]`: the generalised accelerations (free-flyer part in
+//! the root's local frame, as `v`) and the world-axes forces at the 8 sole corners (4 per foot).
+//! The joint torques are eliminated through the actuated rows of the equations of motion,
+//! `τ = M_a q̈ + h_a − J_c,aᵀ f`, and recovered from the solution.
+//!
+//! ```text
+//! min ½ zᵀ P z + pᵀ z          (weighted tasks ½ w ‖A z − r‖², see below)
+//! s.t. M_u q̈ − J_c,uᵀ f = −h_u                 floating-base rows of the EoM      (zero cone, 6)
+//!      J_s q̈ = −J̇_s q̇ − k J_s q̇                each sole, 6-D, world-aligned       (zero cone, 12)
+//!      |M_a q̈ + h_a − J_c,aᵀ f| ≤ s τ_max      torque limits, both signs          (nonneg, 2·32)
+//!      ‖(t₁ᵀf_i, t₂ᵀf_i)‖ ≤ μ nᵀ f_i            friction cones, exact               (SOC(3) × 8)
+//! ```
+//!
+//! Choices (the SPEC leaves them open):
+//! - Contacts: the non-accelerating condition is imposed on each sole as a rigid body (6 rows per
+//!   foot) rather than on the 4 corners (12 rows per foot of rank 6): identical when the foot is
+//!   at rest, and it spares the interior-point KKT system 12 redundant equalities. `k` (config
+//!   `contact_damping`) is a Baumgarte-style velocity term that drives a slipping sole back to
+//!   rest; there is no position term (the controller keeps no reference foot placement).
+//! - Friction: exact second-order cones (clarabel `SecondOrderConeT(3)`) with the sole's z axis
+//!   as normal; they imply the normal force is ≥ 0, so no separate rows are needed. (The paper
+//!   linearised them; clarabel handles the true cone at the same cost.)
+//! - Tasks (`½ w ‖A z − r‖²`): CoM acceleration `J_com q̈ + J̇_com q̇ = a_com` (world), hand
+//!   operational-space acceleration `J_h q̈ + J̇_h q̇ = ẍ_cmd` (linear rows, world-aligned) with
+//!   `ẍ_cmd = K_p (x_des − x) + K_d (ẋ_des − ẋ) + ẍ_des`, base orientation PD towards the posture
+//!   reference's root orientation, joint posture PD, and regularisation of q̈ and f (strictly
+//!   convex: the solution is unique).
+//! - Reuse between ticks: the sparsity pattern is fixed from the model's structure (structural
+//!   zeros included), presolve is off and zeros are not dropped, so after the first tick only the
+//!   values are pushed with `update_P/q/A/b` and the symbolic LDLᵀ analysis and the equilibration
+//!   of the first tick are reused. Clarabel is an interior-point method: it restarts from its own
+//!   initial point every solve (no warm start); what carries over is the structure.
+//! - Failure is never a panic: a solver status other than Solved / AlmostSolved, non-finite data
+//!   or solution, or invalid input gives the fallback torque ([`WholeBodyController::fallback_torque`]:
+//!   gravity compensation through the contacts with joint damping), a
+//!   [`WbcStatus::Fallback`], a counter, and a rate-limited warning. After a solver failure
+//!   the solver is rebuilt on the next tick (fresh equilibration).
+//!
+//! Units: SI (m, s, N, N·m, rad). Forces and CoM / hand quantities are in world axes.
+
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::time::{Duration, Instant};
+
+use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
+use nalgebra::{DMatrix, DVector, Matrix6, Quaternion, UnitQuaternion, Vector3, Vector6};
+
+use super::com_bias::{com_drift_from_pass, drift_pass, frame_drift_from_pass};
+use super::pattern::Pattern;
+use crate::config::WbcConfig;
+use crate::dynamics::spatial::log3;
+use crate::dynamics::{
+    Data, DynamicsError, JointKind, Model, ReferenceFrame, compute_joint_jacobians, crba,
+    get_frame_jacobian, gravity_torques, jacobian_center_of_mass, nonlinear_effects,
+    update_frame_placements,
+};
+
+/// Number of point contacts: 4 sole corners on each of 2 feet.
+pub const N_CONTACTS: usize = 8;
+/// Corner frame suffixes, in the order of [`WbcOutput::contact_forces`] for each foot.
+pub const CORNERS: [&str; 4] = ["fl", "fr", "rl", "rr"];
+/// Warnings about fallbacks are emitted at most once per this many ticks.
+const WARN_EVERY_TICKS: u64 = 1000;
+
+/// Construction errors (the per-tick [`WholeBodyController::solve`] never fails).
+#[derive(Debug, thiserror::Error)]
+pub enum WbcError {
+    #[error("whole-body controller: {0}")]
+    Dynamics(#[from] DynamicsError),
+    #[error("whole-body controller needs a free-flyer root joint")]
+    NoFloatingBase,
+    #[error(
+        "joint '{0}' is not a 1-DoF joint: the QP's torque rows and posture task need 1-DoF joints"
+    )]
+    UnsupportedJoint(String),
+    #[error("whole-body controller: clarabel refused the problem: {0}")]
+    Solver(String),
+}
+
+/// What the control loop asks for this tick. World frame, SI units.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct WbcCommand<'a> {
+    /// Desired CoM acceleration (m/s², world): x/y from the preview controller's plan, z e.g. a
+    /// PD on the CoM height.
+    pub com_acc: Vector3<f64>,
+    /// Hand set-point of the impedance law (m, m/s, m/s², world, at the hand frame origin).
+    pub hand_pos_des: Vector3<f64>,
+    pub hand_vel_des: Vector3<f64>,
+    pub hand_acc_des: Vector3<f64>,
+    /// Current impedance gains K_p (1/s²) and K_d (1/s) (from C2, or the fixed ones of C0/C1).
+    pub kp: f64,
+    pub kd: f64,
+    /// Posture reference (length nq; its root quaternion is the base-orientation target). `None`:
+    /// the stored one ([`WholeBodyController::set_posture_reference`], else the first `q` seen).
+    pub posture_ref: Option<&'a DVector<f64>>,
+}
+
+/// Why a tick fell back to the safe torque.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FallbackReason {
+    /// `q`, `v`, the command or the posture reference is malformed or non-finite.
+    InvalidInput,
+    /// The assembled QP data is not finite.
+    NonFiniteProblem,
+    /// Clarabel refused the problem data (construction or update error).
+    SolverSetup,
+    /// Clarabel ended with this status (not Solved / AlmostSolved).
+    Solver(SolverStatus),
+    /// The solver reported success but the solution is not finite.
+    NonFiniteSolution,
+    /// The solver panicked (caught; the solver is rebuilt next tick).
+    SolverPanic,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WbcStatus {
+    /// The QP's solution (clarabel Solved or AlmostSolved).
+    Solved,
+    /// The fallback torque, for this reason.
+    Fallback(FallbackReason),
+}
+
+/// Counters since construction.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct WbcCounters {
+    pub ticks: u64,
+    /// Ticks whose QP was solved (including reduced-accuracy solutions).
+    pub solved: u64,
+    /// Of those, clarabel's AlmostSolved (reduced accuracy).
+    pub almost_solved: u64,
+    pub fallbacks: u64,
+    pub consecutive_fallbacks: u64,
+    /// Clarabel solvers built (1 after the first tick on the fast path).
+    pub solver_builds: u64,
+}
+
+/// One tick's result. `tau` and `ddq` borrow the controller's buffers.
+#[derive(Debug)]
+pub struct WbcOutput<'a> {
+    /// Actuated joint torques (N·m), length nv − 6, in velocity order of the joints.
+    pub tau: &'a DVector<f64>,
+    /// Generalised accelerations the QP predicts (length nv; zeros on a fallback).
+    pub ddq: &'a DVector<f64>,
+    /// Contact forces (N, world axes) at `<left foot>_fl, _fr, _rl, _rr, <right foot>_fl, …`.
+    pub contact_forces: [Vector3<f64>; N_CONTACTS],
+    pub status: WbcStatus,
+    /// Build + solve wall time of the tick.
+    pub tick_time: Duration,
+    /// Clarabel's own solve time (zero on a fallback before solving).
+    pub solve_time: Duration,
+    /// Interior-point iterations (0 when not solved).
+    pub iterations: u32,
+}
+
+/// Settings copied from [`WbcConfig`].
+#[derive(Clone, Debug)]
+struct Params {
+    friction: f64,
+    contact_damping: f64,
+    w_com: f64,
+    w_hand: f64,
+    w_base: f64,
+    w_posture: f64,
+    w_reg_acc: f64,
+    w_reg_force: f64,
+    base_kp: f64,
+    base_kd: f64,
+    posture_kp: f64,
+    posture_kd: f64,
+    fallback_damping: f64,
+    reuse_solver: bool,
+}
+
+/// The whole-body torque controller. See the module documentation for the problem.
+pub struct WholeBodyController {
+    p: Params,
+    settings: DefaultSettings<f64>,
+    nv: usize,
+    nq: usize,
+    nz: usize,
+    /// Constraint row offsets: EoM (0), soles, torque rows, cones; total rows.
+    row_feet: usize,
+    row_tau: usize,
+    row_soc: usize,
+    n_rows: usize,
+    // Model-derived.
+    corner_ids: [usize; N_CONTACTS],
+    foot_ids: [usize; 2],
+    hand_id: usize,
+    /// Velocity indices of the torque-limited joints and their limits (N·m, scaled).
+    limited: Vec<(usize, f64)>,
+    /// Effort limit of each actuated dof (∞ when unlimited), for clamping the fallback.
+    tau_max: DVector<f64>,
+    /// Configuration index of each actuated dof.
+    q_index: Vec<usize>,
+    // Per-tick workspace.
+    jtmp: DMatrix<f64>,
+    jc: DMatrix<f64>,
+    jfeet: DMatrix<f64>,
+    jh: DMatrix<f64>,
+    jcom: DMatrix<f64>,
+    h: DVector<f64>,
+    pd: DMatrix<f64>,
+    qd: Vec<f64>,
+    ad: DMatrix<f64>,
+    bd: Vec<f64>,
+    p_pattern: Pattern,
+    a_pattern: Pattern,
+    p_val: Vec<f64>,
+    a_val: Vec<f64>,
+    cones: Vec<SupportedConeT<f64>>,
+    solver: Option<DefaultSolver<f64>>,
+    posture_ref: Option<DVector<f64>>,
+    // Outputs.
+    tau: DVector<f64>,
+    last_tau: DVector<f64>,
+    ddq: DVector<f64>,
+    forces: [Vector3<f64>; N_CONTACTS],
+    counters: WbcCounters,
+    last_warn_tick: Option<u64>,
+}
+
+impl WholeBodyController {
+    /// Resolves the contact, foot and hand frames, decides the fixed sparsity pattern, the cones
+    /// and clarabel's settings, and preallocates every buffer. The clarabel solver itself is
+    /// built on the first tick (its equilibration needs real data).
+    pub fn new(model: &Model, config: &WbcConfig) -> Result<Self, WbcError> {
+        if !model.has_floating_base() || model.joints[0].kind != JointKind::FreeFlyer {
+            return Err(WbcError::NoFloatingBase);
+        }
+        let nv = model.nv;
+        let na = nv - 6;
+        let mut q_index = Vec::with_capacity(na);
+        let mut tau_max = DVector::from_element(na, f64::INFINITY);
+        let mut limited = Vec::new();
+        for j in &model.joints[1..] {
+            if j.nv() != 1 || j.nq() != 1 {
+                return Err(WbcError::UnsupportedJoint(j.name.clone()));
+            }
+            q_index.push(j.idx_q);
+            let e = j.limits.effort * config.torque_limit_scale;
+            // An effort of 0 (URDF's "unspecified") or ∞ means no torque row.
+            if e.is_finite() && e > 0.0 {
+                limited.push((j.idx_v, e));
+                tau_max[j.idx_v - 6] = e;
+            }
+        }
+        let foot_ids = [
+            model.frame_id(&config.feet[0])?,
+            model.frame_id(&config.feet[1])?,
+        ];
+        let mut corner_ids = [0; N_CONTACTS];
+        for (k, foot) in config.feet.iter().enumerate() {
+            for (s, suffix) in CORNERS.iter().enumerate() {
+                corner_ids[4 * k + s] = model.frame_id(&format!("{foot}_{suffix}"))?;
+            }
+        }
+        let hand_id = model.frame_id(&config.hand_frame)?;
+
+        let nz = nv + 3 * N_CONTACTS;
+        let row_feet = 6;
+        let row_tau = row_feet + 12;
+        let row_soc = row_tau + 2 * limited.len();
+        let n_rows = row_soc + 3 * N_CONTACTS;
+
+        // Structure: dof a "supports" frame f when its joint is on f's path to the world.
+        let supports = |dof: usize, frame: usize| {
+            model.frames[frame]
+                .parent
+                .is_some_and(|p| model.is_ancestor(model.dof_joint[dof], p))
+        };
+        let m_struct = |a: usize, b: usize| {
+            let (ja, jb) = (model.dof_joint[a], model.dof_joint[b]);
+            model.is_ancestor(ja, jb) || model.is_ancestor(jb, ja)
+        };
+        // P: the q̈ block is dense (J_com has every column), the force block diagonal.
+        let p_pattern = Pattern::from_mask(nz, nz, |r, c| r <= c && (c < nv || r == c));
+        let mut tau_row_dof = vec![usize::MAX; n_rows];
+        for (k, &(dof, _)) in limited.iter().enumerate() {
+            tau_row_dof[row_tau + 2 * k] = dof;
+            tau_row_dof[row_tau + 2 * k + 1] = dof;
+        }
+        let a_pattern = Pattern::from_mask(n_rows, nz, |r, c| {
+            let force = (c >= nv).then(|| (c - nv) / 3);
+            if r < row_feet {
+                // Floating-base rows: M_u is dense, every contact acts on the base.
+                true
+            } else if r < row_tau {
+                let foot = foot_ids[(r - row_feet) / 6];
+                force.is_none() && supports(c, foot)
+            } else if r < row_soc {
+                let dof = tau_row_dof[r];
+                match force {
+                    None => m_struct(dof, c),
+                    Some(k) => supports(dof, corner_ids[k]),
+                }
+            } else {
+                force == Some((r - row_soc) / 3)
+            }
+        });
+        let mut cones = vec![SupportedConeT::ZeroConeT(row_tau)];
+        if !limited.is_empty() {
+            cones.push(SupportedConeT::NonnegativeConeT(2 * limited.len()));
+        }
+        cones.extend((0..N_CONTACTS).map(|_| SupportedConeT::SecondOrderConeT(3)));
+
+        let tol = config.tolerance;
+        let settings = DefaultSettings {
+            verbose: false,
+            max_iter: config.max_iterations,
+            tol_gap_abs: tol,
+            tol_gap_rel: tol,
+            tol_feas: tol,
+            // Data updates need the original structure: no presolve, structural zeros kept.
+            presolve_enable: false,
+            input_sparse_dropzeros: false,
+            direct_kkt_solver: true,
+            direct_solve_method: "qdldl".to_string(),
+            ..DefaultSettings::default()
+        };
+
+        Ok(Self {
+            p: Params {
+                friction: config.friction,
+                contact_damping: config.contact_damping,
+                w_com: config.w_com,
+                w_hand: config.w_hand,
+                w_base: config.w_base_orientation,
+                w_posture: config.w_posture,
+                w_reg_acc: config.w_reg_acceleration,
+                w_reg_force: config.w_reg_force,
+                base_kp: config.base_kp,
+                base_kd: config.base_kd,
+                posture_kp: config.posture_kp,
+                posture_kd: config.posture_kd,
+                fallback_damping: config.fallback_damping,
+                reuse_solver: config.reuse_solver,
+            },
+            settings,
+            nv,
+            nq: model.nq,
+            nz,
+            row_feet,
+            row_tau,
+            row_soc,
+            n_rows,
+            corner_ids,
+            foot_ids,
+            hand_id,
+            limited,
+            tau_max,
+            q_index,
+            jtmp: DMatrix::zeros(6, nv),
+            jc: DMatrix::zeros(3 * N_CONTACTS, nv),
+            jfeet: DMatrix::zeros(12, nv),
+            jh: DMatrix::zeros(3, nv),
+            jcom: DMatrix::zeros(3, nv),
+            h: DVector::zeros(nv),
+            pd: DMatrix::zeros(nz, nz),
+            qd: vec![0.0; nz],
+            ad: DMatrix::zeros(n_rows, nz),
+            bd: vec![0.0; n_rows],
+            p_val: vec![0.0; p_pattern.nnz()],
+            a_val: vec![0.0; a_pattern.nnz()],
+            p_pattern,
+            a_pattern,
+            cones,
+            solver: None,
+            posture_ref: None,
+            tau: DVector::zeros(na),
+            last_tau: DVector::zeros(na),
+            ddq: DVector::zeros(nv),
+            forces: [Vector3::zeros(); N_CONTACTS],
+            counters: WbcCounters::default(),
+            last_warn_tick: None,
+        })
+    }
+
+    /// Counters of ticks, solves and fallbacks since construction.
+    pub fn counters(&self) -> WbcCounters {
+        self.counters
+    }
+
+    /// Frame ids of the 8 contact points (order of [`WbcOutput::contact_forces`]).
+    pub fn contact_frames(&self) -> [usize; N_CONTACTS] {
+        self.corner_ids
+    }
+
+    /// Contact forces of the last tick (QP or fallback), as in [`WbcOutput::contact_forces`].
+    pub fn last_contact_forces(&self) -> &[Vector3<f64>; N_CONTACTS] {
+        &self.forces
+    }
+
+    /// Frame ids of the two soles and of the hand.
+    pub fn foot_frames(&self) -> [usize; 2] {
+        self.foot_ids
+    }
+    pub fn hand_frame(&self) -> usize {
+        self.hand_id
+    }
+
+    /// Effort limit used for each actuated dof (N·m; ∞ where the URDF gives none).
+    pub fn torque_limits(&self) -> &DVector<f64> {
+        &self.tau_max
+    }
+
+    /// Sizes of the QP: (variables, constraint rows, nnz(P), nnz(A)).
+    pub fn problem_size(&self) -> (usize, usize, usize, usize) {
+        (
+            self.nz,
+            self.n_rows,
+            self.p_pattern.nnz(),
+            self.a_pattern.nnz(),
+        )
+    }
+
+    /// Stores the posture reference (length nq; its root quaternion is the base-orientation
+    /// target).
+    pub fn set_posture_reference(
+        &mut self,
+        model: &Model,
+        q_ref: &DVector<f64>,
+    ) -> Result<(), WbcError> {
+        model.check_q(q_ref)?;
+        match self.posture_ref.as_mut() {
+            Some(r) => r.copy_from(q_ref),
+            None => self.posture_ref = Some(q_ref.clone()),
+        }
+        Ok(())
+    }
+
+    pub fn posture_reference(&self) -> Option<&DVector<f64>> {
+        self.posture_ref.as_ref()
+    }
+
+    /// One control tick: assemble and solve the QP at `(q, v)` for `cmd`. Never panics and never
+    /// fails: on any problem it returns the fallback torque with [`WbcStatus::Fallback`].
+    /// `data` is the caller's workspace for `model` (overwritten).
+    pub fn solve(
+        &mut self,
+        model: &Model,
+        data: &mut Data,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        cmd: &WbcCommand,
+    ) -> WbcOutput<'_> {
+        let t0 = Instant::now();
+        self.counters.ticks += 1;
+        let mut solve_time = Duration::ZERO;
+        let mut iterations = 0;
+        let status = match self.try_solve(model, data, q, v, cmd, &mut solve_time, &mut iterations)
+        {
+            Ok(almost) => {
+                self.counters.solved += 1;
+                self.counters.almost_solved += u64::from(almost);
+                self.counters.consecutive_fallbacks = 0;
+                self.last_tau.copy_from(&self.tau);
+                WbcStatus::Solved
+            }
+            Err(reason) => {
+                self.counters.fallbacks += 1;
+                self.counters.consecutive_fallbacks += 1;
+                if !matches!(reason, FallbackReason::InvalidInput) {
+                    // A fresh solver (fresh equilibration) next tick.
+                    self.solver = None;
+                }
+                self.apply_fallback(model, data, q, v);
+                self.warn(reason);
+                WbcStatus::Fallback(reason)
+            }
+        };
+        WbcOutput {
+            tau: &self.tau,
+            ddq: &self.ddq,
+            contact_forces: self.forces,
+            status,
+            tick_time: t0.elapsed(),
+            solve_time,
+            iterations,
+        }
+    }
+
+    fn warn(&mut self, reason: FallbackReason) {
+        let t = self.counters.ticks;
+        if self
+            .last_warn_tick
+            .is_none_or(|last| t - last >= WARN_EVERY_TICKS)
+        {
+            self.last_warn_tick = Some(t);
+            tracing::warn!(
+                ?reason,
+                fallbacks = self.counters.fallbacks,
+                consecutive = self.counters.consecutive_fallbacks,
+                ticks = t,
+                "whole-body QP fell back to gravity compensation (warnings limited to one per {WARN_EVERY_TICKS} ticks)"
+            );
+        }
+    }
+
+    /// The QP path. `Ok(almost_solved)` leaves τ, q̈ and f in the output buffers.
+    #[allow(clippy::too_many_arguments)]
+    fn try_solve(
+        &mut self,
+        model: &Model,
+        data: &mut Data,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        cmd: &WbcCommand,
+        solve_time: &mut Duration,
+        iterations: &mut u32,
+    ) -> Result<bool, FallbackReason> {
+        use FallbackReason::*;
+        if model.nv != self.nv || model.nq != self.nq {
+            return Err(InvalidInput);
+        }
+        let cmd_finite = [
+            cmd.com_acc,
+            cmd.hand_pos_des,
+            cmd.hand_vel_des,
+            cmd.hand_acc_des,
+        ]
+        .iter()
+        .all(|x| x.iter().all(|c| c.is_finite()))
+            && cmd.kp.is_finite()
+            && cmd.kd.is_finite();
+        if !cmd_finite || model.check_v("v", v).is_err() {
+            return Err(InvalidInput);
+        }
+        if let Some(r) = cmd.posture_ref {
+            model.check_q(r).map_err(|_| InvalidInput)?;
+        }
+        // Kinematics and dynamics at (q, v). CRBA checks q and leaves the joint Jacobians.
+        crba(model, data, q).map_err(|_| InvalidInput)?;
+        if self.posture_ref.is_none() && cmd.posture_ref.is_none() {
+            self.posture_ref = Some(q.clone()); // first tick only
+        }
+        update_frame_placements(model, data);
+        self.build_jacobians(model, data);
+        let hand_pos = data.o_m_f[self.hand_id].trans;
+        let root_rot = data.o_m_i[0].rot;
+        let foot_rot = [
+            data.o_m_f[self.foot_ids[0]].rot,
+            data.o_m_f[self.foot_ids[1]].rot,
+        ];
+        jacobian_center_of_mass(model, data, q).map_err(|_| InvalidInput)?;
+        self.jcom.copy_from(&data.jcom);
+        // Drifts J̇ v of the hand, both soles and the CoM: one forward pass.
+        let hand_drift = drift_pass(model, data, q, v, self.hand_id)
+            .map_err(|_| InvalidInput)?
+            .lin;
+        let feet_drift = [
+            frame_drift_from_pass(model, data, self.foot_ids[0]).to_vector(),
+            frame_drift_from_pass(model, data, self.foot_ids[1]).to_vector(),
+        ];
+        let com_drift = com_drift_from_pass(model, data);
+        // Bias h(q, v) last: RNEA overwrites data.v / data.a but not data.m.
+        nonlinear_effects(model, data, q, v).map_err(|_| InvalidInput)?;
+        self.h.copy_from(&data.tau);
+
+        // ---- Objective (dense scratch; only the upper triangle is gathered). ----
+        let nv = self.nv;
+        let p = self.p.clone();
+        self.pd.fill(0.0);
+        self.qd.fill(0.0);
+        // CoM task.
+        let r_com = cmd.com_acc - com_drift;
+        add_task(&mut self.pd, &mut self.qd, &self.jcom, &r_com, p.w_com);
+        // Hand impedance task.
+        let hand_vel = mat3_mul_v(&self.jh, v);
+        let x_cmd = cmd.kp * (cmd.hand_pos_des - hand_pos)
+            + cmd.kd * (cmd.hand_vel_des - hand_vel)
+            + cmd.hand_acc_des;
+        let r_hand = x_cmd - hand_drift;
+        add_task(&mut self.pd, &mut self.qd, &self.jh, &r_hand, p.w_hand);
+        // Base orientation: world angular acceleration R ω̇_b (= R q̈[3..6] since d/dt(R ω_b) =
+        // R ω̇_b) towards α = K_p log(R_ref Rᵀ) − K_d ω; in body axes the target is Rᵀ α.
+        let q_ref = cmd
+            .posture_ref
+            .or(self.posture_ref.as_ref())
+            .ok_or(InvalidInput)?;
+        let quat = UnitQuaternion::from_quaternion(Quaternion::new(
+            q_ref[6], q_ref[3], q_ref[4], q_ref[5],
+        ));
+        let r_ref = quat.to_rotation_matrix().into_inner();
+        let omega_b = Vector3::new(v[3], v[4], v[5]);
+        let e_world = log3(&(r_ref * root_rot.transpose()));
+        let target_b = p.base_kp * (root_rot.transpose() * e_world) - p.base_kd * omega_b;
+        for k in 0..3 {
+            self.pd[(3 + k, 3 + k)] += p.w_base;
+            self.qd[3 + k] -= p.w_base * target_b[k];
+        }
+        // Posture PD on the joints.
+        for (a, &qi) in self.q_index.iter().enumerate() {
+            let d = 6 + a;
+            let target = p.posture_kp * (q_ref[qi] - q[qi]) - p.posture_kd * v[d];
+            self.pd[(d, d)] += p.w_posture;
+            self.qd[d] -= p.w_posture * target;
+        }
+        // Regularisation.
+        for d in 0..self.nz {
+            self.pd[(d, d)] += if d < nv { p.w_reg_acc } else { p.w_reg_force };
+        }
+
+        // ---- Constraints A z + s = b, s ∈ K. ----
+        let m = &data.m;
+        let ad = &mut self.ad;
+        ad.fill(0.0);
+        // Floating-base EoM rows: M_u q̈ − J_c,uᵀ f = −h_u.
+        for r in 0..6 {
+            for c in 0..nv {
+                ad[(r, c)] = m[(r, c)];
+            }
+            for k in 0..3 * N_CONTACTS {
+                ad[(r, nv + k)] = -self.jc[(k, r)];
+            }
+            self.bd[r] = -self.h[r];
+        }
+        // Soles at rest: J_s q̈ = −J̇_s v − k J_s v.
+        for foot in 0..2 {
+            for i in 0..6 {
+                let row = self.row_feet + 6 * foot + i;
+                let jr = 6 * foot + i;
+                let mut jv = 0.0;
+                for c in 0..nv {
+                    let x = self.jfeet[(jr, c)];
+                    ad[(row, c)] = x;
+                    jv += x * v[c];
+                }
+                self.bd[row] = -feet_drift[foot][i] - p.contact_damping * jv;
+            }
+        }
+        // Torque limits: ±(M_a q̈ + h_a − J_c,aᵀ f) ≤ τ_max.
+        for (k, &(dof, tmax)) in self.limited.iter().enumerate() {
+            let row = self.row_tau + 2 * k;
+            for c in 0..nv {
+                let x = m[(dof, c)];
+                ad[(row, c)] = x;
+                ad[(row + 1, c)] = -x;
+            }
+            for j in 0..3 * N_CONTACTS {
+                let x = self.jc[(j, dof)];
+                ad[(row, nv + j)] = -x;
+                ad[(row + 1, nv + j)] = x;
+            }
+            self.bd[row] = tmax - self.h[dof];
+            self.bd[row + 1] = tmax + self.h[dof];
+        }
+        // Friction cones: s = (μ nᵀf, t₁ᵀf, t₂ᵀf) ∈ SOC(3), b = 0.
+        for c in 0..N_CONTACTS {
+            let rot = &foot_rot[c / 4];
+            let row = self.row_soc + 3 * c;
+            for a in 0..3 {
+                ad[(row, nv + 3 * c + a)] = -p.friction * rot[(a, 2)];
+                ad[(row + 1, nv + 3 * c + a)] = -rot[(a, 0)];
+                ad[(row + 2, nv + 3 * c + a)] = -rot[(a, 1)];
+            }
+            self.bd[row] = 0.0;
+            self.bd[row + 1] = 0.0;
+            self.bd[row + 2] = 0.0;
+        }
+
+        self.p_pattern.gather(&self.pd, &mut self.p_val);
+        self.a_pattern.gather(&self.ad, &mut self.a_val);
+        let finite = |s: &[f64]| s.iter().all(|x| x.is_finite());
+        if !(finite(&self.p_val) && finite(&self.a_val) && finite(&self.qd) && finite(&self.bd)) {
+            return Err(NonFiniteProblem);
+        }
+
+        // ---- Solve: update the data in place (fast path) or build a solver. ----
+        let reuse = self.p.reuse_solver && self.solver.is_some();
+        if reuse {
+            let s = self.solver.as_mut().ok_or(SolverSetup)?;
+            let updated = s
+                .update_P(&self.p_val)
+                .and_then(|_| s.update_A(&self.a_val))
+                .and_then(|_| s.update_q(&self.qd))
+                .and_then(|_| s.update_b(&self.bd));
+            if updated.is_err() {
+                return Err(SolverSetup);
+            }
+        } else {
+            let pm = self.p_pattern.to_csc(&self.p_val);
+            let am = self.a_pattern.to_csc(&self.a_val);
+            let s = DefaultSolver::new(
+                &pm,
+                &self.qd,
+                &am,
+                &self.bd,
+                &self.cones,
+                self.settings.clone(),
+            )
+            .map_err(|_| SolverSetup)?;
+            self.counters.solver_builds += 1;
+            self.solver = Some(s);
+        }
+        let solver = self.solver.as_mut().ok_or(SolverSetup)?;
+        catch_unwind(AssertUnwindSafe(|| solver.solve())).map_err(|_| SolverPanic)?;
+        let sol = &solver.solution;
+        *solve_time = Duration::from_secs_f64(sol.solve_time.max(0.0));
+        *iterations = sol.iterations;
+        let almost = match sol.status {
+            SolverStatus::Solved => false,
+            SolverStatus::AlmostSolved => true,
+            s => return Err(Solver(s)),
+        };
+        let x = &sol.x;
+        if x.len() != self.nz || !finite(x) {
+            return Err(NonFiniteSolution);
+        }
+
+        // ---- Outputs: q̈, f, τ = M_a q̈ + h_a − J_c,aᵀ f. ----
+        self.ddq.copy_from_slice(&x[..nv]);
+        for c in 0..N_CONTACTS {
+            self.forces[c] = Vector3::new(x[nv + 3 * c], x[nv + 3 * c + 1], x[nv + 3 * c + 2]);
+        }
+        for a in 0..nv - 6 {
+            let d = 6 + a;
+            let mut t = self.h[d];
+            for c in 0..nv {
+                t += m[(d, c)] * x[c];
+            }
+            for j in 0..3 * N_CONTACTS {
+                t -= self.jc[(j, d)] * x[nv + j];
+            }
+            self.tau[a] = t;
+        }
+        if !finite(self.tau.as_slice()) {
+            return Err(NonFiniteSolution);
+        }
+        Ok(almost)
+    }
+
+    /// World-aligned Jacobians of the corners (linear rows), soles (6 rows) and hand (linear
+    /// rows), from `data.j` and `data.o_m_f`.
+    fn build_jacobians(&mut self, model: &Model, data: &Data) {
+        let lwa = ReferenceFrame::LocalWorldAligned;
+        for (c, &id) in self.corner_ids.iter().enumerate() {
+            // Frame ids and sizes were checked at construction: this cannot fail.
+            let _ = get_frame_jacobian(model, data, id, lwa, &mut self.jtmp);
+            self.jc.rows_mut(3 * c, 3).copy_from(&self.jtmp.rows(0, 3));
+        }
+        for (k, &id) in self.foot_ids.iter().enumerate() {
+            let _ = get_frame_jacobian(model, data, id, lwa, &mut self.jtmp);
+            self.jfeet.rows_mut(6 * k, 6).copy_from(&self.jtmp);
+        }
+        let _ = get_frame_jacobian(model, data, self.hand_id, lwa, &mut self.jtmp);
+        self.jh.copy_from(&self.jtmp.rows(0, 3));
+    }
+
+    /// The safe torque, written to the output buffers: gravity compensation through the
+    /// contacts plus joint damping, clamped to the effort limits.
+    ///
+    /// The 8 contact forces are the least-norm solution of the floating-base gravity rows
+    /// `J_c,uᵀ f = g_u` (the weight shared evenly when standing symmetrically; friction cones
+    /// are not enforced), and `τ = g_a − J_c,aᵀ f − D q̇_a`. Returns the torque, or an error when
+    /// `(q, v)` are invalid (then the buffers are left as they were).
+    pub fn fallback_torque(
+        &mut self,
+        model: &Model,
+        data: &mut Data,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+    ) -> Result<&DVector<f64>, WbcError> {
+        model.check_v("v", v)?;
+        if model.nv != self.nv {
+            return Err(WbcError::Dynamics(DynamicsError::DimensionMismatch {
+                what: "model (not the controller's)",
+                expected: self.nv,
+                got: model.nv,
+            }));
+        }
+        compute_joint_jacobians(model, data, q)?;
+        self.build_jacobians(model, data);
+        gravity_torques(model, data, q)?;
+        let g = &data.tau;
+        // f = Aᵀ (A Aᵀ)⁻¹ g_u with A = J_c,uᵀ (6 × 24).
+        let mut aat = Matrix6::<f64>::zeros();
+        for r in 0..6 {
+            for s in 0..6 {
+                let mut x = 0.0;
+                for j in 0..3 * N_CONTACTS {
+                    x += self.jc[(j, r)] * self.jc[(j, s)];
+                }
+                aat[(r, s)] = x;
+            }
+        }
+        let gu = Vector6::new(g[0], g[1], g[2], g[3], g[4], g[5]);
+        let y = aat
+            .cholesky()
+            .map(|ch| ch.solve(&gu))
+            .ok_or(WbcError::Dynamics(DynamicsError::Singular(
+                "contact Jacobian of the fallback",
+            )))?;
+        let mut f = [0.0; 3 * N_CONTACTS];
+        for (j, fj) in f.iter_mut().enumerate() {
+            *fj = (0..6).map(|r| self.jc[(j, r)] * y[r]).sum();
+        }
+        for a in 0..self.nv - 6 {
+            let d = 6 + a;
+            let mut t = g[d] - self.p.fallback_damping * v[d];
+            for (j, fj) in f.iter().enumerate() {
+                t -= self.jc[(j, d)] * fj;
+            }
+            let lim = self.tau_max[a];
+            self.tau[a] = t.clamp(-lim, lim);
+        }
+        for c in 0..N_CONTACTS {
+            self.forces[c] = Vector3::new(f[3 * c], f[3 * c + 1], f[3 * c + 2]);
+        }
+        self.ddq.fill(0.0);
+        Ok(&self.tau)
+    }
+
+    /// Fallback for a failed tick: [`Self::fallback_torque`], or, if even that cannot be
+    /// computed (invalid state), the last QP torque (zeros before any) with damping omitted.
+    fn apply_fallback(
+        &mut self,
+        model: &Model,
+        data: &mut Data,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+    ) {
+        let ok = self.fallback_torque(model, data, q, v).is_ok()
+            && self.tau.iter().all(|t| t.is_finite());
+        if !ok {
+            if self.last_tau.iter().all(|t| t.is_finite()) {
+                self.tau.copy_from(&self.last_tau);
+            } else {
+                self.tau.fill(0.0);
+            }
+            self.ddq.fill(0.0);
+            self.forces = [Vector3::zeros(); N_CONTACTS];
+        }
+    }
+}
+
+/// `P += w JᵀJ` (top-left block), `p −= w Jᵀ r` for a 3-row task.
+fn add_task(pd: &mut DMatrix<f64>, qd: &mut [f64], j: &DMatrix<f64>, r: &Vector3<f64>, w: f64) {
+    let nv = j.ncols();
+    pd.view_mut((0, 0), (nv, nv)).gemm_tr(w, j, j, 1.0);
+    for c in 0..nv {
+        qd[c] -= w * (j[(0, c)] * r.x + j[(1, c)] * r.y + j[(2, c)] * r.z);
+    }
+}
+
+fn mat3_mul_v(j: &DMatrix<f64>, v: &DVector<f64>) -> Vector3<f64> {
+    let mut out = Vector3::zeros();
+    for c in 0..j.ncols() {
+        for r in 0..3 {
+            out[r] += j[(r, c)] * v[c];
+        }
+    }
+    out
+}

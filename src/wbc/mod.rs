@@ -1,0 +1,18 @@
+//! Whole-body torque control: the LQP of the paper (Salini, Padois, Bidaud 2011; SPEC §6).
+//!
+//! Each tick [`WholeBodyController::solve`] turns the preview controller's CoM acceleration, the
+//! hand impedance law (with the current gains) and a posture reference into joint torques, by a
+//! quadratic program over the joint accelerations and the 8 sole-corner contact forces, solved
+//! with clarabel. See [`controller`] for the problem, its constraints and the choices made.
+//!
+//! - [`controller`]: [`WholeBodyController`], its command / output / status types, the fallback.
+//! - [`com_bias`]: `J̇ v` drift of the CoM and of several frames from one forward pass.
+
+pub mod com_bias;
+pub mod controller;
+mod pattern;
+
+pub use controller::{
+    CORNERS, FallbackReason, N_CONTACTS, WbcCommand, WbcCounters, WbcError, WbcOutput, WbcStatus,
+    WholeBodyController,
+};

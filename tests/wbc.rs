@@ -1,0 +1,549 @@
+//! Whole-body QP on the humanoid: each check uses an independent truth (Newton's law for the
+//! CoM, the full equations of motion and ABA for the torques, finite differences for the
+//! drifts, the URDF for the limits), not the controller's own matrices.
+
+use nalgebra::{DMatrix, DVector, Vector3};
+use upc::config::{Config, Layers, WbcConfig};
+use upc::dynamics::spatial::Force;
+use upc::dynamics::{
+    Data, Model, ReferenceFrame, aba_with_external_forces, center_of_mass_velocity, crba,
+    forward_kinematics, forward_kinematics_velocity, frame_jdot_v, frame_velocity, icub_like,
+    integrate, nonlinear_effects,
+};
+use upc::wbc::com_bias::{com_drift, drift_pass, frame_drift_from_pass};
+use upc::wbc::{FallbackReason, N_CONTACTS, WbcCommand, WbcStatus, WholeBodyController};
+
+const G: f64 = 9.81;
+
+fn config() -> WbcConfig {
+    Config::embedded_default().unwrap().wbc
+}
+
+struct Setup {
+    model: Model,
+    data: Data,
+    wbc: WholeBodyController,
+    q: DVector<f64>,
+    v: DVector<f64>,
+}
+
+fn setup_with(cfg: &WbcConfig) -> Setup {
+    let model = icub_like::load().unwrap();
+    let data = Data::new(&model);
+    let wbc = WholeBodyController::new(&model, cfg).unwrap();
+    let q = icub_like::home_configuration(&model).unwrap();
+    let v = DVector::zeros(model.nv);
+    Setup {
+        model,
+        data,
+        wbc,
+        q,
+        v,
+    }
+}
+
+fn setup() -> Setup {
+    setup_with(&config())
+}
+
+fn hand_position(s: &Setup) -> Vector3<f64> {
+    let mut d = Data::new(&s.model);
+    forward_kinematics(&s.model, &mut d, &s.q).unwrap();
+    d.o_m_f[s.model.frame_id("r_hand").unwrap()].trans
+}
+
+/// Holding the hand where it is, with the default gains.
+fn hold(s: &Setup) -> WbcCommand<'static> {
+    WbcCommand {
+        hand_pos_des: hand_position(s),
+        kp: 100.0,
+        kd: 20.0,
+        ..WbcCommand::default()
+    }
+}
+
+/// Joint rates on the torso, arms and neck only (legs and base still: the feet stay at rest).
+fn upper_body_velocity(model: &Model) -> DVector<f64> {
+    let mut v = DVector::zeros(model.nv);
+    for j in &model.joints[1..] {
+        let leg = ["hip", "knee", "ankle"].iter().any(|n| j.name.contains(n));
+        if !leg {
+            v[j.idx_v] = 0.4 * ((j.idx_v as f64) * 1.3).sin();
+        }
+    }
+    v
+}
+
+/// Torso and arm joints moved away from home (legs untouched: soles stay flat).
+fn perturbed(model: &Model, q: &DVector<f64>) -> DVector<f64> {
+    let mut q = q.clone();
+    for j in &model.joints[1..] {
+        let leg = ["hip", "knee", "ankle"].iter().any(|n| j.name.contains(n));
+        if !leg {
+            q[j.idx_q] += 0.15 * ((j.idx_q as f64) * 0.7).cos();
+        }
+    }
+    q
+}
+
+struct Solution {
+    status: WbcStatus,
+    tau: DVector<f64>,
+    ddq: DVector<f64>,
+    forces: [Vector3<f64>; N_CONTACTS],
+    iterations: u32,
+}
+
+fn solve(s: &mut Setup, cmd: &WbcCommand) -> Solution {
+    let out = s.wbc.solve(&s.model, &mut s.data, &s.q, &s.v, cmd);
+    Solution {
+        status: out.status,
+        tau: out.tau.clone(),
+        ddq: out.ddq.clone(),
+        forces: out.contact_forces,
+        iterations: out.iterations,
+    }
+}
+
+fn total_force(sol: &Solution) -> Vector3<f64> {
+    sol.forces.iter().sum()
+}
+
+/// CoM acceleration implied by the contact forces (Newton: M c̈ = Σ f + M g).
+fn newton_com_acc(model: &Model, sol: &Solution) -> Vector3<f64> {
+    total_force(sol) / model.total_mass() - Vector3::new(0.0, 0.0, G)
+}
+
+/// Central finite difference of `vel(q ⊕ ±v dt, v)`: with v constant (q̈ = 0 in the
+/// free-flyer's local convention) this is J̇ v.
+fn fd_drift(
+    model: &Model,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    vel: impl Fn(&DVector<f64>) -> Vector3<f64>,
+) -> Vector3<f64> {
+    let dt = 1e-6;
+    let mut qp = q.clone();
+    let mut qm = q.clone();
+    integrate(model, q, v, dt, &mut qp).unwrap();
+    integrate(model, q, v, -dt, &mut qm).unwrap();
+    (vel(&qp) - vel(&qm)) / (2.0 * dt)
+}
+
+fn assert_cones_and_limits(s: &Setup, sol: &Solution, mu: f64) {
+    for (c, f) in sol.forces.iter().enumerate() {
+        // The soles are flat at these configurations: the normal is world z.
+        let ft = (f.x * f.x + f.y * f.y).sqrt();
+        assert!(f.z >= -1e-6, "contact {c}: negative normal force {f:?}");
+        assert!(
+            ft <= mu * f.z * (1.0 + 1e-6) + 1e-6,
+            "contact {c}: outside the friction cone, |f_t| = {ft}, μ f_n = {}",
+            mu * f.z
+        );
+    }
+    for j in &s.model.joints[1..] {
+        let t = sol.tau[j.idx_v - 6];
+        assert!(
+            t.abs() <= j.limits.effort * (1.0 + 1e-6) + 1e-6,
+            "joint {}: |τ| = {} > {}",
+            j.name,
+            t.abs(),
+            j.limits.effort
+        );
+    }
+}
+
+/// Residual of the full equations of motion `M q̈ + h − Sᵀτ − Σ J_cᵀ f` (all 38 rows),
+/// with M, h and the corner Jacobians computed here.
+fn eom_residual(s: &Setup, sol: &Solution) -> f64 {
+    let model = &s.model;
+    let mut d = Data::new(model);
+    let m = crba(model, &mut d, &s.q).unwrap().clone();
+    let h = nonlinear_effects(model, &mut d, &s.q, &s.v)
+        .unwrap()
+        .clone();
+    let mut r = &m * &sol.ddq + h;
+    for a in 0..model.nv - 6 {
+        r[6 + a] -= sol.tau[a];
+    }
+    let mut jac = DMatrix::zeros(6, model.nv);
+    for (c, id) in s.wbc.contact_frames().iter().enumerate() {
+        upc::dynamics::compute_joint_jacobians(model, &mut d, &s.q).unwrap();
+        upc::dynamics::get_frame_jacobian(
+            model,
+            &d,
+            *id,
+            ReferenceFrame::LocalWorldAligned,
+            &mut jac,
+        )
+        .unwrap();
+        r -= jac.rows(0, 3).transpose() * sol.forces[c];
+    }
+    r.amax()
+}
+
+#[test]
+fn static_standing_forces_carry_the_weight() {
+    let mut s = setup();
+    let cmd = hold(&s);
+    let sol = solve(&mut s, &cmd);
+    assert_eq!(sol.status, WbcStatus::Solved);
+    let mg = s.model.total_mass() * G;
+    let f = total_force(&sol);
+    assert!(
+        (f - Vector3::new(0.0, 0.0, mg)).norm() <= 0.01 * mg,
+        "Σf = {f:?}, M g = {mg}"
+    );
+    // Both feet carry a share and every corner pushes.
+    let left: f64 = sol.forces[..4].iter().map(|f| f.z).sum();
+    assert!(
+        left > 0.25 * mg && left < 0.75 * mg,
+        "left foot carries {left} of {mg}"
+    );
+    assert!(sol.forces.iter().all(|f| f.z > 0.0), "{:?}", sol.forces);
+    assert!(sol.iterations > 0);
+    assert_cones_and_limits(&s, &sol, config().friction);
+    assert!(eom_residual(&s, &sol) < 1e-5, "{}", eom_residual(&s, &sol));
+    assert_eq!(s.wbc.counters().solved, 1);
+}
+
+#[test]
+fn feasible_com_acceleration_is_achieved() {
+    let mut s = setup();
+    s.v = upper_body_velocity(&s.model);
+    let a_des = Vector3::new(0.3, -0.2, 0.1);
+    let cmd = WbcCommand {
+        com_acc: a_des,
+        ..hold(&s)
+    };
+    let sol = solve(&mut s, &cmd);
+    assert_eq!(sol.status, WbcStatus::Solved);
+    // Truth 1, Newton's law on the contact forces.
+    let a_newton = newton_com_acc(&s.model, &sol);
+    assert!(
+        (a_newton - a_des).norm() < 1e-2,
+        "{a_newton:?} vs {a_des:?}"
+    );
+    // Truth 2, kinematics: J_com q̈ + J̇_com v, the drift by finite differences.
+    let model = &s.model;
+    let mut d = Data::new(model);
+    let jcom = upc::dynamics::jacobian_center_of_mass(model, &mut d, &s.q)
+        .unwrap()
+        .clone();
+    let v = s.v.clone();
+    let drift = fd_drift(model, &s.q, &s.v, |q| {
+        let mut d = Data::new(model);
+        center_of_mass_velocity(model, &mut d, q, &v).unwrap().1
+    });
+    assert!(drift.norm() > 1e-3, "the test needs a non-zero drift");
+    let a_kin = &jcom * &sol.ddq + drift;
+    assert!((a_kin - a_des).norm() < 1e-2, "{a_kin:?} vs {a_des:?}");
+    assert!((a_kin - a_newton).norm() < 1e-4);
+    assert_cones_and_limits(&s, &sol, config().friction);
+}
+
+#[test]
+fn hand_acceleration_is_tracked() {
+    let mut s = setup();
+    s.q = perturbed(&s.model, &s.q);
+    s.v = upper_body_velocity(&s.model);
+    let hand = s.model.frame_id("r_hand").unwrap();
+    let mut d = Data::new(&s.model);
+    forward_kinematics_velocity(&s.model, &mut d, &s.q, &s.v).unwrap();
+    let x = d.o_m_f[hand].trans;
+    let xd = frame_velocity(&s.model, &d, hand, ReferenceFrame::LocalWorldAligned).lin;
+    // Impedance law with an offset set-point: ẍ_cmd = K_p (x_des − x) + K_d (ẋ_des − ẋ) + ẍ_des.
+    let (kp, kd) = (50.0, 10.0);
+    let x_des = x + Vector3::new(0.01, -0.005, 0.008);
+    let a_ff = Vector3::new(0.2, 0.0, -0.1);
+    let cmd = WbcCommand {
+        hand_pos_des: x_des,
+        hand_vel_des: Vector3::zeros(),
+        hand_acc_des: a_ff,
+        kp,
+        kd,
+        ..WbcCommand::default()
+    };
+    let x_cmd = kp * (x_des - x) + kd * (-xd) + a_ff;
+    let sol = solve(&mut s, &cmd);
+    assert_eq!(sol.status, WbcStatus::Solved);
+    let mut jac = DMatrix::zeros(6, s.model.nv);
+    upc::dynamics::compute_joint_jacobians(&s.model, &mut d, &s.q).unwrap();
+    upc::dynamics::get_frame_jacobian(
+        &s.model,
+        &d,
+        hand,
+        ReferenceFrame::LocalWorldAligned,
+        &mut jac,
+    )
+    .unwrap();
+    let drift = frame_jdot_v(
+        &s.model,
+        &mut d,
+        &s.q,
+        &s.v,
+        hand,
+        ReferenceFrame::LocalWorldAligned,
+    )
+    .unwrap()
+    .lin;
+    let a_hand = jac.rows(0, 3) * &sol.ddq + drift;
+    assert!(
+        (a_hand - x_cmd).norm() < 0.02 * x_cmd.norm().max(0.1),
+        "hand {a_hand:?} vs commanded {x_cmd:?}"
+    );
+    // The CoM request (zero) holds at the same time.
+    assert!(newton_com_acc(&s.model, &sol).norm() < 1e-2);
+    assert_cones_and_limits(&s, &sol, config().friction);
+}
+
+#[test]
+fn torques_reproduce_the_accelerations_through_aba() {
+    let mut s = setup();
+    s.q = perturbed(&s.model, &s.q);
+    s.v = upper_body_velocity(&s.model);
+    let cmd = WbcCommand {
+        com_acc: Vector3::new(-0.2, 0.1, 0.0),
+        ..hold(&s)
+    };
+    let sol = solve(&mut s, &cmd);
+    assert_eq!(sol.status, WbcStatus::Solved);
+    assert!(eom_residual(&s, &sol) < 1e-5, "{}", eom_residual(&s, &sol));
+    // Forward dynamics: τ and the contact forces as external wrenches on the foot bodies.
+    let model = &s.model;
+    let mut d = Data::new(model);
+    forward_kinematics(model, &mut d, &s.q).unwrap();
+    let mut fext = vec![Force::zero(); model.njoints()];
+    for (c, id) in s.wbc.contact_frames().iter().enumerate() {
+        let body = model.frames[*id].parent.unwrap();
+        let o = d.o_m_i[body];
+        let p_local = o.inverse().act_point(&d.o_m_f[*id].trans);
+        let f_local = o.rot.transpose() * sol.forces[c];
+        fext[body] += Force::new(f_local, p_local.cross(&f_local));
+    }
+    let mut tau_full = DVector::zeros(model.nv);
+    tau_full.rows_mut(6, model.nv - 6).copy_from(&sol.tau);
+    let ddq = aba_with_external_forces(model, &mut d, &s.q, &s.v, &tau_full, &fext).unwrap();
+    let err = (ddq - &sol.ddq).amax();
+    assert!(err < 1e-4, "ABA q̈ differs from the QP's by {err}");
+    // The soles do not accelerate (J_s q̈ + J̇_s v = 0; the feet are at rest so k J_s v = 0).
+    for foot in s.wbc.foot_frames() {
+        let mut jac = DMatrix::zeros(6, model.nv);
+        upc::dynamics::compute_joint_jacobians(model, &mut d, &s.q).unwrap();
+        upc::dynamics::get_frame_jacobian(
+            model,
+            &d,
+            foot,
+            ReferenceFrame::LocalWorldAligned,
+            &mut jac,
+        )
+        .unwrap();
+        let drift = frame_jdot_v(
+            model,
+            &mut d,
+            &s.q,
+            &s.v,
+            foot,
+            ReferenceFrame::LocalWorldAligned,
+        )
+        .unwrap()
+        .to_vector();
+        let acc = &jac * &sol.ddq + drift;
+        assert!(acc.amax() < 1e-6, "sole {foot} accelerates: {acc:?}");
+    }
+    assert_cones_and_limits(&s, &sol, config().friction);
+}
+
+#[test]
+fn infeasible_com_request_gives_the_best_feasible_solution() {
+    let mut s = setup();
+    let mu = config().friction;
+    let mg = s.model.total_mass() * G;
+    for ax in [Vector3::new(50.0, 0.0, 0.0), Vector3::new(0.0, -50.0, 50.0)] {
+        for _ in 0..20 {
+            let cmd = WbcCommand {
+                com_acc: ax,
+                ..hold(&s)
+            };
+            let sol = solve(&mut s, &cmd);
+            assert_eq!(sol.status, WbcStatus::Solved, "request {ax:?}");
+            assert_cones_and_limits(&s, &sol, mu);
+            assert!(sol.tau.iter().all(|t| t.is_finite()));
+            // Best effort: pushes towards the request as far as friction and torques allow,
+            // never beyond it.
+            let a = newton_com_acc(&s.model, &sol);
+            assert!(a.dot(&ax) > 0.0, "{a:?} does not move towards {ax:?}");
+            assert!(a.norm() < ax.norm());
+            let f = total_force(&sol);
+            assert!((f.x * f.x + f.y * f.y).sqrt() <= mu * f.z + 1e-6);
+            assert!(f.z < 40.0 * mg);
+        }
+    }
+    let c = s.wbc.counters();
+    assert_eq!((c.ticks, c.solved, c.fallbacks), (40, 40, 0), "{c:?}");
+    assert_eq!(c.solver_builds, 1);
+    // Back to a normal request: solved as before.
+    let cmd = hold(&s);
+    let sol = solve(&mut s, &cmd);
+    assert_eq!(sol.status, WbcStatus::Solved);
+    assert!((total_force(&sol) - Vector3::new(0.0, 0.0, mg)).norm() <= 0.01 * mg);
+}
+
+#[test]
+fn invalid_input_falls_back_without_panicking() {
+    let mut s = setup();
+    let cmd = hold(&s);
+    let good = solve(&mut s, &cmd);
+    assert_eq!(good.status, WbcStatus::Solved);
+    let q_good = s.q.clone();
+    s.q[10] = f64::NAN;
+    for _ in 0..100 {
+        let sol = solve(&mut s, &cmd);
+        assert_eq!(
+            sol.status,
+            WbcStatus::Fallback(FallbackReason::InvalidInput)
+        );
+        // Last good torque held.
+        assert!((sol.tau.clone() - &good.tau).amax() < 1e-12);
+    }
+    s.q = q_good;
+    let nan_cmd = WbcCommand {
+        com_acc: Vector3::new(f64::NAN, 0.0, 0.0),
+        ..cmd
+    };
+    let sol = solve(&mut s, &nan_cmd);
+    assert_eq!(
+        sol.status,
+        WbcStatus::Fallback(FallbackReason::InvalidInput)
+    );
+    // A valid state with a bad command: gravity compensation, finite and within limits.
+    assert!(sol.tau.iter().all(|t| t.is_finite()));
+    assert_cones_and_limits(&s, &sol, 10.0);
+    let sol = solve(&mut s, &cmd);
+    assert_eq!(sol.status, WbcStatus::Solved);
+    let c = s.wbc.counters();
+    assert_eq!(
+        (c.ticks, c.solved, c.fallbacks, c.consecutive_fallbacks),
+        (103, 2, 101, 0)
+    );
+}
+
+#[test]
+fn fallback_torque_is_static_gravity_compensation() {
+    let mut s = setup();
+    let tau = s
+        .wbc
+        .fallback_torque(&s.model, &mut s.data, &s.q, &s.v)
+        .unwrap()
+        .clone();
+    // M·0 + g = Sᵀτ + Σ J_cᵀ f with the fallback's own contact forces (v = 0: no damping).
+    let sol = Solution {
+        status: WbcStatus::Solved,
+        tau,
+        ddq: DVector::zeros(s.model.nv),
+        forces: *s.wbc.last_contact_forces(),
+        iterations: 0,
+    };
+    assert!(eom_residual(&s, &sol) < 1e-8, "{}", eom_residual(&s, &sol));
+    let mg = s.model.total_mass() * G;
+    assert!((total_force(&sol) - Vector3::new(0.0, 0.0, mg)).norm() < 1e-6 * mg);
+    assert_cones_and_limits(&s, &sol, 1.0);
+}
+
+#[test]
+fn reused_solver_matches_a_fresh_solver_each_tick() {
+    let mut warm = setup();
+    let mut cfg = config();
+    cfg.reuse_solver = false;
+    let mut cold = setup_with(&cfg);
+    let home = warm.q.clone();
+    for k in 0..5 {
+        let t = k as f64 * 0.3;
+        let q = perturbed(&warm.model, &home);
+        let q = &home + (q - &home) * t;
+        warm.q = q.clone();
+        cold.q = q;
+        warm.v = upper_body_velocity(&warm.model) * t;
+        cold.v = warm.v.clone();
+        let cmd = WbcCommand {
+            com_acc: Vector3::new(0.2 * t, -0.1, 0.05),
+            ..hold(&warm)
+        };
+        let a = solve(&mut warm, &cmd);
+        let b = solve(&mut cold, &cmd);
+        assert_eq!(a.status, WbcStatus::Solved);
+        assert_eq!(b.status, WbcStatus::Solved);
+        // The task-level result is tight; the torques agree to the interior-point tolerance
+        // (the load sharing among the 8 corners is only weakly determined by ‖f‖²).
+        let df = (total_force(&a) - total_force(&b)).norm();
+        assert!(df < 1e-3, "tick {k}: total contact forces differ by {df} N");
+        let dt = (a.tau.clone() - &b.tau).amax();
+        assert!(dt < 2e-2, "tick {k}: torques differ by {dt} N·m");
+    }
+    assert_eq!(warm.wbc.counters().solver_builds, 1);
+    assert_eq!(cold.wbc.counters().solver_builds, 5);
+}
+
+#[test]
+fn com_and_frame_drifts_match_finite_differences() {
+    let model = icub_like::load().unwrap();
+    let mut d = Data::new(&model);
+    let q = perturbed(&model, &icub_like::home_configuration(&model).unwrap());
+    // A full velocity, base included: the drift formula must hold for any motion.
+    let v = DVector::from_fn(model.nv, |k, _| 0.5 * ((k as f64) * 0.9 + 0.3).cos());
+    let c = com_drift(&model, &mut d, &q, &v).unwrap();
+    let fd = fd_drift(&model, &q, &v, |q| {
+        let mut d = Data::new(&model);
+        center_of_mass_velocity(&model, &mut d, q, &v).unwrap().1
+    });
+    assert!(
+        (c - fd).norm() < 1e-5 * (1.0 + fd.norm()),
+        "{c:?} vs {fd:?}"
+    );
+    // Frames read off the shared pass agree with the library's per-frame J̇v.
+    let hand = model.frame_id("r_hand").unwrap();
+    drift_pass(&model, &mut d, &q, &v, hand).unwrap();
+    for name in ["l_sole", "r_sole", "r_sole_fl", "chest", "r_hand"] {
+        let id = model.frame_id(name).unwrap();
+        let shared = frame_drift_from_pass(&model, &d, id).to_vector();
+        let mut d2 = Data::new(&model);
+        let lib = frame_jdot_v(
+            &model,
+            &mut d2,
+            &q,
+            &v,
+            id,
+            ReferenceFrame::LocalWorldAligned,
+        )
+        .unwrap()
+        .to_vector();
+        assert!((shared - lib).amax() < 1e-10, "{name}");
+    }
+}
+
+#[test]
+fn config_section_is_checked_by_key() {
+    let c = config();
+    assert_eq!(c.feet, ["l_sole".to_string(), "r_sole".to_string()]);
+    assert!(c.reuse_solver);
+    for (set, key) in [
+        ("wbc.friction=-0.5", "wbc.friction"),
+        ("wbc.torque_limit_scale=1.5", "wbc.torque_limit_scale"),
+        ("wbc.w_reg_force=0", "wbc.w_reg_force"),
+        ("wbc.max_iterations=0", "wbc.max_iterations"),
+    ] {
+        let mut l = Layers::new();
+        l.push_str("defaults", upc::config::DEFAULT_TOML).unwrap();
+        l.push_override(set).unwrap();
+        let e = l.build().unwrap_err().to_string();
+        assert!(e.contains(key), "{set}: {e}");
+    }
+    let model = icub_like::load().unwrap();
+    let mut bad = config();
+    bad.hand_frame = "no_such_frame".into();
+    let e = WholeBodyController::new(&model, &bad)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("no_such_frame"), "{e}");
+}
