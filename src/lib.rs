@@ -6,6 +6,7 @@
 //! - [`scenario`]: hand force profiles (impacts, CSV) and the ZMP reference of a run.
 //! - [`offline`]: the closed loop of the reduced models behind `upc preview`, with its metrics.
 //! - [`config`]: TOML configuration with errors that name the offending key.
+//! - [`sim`]: the simulator process (humanoid on the ground, door on a spherical joint).
 //! - [`wbc`]: the whole-body torque controller (LQP over q̈ and contact forces, clarabel).
 
 pub mod config;
@@ -13,4 +14,5 @@ pub mod dynamics;
 pub mod offline;
 pub mod preview;
 pub mod scenario;
+pub mod sim;
 pub mod wbc;

@@ -22,6 +22,8 @@ enum Command {
     Preview(cli::preview::PreviewArgs),
     /// Inspect a URDF: joints, DoF, mass, CoM; dump M(q), h(q, v), CoM and a frame Jacobian as JSON.
     Model(cli::model::ModelArgs),
+    /// Run the simulator: the humanoid on the ground and the door, over iceoryx2 (see --help).
+    Sim(cli::sim::SimArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -35,6 +37,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Preview(args) => cli::preview::run(args),
         Command::Model(args) => cli::model::run(args),
+        Command::Sim(args) => cli::sim::run_cli(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

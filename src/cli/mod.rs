@@ -2,6 +2,7 @@
 
 pub mod model;
 pub mod preview;
+pub mod sim;
 
 /// Error type of the command line: any displayable cause, rendered once by `main`.
 pub type CliResult = Result<(), Box<dyn std::error::Error + Send + Sync>>;

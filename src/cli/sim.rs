@@ -1,0 +1,109 @@
+//! `upc sim`: the simulator process (humanoid on the ground, door at the right hand).
+
+use std::path::PathBuf;
+
+use upc::sim::SimConfig;
+use upc::sim::process::{RunOptions, run, stop_on_signals};
+
+use super::CliResult;
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ModeChoice {
+    Lockstep,
+    Realtime,
+}
+
+/// Start the simulator: `upc sim` runs the embedded default scene (the iCub-like humanoid at its
+/// home posture on flat ground, the door held by its right hand, the `single_impact` hinge
+/// torque profile) in lockstep with a controller on the `upc/*` services. Start the controller
+/// next to it; with no controller, use `--mode realtime` (the safe joint damping takes over).
+#[derive(clap::Args)]
+#[command(
+    after_help = "Examples:\n  upc sim                                   # lockstep, 10 s, waits for a controller\n  upc sim --mode realtime --duration 5 --rrd sim.rrd\n  upc sim --set sim.friction=0.5 --scenario multiple_impacts --prefix test1"
+)]
+pub struct SimArgs {
+    /// Lockstep (wait for each answer; deterministic) or real-time (wall-clock rate).
+    #[arg(long, value_enum)]
+    pub mode: Option<ModeChoice>,
+    /// Simulated seconds to run (0: until Ctrl-C). Default from sim.duration.
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Write the ground truth to this rerun recording.
+    #[arg(long)]
+    pub rrd: Option<PathBuf>,
+    /// Rerun recording id (give the controller the same one to merge recordings).
+    #[arg(long)]
+    pub recording_id: Option<String>,
+    /// Extra config files (layout of config/sim.toml) over the embedded defaults, in order.
+    #[arg(long = "config")]
+    pub configs: Vec<PathBuf>,
+    /// Override any config key, e.g. --set sim.friction=0.6 (applied last, in order).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub sets: Vec<String>,
+    /// iceoryx2 service prefix (default sim.process.prefix, "upc").
+    #[arg(long)]
+    pub prefix: Option<String>,
+    /// Door torque profile: embedded scenario name (single_impact, multiple_impacts) or a path.
+    #[arg(long)]
+    pub scenario: Option<String>,
+}
+
+pub fn load_config(args: &SimArgs) -> Result<SimConfig, upc::config::ConfigError> {
+    let mut sets = args.sets.clone();
+    let toml_str = |s: &str| format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\""));
+    if let Some(m) = args.mode {
+        let m = match m {
+            ModeChoice::Lockstep => "lockstep",
+            ModeChoice::Realtime => "realtime",
+        };
+        sets.push(format!("sim.mode={}", toml_str(m)));
+    }
+    if let Some(d) = args.duration {
+        sets.push(format!("sim.duration={d:?}"));
+    }
+    if let Some(p) = &args.prefix {
+        sets.push(format!("sim.process.prefix={}", toml_str(p)));
+    }
+    if let Some(s) = &args.scenario {
+        sets.push(format!("sim.scenario={}", toml_str(s)));
+    }
+    SimConfig::load(&args.configs, &sets)
+}
+
+pub fn run_cli(args: SimArgs) -> CliResult {
+    let config = load_config(&args)?;
+    let opts = RunOptions {
+        node_name: format!("upc-sim-{}", std::process::id()),
+        config,
+        rrd: args.rrd,
+        recording_id: args.recording_id,
+    };
+    let stop = stop_on_signals();
+    let s = run(&opts, &stop)?;
+    println!(
+        "sim: {} steps, {:.3} s simulated in {:.3} s; step time p50 {:.1} µs, p99 {:.1} µs, max {:.1} µs; \
+         overruns {}; commands accepted {}, rejected {} (length {}, non-finite {}, order {}), stale {}; \
+         safe-mode steps {}; max penetration {:.2e} m, max slip {:.2e} m/s, max loop error {:.2e} m; \
+         rerun frames {} written, {} dropped",
+        s.steps,
+        s.sim_time,
+        s.wall_time,
+        s.step_time_p50 * 1e6,
+        s.step_time_p99 * 1e6,
+        s.step_time_max * 1e6,
+        s.overruns,
+        s.commands.accepted,
+        s.commands.rejected(),
+        s.commands.wrong_length,
+        s.commands.non_finite,
+        s.commands.out_of_order,
+        s.commands.stale,
+        s.safe_mode_steps,
+        s.max_penetration,
+        s.max_slip_speed,
+        s.max_loop_error,
+        s.recorder.written,
+        s.recorder.dropped
+    );
+    Ok(())
+}

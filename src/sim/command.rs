@@ -1,0 +1,89 @@
+//! Validation of torque commands, independent of IPC so it is unit-testable: a command with the
+//! wrong number of torques, a non-finite torque, or a sequence number that does not increase is
+//! rejected and counted, never applied.
+
+/// Why a command was rejected.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum Rejection {
+    #[error("torque command has n = {got}, the robot has {expected} actuated joints")]
+    WrongLength { expected: usize, got: usize },
+    #[error("torque command has a non-finite torque at index {index}")]
+    NonFinite { index: usize },
+    #[error("torque command seq {seq} does not follow the last accepted seq {last}")]
+    OutOfOrder { seq: u64, last: u64 },
+}
+
+/// Counters of the command stream.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CommandStats {
+    pub accepted: u64,
+    pub wrong_length: u64,
+    pub non_finite: u64,
+    pub out_of_order: u64,
+    /// Steps run without a fresh command (real-time) or answers to an older state (lockstep).
+    pub stale: u64,
+}
+
+impl CommandStats {
+    pub fn rejected(&self) -> u64 {
+        self.wrong_length + self.non_finite + self.out_of_order
+    }
+}
+
+/// Checks one command: `n` torques expected out of the `tau` array, `seq` strictly greater than
+/// the last accepted one. Pure: the caller counts and applies.
+pub fn validate_command(
+    last_seq: Option<u64>,
+    seq: u64,
+    n: u32,
+    tau: &[f64],
+    expected: usize,
+) -> Result<(), Rejection> {
+    let got = n as usize;
+    if got != expected || got > tau.len() {
+        return Err(Rejection::WrongLength { expected, got });
+    }
+    if let Some(index) = tau[..got].iter().position(|t| !t.is_finite()) {
+        return Err(Rejection::NonFinite { index });
+    }
+    if let Some(last) = last_seq
+        && seq <= last
+    {
+        return Err(Rejection::OutOfOrder { seq, last });
+    }
+    Ok(())
+}
+
+/// A validator that remembers the last accepted sequence number and counts.
+#[derive(Debug, Clone, Default)]
+pub struct CommandGate {
+    pub last_seq: Option<u64>,
+    pub stats: CommandStats,
+}
+
+impl CommandGate {
+    /// Validates and counts; on success the command's seq becomes the last accepted one.
+    pub fn check(
+        &mut self,
+        seq: u64,
+        n: u32,
+        tau: &[f64],
+        expected: usize,
+    ) -> Result<(), Rejection> {
+        match validate_command(self.last_seq, seq, n, tau, expected) {
+            Ok(()) => {
+                self.last_seq = Some(seq);
+                self.stats.accepted += 1;
+                Ok(())
+            }
+            Err(e) => {
+                match e {
+                    Rejection::WrongLength { .. } => self.stats.wrong_length += 1,
+                    Rejection::NonFinite { .. } => self.stats.non_finite += 1,
+                    Rejection::OutOfOrder { .. } => self.stats.out_of_order += 1,
+                }
+                Err(e)
+            }
+        }
+    }
+}

@@ -1,0 +1,147 @@
+//! The simulator's configuration (`config/sim.toml`, embedded), layered like the rest of upc:
+//! embedded defaults ← `--config` files ← `--set key=value`. Errors name the key and its layer.
+
+use std::path::PathBuf;
+
+use serde::Deserialize;
+
+use crate::config::{ConfigError, Layers};
+
+/// The defaults shipped inside the binary.
+pub const SIM_TOML: &str = include_str!("../../config/sim.toml");
+
+/// Stepping mode of the process.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Wait for the torques answering each published state (deterministic).
+    Lockstep,
+    /// Step at wall-clock rate with the latest torques.
+    Realtime,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimFile {
+    pub sim: SimConfig,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimConfig {
+    pub dt: f64,
+    pub mode: Mode,
+    pub duration: f64,
+    pub friction: f64,
+    pub joint_damping: f64,
+    pub door_damping: f64,
+    pub joint_limits: bool,
+    pub effort_limits: bool,
+    pub door: bool,
+    pub scenario: String,
+    pub record_period: f64,
+    pub solver: SolverConfig,
+    pub process: ProcessConfig,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SolverConfig {
+    pub max_iterations: usize,
+    pub tolerance: f64,
+    pub regularisation: f64,
+    pub contact_stabilisation: f64,
+    pub loop_stabilisation: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProcessConfig {
+    pub prefix: String,
+    pub lockstep_timeout: f64,
+    pub command_timeout: f64,
+    pub safe_damping: f64,
+    pub first_command_timeout: f64,
+}
+
+impl SimConfig {
+    /// The embedded defaults.
+    pub fn embedded() -> Result<SimConfig, ConfigError> {
+        Self::load(&[], &[])
+    }
+
+    /// Embedded defaults, then `files` in order, then `sets` (`sim.key=value`).
+    pub fn load(files: &[PathBuf], sets: &[String]) -> Result<SimConfig, ConfigError> {
+        let mut layers = Layers::new();
+        layers.push_str("<embedded config/sim.toml>", SIM_TOML)?;
+        for f in files {
+            layers.push_file(f)?;
+        }
+        for s in sets {
+            layers.push_override(s)?;
+        }
+        let file: SimFile = layers.typed()?;
+        file.sim.validate(&layers)?;
+        Ok(file.sim)
+    }
+
+    fn validate(&self, l: &Layers) -> Result<(), ConfigError> {
+        let pos = |key: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(l.range_error(key, format!("must be finite and > 0, got {v}")))
+            }
+        };
+        let nonneg = |key: &str, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(l.range_error(key, format!("must be finite and ≥ 0, got {v}")))
+            }
+        };
+        let unit = |key: &str, v: f64| {
+            if v.is_finite() && v > 0.0 && v <= 1.0 {
+                Ok(())
+            } else {
+                Err(l.range_error(key, format!("must be in (0, 1], got {v}")))
+            }
+        };
+        pos("sim.dt", self.dt)?;
+        if self.dt > 0.02 {
+            return Err(l.range_error("sim.dt", format!("must be ≤ 0.02 s, got {}", self.dt)));
+        }
+        nonneg("sim.duration", self.duration)?;
+        nonneg("sim.friction", self.friction)?;
+        nonneg("sim.joint_damping", self.joint_damping)?;
+        nonneg("sim.door_damping", self.door_damping)?;
+        pos("sim.record_period", self.record_period)?;
+        if self.solver.max_iterations == 0 {
+            return Err(l.range_error("sim.solver.max_iterations", "must be ≥ 1"));
+        }
+        nonneg("sim.solver.tolerance", self.solver.tolerance)?;
+        nonneg("sim.solver.regularisation", self.solver.regularisation)?;
+        unit(
+            "sim.solver.contact_stabilisation",
+            self.solver.contact_stabilisation,
+        )?;
+        unit(
+            "sim.solver.loop_stabilisation",
+            self.solver.loop_stabilisation,
+        )?;
+        if self.process.prefix.is_empty() {
+            return Err(l.range_error("sim.process.prefix", "must not be empty"));
+        }
+        pos(
+            "sim.process.lockstep_timeout",
+            self.process.lockstep_timeout,
+        )?;
+        pos("sim.process.command_timeout", self.process.command_timeout)?;
+        nonneg("sim.process.safe_damping", self.process.safe_damping)?;
+        pos(
+            "sim.process.first_command_timeout",
+            self.process.first_command_timeout,
+        )?;
+        Ok(())
+    }
+}

@@ -1,0 +1,24 @@
+//! The simulator behind `upc sim`: the humanoid on the ground through its sole corners, the
+//! door on a spherical joint at the right hand, stepped at a fixed `dt` and exchanged with the
+//! controller over iceoryx2 (`crate::channels`).
+//!
+//! - [`world`]: the physics, no IPC ([`World::step`]); [`contact`]: the constraint solver
+//!   (Coulomb cones, spherical joint, joint limits; projected Gauss–Seidel); [`factor`]: the
+//!   tree-sparse `LᵀDL` factorisation of the mass matrix.
+//! - [`scene`]: the default scene (humanoid + door placed at the hand, hinge torque profile).
+//! - [`command`]: validation of torque commands; [`process`]: the lockstep / real-time loop;
+//!   [`record`]: the rerun `.rrd` of the ground truth; [`config`]: `config/sim.toml`.
+
+pub mod command;
+pub mod config;
+pub mod contact;
+pub mod factor;
+pub mod process;
+pub mod record;
+pub mod scene;
+pub mod world;
+
+pub use command::{CommandGate, CommandStats, Rejection, validate_command};
+pub use config::{Mode, SimConfig};
+pub use scene::{CONTACT_FRAMES, DoorDrive, PosturePd, Scene, humanoid_scene};
+pub use world::{DoorSpec, PhysicsParams, Plane, SimError, StepReport, World, WorldSpec};

@@ -1,0 +1,375 @@
+//! Rerun `.rrd` of the simulator's ground truth, written by a logger thread so the stepping loop
+//! never waits on it.
+//!
+//! Entities: `world/robot/<link>` (per-link `Transform3D`; static child `visual_<k>` with the URDF
+//! visual's origin and its box / cylinder / sphere / capsule), `world/door/<link>` likewise,
+//! `world/contacts/points` and `world/contacts/forces` (arrows, 1 mm per N… scaled 1/500 m/N),
+//! `world/zmp`, `world/support_polygon` (convex hull of the loaded corners), `world/hand_force`.
+//! Time line `sim_time` (simulated seconds, as in the controller's recording).
+//!
+//! The loop offers a frame every `record_period`; the frame goes through a bounded channel and
+//! is dropped (and counted) if the logger is behind. Building a frame allocates a few small
+//! vectors at the logging rate (100 Hz by default), never at the stepping rate.
+
+use std::path::Path;
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+use std::thread::JoinHandle;
+
+use nalgebra::{UnitQuaternion, Vector3};
+
+use crate::dynamics::{Model, SE3};
+
+use super::world::World;
+
+/// Newtons to metres for the force arrows.
+const FORCE_SCALE: f32 = 1.0 / 500.0;
+
+/// Frames the logger wrote and dropped.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RecorderStats {
+    pub written: u64,
+    pub dropped: u64,
+}
+
+struct Frame {
+    time: f64,
+    robot: Vec<([f32; 3], [f32; 4])>,
+    door: Vec<([f32; 3], [f32; 4])>,
+    points: Vec<[f32; 3]>,
+    forces: Vec<[f32; 3]>,
+    hand: [f32; 3],
+    hand_force: [f32; 3],
+}
+
+/// A running logger thread.
+pub struct Recorder {
+    tx: Option<SyncSender<Frame>>,
+    thread: Option<JoinHandle<u64>>,
+    robot_links: Vec<(usize, String)>,
+    door_links: Vec<(usize, String)>,
+    hand_frame: Option<usize>,
+    dropped: u64,
+}
+
+fn pose(p: &SE3) -> ([f32; 3], [f32; 4]) {
+    let q = UnitQuaternion::from_matrix(&p.rot);
+    let c = q.quaternion().coords;
+    (
+        [p.trans.x as f32, p.trans.y as f32, p.trans.z as f32],
+        [c.x as f32, c.y as f32, c.z as f32, c.w as f32],
+    )
+}
+
+/// The model frames that are URDF links with visuals: (frame index, link name).
+fn link_frames(model: &Model, urdf: &urdf_rs::Robot) -> Vec<(usize, String)> {
+    urdf.links
+        .iter()
+        .filter(|l| !l.visual.is_empty())
+        .filter_map(|l| model.frame_id(&l.name).ok().map(|f| (f, l.name.clone())))
+        .collect()
+}
+
+fn color_of(urdf: &urdf_rs::Robot, v: &urdf_rs::Visual) -> [u8; 4] {
+    let from = |c: &urdf_rs::Color| c.rgba.0.map(|x| (x.clamp(0.0, 1.0) * 255.0) as u8);
+    if let Some(m) = &v.material {
+        if let Some(c) = &m.color {
+            return from(c);
+        }
+        if let Some(c) = urdf
+            .materials
+            .iter()
+            .find(|g| g.name == m.name)
+            .and_then(|g| g.color.as_ref())
+        {
+            return from(c);
+        }
+    }
+    [180, 180, 190, 255]
+}
+
+fn log_geometry(
+    rec: &rerun::RecordingStream,
+    prefix: &str,
+    urdf: &urdf_rs::Robot,
+) -> rerun::RecordingStreamResult<()> {
+    for link in &urdf.links {
+        for (k, v) in link.visual.iter().enumerate() {
+            let path = format!("{prefix}/{}/visual_{k}", link.name);
+            let o = SE3::from_xyz_rpy(v.origin.xyz.0, v.origin.rpy.0);
+            let (t, q) = pose(&o);
+            rec.log_static(
+                path.as_str(),
+                &rerun::Transform3D::from_translation_rotation(t, rerun::Quaternion::from_xyzw(q)),
+            )?;
+            let [r, g, b, a] = color_of(urdf, v);
+            let color = rerun::Color::from_unmultiplied_rgba(r, g, b, a);
+            match &v.geometry {
+                urdf_rs::Geometry::Box { size } => {
+                    let s = size.0.map(|x| x as f32 / 2.0);
+                    rec.log_static(
+                        path.as_str(),
+                        &rerun::Boxes3D::from_half_sizes([s])
+                            .with_colors([color])
+                            .with_fill_mode(rerun::FillMode::Solid),
+                    )?;
+                }
+                urdf_rs::Geometry::Cylinder { radius, length } => {
+                    rec.log_static(
+                        path.as_str(),
+                        &rerun::Cylinders3D::from_lengths_and_radii(
+                            [*length as f32],
+                            [*radius as f32],
+                        )
+                        .with_colors([color])
+                        .with_fill_mode(rerun::FillMode::Solid),
+                    )?;
+                }
+                urdf_rs::Geometry::Capsule { radius, length } => {
+                    // Rerun's capsule starts at the origin along +z; URDF's is centred.
+                    rec.log_static(
+                        path.as_str(),
+                        &rerun::Capsules3D::from_lengths_and_radii(
+                            [*length as f32],
+                            [*radius as f32],
+                        )
+                        .with_translations([[0.0, 0.0, -(*length as f32) / 2.0]])
+                        .with_colors([color]),
+                    )?;
+                }
+                urdf_rs::Geometry::Sphere { radius } => {
+                    rec.log_static(
+                        path.as_str(),
+                        &rerun::Ellipsoids3D::from_radii([*radius as f32])
+                            .with_colors([color])
+                            .with_fill_mode(rerun::FillMode::Solid),
+                    )?;
+                }
+                urdf_rs::Geometry::Mesh { .. } => {}
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Convex hull (counter-clockwise, closed) of 2-D points, by monotone chain.
+pub fn convex_hull(points: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let mut p: Vec<[f64; 2]> = points.to_vec();
+    p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    p.dedup();
+    if p.len() < 3 {
+        return p;
+    }
+    let cross = |o: &[f64; 2], a: &[f64; 2], b: &[f64; 2]| {
+        (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    };
+    let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * p.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 {
+            Box::new(p.iter())
+        } else {
+            Box::new(p.iter().rev())
+        };
+        for q in iter {
+            while hull.len() >= start + 2
+                && cross(&hull[hull.len() - 2], &hull[hull.len() - 1], q) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(*q);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+fn write_frame(
+    rec: &rerun::RecordingStream,
+    f: &Frame,
+    robot: &[(usize, String)],
+    door: &[(usize, String)],
+) -> rerun::RecordingStreamResult<()> {
+    rec.set_duration_secs("sim_time", f.time);
+    for ((_, name), (t, q)) in robot.iter().zip(&f.robot) {
+        rec.log(
+            format!("world/robot/{name}"),
+            &rerun::Transform3D::from_translation_rotation(*t, rerun::Quaternion::from_xyzw(*q)),
+        )?;
+    }
+    for ((_, name), (t, q)) in door.iter().zip(&f.door) {
+        rec.log(
+            format!("world/door/{name}"),
+            &rerun::Transform3D::from_translation_rotation(*t, rerun::Quaternion::from_xyzw(*q)),
+        )?;
+    }
+    rec.log(
+        "world/contacts/points",
+        &rerun::Points3D::new(f.points.iter().copied()).with_radii([0.006]),
+    )?;
+    let loaded: Vec<usize> = (0..f.points.len())
+        .filter(|&k| f.forces[k][2] > 1e-3)
+        .collect();
+    rec.log(
+        "world/contacts/forces",
+        &rerun::Arrows3D::from_vectors(f.forces.iter().map(|v| v.map(|x| x * FORCE_SCALE)))
+            .with_origins(f.points.iter().copied())
+            .with_colors([rerun::Color::from_rgb(230, 80, 40)]),
+    )?;
+    let fz: f32 = loaded.iter().map(|&k| f.forces[k][2]).sum();
+    if fz > 1e-3 {
+        let cop = loaded.iter().fold([0.0f32; 2], |acc, &k| {
+            [
+                acc[0] + f.forces[k][2] * f.points[k][0],
+                acc[1] + f.forces[k][2] * f.points[k][1],
+            ]
+        });
+        rec.log(
+            "world/zmp",
+            &rerun::Points3D::new([[cop[0] / fz, cop[1] / fz, 0.0]])
+                .with_radii([0.012])
+                .with_colors([rerun::Color::from_rgb(40, 200, 60)]),
+        )?;
+        let pts: Vec<[f64; 2]> = loaded
+            .iter()
+            .map(|&k| [f.points[k][0] as f64, f.points[k][1] as f64])
+            .collect();
+        let mut hull = convex_hull(&pts);
+        if let Some(first) = hull.first().copied() {
+            hull.push(first);
+        }
+        rec.log(
+            "world/support_polygon",
+            &rerun::LineStrips3D::new([hull.iter().map(|p| [p[0] as f32, p[1] as f32, 0.0])])
+                .with_colors([rerun::Color::from_rgb(40, 120, 230)]),
+        )?;
+    } else {
+        rec.log("world/zmp", &rerun::Clear::flat())?;
+        rec.log("world/support_polygon", &rerun::Clear::flat())?;
+    }
+    rec.log(
+        "world/hand_force",
+        &rerun::Arrows3D::from_vectors([f.hand_force.map(|x| x * FORCE_SCALE * 5.0)])
+            .with_origins([f.hand])
+            .with_colors([rerun::Color::from_rgb(200, 40, 200)]),
+    )?;
+    Ok(())
+}
+
+fn logger(
+    rec: rerun::RecordingStream,
+    rx: Receiver<Frame>,
+    robot: Vec<(usize, String)>,
+    door: Vec<(usize, String)>,
+) -> u64 {
+    let mut written = 0;
+    let mut failed = false;
+    while let Ok(f) = rx.recv() {
+        match write_frame(&rec, &f, &robot, &door) {
+            Ok(()) => written += 1,
+            Err(e) if !failed => {
+                tracing::warn!("rerun logging failed: {e}");
+                failed = true;
+            }
+            Err(_) => {}
+        }
+    }
+    if let Err(e) = rec.flush_blocking() {
+        tracing::warn!("rerun flush failed: {e}");
+    }
+    written
+}
+
+impl Recorder {
+    /// Opens the `.rrd`, logs the static geometry of the robot and the door (from their URDFs:
+    /// `assets/icub_like/icub_like.urdf`, `assets/door/door.urdf`) and starts the logger thread.
+    pub fn spawn(
+        path: &Path,
+        recording_id: Option<&str>,
+        world: &World,
+    ) -> Result<Recorder, Box<dyn std::error::Error + Send + Sync>> {
+        let mut b = rerun::RecordingStreamBuilder::new("upc");
+        if let Some(id) = recording_id {
+            b = b.recording_id(id);
+        }
+        let rec = b.save(path)?;
+        let robot_urdf = urdf_rs::read_file(crate::dynamics::icub_like::urdf_path())?;
+        rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
+        log_geometry(&rec, "world/robot", &robot_urdf)?;
+        let robot_links = link_frames(world.robot(), &robot_urdf);
+        let door_links = match world.door() {
+            Some((model, _)) => {
+                let door_urdf = urdf_rs::read_file(crate::dynamics::icub_like::door_urdf_path())?;
+                log_geometry(&rec, "world/door", &door_urdf)?;
+                link_frames(model, &door_urdf)
+            }
+            None => Vec::new(),
+        };
+        let hand_frame = world.robot().frame_id(super::scene::HAND_FRAME).ok();
+        let (tx, rx) = sync_channel::<Frame>(64);
+        let (rl, dl) = (robot_links.clone(), door_links.clone());
+        let thread = std::thread::Builder::new()
+            .name("sim-rerun".into())
+            .spawn(move || logger(rec, rx, rl, dl))?;
+        Ok(Recorder {
+            tx: Some(tx),
+            thread: Some(thread),
+            robot_links,
+            door_links,
+            hand_frame,
+            dropped: 0,
+        })
+    }
+
+    /// Offers the current state; dropped (and counted) if the logger is behind.
+    pub fn offer(&mut self, world: &mut World, hand_force: &[f64; 3]) {
+        let Some(tx) = &self.tx else { return };
+        let placements = world.robot_frame_placements();
+        let robot = self
+            .robot_links
+            .iter()
+            .map(|(f, _)| pose(&placements[*f]))
+            .collect();
+        let hand = self
+            .hand_frame
+            .map(|f| placements[f].trans)
+            .unwrap_or_else(Vector3::zeros);
+        let door = match world.door_frame_placements() {
+            Some(p) => self.door_links.iter().map(|(f, _)| pose(&p[*f])).collect(),
+            None => Vec::new(),
+        };
+        let frame = Frame {
+            time: world.time(),
+            robot,
+            door,
+            points: world
+                .contact_points()
+                .iter()
+                .map(|p| [p.x as f32, p.y as f32, p.z as f32])
+                .collect(),
+            forces: world
+                .contact_forces()
+                .iter()
+                .map(|p| [p.x as f32, p.y as f32, p.z as f32])
+                .collect(),
+            hand: [hand.x as f32, hand.y as f32, hand.z as f32],
+            hand_force: hand_force.map(|x| x as f32),
+        };
+        match tx.try_send(frame) {
+            Ok(()) => {}
+            Err(TrySendError::Full(_)) => self.dropped += 1,
+            Err(TrySendError::Disconnected(_)) => {
+                self.tx = None;
+            }
+        }
+    }
+
+    /// Closes the channel, waits for the logger to flush the file.
+    pub fn finish(mut self) -> RecorderStats {
+        self.tx = None;
+        let written = self.thread.take().and_then(|t| t.join().ok()).unwrap_or(0);
+        RecorderStats {
+            written,
+            dropped: self.dropped,
+        }
+    }
+}

@@ -1,0 +1,264 @@
+//! The default scene (SPEC §6): the iCub-like humanoid standing on flat ground on the four sole
+//! corners of each foot, its right hand holding the door's handle through a spherical joint,
+//! and the door's hinge driven by the scenario's torque profile.
+//!
+//! Door placement: the door (`assets/door/door.urdf`) is turned by −90° about z so that its leaf
+//! faces the robot (its −y side, where the handle sticks out, points to world −x), and translated
+//! so that at hinge angle 0 the handle frame coincides with `r_hand` at the home configuration.
+//! The hinge is then 0.72 m to the robot's left of the handle (+y) and its vertical axis passes
+//! 7 cm beyond the handle (+x); the door floats a little below the ground, which does not matter
+//! (it only touches the hand).
+//!
+//! Hinge torque: the scenario gives the force `F(t)` the door applies to the hand (world). If
+//! the hand holds still, the door is in equilibrium when the hinge torque balances the hand's
+//! reaction: `τ(t) = ((p_handle − p_hinge) × F(t)) · z`, with the lever taken at the home
+//! placement (0.72 m). A force towards the robot (−x) is a negative (closing) torque.
+
+use nalgebra::{DVector, Vector3};
+
+use crate::dynamics::{BaseJoint, Data, Model, SE3, forward_kinematics, icub_like};
+use crate::scenario::{ForceProfile, Scenario};
+
+use super::config::SimConfig;
+use super::world::{DoorSpec, PhysicsParams, Plane, SimError, World, WorldSpec};
+
+/// The contact frames, in the channel contract's order.
+pub const CONTACT_FRAMES: [&str; 8] = [
+    "l_sole_fl",
+    "l_sole_fr",
+    "l_sole_rl",
+    "l_sole_rr",
+    "r_sole_fl",
+    "r_sole_fr",
+    "r_sole_rl",
+    "r_sole_rr",
+];
+
+/// The robot frame that holds the door, and the door frame it holds.
+pub const HAND_FRAME: &str = "r_hand";
+pub const HANDLE_FRAME: &str = "handle";
+
+/// The hinge torque profile derived from the scenario's hand force.
+#[derive(Clone, Debug)]
+pub struct DoorDrive {
+    pub profile: ForceProfile,
+    /// Lever from the hinge axis to the handle (world, at the home placement).
+    pub lever: Vector3<f64>,
+    /// Hinge axis (world).
+    pub axis: Vector3<f64>,
+}
+
+impl DoorDrive {
+    /// Hinge torque at time `t` (N·m).
+    pub fn torque(&self, t: f64) -> f64 {
+        let f = self.profile.at(t);
+        self.lever
+            .cross(&Vector3::new(f[0], f[1], f[2]))
+            .dot(&self.axis)
+    }
+
+    /// The scenario's hand force at `t` (N, world): what the door pushes with, if held still.
+    pub fn hand_force(&self, t: f64) -> [f64; 3] {
+        self.profile.at(t)
+    }
+
+    /// A drive that applies no torque.
+    pub fn none() -> Self {
+        Self {
+            profile: ForceProfile::Samples(Vec::new()),
+            lever: Vector3::zeros(),
+            axis: Vector3::z(),
+        }
+    }
+}
+
+/// The default scene built: the world, its initial state and the door drive.
+pub struct Scene {
+    pub world: World,
+    pub drive: DoorDrive,
+    /// Home configuration of the robot (also the initial state).
+    pub q_home: DVector<f64>,
+}
+
+/// World placement of the door's base that puts the handle on `hand` (hinge angle 0).
+pub fn door_base_for(door: &Model, hand: &Vector3<f64>) -> Result<SE3, SimError> {
+    let mut data = Data::new(door);
+    forward_kinematics(door, &mut data, &door.neutral())?;
+    let h0 = data.o_m_f[door.frame_id(HANDLE_FRAME)?].trans;
+    let rot =
+        *nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), -std::f64::consts::FRAC_PI_2)
+            .matrix();
+    Ok(SE3::new(rot, hand - rot * h0))
+}
+
+/// Builds the humanoid (+ door if `config.door`) at its home configuration, at rest.
+pub fn humanoid_scene(
+    config: &SimConfig,
+    profile: Option<ForceProfile>,
+) -> Result<Scene, SimError> {
+    humanoid_scene_with(PhysicsParams::from_config(config), config.door, profile)
+}
+
+/// As [`humanoid_scene`] with explicit parameters.
+pub fn humanoid_scene_with(
+    params: PhysicsParams,
+    with_door: bool,
+    profile: Option<ForceProfile>,
+) -> Result<Scene, SimError> {
+    let robot = icub_like::load()?;
+    let q_home = icub_like::home_configuration(&robot)?;
+    let mut drive = DoorDrive::none();
+    let door = if with_door {
+        let door = Model::from_urdf_file(icub_like::door_urdf_path(), BaseJoint::Fixed)?;
+        let mut data = Data::new(&robot);
+        forward_kinematics(&robot, &mut data, &q_home)?;
+        let hand = data.o_m_f[robot.frame_id(HAND_FRAME)?].trans;
+        let base = door_base_for(&door, &hand)?;
+        // Lever: from the hinge axis (through the hinge joint origin) to the handle.
+        let hinge = door
+            .joints
+            .first()
+            .ok_or_else(|| SimError::Scene("the door has no joint".into()))?;
+        let hinge_origin = base.compose(&hinge.placement).trans;
+        let axis = match hinge.kind {
+            crate::dynamics::JointKind::Revolute { axis } => {
+                base.compose(&hinge.placement).rot * axis
+            }
+            _ => {
+                return Err(SimError::Scene(
+                    "the door's first joint must be revolute".into(),
+                ));
+            }
+        };
+        let mut lever = hand - hinge_origin;
+        lever -= axis * axis.dot(&lever);
+        if let Some(p) = profile {
+            drive = DoorDrive {
+                profile: p,
+                lever,
+                axis,
+            };
+        }
+        Some(DoorSpec {
+            model: door,
+            base,
+            handle_frame: HANDLE_FRAME.into(),
+            hand_frame: HAND_FRAME.into(),
+        })
+    } else {
+        None
+    };
+    let spec = WorldSpec {
+        robot,
+        contact_frames: CONTACT_FRAMES.iter().map(|s| s.to_string()).collect(),
+        ground: Plane::ground(),
+        door,
+        params,
+    };
+    let v0 = DVector::zeros(spec.robot.nv);
+    let world = World::new(spec, q_home.clone(), v0)?;
+    Ok(Scene {
+        world,
+        drive,
+        q_home,
+    })
+}
+
+/// Loads the scenario named in the config (embedded name or path) and builds the scene.
+pub fn default_scene(
+    config: &SimConfig,
+) -> Result<(Scene, Scenario), Box<dyn std::error::Error + Send + Sync>> {
+    let scenario = Scenario::load(&config.scenario)?;
+    let scene = humanoid_scene(config, Some(scenario.force.clone()))?;
+    Ok((scene, scenario))
+}
+
+/// A posture-holding joint PD for tests, demos and the benchmark: `τ = Kp (q_ref − q) − Kd q̇`
+/// with per-joint gains scaled by the joint-space inertia diagonal at `q_ref` (natural frequency
+/// `freq` Hz, damping ratio `zeta`), so light wrists and heavy hips behave alike.
+#[derive(Clone, Debug)]
+pub struct PosturePd {
+    pub q_ref: DVector<f64>,
+    pub kp: DVector<f64>,
+    pub kd: DVector<f64>,
+    /// Effective joint inertias `1 / (M⁻¹)_jj` at `q_ref`.
+    pub inertia: DVector<f64>,
+    floating: bool,
+}
+
+impl PosturePd {
+    pub fn new(
+        model: &Model,
+        q_ref: &DVector<f64>,
+        freq: f64,
+        zeta: f64,
+    ) -> Result<Self, SimError> {
+        let mut data = Data::new(model);
+        let m = crate::dynamics::crba(model, &mut data, q_ref)?.clone();
+        let minv = m
+            .cholesky()
+            .ok_or(SimError::Dynamics(
+                crate::dynamics::DynamicsError::Singular("M(q_ref)"),
+            ))?
+            .inverse();
+        let floating = model.has_floating_base();
+        let start = if floating { 6 } else { 0 };
+        let n = model.nv - start;
+        // Effective inertia of each joint when the rest of the body is free: 1 / (M⁻¹)_jj.
+        let inertia = DVector::from_fn(n, |i, _| 1.0 / minv[(start + i, start + i)]);
+        let w = 2.0 * std::f64::consts::PI * freq;
+        let kp = inertia.map(|i| i * w * w);
+        let kd = inertia.map(|i| 2.0 * zeta * i * w);
+        Ok(Self {
+            q_ref: q_ref.clone(),
+            kp,
+            kd,
+            inertia,
+            floating,
+        })
+    }
+
+    /// Raises the gains of the joints whose name contains one of `patterns` to at least
+    /// (`kp`, `kd`). The inertia diagonal underestimates what a standing leg carries (the ankle's
+    /// subtree is the foot alone, but it holds the whole body up), so legs and torso need floors.
+    pub fn with_floor(mut self, model: &Model, patterns: &[&str], kp: f64, kd: f64) -> Self {
+        let start = if self.floating { 6 } else { 0 };
+        for i in 0..self.kp.len() {
+            let name = &model.joints[model.dof_joint[start + i]].name;
+            if patterns.iter().any(|p| name.contains(p)) {
+                self.kp[i] = self.kp[i].max(kp);
+                self.kd[i] = self.kd[i].max(kd);
+            }
+        }
+        self
+    }
+
+    /// Caps the gains to what an explicit PD evaluated once per step of `dt` keeps stable on
+    /// each joint's effective inertia even with the foot in the air (`kd ≤ I/(2dt)`,
+    /// `kp ≤ I/(2dt²)`).
+    pub fn capped(mut self, dt: f64) -> Self {
+        for i in 0..self.kp.len() {
+            let inertia = self.inertia[i];
+            self.kp[i] = self.kp[i].min(0.5 * inertia / (dt * dt));
+            self.kd[i] = self.kd[i].min(0.5 * inertia / dt);
+        }
+        self
+    }
+
+    /// The posture PD the tests and the benchmark use for the humanoid: 6 Hz critically damped
+    /// on the effective inertias, legs and torso raised to 800 N·m/rad and 10 N·m·s/rad, all
+    /// capped for stability at the 1 ms step.
+    pub fn standing(model: &Model, q_ref: &DVector<f64>) -> Result<Self, SimError> {
+        Ok(Self::new(model, q_ref, 6.0, 1.0)?
+            .with_floor(model, &["hip", "knee", "ankle", "torso"], 800.0, 10.0)
+            .capped(1e-3))
+    }
+
+    /// Torques into `out` (length nv − 6 or nv).
+    pub fn torques(&self, q: &DVector<f64>, v: &DVector<f64>, out: &mut DVector<f64>) {
+        let (sq, sv) = if self.floating { (7, 6) } else { (0, 0) };
+        for i in 0..out.len() {
+            out[i] = self.kp[i] * (self.q_ref[sq + i] - q[sq + i]) - self.kd[i] * v[sv + i];
+        }
+    }
+}

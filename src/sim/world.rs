@@ -1,0 +1,891 @@
+//! The physics of the simulator, without any IPC: a robot (any URDF model, floating or fixed
+//! base) standing on a plane through contact points, optionally a door joined to a robot frame
+//! by a spherical joint, stepped at a fixed `dt`.
+//!
+//! One step (semi-implicit Euler at the velocity level, Moreau–Jean time stepping):
+//! 1. `M(q)` (CRBA) and `h(q, v)` (RNEA) of the robot and the door; joint damping `D` is
+//!    integrated implicitly, so the factorised matrix is `M + dt D` (block-diagonal: robot,
+//!    door), factorised by the tree-sparse `LᵀDL` ([`super::factor`]);
+//! 2. free velocity `v* = v + dt (M + dt D)⁻¹ (Sᵀτ − h − D v)`;
+//! 3. constraint rows at `q`: every contact point (normal + 2 tangents of the plane), the three
+//!    rows of the hand–handle point constraint, and the joint limits about to be crossed;
+//!    velocity targets remove a fraction of the penetration / loop gap per step
+//!    (`contact_stabilisation`, `loop_stabilisation`); a contact still above the plane may
+//!    approach it by at most its gap in this step (speculative contact, so nothing tunnels);
+//! 4. impulses `λ` from [`ConstraintSystem`] (Coulomb cones, projected Gauss–Seidel, warm start);
+//! 5. `v⁺ = v* + (M + dt D)⁻¹ Jᵀ λ`, `q⁺ = q ⊕ v⁺ dt` (SE(3) for the free-flyer).
+//!
+//! Forces reported are `λ / dt`. Construction allocates; [`World::step`] does not, never panics
+//! on bad input (errors instead), and leaves the state untouched when it fails.
+
+use nalgebra::{DMatrix, DVector, Vector3};
+
+use crate::dynamics::{
+    DynamicsError, JointKind, Model, SE3, crba, integrate, kinematics, nonlinear_effects,
+};
+
+use super::config::SimConfig;
+use super::contact::{BlockKind, ConstraintSystem, SolverSettings};
+use super::factor::{LtdlFactor, NotPositiveDefinite};
+
+/// Errors of building or stepping a [`World`].
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
+pub enum SimError {
+    #[error(transparent)]
+    Dynamics(#[from] DynamicsError),
+    #[error("torque vector has length {got}, the robot has {expected} actuated joints")]
+    TorqueLength { expected: usize, got: usize },
+    #[error("{what} is not finite at index {index}")]
+    NonFinite { what: &'static str, index: usize },
+    #[error(transparent)]
+    Singular(#[from] NotPositiveDefinite),
+    #[error("the state diverged (non-finite velocity at dof {0}); the step was not applied")]
+    Diverged(usize),
+    #[error("invalid scene: {0}")]
+    Scene(String),
+}
+
+/// A plane `{x : n·x = offset}` (unit normal `n`, pointing out of the ground).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Plane {
+    pub normal: Vector3<f64>,
+    pub offset: f64,
+}
+
+impl Plane {
+    /// The ground `z = 0`.
+    pub fn ground() -> Self {
+        Self {
+            normal: Vector3::z(),
+            offset: 0.0,
+        }
+    }
+
+    /// A plane through the origin tilted by `angle` about the world y axis (it descends
+    /// towards +x for a positive angle).
+    pub fn slope(angle: f64) -> Self {
+        Self {
+            normal: Vector3::new(angle.sin(), 0.0, angle.cos()),
+            offset: 0.0,
+        }
+    }
+
+    /// Signed distance of a point (positive above).
+    pub fn distance(&self, p: &Vector3<f64>) -> f64 {
+        self.normal.dot(p) - self.offset
+    }
+
+    /// Two unit tangents completing the normal to a right-handed basis (t₁ in the x–z plane
+    /// when possible).
+    pub fn tangents(&self) -> (Vector3<f64>, Vector3<f64>) {
+        let n = self.normal;
+        let seed = if n.y.abs() < 0.9 {
+            Vector3::y()
+        } else {
+            Vector3::x()
+        };
+        let t1 = seed.cross(&n).normalize();
+        let t2 = n.cross(&t1);
+        (t1, t2)
+    }
+}
+
+/// Physical and numerical parameters of the stepping.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PhysicsParams {
+    pub dt: f64,
+    /// Coulomb friction coefficient of every contact.
+    pub friction: f64,
+    /// Viscous damping of every robot joint except the free-flyer (N·m·s/rad or N·s/m).
+    pub joint_damping: f64,
+    /// Viscous damping of the door's joints.
+    pub door_damping: f64,
+    pub joint_limits: bool,
+    pub effort_limits: bool,
+    pub solver: SolverSettings,
+    pub contact_stabilisation: f64,
+    pub loop_stabilisation: f64,
+}
+
+impl PhysicsParams {
+    pub fn from_config(c: &SimConfig) -> Self {
+        Self {
+            dt: c.dt,
+            friction: c.friction,
+            joint_damping: c.joint_damping,
+            door_damping: c.door_damping,
+            joint_limits: c.joint_limits,
+            effort_limits: c.effort_limits,
+            solver: SolverSettings {
+                max_iterations: c.solver.max_iterations,
+                tolerance: c.solver.tolerance,
+                regularisation: c.solver.regularisation,
+            },
+            contact_stabilisation: c.solver.contact_stabilisation,
+            loop_stabilisation: c.solver.loop_stabilisation,
+        }
+    }
+}
+
+impl Default for PhysicsParams {
+    fn default() -> Self {
+        Self::from_config(&SimConfig::embedded().expect("the embedded sim config is valid"))
+    }
+}
+
+/// A door (or any fixed-base mechanism) joined to the robot by a spherical joint.
+#[derive(Clone, Debug)]
+pub struct DoorSpec {
+    /// Fixed-base model, in its own coordinates (placed by `base`).
+    pub model: Model,
+    /// World placement of the door model's root.
+    pub base: SE3,
+    /// Frame of the door model held by the robot (its origin is the joint centre).
+    pub handle_frame: String,
+    /// Frame of the robot holding the door.
+    pub hand_frame: String,
+}
+
+/// Everything a [`World`] is built from.
+#[derive(Clone, Debug)]
+pub struct WorldSpec {
+    pub robot: Model,
+    /// Frames of the robot that touch the ground (their origins are the contact points).
+    pub contact_frames: Vec<String>,
+    pub ground: Plane,
+    pub door: Option<DoorSpec>,
+    pub params: PhysicsParams,
+}
+
+/// What one step did (all plain values; no allocation).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepReport {
+    /// Steps done so far (this step included) and simulated time after it.
+    pub step: u64,
+    pub time: f64,
+    pub solver_iterations: u32,
+    /// Largest impulse change in the solver's last sweep (N·s).
+    pub solver_change: f64,
+    /// Contacts carrying load and joint limits engaged.
+    pub active_contacts: u32,
+    pub active_limits: u32,
+    /// Deepest penetration below the plane after the step (m, ≥ 0).
+    pub max_penetration: f64,
+    /// Fastest tangential speed of a loaded contact point at the end of the step (m/s).
+    pub max_slip_speed: f64,
+    /// Hand–handle distance after the step (m); 0 without a door.
+    pub loop_error: f64,
+    /// Centre of pressure of the contact forces on the plane (world x, y), if any load.
+    pub zmp: Option<[f64; 2]>,
+    /// Sum of the normal contact forces (N).
+    pub total_normal_force: f64,
+    /// Force of the door on the hand (N, world).
+    pub hand_force: [f64; 3],
+    /// Hinge torque applied (N·m).
+    pub door_torque: f64,
+    /// Robot centre of mass after the step (m, world).
+    pub com: [f64; 3],
+}
+
+#[derive(Clone, Copy, Debug)]
+struct ContactPoint {
+    joint: usize,
+    local: Vector3<f64>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct LimitedDof {
+    /// Index in the combined velocity vector.
+    dof: usize,
+    /// Door (true) or robot configuration index.
+    door: bool,
+    iq: usize,
+    lower: f64,
+    upper: f64,
+}
+
+struct Door {
+    model: Model,
+    data: crate::dynamics::Data,
+    q: DVector<f64>,
+    v: DVector<f64>,
+    q_next: DVector<f64>,
+    handle: ContactPoint,
+    hand: ContactPoint,
+}
+
+/// The simulated scene and its preallocated workspace.
+pub struct World {
+    robot: Model,
+    data: crate::dynamics::Data,
+    q: DVector<f64>,
+    v: DVector<f64>,
+    q_next: DVector<f64>,
+    door: Option<Door>,
+    contacts: Vec<ContactPoint>,
+    contact_names: Vec<String>,
+    ground: Plane,
+    tangents: (Vector3<f64>, Vector3<f64>),
+    params: PhysicsParams,
+    floating: bool,
+    n_act: usize,
+    effort: Vec<f64>,
+    damping: DVector<f64>,
+    limits: Vec<LimitedDof>,
+    nvt: usize,
+    factor: LtdlFactor,
+    sys: ConstraintSystem,
+    /// Combined-velocity scratch: force, v*, impulse.
+    force: DVector<f64>,
+    vstar: DVector<f64>,
+    dv: DVector<f64>,
+    warm: DVector<f64>,
+    /// Per contact: world point (at the start of the last step), force (N, world).
+    points: Vec<Vector3<f64>>,
+    forces: Vec<Vector3<f64>>,
+    time: f64,
+    steps: u64,
+    last: StepReport,
+}
+
+fn dof_parents(model: &Model, offset: usize, out: &mut Vec<Option<usize>>) {
+    for j in &model.joints {
+        for k in 0..j.nv() {
+            let p = if k > 0 {
+                Some(offset + j.idx_v + k - 1)
+            } else {
+                j.parent.map(|p| {
+                    let pj = &model.joints[p];
+                    offset + pj.idx_v + pj.nv() - 1
+                })
+            };
+            out.push(p);
+        }
+    }
+}
+
+fn point_of(model: &Model, frame: &str) -> Result<ContactPoint, SimError> {
+    let f = &model.frames[model.frame_id(frame)?];
+    let joint = f.parent.ok_or_else(|| {
+        SimError::Scene(format!(
+            "frame '{frame}' is fixed to the world, it cannot move"
+        ))
+    })?;
+    Ok(ContactPoint {
+        joint,
+        local: f.placement.trans,
+    })
+}
+
+fn limited_dofs(model: &Model, offset: usize, door: bool, out: &mut Vec<LimitedDof>) {
+    for j in &model.joints {
+        if j.kind == JointKind::FreeFlyer {
+            continue;
+        }
+        let l = j.limits;
+        if l.lower.is_finite() || l.upper.is_finite() {
+            out.push(LimitedDof {
+                dof: offset + j.idx_v,
+                door,
+                iq: j.idx_q,
+                lower: l.lower,
+                upper: l.upper,
+            });
+        }
+    }
+}
+
+/// World position of a body point.
+#[inline]
+fn world_point(data: &crate::dynamics::Data, c: &ContactPoint) -> Vector3<f64> {
+    let o = &data.o_m_i[c.joint];
+    o.rot * c.local + o.trans
+}
+
+/// Writes `sign · axisᵀ · (v_point)` Jacobian entries of a body point into `jt[.., col]`, for
+/// the dofs supporting `joint` (world Jacobian columns in `data.j`), at `offset`.
+#[allow(clippy::too_many_arguments)]
+fn point_rows(
+    model: &Model,
+    data: &crate::dynamics::Data,
+    joint: usize,
+    p: &Vector3<f64>,
+    axes: &[Vector3<f64>],
+    sign: f64,
+    offset: usize,
+    jt: &mut DMatrix<f64>,
+    col: usize,
+) {
+    let mut cur = Some(joint);
+    while let Some(a) = cur {
+        let ja = &model.joints[a];
+        for c in ja.idx_v..ja.idx_v + ja.nv() {
+            let s = data.j.fixed_view::<6, 1>(0, c);
+            let lin = Vector3::new(s[0], s[1], s[2]);
+            let ang = Vector3::new(s[3], s[4], s[5]);
+            let vel = lin + ang.cross(p);
+            for (k, ax) in axes.iter().enumerate() {
+                jt[(offset + c, col + k)] = sign * ax.dot(&vel);
+            }
+        }
+        cur = ja.parent;
+    }
+}
+
+impl World {
+    /// Builds the world at state `(q, v)` of the robot (the door starts at its neutral
+    /// configuration, at rest).
+    pub fn new(spec: WorldSpec, q: DVector<f64>, v: DVector<f64>) -> Result<World, SimError> {
+        let WorldSpec {
+            robot,
+            contact_frames,
+            ground,
+            door,
+            params,
+        } = spec;
+        robot.check_q(&q)?;
+        robot.check_v("v", &v)?;
+        if !(params.dt > 0.0 && params.dt.is_finite()) {
+            return Err(SimError::Scene(format!(
+                "dt must be > 0, got {}",
+                params.dt
+            )));
+        }
+        let n = ground.normal.norm();
+        if !(n > 0.0 && n.is_finite() && ground.offset.is_finite()) {
+            return Err(SimError::Scene(
+                "ground normal must be a non-zero vector".into(),
+            ));
+        }
+        let ground = Plane {
+            normal: ground.normal / n,
+            offset: ground.offset / n,
+        };
+        let floating = robot
+            .joints
+            .first()
+            .is_some_and(|j| j.kind == JointKind::FreeFlyer);
+        let n_act = if floating { robot.nv - 6 } else { robot.nv };
+        let start = robot.nv - n_act;
+        let effort: Vec<f64> = (start..robot.nv)
+            .map(|k| robot.joints[robot.dof_joint[k]].limits.effort)
+            .collect();
+        let contacts = contact_frames
+            .iter()
+            .map(|f| point_of(&robot, f))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut parents = Vec::new();
+        dof_parents(&robot, 0, &mut parents);
+        let mut limits = Vec::new();
+        if params.joint_limits {
+            limited_dofs(&robot, 0, false, &mut limits);
+        }
+        let door = match door {
+            None => None,
+            Some(d) => {
+                let mut model = d.model;
+                if model.has_floating_base() {
+                    return Err(SimError::Scene(
+                        "the door model must have a fixed base".into(),
+                    ));
+                }
+                for j in model.joints.iter_mut().filter(|j| j.parent.is_none()) {
+                    j.placement = d.base.compose(&j.placement);
+                }
+                for f in model.frames.iter_mut().filter(|f| f.parent.is_none()) {
+                    f.placement = d.base.compose(&f.placement);
+                }
+                let handle = point_of(&model, &d.handle_frame)?;
+                let hand = point_of(&robot, &d.hand_frame)?;
+                dof_parents(&model, robot.nv, &mut parents);
+                if params.joint_limits {
+                    limited_dofs(&model, robot.nv, true, &mut limits);
+                }
+                let data = crate::dynamics::Data::new(&model);
+                let q = model.neutral();
+                let v = DVector::zeros(model.nv);
+                let q_next = q.clone();
+                Some(Door {
+                    model,
+                    data,
+                    q,
+                    v,
+                    q_next,
+                    handle,
+                    hand,
+                })
+            }
+        };
+        let nvt = parents.len();
+        let factor = LtdlFactor::new(parents)
+            .ok_or_else(|| SimError::Scene("joints are not ordered parents first".into()))?;
+        let mut damping = DVector::zeros(nvt);
+        for k in 0..robot.nv {
+            if !(floating && k < 6) {
+                damping[k] = params.joint_damping;
+            }
+        }
+        for k in robot.nv..nvt {
+            damping[k] = params.door_damping;
+        }
+        let max_rows = 3 * contacts.len() + if door.is_some() { 3 } else { 0 } + limits.len();
+        let nc = contacts.len();
+        let data = crate::dynamics::Data::new(&robot);
+        let q_next = q.clone();
+        let mut w = World {
+            data,
+            q,
+            v,
+            q_next,
+            door,
+            contact_names: contact_frames,
+            tangents: ground.tangents(),
+            ground,
+            params,
+            floating,
+            n_act,
+            effort,
+            damping,
+            limits,
+            nvt,
+            factor,
+            sys: ConstraintSystem::new(nvt, max_rows.max(1)),
+            force: DVector::zeros(nvt),
+            vstar: DVector::zeros(nvt),
+            dv: DVector::zeros(nvt),
+            warm: DVector::zeros(3 * nc + 3),
+            points: vec![Vector3::zeros(); nc],
+            forces: vec![Vector3::zeros(); nc],
+            contacts,
+            robot,
+            time: 0.0,
+            steps: 0,
+            last: StepReport::default(),
+        };
+        w.refresh_points();
+        Ok(w)
+    }
+
+    fn refresh_points(&mut self) {
+        kinematics::placements_unchecked(&self.robot, &mut self.data, self.q.as_slice());
+        for (p, c) in self.points.iter_mut().zip(&self.contacts) {
+            *p = world_point(&self.data, c);
+        }
+        if let Some(d) = &mut self.door {
+            kinematics::placements_unchecked(&d.model, &mut d.data, d.q.as_slice());
+        }
+    }
+
+    /// Advances one step under joint torques `tau` (length [`World::n_actuated`]) and the
+    /// door's hinge torque. On error the state is unchanged.
+    pub fn step(&mut self, tau: &DVector<f64>, door_torque: f64) -> Result<StepReport, SimError> {
+        if tau.len() != self.n_act {
+            return Err(SimError::TorqueLength {
+                expected: self.n_act,
+                got: tau.len(),
+            });
+        }
+        if let Some(i) = tau.iter().position(|t| !t.is_finite()) {
+            return Err(SimError::NonFinite {
+                what: "joint torque",
+                index: i,
+            });
+        }
+        if !door_torque.is_finite() {
+            return Err(SimError::NonFinite {
+                what: "door torque",
+                index: 0,
+            });
+        }
+        let dt = self.params.dt;
+        let nv = self.robot.nv;
+        let nvt = self.nvt;
+        let start = nv - self.n_act;
+
+        // 1. Dynamics terms and the factor of M + dt D.
+        nonlinear_effects(&self.robot, &mut self.data, &self.q, &self.v)?;
+        for k in 0..nv {
+            self.force[k] = -self.data.tau[k] - self.damping[k] * self.v[k];
+        }
+        for (i, t) in tau.iter().enumerate() {
+            let t = if self.params.effort_limits {
+                let e = self.effort[i];
+                t.max(-e).min(e)
+            } else {
+                *t
+            };
+            self.force[start + i] += t;
+        }
+        crba(&self.robot, &mut self.data, &self.q)?;
+        {
+            let mm = self.factor.matrix_mut();
+            mm.view_mut((0, 0), (nv, nv)).copy_from(&self.data.m);
+        }
+        if let Some(d) = &mut self.door {
+            nonlinear_effects(&d.model, &mut d.data, &d.q, &d.v)?;
+            crba(&d.model, &mut d.data, &d.q)?;
+            let nd = d.model.nv;
+            for k in 0..nd {
+                self.force[nv + k] = -d.data.tau[k] - self.damping[nv + k] * d.v[k];
+            }
+            if nd > 0 {
+                self.force[nv] += door_torque;
+            }
+            self.factor
+                .matrix_mut()
+                .view_mut((nv, nv), (nd, nd))
+                .copy_from(&d.data.m);
+        }
+        {
+            let mm = self.factor.matrix_mut();
+            for k in 0..nvt {
+                mm[(k, k)] += dt * self.damping[k];
+            }
+        }
+        self.factor.factor()?;
+
+        // 2. Free velocity.
+        self.dv.copy_from(&self.force);
+        self.factor.solve(self.dv.as_mut_slice());
+        for k in 0..nv {
+            self.vstar[k] = self.v[k] + dt * self.dv[k];
+        }
+        if let Some(d) = &self.door {
+            for k in 0..d.model.nv {
+                self.vstar[nv + k] = d.v[k] + dt * self.dv[nv + k];
+            }
+        }
+
+        // 3. Constraint rows.
+        self.sys.clear();
+        let n = self.ground.normal;
+        let (t1, t2) = self.tangents;
+        let beta = self.params.contact_stabilisation;
+        let mu = self.params.friction;
+        for (ci, c) in self.contacts.iter().enumerate() {
+            let p = world_point(&self.data, c);
+            self.points[ci] = p;
+            let Some(r) = self.sys.push(BlockKind::Contact { mu }) else {
+                return Err(SimError::Scene("constraint capacity exhausted".into()));
+            };
+            point_rows(
+                &self.robot,
+                &self.data,
+                c.joint,
+                &p,
+                &[n, t1, t2],
+                1.0,
+                0,
+                &mut self.sys.jt,
+                r,
+            );
+            let phi = self.ground.distance(&p);
+            let target = if phi >= 0.0 {
+                -phi / dt
+            } else {
+                -beta * phi / dt
+            };
+            self.sys.bias[r] = self.sys.jt.column(r).dot(&self.vstar) - target;
+            self.sys.bias[r + 1] = self.sys.jt.column(r + 1).dot(&self.vstar);
+            self.sys.bias[r + 2] = self.sys.jt.column(r + 2).dot(&self.vstar);
+            for k in 0..3 {
+                self.sys.lambda[r + k] = self.warm[3 * ci + k];
+            }
+        }
+        let nc = self.contacts.len();
+        let mut loop_row = None;
+        if let Some(d) = &self.door {
+            let ph = world_point(&self.data, &d.hand);
+            let pd = world_point(&d.data, &d.handle);
+            let Some(r) = self.sys.push(BlockKind::Bilateral3) else {
+                return Err(SimError::Scene("constraint capacity exhausted".into()));
+            };
+            let axes = [Vector3::x(), Vector3::y(), Vector3::z()];
+            point_rows(
+                &self.robot,
+                &self.data,
+                d.hand.joint,
+                &ph,
+                &axes,
+                1.0,
+                0,
+                &mut self.sys.jt,
+                r,
+            );
+            point_rows(
+                &d.model,
+                &d.data,
+                d.handle.joint,
+                &pd,
+                &axes,
+                -1.0,
+                nv,
+                &mut self.sys.jt,
+                r,
+            );
+            let e = ph - pd;
+            let gamma = self.params.loop_stabilisation;
+            for k in 0..3 {
+                let target = -gamma * e[k] / dt;
+                self.sys.bias[r + k] = self.sys.jt.column(r + k).dot(&self.vstar) - target;
+                self.sys.lambda[r + k] = self.warm[3 * nc + k];
+            }
+            loop_row = Some(r);
+        }
+        let mut active_limits = 0;
+        for l in &self.limits {
+            let qk = match (&self.door, l.door) {
+                (Some(d), true) => d.q[l.iq],
+                _ => self.q[l.iq],
+            };
+            let vk = self.vstar[l.dof];
+            // Nearer side only; engaged when the free motion would come within 0.02 rad/m.
+            let (gap, sign) = if qk - l.lower <= l.upper - qk {
+                (qk - l.lower, 1.0)
+            } else {
+                (l.upper - qk, -1.0)
+            };
+            if !(gap + dt * sign * vk < 0.02) {
+                continue;
+            }
+            let Some(r) = self.sys.push(BlockKind::Unilateral) else {
+                break;
+            };
+            active_limits += 1;
+            self.sys.jt[(l.dof, r)] = sign;
+            let target = if gap >= 0.0 {
+                -gap / dt
+            } else {
+                -beta * gap / dt
+            };
+            self.sys.bias[r] = sign * vk - target;
+        }
+
+        // 4. Impulses.
+        self.sys
+            .assemble(&self.factor, self.params.solver.regularisation);
+        let stats = self.sys.solve(&self.params.solver);
+
+        // 5. Velocity update, checked before anything is committed.
+        self.sys.generalized_impulse(&mut self.dv);
+        self.factor.solve(self.dv.as_mut_slice());
+        for k in 0..nvt {
+            let x = self.vstar[k] + self.dv[k];
+            if !x.is_finite() {
+                return Err(SimError::Diverged(k));
+            }
+            self.vstar[k] = x;
+        }
+        for k in 0..nv {
+            self.v[k] = self.vstar[k];
+        }
+        integrate(&self.robot, &self.q, &self.v, dt, &mut self.q_next)?;
+        std::mem::swap(&mut self.q, &mut self.q_next);
+        if let Some(d) = &mut self.door {
+            for k in 0..d.model.nv {
+                d.v[k] = self.vstar[nv + k];
+            }
+            integrate(&d.model, &d.q, &d.v, dt, &mut d.q_next)?;
+            std::mem::swap(&mut d.q, &mut d.q_next);
+        }
+        self.time += dt;
+        self.steps += 1;
+
+        // Report: forces at q, geometry after the step.
+        let mut report = StepReport {
+            step: self.steps,
+            time: self.time,
+            solver_iterations: stats.iterations as u32,
+            solver_change: stats.last_change,
+            active_limits,
+            door_torque,
+            ..StepReport::default()
+        };
+        let (mut fz, mut cx, mut cy) = (0.0, 0.0, 0.0);
+        for ci in 0..nc {
+            let r = 3 * ci;
+            let l = &self.sys.lambda;
+            self.warm[r] = l[r];
+            self.warm[r + 1] = l[r + 1];
+            self.warm[r + 2] = l[r + 2];
+            let f = (n * l[r] + t1 * l[r + 1] + t2 * l[r + 2]) / dt;
+            self.forces[ci] = f;
+            let fn_ = l[r] / dt;
+            if fn_ > 1e-9 {
+                report.active_contacts += 1;
+                fz += fn_;
+                cx += fn_ * self.points[ci].x;
+                cy += fn_ * self.points[ci].y;
+                let ut1 = self.sys.jt.column(r + 1).dot(&self.vstar);
+                let ut2 = self.sys.jt.column(r + 2).dot(&self.vstar);
+                report.max_slip_speed = report.max_slip_speed.max(ut1.hypot(ut2));
+            }
+        }
+        report.total_normal_force = fz;
+        if fz > 1e-9 {
+            report.zmp = Some([cx / fz, cy / fz]);
+        }
+        if let Some(r) = loop_row {
+            for k in 0..3 {
+                self.warm[3 * nc + k] = self.sys.lambda[r + k];
+                report.hand_force[k] = self.sys.lambda[r + k] / dt;
+            }
+        }
+        self.refresh_points_after(&mut report);
+        self.last = report;
+        Ok(report)
+    }
+
+    /// Post-step kinematics: penetration, loop error, CoM.
+    fn refresh_points_after(&mut self, report: &mut StepReport) {
+        kinematics::placements_unchecked(&self.robot, &mut self.data, self.q.as_slice());
+        for c in &self.contacts {
+            let p = world_point(&self.data, c);
+            report.max_penetration = report.max_penetration.max(-self.ground.distance(&p));
+        }
+        let mut h = Vector3::zeros();
+        let mut mass = 0.0;
+        for (i, j) in self.robot.joints.iter().enumerate() {
+            let o = &self.data.o_m_i[i];
+            h += o.rot * j.inertia.h + j.inertia.mass * o.trans;
+            mass += j.inertia.mass;
+        }
+        if mass > 0.0 {
+            report.com = (h / mass).into();
+        }
+        if let Some(d) = &mut self.door {
+            kinematics::placements_unchecked(&d.model, &mut d.data, d.q.as_slice());
+            let ph = world_point(&self.data, &d.hand);
+            let pd = world_point(&d.data, &d.handle);
+            report.loop_error = (ph - pd).norm();
+        }
+    }
+
+    /// Sets the robot state (and zeroes the warm start). The door keeps its state.
+    pub fn set_state(&mut self, q: &DVector<f64>, v: &DVector<f64>) -> Result<(), SimError> {
+        self.robot.check_q(q)?;
+        self.robot.check_v("v", v)?;
+        self.q.copy_from(q);
+        self.v.copy_from(v);
+        self.warm.fill(0.0);
+        self.refresh_points();
+        Ok(())
+    }
+
+    /// Sets the door's state (angle, rate for a 1-DoF door).
+    pub fn set_door_state(&mut self, q: &DVector<f64>, v: &DVector<f64>) -> Result<(), SimError> {
+        let d = self
+            .door
+            .as_mut()
+            .ok_or_else(|| SimError::Scene("no door".into()))?;
+        d.model.check_q(q)?;
+        d.model.check_v("door v", v)?;
+        d.q.copy_from(q);
+        d.v.copy_from(v);
+        self.refresh_points();
+        Ok(())
+    }
+
+    pub fn robot(&self) -> &Model {
+        &self.robot
+    }
+    pub fn q(&self) -> &DVector<f64> {
+        &self.q
+    }
+    pub fn v(&self) -> &DVector<f64> {
+        &self.v
+    }
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+    pub fn params(&self) -> &PhysicsParams {
+        &self.params
+    }
+    pub fn ground(&self) -> &Plane {
+        &self.ground
+    }
+    /// Number of torques [`World::step`] expects (nv − 6 with a floating base, nv otherwise).
+    pub fn n_actuated(&self) -> usize {
+        self.n_act
+    }
+    pub fn is_floating(&self) -> bool {
+        self.floating
+    }
+    /// The last step's report (default before the first step).
+    pub fn last_report(&self) -> &StepReport {
+        &self.last
+    }
+    /// Contact frame names, in the order of [`World::contact_forces`].
+    pub fn contact_names(&self) -> &[String] {
+        &self.contact_names
+    }
+    /// Contact forces of the last step (N, world; ground on robot).
+    pub fn contact_forces(&self) -> &[Vector3<f64>] {
+        &self.forces
+    }
+    /// Contact points where the last step's forces applied (m, world).
+    pub fn contact_points(&self) -> &[Vector3<f64>] {
+        &self.points
+    }
+    /// Hinge angle and rate of a 1-DoF door (0 without a door).
+    pub fn door_angle(&self) -> f64 {
+        self.door
+            .as_ref()
+            .map_or(0.0, |d| d.q.get(0).copied().unwrap_or(0.0))
+    }
+    pub fn door_velocity(&self) -> f64 {
+        self.door
+            .as_ref()
+            .map_or(0.0, |d| d.v.get(0).copied().unwrap_or(0.0))
+    }
+    /// The door model (placed in the world) and its configuration.
+    pub fn door(&self) -> Option<(&Model, &DVector<f64>)> {
+        self.door.as_ref().map(|d| (&d.model, &d.q))
+    }
+
+    /// World placements of every robot frame (URDF links included) at the current state.
+    pub fn robot_frame_placements(&mut self) -> &[SE3] {
+        kinematics::placements_unchecked(&self.robot, &mut self.data, self.q.as_slice());
+        kinematics::update_frame_placements(&self.robot, &mut self.data);
+        &self.data.o_m_f
+    }
+
+    /// World placements of every door frame at the current state.
+    pub fn door_frame_placements(&mut self) -> Option<&[SE3]> {
+        let d = self.door.as_mut()?;
+        kinematics::placements_unchecked(&d.model, &mut d.data, d.q.as_slice());
+        kinematics::update_frame_placements(&d.model, &mut d.data);
+        Some(&d.data.o_m_f)
+    }
+
+    /// Total mechanical energy (kinetic + gravitational) of the robot and the door (J).
+    pub fn energy(&mut self) -> Result<f64, SimError> {
+        fn one(
+            model: &Model,
+            data: &mut crate::dynamics::Data,
+            q: &DVector<f64>,
+            v: &DVector<f64>,
+        ) -> Result<f64, SimError> {
+            if model.nv == 0 {
+                return Ok(0.0);
+            }
+            let m = crba(model, data, q)?.clone();
+            let kin = 0.5 * v.dot(&(m * v));
+            let mut pot = 0.0;
+            for (i, j) in model.joints.iter().enumerate() {
+                let o = &data.o_m_i[i];
+                let c = o.rot * j.inertia.h + j.inertia.mass * o.trans;
+                pot -= model.gravity.dot(&c);
+            }
+            Ok(kin + pot)
+        }
+        let mut e = one(&self.robot, &mut self.data, &self.q, &self.v)?;
+        if let Some(d) = &mut self.door {
+            e += one(&d.model, &mut d.data, &d.q, &d.v)?;
+        }
+        Ok(e)
+    }
+}

@@ -1,0 +1,155 @@
+//! The simulator process over iceoryx2: a lockstep controller in the test answers every state
+//! with posture-PD torques; malformed commands are rejected and counted; reruns are
+//! bit-identical. Also the pure validation of torque commands.
+
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
+
+use nalgebra::DVector;
+use upc::channels::{Bus, MAX_DOF, ServiceKind, StateMsg, TorqueMsg};
+use upc::sim::process::{RunOptions, RunSummary, run};
+use upc::sim::{CommandGate, PosturePd, Rejection, SimConfig, validate_command};
+
+#[test]
+fn commands_with_wrong_length_nan_or_old_seq_are_rejected() {
+    let tau = [0.0; MAX_DOF];
+    assert_eq!(validate_command(None, 0, 32, &tau, 32), Ok(()));
+    assert_eq!(
+        validate_command(None, 0, 31, &tau, 32),
+        Err(Rejection::WrongLength {
+            expected: 32,
+            got: 31
+        })
+    );
+    assert!(matches!(
+        validate_command(None, 0, 60, &tau, 60),
+        Err(Rejection::WrongLength { .. })
+    ));
+    let mut bad = tau;
+    bad[7] = f64::NAN;
+    assert_eq!(
+        validate_command(None, 0, 32, &bad, 32),
+        Err(Rejection::NonFinite { index: 7 })
+    );
+    bad[7] = f64::NEG_INFINITY;
+    assert!(validate_command(None, 0, 32, &bad, 32).is_err());
+    // Beyond n, garbage is ignored.
+    bad[7] = 0.0;
+    bad[40] = f64::NAN;
+    assert_eq!(validate_command(None, 0, 32, &bad, 32), Ok(()));
+    assert_eq!(
+        validate_command(Some(5), 5, 32, &tau, 32),
+        Err(Rejection::OutOfOrder { seq: 5, last: 5 })
+    );
+    assert!(validate_command(Some(5), 4, 32, &tau, 32).is_err());
+    assert_eq!(validate_command(Some(5), 9, 32, &tau, 32), Ok(()));
+
+    let mut gate = CommandGate::default();
+    assert!(gate.check(1, 32, &tau, 32).is_ok());
+    assert!(gate.check(2, 30, &tau, 32).is_err());
+    assert!(gate.check(1, 32, &tau, 32).is_err());
+    assert!(gate.check(2, 32, &bad[..32], 32).is_ok());
+    assert_eq!(gate.stats.accepted, 2);
+    assert_eq!(gate.stats.wrong_length, 1);
+    assert_eq!(gate.stats.out_of_order, 1);
+    assert_eq!(gate.stats.rejected(), 2);
+    assert_eq!(gate.last_seq, Some(2));
+}
+
+/// Runs the simulator in a thread and a PD controller here; returns the sim's summary and the
+/// last state received.
+fn lockstep_run(tag: &str, steps: u64, inject_bad: bool) -> (RunSummary, StateMsg) {
+    let prefix = format!("upc_simtest_{}_{tag}", std::process::id());
+    let mut config = SimConfig::load(&[], &["sim.mode=\"lockstep\"".into()]).unwrap();
+    config.duration = steps as f64 * config.dt;
+    config.process.prefix = prefix.clone();
+    config.process.first_command_timeout = 20.0;
+    config.process.lockstep_timeout = 20.0;
+    let opts = RunOptions {
+        config,
+        rrd: None,
+        recording_id: None,
+        node_name: format!("sim_{tag}"),
+    };
+
+    let bus = Bus::open(&prefix, &format!("ctrl_{tag}")).unwrap();
+    let states = bus.subscriber::<StateMsg>(ServiceKind::State).unwrap();
+    let torques = bus.publisher::<TorqueMsg>(ServiceKind::Torques).unwrap();
+    let wake_sim = bus.notifier(ServiceKind::Torques).unwrap();
+    let wake_me = bus.listener(ServiceKind::State).unwrap();
+
+    let sim = std::thread::spawn(move || {
+        let stop = AtomicBool::new(false);
+        run(&opts, &stop)
+    });
+
+    let model = upc::dynamics::icub_like::load().unwrap();
+    let q_home = upc::dynamics::icub_like::home_configuration(&model).unwrap();
+    let pd = PosturePd::standing(&model, &q_home).unwrap();
+    let n = model.nv - 6;
+    let mut tau = DVector::zeros(n);
+    let mut seq = 0u64;
+    let mut last = StateMsg::default();
+    let send = |seq: u64, step: u64, n: u32, tau: &[f64]| {
+        torques
+            .send_with(|m| {
+                m.seq = seq;
+                m.state_step = step;
+                m.n = n;
+                m.tau[..tau.len()].copy_from_slice(tau);
+            })
+            .unwrap();
+        wake_sim.notify().unwrap();
+    };
+    'outer: loop {
+        wake_me.wait(Duration::from_millis(100)).unwrap();
+        while let Some(s) = states.receive().unwrap() {
+            last = s;
+            if s.step >= steps {
+                break 'outer;
+            }
+            let q = DVector::from_column_slice(&s.q[..s.nq as usize]);
+            let v = DVector::from_column_slice(&s.v[..s.nv as usize]);
+            pd.torques(&q, &v, &mut tau);
+            if inject_bad && s.step == 5 {
+                send(seq + 1, s.step, n as u32 - 1, tau.as_slice()); // wrong length
+                let mut nan = tau.clone();
+                nan[3] = f64::NAN;
+                send(seq + 1, s.step, n as u32, nan.as_slice()); // NaN
+            }
+            if inject_bad && s.step == 7 {
+                send(seq, s.step, n as u32, tau.as_slice()); // seq not increasing
+            }
+            seq += 1;
+            send(seq, s.step, n as u32, tau.as_slice());
+        }
+        if sim.is_finished() {
+            break;
+        }
+    }
+    let summary = sim.join().unwrap().unwrap();
+    (summary, last)
+}
+
+#[test]
+fn lockstep_over_iceoryx2_rejects_bad_commands_and_reruns_identically() {
+    let (a, sa) = lockstep_run("a", 300, true);
+    assert_eq!(a.steps, 300);
+    assert_eq!(a.commands.wrong_length, 1, "{a:?}");
+    assert_eq!(a.commands.non_finite, 1, "{a:?}");
+    assert_eq!(a.commands.out_of_order, 1, "{a:?}");
+    assert_eq!(a.commands.accepted, 300, "{a:?}");
+    assert!(a.max_loop_error < 1e-3 && a.max_penetration < 1e-3, "{a:?}");
+    let (b, sb) = lockstep_run("b", 300, false);
+    assert_eq!(b.commands.rejected(), 0);
+    assert_eq!(sa.step, 300);
+    let bits = |s: &StateMsg| -> Vec<u64> {
+        s.q.iter()
+            .chain(s.v.iter())
+            .chain(s.contact_forces.iter().flatten())
+            .chain(s.hand_force.iter())
+            .map(|x| x.to_bits())
+            .collect()
+    };
+    assert_eq!(bits(&sa), bits(&sb), "lockstep reruns differ");
+}
