@@ -316,7 +316,7 @@ impl Looper {
         self.max_loop = self.max_loop.max(rep.loop_error);
         self.publish(ep, world, &rep, dt_step)?;
         if let Some(r) = recorder
-            && world.steps() % self.record_every == 0
+            && world.steps().is_multiple_of(self.record_every)
         {
             r.offer(world, &self.hand_force);
         }

@@ -645,7 +645,7 @@ impl World {
             } else {
                 (l.upper - qk, -1.0)
             };
-            if !(gap + dt * sign * vk < 0.02) {
+            if gap + dt * sign * vk >= 0.02 || gap.is_nan() {
                 continue;
             }
             let Some(r) = self.sys.push(BlockKind::Unilateral) else {
