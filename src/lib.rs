@@ -6,11 +6,17 @@
 //! - [`scenario`]: hand force profiles (impacts, CSV) and the ZMP reference of a run.
 //! - [`offline`]: the closed loop of the reduced models behind `upc preview`, with its metrics.
 //! - [`config`]: TOML configuration with errors that name the offending key.
-//! - [`sim`]: the simulator process (humanoid on the ground, door on a spherical joint).
 //! - [`wbc`]: the whole-body torque controller (LQP over q̈ and contact forces, clarabel).
+//! - [`forecast`]: the reference force forecaster process.
+//! - [`sim`]: the simulator process (humanoid on the ground, door on a spherical joint).
+//! - [`control`]: the control server's loop pieces (tick, C2 thread, timing, real-time setup).
+//! - [`channels`]: the iceoryx2 channel contract shared by every process.
 
+pub mod channels;
 pub mod config;
+pub mod control;
 pub mod dynamics;
+pub mod forecast;
 pub mod offline;
 pub mod preview;
 pub mod scenario;

@@ -18,8 +18,14 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Launch simulator, forecaster and controller as processes on a scenario; write runs/<name>/.
+    Run(cli::run::RunArgs),
     /// Run the closed loop of the reduced models (cart-table + hand impedance) on a scenario.
     Preview(cli::preview::PreviewArgs),
+    /// Run the control server: state and forecast in, joint torques out, over iceoryx2.
+    Controller(cli::controller::ControllerArgs),
+    /// Publish a scenario's hand force forecast on the forecast channel.
+    Forecast(cli::forecast::ForecastArgs),
     /// Inspect a URDF: joints, DoF, mass, CoM; dump M(q), h(q, v), CoM and a frame Jacobian as JSON.
     Model(cli::model::ModelArgs),
     /// Run the simulator: the humanoid on the ground and the door, over iceoryx2 (see --help).
@@ -35,9 +41,12 @@ fn main() -> std::process::ExitCode {
         .init();
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Run(args) => cli::run::run(args),
         Command::Preview(args) => cli::preview::run(args),
         Command::Model(args) => cli::model::run(args),
         Command::Sim(args) => cli::sim::run_cli(args),
+        Command::Forecast(args) => cli::forecast::run_cli(args),
+        Command::Controller(args) => cli::controller::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

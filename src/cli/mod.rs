@@ -1,7 +1,11 @@
 //! Subcommand implementations; each returns an error value, never panics on user input.
 
+pub mod common;
+pub mod controller;
+pub mod forecast;
 pub mod model;
 pub mod preview;
+pub mod run;
 pub mod sim;
 
 /// Error type of the command line: any displayable cause, rendered once by `main`.

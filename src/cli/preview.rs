@@ -3,7 +3,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use upc::config::{Config, ControllerKind, Layers};
+use upc::config::{Config, ControllerKind};
 use upc::offline::{ReducedLoop, RunResult};
 use upc::scenario::Scenario;
 
@@ -28,12 +28,8 @@ pub struct PreviewArgs {
     /// Write one CSV row per step (with `all`, one file per controller: name-c0.csv, …).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Extra config files layered over the defaults, in order.
-    #[arg(long = "config")]
-    pub configs: Vec<PathBuf>,
-    /// Override any config key, e.g. --set preview.horizon=200 (applied last, in order).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    pub sets: Vec<String>,
+    #[command(flatten)]
+    pub config: super::common::ConfigArgs,
     /// Shorthand for --set preview.horizon=N.
     #[arg(long)]
     pub horizon: Option<usize>,
@@ -48,20 +44,12 @@ pub struct PreviewArgs {
     pub zmp_constraints: bool,
 }
 
-/// Layer the embedded defaults, config files, the scenario's overrides and the flags.
+/// The config of a preview run: the layers plus the shorthand flags.
 pub fn load_config(
     args: &PreviewArgs,
     scenario: &Scenario,
 ) -> Result<Config, upc::config::ConfigError> {
-    let mut layers = Layers::new();
-    layers.push_str("<embedded config/default.toml>", upc::config::DEFAULT_TOML)?;
-    for path in &args.configs {
-        layers.push_file(path)?;
-    }
-    if let Some(table) = &scenario.config {
-        layers.push_table(&format!("{} [config]", scenario.origin), table.clone());
-    }
-    let mut sets = args.sets.clone();
+    let mut sets = Vec::new();
     if let Some(h) = args.horizon {
         sets.push(format!("preview.horizon={h}"));
     }
@@ -74,10 +62,7 @@ pub fn load_config(
     if args.zmp_constraints {
         sets.push("preview.zmp_constraints=true".into());
     }
-    for s in &sets {
-        layers.push_override(s)?;
-    }
-    layers.build()
+    args.config.load(Some(scenario), &sets)
 }
 
 pub fn run(args: PreviewArgs) -> CliResult {

@@ -14,6 +14,7 @@ pub struct Config {
     pub hand: HandConfig,
     pub gain_search: GainSearchConfig,
     pub wbc: WbcConfig,
+    pub controller: ControllerConfig,
 }
 
 /// Reduced-model parameters of the robot (SPEC §1, §3).
@@ -298,6 +299,7 @@ impl Config {
             return Err(l.range_error("wbc.max_iterations", "must be ≥ 1"));
         }
         pos("wbc.tolerance", w.tolerance)?;
+        self.controller.validate(l)?;
         Ok(())
     }
 
@@ -329,5 +331,71 @@ impl ControllerKind {
             ControllerKind::C1 => "c1",
             ControllerKind::C2 => "c2",
         }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LoopMode {
+    /// Answer each simulator state as it arrives (the simulator waits): reproducible runs.
+    Lockstep,
+    /// Tick at wall-clock rate on absolute deadlines with the latest state.
+    Realtime,
+}
+
+/// The control server (`upc controller`).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ControllerConfig {
+    pub kind: ControllerKind,
+    pub mode: LoopMode,
+    /// Loop rate (Hz) in real-time mode; also the control period used by the CoM command.
+    pub rate_hz: f64,
+    /// Seconds without a new state after which the loop holds its safe behaviour (real time) or
+    /// considers the run over (lockstep).
+    pub state_timeout: f64,
+    /// PD on the CoM height (1/s², 1/s).
+    pub com_height_kp: f64,
+    pub com_height_kd: f64,
+    /// Forecast windows starting more than this before / after the current time are rejected (s).
+    pub forecast_max_age: f64,
+    pub forecast_max_lead: f64,
+    /// Decay time constant of the forecast past the end of its window (s).
+    pub forecast_decay: f64,
+    /// Control ticks between two C2 snapshots.
+    pub c2_every: usize,
+    /// Control ticks between two rerun records (and 10× that between plan records).
+    pub log_every: usize,
+    pub realtime: crate::control::realtime::RealtimeSettings,
+}
+
+impl ControllerConfig {
+    pub(crate) fn validate(&self, l: &Layers) -> Result<(), ConfigError> {
+        for (key, v) in [
+            ("controller.rate_hz", self.rate_hz),
+            ("controller.state_timeout", self.state_timeout),
+            ("controller.forecast_max_age", self.forecast_max_age),
+            ("controller.forecast_max_lead", self.forecast_max_lead),
+            ("controller.forecast_decay", self.forecast_decay),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(l.range_error(key, format!("must be finite and > 0, got {v}")));
+            }
+        }
+        for (key, v) in [
+            ("controller.com_height_kp", self.com_height_kp),
+            ("controller.com_height_kd", self.com_height_kd),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(l.range_error(key, format!("must be finite and ≥ 0, got {v}")));
+            }
+        }
+        if self.c2_every == 0 || self.log_every == 0 {
+            return Err(l.range_error("controller.c2_every", "c2_every and log_every must be ≥ 1"));
+        }
+        if !(0..=99).contains(&self.realtime.fifo_priority) {
+            return Err(l.range_error("controller.realtime.fifo_priority", "must be in 0..=99"));
+        }
+        Ok(())
     }
 }

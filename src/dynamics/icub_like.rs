@@ -25,9 +25,14 @@ pub fn door_urdf_path() -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(DOOR_URDF_PATH)
 }
 
-/// Loads the humanoid with a floating base.
+/// The humanoid URDF, embedded so the binaries run from any directory.
+pub const URDF: &str = include_str!("../../assets/icub_like/icub_like.urdf");
+/// The door URDF, embedded.
+pub const DOOR_URDF: &str = include_str!("../../assets/door/door.urdf");
+
+/// Loads the (embedded) humanoid with a floating base.
 pub fn load() -> Result<Model, DynamicsError> {
-    Model::from_urdf_file(urdf_path(), BaseJoint::Floating)
+    Model::from_urdf_str(URDF, BaseJoint::Floating)
 }
 
 /// Standing home posture (radians; joints not listed are 0): knees slightly bent with flat

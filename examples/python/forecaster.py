@@ -1,0 +1,150 @@
+#!/usr/bin/env python3
+"""An external hand-force forecaster for upc, in Python (iceoryx2 Python bindings).
+
+It mirrors the channel contract of services/CHANNELS.md with ctypes: it follows the
+simulator's time on `<prefix>/state` and publishes `upc::ForecastMsg` windows on
+`<prefix>/forecast`. Its force model is its own: one raised-cosine impact on the hand, pushing
+toward the robot (−x), as an estimator in a lab would publish from its own knowledge.
+
+    python3 examples/python/forecaster.py --prefix upc --peak 50 --start 1.0 --until 4.0
+
+`upc run --forecaster "python3 examples/python/forecaster.py"` starts it in place of the
+built-in forecaster, with UPC_PREFIX and UPC_DURATION set.
+"""
+
+import argparse
+import ctypes
+import math
+import os
+import signal
+import sys
+
+import iceoryx2 as iox2
+
+MAX_DOF = 48
+N_CONTACTS = 8
+MAX_FORECAST = 2048
+
+
+class StateMsg(ctypes.Structure):
+    _fields_ = [
+        ("step", ctypes.c_uint64),
+        ("time", ctypes.c_double),
+        ("nq", ctypes.c_uint32),
+        ("nv", ctypes.c_uint32),
+        ("q", ctypes.c_double * MAX_DOF),
+        ("v", ctypes.c_double * MAX_DOF),
+        ("contact_forces", (ctypes.c_double * 3) * N_CONTACTS),
+        ("zmp", ctypes.c_double * 2),
+        ("door_angle", ctypes.c_double),
+        ("door_velocity", ctypes.c_double),
+        ("hand_force", ctypes.c_double * 3),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        return "upc::StateMsg"
+
+
+class ForecastMsg(ctypes.Structure):
+    _fields_ = [
+        ("seq", ctypes.c_uint64),
+        ("t0", ctypes.c_double),
+        ("dt", ctypes.c_double),
+        ("len", ctypes.c_uint32),
+        ("_pad", ctypes.c_uint32),
+        ("forces", (ctypes.c_double * 3) * MAX_FORECAST),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        return "upc::ForecastMsg"
+
+
+def impact(t: float, start: float, rise: float, hold: float, fall: float, peak: float) -> float:
+    """Raised-cosine rise, plateau, raised-cosine fall (the shape of the embedded scenarios)."""
+    tau = t - start
+    if tau <= 0 or tau >= rise + hold + fall:
+        return 0.0
+    if tau < rise:
+        return peak * 0.5 * (1 - math.cos(math.pi * tau / rise))
+    if tau <= rise + hold:
+        return peak
+    return peak * 0.5 * (1 + math.cos(math.pi * (tau - rise - hold) / fall))
+
+
+def pubsub(node, name, payload):
+    # The same service settings as every upc process (services/CHANNELS.md).
+    return (
+        node.service_builder(iox2.ServiceName.new(name))
+        .publish_subscribe(payload)
+        .history_size(1)
+        .subscriber_max_buffer_size(4)
+        .enable_safe_overflow(True)
+        .max_publishers(4)
+        .max_subscribers(8)
+        .max_nodes(16)
+        .open_or_create()
+    )
+
+
+def event(node, name):
+    return (
+        node.service_builder(iox2.ServiceName.new(name + "/event"))
+        .event()
+        .max_notifiers(4)
+        .max_listeners(8)
+        .max_nodes(16)
+        .open_or_create()
+    )
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--prefix", default=os.environ.get("UPC_PREFIX", "upc"))
+    p.add_argument("--until", type=float, default=float(os.environ.get("UPC_DURATION", "4.0")))
+    p.add_argument("--peak", type=float, default=50.0, help="impact peak force toward the robot (N)")
+    p.add_argument("--start", type=float, default=1.0)
+    p.add_argument("--rise", type=float, default=0.3)
+    p.add_argument("--hold", type=float, default=0.15)
+    p.add_argument("--fall", type=float, default=0.4)
+    p.add_argument("--dt", type=float, default=0.005)
+    p.add_argument("--window", type=float, default=2.5)
+    p.add_argument("--period", type=float, default=0.01, help="simulated time between windows (s)")
+    a = p.parse_args()
+
+    stop = {"now": False}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.update(now=True))
+
+    iox2.set_log_level_from_env_or(iox2.LogLevel.Error)
+    node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
+    publisher = pubsub(node, f"{a.prefix}/forecast", ForecastMsg).publisher_builder().create()
+    notifier = event(node, f"{a.prefix}/forecast").notifier_builder().create()
+    states = pubsub(node, f"{a.prefix}/state", StateMsg).subscriber_builder().create()
+    n = min(MAX_FORECAST, int(math.ceil(a.window / a.dt)))
+
+    seq, now, next_at = 0, 0.0, -1.0
+    while not stop["now"]:
+        while True:
+            sample = states.receive()
+            if sample is None:
+                break
+            now = sample.payload().contents.time
+        if now >= next_at:
+            seq += 1
+            msg = ForecastMsg(seq=seq, t0=now, dt=a.dt, len=n)
+            for i in range(n):
+                msg.forces[i][0] = -impact(now + i * a.dt, a.start, a.rise, a.hold, a.fall, a.peak)
+            publisher.loan_uninit().write_payload(msg).send()
+            notifier.notify()
+            next_at = (math.floor(now / a.period) + 1) * a.period
+        if now >= a.until:
+            break
+        node.wait(iox2.Duration.from_millis(2))
+    print(f"python forecaster: {seq} windows published", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,275 @@
+//! Typed iceoryx2 endpoints for the contract's services.
+
+use core::fmt::Debug;
+use core::time::Duration;
+
+use iceoryx2::port::listener::Listener as IoxListener;
+use iceoryx2::port::notifier::Notifier as IoxNotifier;
+use iceoryx2::port::publisher::Publisher as IoxPublisher;
+use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
+use iceoryx2::prelude::*;
+
+use super::ServiceKind;
+
+/// Samples a subscriber buffers before the oldest is overwritten: a slow reader sees the newest.
+const SUBSCRIBER_BUFFER: usize = 4;
+
+/// An IPC failure, with what was being attempted.
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("{what}: {detail}")]
+pub struct ChannelError {
+    pub what: String,
+    pub detail: String,
+}
+
+fn err(what: impl Into<String>, e: impl Debug) -> ChannelError {
+    ChannelError {
+        what: what.into(),
+        detail: format!("{e:?}"),
+    }
+}
+
+/// One process's connection to the services of a prefix (one iceoryx2 node).
+pub struct Bus {
+    node: Node<ipc::Service>,
+    prefix: String,
+}
+
+impl Bus {
+    /// Open the bus as node `node_name`. Stale resources of dead nodes (a process killed with
+    /// SIGKILL) are removed first, so a restart never fails with "already exists".
+    pub fn open(prefix: &str, node_name: &str) -> Result<Bus, ChannelError> {
+        // iceoryx2's own logger: errors only unless IOX2_LOG_LEVEL says otherwise.
+        set_log_level_from_env_or(LogLevel::Error);
+        let removed = cleanup_dead_nodes();
+        if removed > 0 {
+            tracing::info!("removed stale iceoryx2 resources of {removed} dead node(s)");
+        }
+        let name: NodeName = node_name
+            .try_into()
+            .map_err(|e| err(format!("node name `{node_name}`"), e))?;
+        let node = NodeBuilder::new()
+            .name(&name)
+            // Processes handle SIGINT/SIGTERM themselves (clean shutdown, complete logs).
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .map_err(|e| err(format!("create node `{node_name}`"), e))?;
+        Ok(Bus {
+            node,
+            prefix: prefix.to_string(),
+        })
+    }
+
+    pub fn prefix(&self) -> &str {
+        &self.prefix
+    }
+
+    fn service_name(&self, kind: ServiceKind, event: bool) -> Result<ServiceName, ChannelError> {
+        let name = format!(
+            "{}/{}{}",
+            self.prefix,
+            kind.suffix(),
+            if event { "/event" } else { "" }
+        );
+        name.as_str()
+            .try_into()
+            .map_err(|e| err(format!("service name `{name}`"), e))
+    }
+
+    fn pubsub<T: ZeroCopySend + Debug + 'static>(
+        &self,
+        kind: ServiceKind,
+    ) -> Result<
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
+        ChannelError,
+    > {
+        let name = self.service_name(kind, false)?;
+        self.node
+            .service_builder(&name)
+            .publish_subscribe::<T>()
+            .history_size(kind.history())
+            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+            .enable_safe_overflow(true)
+            .max_publishers(4)
+            .max_subscribers(8)
+            .max_nodes(16)
+            .open_or_create()
+            .map_err(|e| err(format!("open service `{name}`"), e))
+    }
+
+    fn event(
+        &self,
+        kind: ServiceKind,
+    ) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>, ChannelError>
+    {
+        let name = self.service_name(kind, true)?;
+        self.node
+            .service_builder(&name)
+            .event()
+            .max_notifiers(4)
+            .max_listeners(8)
+            .max_nodes(16)
+            .open_or_create()
+            .map_err(|e| err(format!("open event `{name}`"), e))
+    }
+
+    pub fn publisher<T: ZeroCopySend + Debug + Copy + 'static>(
+        &self,
+        kind: ServiceKind,
+    ) -> Result<Publisher<T>, ChannelError> {
+        let inner = self
+            .pubsub::<T>(kind)?
+            .publisher_builder()
+            .create()
+            .map_err(|e| err("create publisher", e))?;
+        Ok(Publisher { inner })
+    }
+
+    pub fn subscriber<T: ZeroCopySend + Debug + Copy + 'static>(
+        &self,
+        kind: ServiceKind,
+    ) -> Result<Subscriber<T>, ChannelError> {
+        let inner = self
+            .pubsub::<T>(kind)?
+            .subscriber_builder()
+            .create()
+            .map_err(|e| err("create subscriber", e))?;
+        Ok(Subscriber { inner })
+    }
+
+    pub fn notifier(&self, kind: ServiceKind) -> Result<Notifier, ChannelError> {
+        let inner = self
+            .event(kind)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| err("create notifier", e))?;
+        Ok(Notifier { inner })
+    }
+
+    pub fn listener(&self, kind: ServiceKind) -> Result<Listener, ChannelError> {
+        let inner = self
+            .event(kind)?
+            .listener_builder()
+            .create()
+            .map_err(|e| err("create listener", e))?;
+        Ok(Listener { inner })
+    }
+}
+
+/// Remove the stale resources of dead iceoryx2 nodes; returns how many were cleaned.
+pub fn cleanup_dead_nodes() -> usize {
+    let mut removed = 0;
+    let _ = Node::<ipc::Service>::list(Config::global_config(), |state| {
+        if let NodeState::<ipc::Service>::Dead(view) = state
+            && view.try_remove_stale_resources().is_ok()
+        {
+            removed += 1;
+        }
+        CallbackProgression::Continue
+    });
+    removed
+}
+
+/// Publishes `T` by loaning shared memory and filling it in place (no copy of the payload).
+pub struct Publisher<T: ZeroCopySend + Debug + Copy + 'static> {
+    inner: IoxPublisher<ipc::Service, T, ()>,
+}
+
+impl<T: ZeroCopySend + Debug + Copy + 'static> Publisher<T> {
+    /// Loan a zeroed sample, let `fill` write it, send it.
+    pub fn send_with(&self, fill: impl FnOnce(&mut T)) -> Result<(), ChannelError> {
+        let mut sample = self
+            .inner
+            .loan_uninit()
+            .map_err(|e| err("loan sample", e))?;
+        // SAFETY: the contract's payloads are plain old data of integers and floats, for which
+        // all-zero bytes are a valid value.
+        let mut sample = unsafe {
+            sample.payload_mut().as_mut_ptr().write_bytes(0, 1);
+            sample.assume_init()
+        };
+        fill(sample.payload_mut());
+        sample.send().map_err(|e| err("send sample", e))?;
+        Ok(())
+    }
+
+    /// Send a copy of `msg`.
+    pub fn send(&self, msg: &T) -> Result<(), ChannelError> {
+        self.send_with(|m| *m = *msg)
+    }
+}
+
+/// Receives `T`.
+pub struct Subscriber<T: ZeroCopySend + Debug + Copy + 'static> {
+    inner: IoxSubscriber<ipc::Service, T, ()>,
+}
+
+impl<T: ZeroCopySend + Debug + Copy + 'static> Subscriber<T> {
+    /// The next sample in order, copied out.
+    pub fn receive(&self) -> Result<Option<T>, ChannelError> {
+        Ok(self
+            .inner
+            .receive()
+            .map_err(|e| err("receive", e))?
+            .map(|s| *s))
+    }
+
+    /// The newest sample, dropping older ones.
+    pub fn latest(&self) -> Result<Option<T>, ChannelError> {
+        let mut last = None;
+        while let Some(s) = self.inner.receive().map_err(|e| err("receive", e))? {
+            last = Some(*s);
+        }
+        Ok(last)
+    }
+
+    /// Run `f` on the newest sample in shared memory without copying it (large payloads).
+    pub fn with_latest<R>(&self, f: impl FnOnce(&T) -> R) -> Result<Option<R>, ChannelError> {
+        let mut last = None;
+        while let Some(s) = self.inner.receive().map_err(|e| err("receive", e))? {
+            last = Some(s);
+        }
+        Ok(last.map(|s| f(&s)))
+    }
+
+    /// Whether samples are waiting.
+    pub fn has_samples(&self) -> bool {
+        self.inner.has_samples().unwrap_or(false)
+    }
+}
+
+/// Wakes the listeners of a service.
+pub struct Notifier {
+    inner: IoxNotifier<ipc::Service>,
+}
+
+impl Notifier {
+    pub fn notify(&self) -> Result<(), ChannelError> {
+        self.inner
+            .notify()
+            .map(|_| ())
+            .map_err(|e| err("notify", e))
+    }
+}
+
+/// Waits for a service's wake-ups.
+pub struct Listener {
+    inner: IoxListener<ipc::Service>,
+}
+
+impl Listener {
+    /// Block up to `timeout` for a notification; true if one (or more) arrived.
+    pub fn wait(&self, timeout: Duration) -> Result<bool, ChannelError> {
+        let n = self
+            .inner
+            .timed_wait(|_| {}, timeout)
+            .map_err(|e| err("wait", e))?;
+        Ok(n > 0)
+    }
+
+    /// Consume pending notifications without blocking; true if there were any.
+    pub fn drain(&self) -> Result<bool, ChannelError> {
+        let n = self.inner.try_wait(|_| {}).map_err(|e| err("wait", e))?;
+        Ok(n > 0)
+    }
+}

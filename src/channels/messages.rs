@@ -1,0 +1,117 @@
+//! The `#[repr(C)]` payloads exchanged between upc's processes. Their layout is the wire format:
+//! any process (Rust, Python with ctypes, C) that mirrors it field by field, with the same
+//! iceoryx2 type name, can publish or subscribe. Documented in `services/CHANNELS.md`.
+//!
+//! Units are SI; vectors are in the world frame (z up) unless a field says otherwise.
+
+use iceoryx2::prelude::*;
+
+/// Capacity of the q, v and τ arrays (the humanoid uses nq = 39, nv = 38, 32 torques).
+pub const MAX_DOF: usize = 48;
+/// Contact points: four sole corners per foot, order l_fl, l_fr, l_rl, l_rr, r_fl, r_fr, r_rl, r_rr.
+pub const N_CONTACTS: usize = 8;
+/// Capacity of a force forecast (samples).
+pub const MAX_FORECAST: usize = 2048;
+
+/// Robot state, simulator → controller, once per simulation step.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[type_name("upc::StateMsg")]
+pub struct StateMsg {
+    /// Simulation step counter (starts at 0, +1 per step).
+    pub step: u64,
+    /// Simulated time (s).
+    pub time: f64,
+    pub nq: u32,
+    pub nv: u32,
+    /// Configuration: [base position (3), base quaternion xyzw (4), joints…] (Pinocchio order).
+    pub q: [f64; MAX_DOF],
+    /// Velocity: [base linear (3), base angular (3) in the base frame, joint rates…].
+    pub v: [f64; MAX_DOF],
+    /// Force of the ground on each sole corner (N, world).
+    pub contact_forces: [[f64; 3]; N_CONTACTS],
+    /// Centre of pressure of the contact forces on the ground (m, world x, y).
+    pub zmp: [f64; 2],
+    /// Door hinge angle (rad) and rate (rad/s).
+    pub door_angle: f64,
+    pub door_velocity: f64,
+    /// Force of the door on the right hand (N, world): the true hand–door force.
+    pub hand_force: [f64; 3],
+}
+
+/// Joint torques, controller → simulator, answering one state.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[type_name("upc::TorqueMsg")]
+pub struct TorqueMsg {
+    /// Sequence number of this command, strictly increasing per controller run.
+    pub seq: u64,
+    /// The `StateMsg::step` these torques answer (lockstep pairs them).
+    pub state_step: u64,
+    /// Number of torques (actuated joints, nv − 6 for a floating base).
+    pub n: u32,
+    /// Controller status flags (see `TORQUE_FLAG_*`).
+    pub flags: u32,
+    /// Joint torques (N·m), model joint order.
+    pub tau: [f64; MAX_DOF],
+}
+
+/// The controller's torques came from its fallback (solver failure, stale state…).
+pub const TORQUE_FLAG_FALLBACK: u32 = 1;
+
+/// Hand force forecast, forecaster → controller: the force the environment will apply on the
+/// hand at `t0 + i·dt`, i = 0 … len−1 (simulated time).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[type_name("upc::ForecastMsg")]
+pub struct ForecastMsg {
+    /// Sequence number, strictly increasing per forecaster run.
+    pub seq: u64,
+    /// Time of the first sample (s, simulated time).
+    pub t0: f64,
+    /// Sample spacing (s), > 0.
+    pub dt: f64,
+    /// Number of valid samples, ≤ MAX_FORECAST.
+    pub len: u32,
+    pub _pad: u32,
+    /// Forces (N, world).
+    pub forces: [[f64; 3]; MAX_FORECAST],
+}
+
+/// Ground-truth diagnostics of the simulator, for loggers and tests (not for the controller).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[type_name("upc::GroundTruthMsg")]
+pub struct GroundTruthMsg {
+    pub step: u64,
+    pub time: f64,
+    /// Centre of mass (m, world).
+    pub com: [f64; 3],
+    /// Hand–handle loop-closure error (m).
+    pub loop_error: f64,
+    /// Deepest contact penetration (m, ≥ 0).
+    pub max_penetration: f64,
+    /// Fastest tangential speed of a contact point in contact (m/s).
+    pub max_slip_speed: f64,
+    /// Door hinge torque applied this step (N·m).
+    pub door_torque: f64,
+    /// Wall time of the physics step (s).
+    pub step_time: f64,
+    pub solver_iterations: u32,
+    /// Torque messages rejected so far (wrong length, non-finite, out of order).
+    pub rejected_commands: u32,
+    /// Steps run with stale (or no) torques so far.
+    pub stale_commands: u64,
+}
+
+macro_rules! zeroed_default {
+    ($($t:ty),*) => {$(
+        impl Default for $t {
+            fn default() -> Self {
+                // SAFETY: plain-old-data of integers and floats; all-zero bits are valid.
+                unsafe { core::mem::zeroed() }
+            }
+        }
+    )*};
+}
+zeroed_default!(StateMsg, TorqueMsg, ForecastMsg, GroundTruthMsg);

@@ -1,0 +1,93 @@
+//! `upc controller`: the control server.
+
+use std::path::PathBuf;
+
+use upc::channels::DEFAULT_PREFIX;
+use upc::config::ControllerKind;
+use upc::control::server::{ServerOptions, run_server};
+use upc::dynamics::{BaseJoint, Model, icub_like};
+use upc::forecast::stop_flag;
+use upc::scenario::Scenario;
+
+use super::CliResult;
+use super::common::ConfigArgs;
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct ControllerArgs {
+    /// Scenario: its ZMP reference and [config] overrides (the force comes from the forecaster).
+    #[arg(long, default_value = "multiple_impacts")]
+    pub scenario: String,
+    /// Controller (overrides controller.kind).
+    #[arg(long, value_enum)]
+    pub controller: Option<ControllerKind>,
+    /// Run at wall-clock rate instead of lockstep (overrides controller.mode).
+    #[arg(long)]
+    pub realtime: bool,
+    /// Robot URDF (default: the embedded iCub-like humanoid).
+    #[arg(long)]
+    pub urdf: Option<PathBuf>,
+    /// Service prefix of the run.
+    #[arg(long, default_value = DEFAULT_PREFIX)]
+    pub prefix: String,
+    /// Write the controller's rerun log here.
+    #[arg(long)]
+    pub rrd: Option<PathBuf>,
+    /// Rerun recording id (share it with the simulator's log for one timeline).
+    #[arg(long, default_value = "upc")]
+    pub recording_id: String,
+    /// Also write every logged tick as CSV here (needs --rrd; same decimation).
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+    /// Write the run's figures as JSON here.
+    #[arg(long)]
+    pub summary: Option<PathBuf>,
+    /// Stop at this simulated time (s); default: the scenario's duration.
+    #[arg(long)]
+    pub duration: Option<f64>,
+    #[command(flatten)]
+    pub config: ConfigArgs,
+}
+
+pub fn run(args: ControllerArgs) -> CliResult {
+    let scenario = Scenario::load(&args.scenario)?;
+    let mut extra = Vec::new();
+    if let Some(k) = args.controller {
+        extra.push(format!("controller.kind=\"{}\"", k.name()));
+    }
+    if args.realtime {
+        extra.push("controller.mode=\"realtime\"".into());
+    }
+    let config = args.config.load(Some(&scenario), &extra)?;
+    let model = match &args.urdf {
+        Some(p) => Model::from_urdf_file(p, BaseJoint::Floating)?,
+        None => icub_like::load()?,
+    };
+    let opts = ServerOptions {
+        prefix: args.prefix.clone(),
+        duration: Some(args.duration.unwrap_or(scenario.duration)),
+        rrd: args.rrd.clone(),
+        recording_id: args.recording_id.clone(),
+        zmp_offset: scenario.zmp_reference,
+        startup_timeout: 60.0,
+        csv: args.csv.clone(),
+    };
+    tracing::info!(
+        "controller {} ({:?}) on {}/*, {} Hz",
+        config.controller.kind.name(),
+        config.controller.mode,
+        args.prefix,
+        config.controller.rate_hz
+    );
+    let summary = run_server(&config, model, &opts, stop_flag())?;
+    tracing::info!(
+        "controller stopped ({}): {} ticks, tick p50 {:.1} µs p99 {:.1} µs",
+        summary.stopped_by,
+        summary.ticks,
+        summary.tick_p50_us,
+        summary.tick_p99_us
+    );
+    if let Some(p) = &args.summary {
+        std::fs::write(p, serde_json::to_string_pretty(&summary)?)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,319 @@
+//! `upc run`: the one-command launcher. Starts the simulator, the forecaster and the controller
+//! as separate processes for each controller asked for, shows progress, stops them cleanly and
+//! writes `runs/<name>/` (per controller: `sim.rrd`, `controller.rrd`, `controller.csv`,
+//! `controller.json`, the processes' logs) with a `summary.json` and a metrics table.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use indicatif::{ProgressBar, ProgressStyle};
+use upc::channels::{Bus, ServiceKind, StateMsg};
+use upc::config::ControllerKind;
+use upc::control::server::ServerSummary;
+use upc::scenario::Scenario;
+
+use super::CliResult;
+use super::common::ConfigArgs;
+
+#[derive(Clone, Copy, PartialEq, Eq, Debug, clap::ValueEnum)]
+pub enum Which {
+    C0,
+    C1,
+    C2,
+    All,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct RunArgs {
+    /// Scenario: embedded name (single_impact, multiple_impacts) or TOML path.
+    #[arg(long, default_value = "multiple_impacts")]
+    pub scenario: String,
+    /// Controller(s) to run, one after the other.
+    #[arg(long, value_enum, default_value = "all")]
+    pub controller: Which,
+    /// Wall-clock mode instead of lockstep.
+    #[arg(long)]
+    pub realtime: bool,
+    /// Simulated seconds (default: the scenario's duration).
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Run name (default: <scenario>-<unix time>).
+    #[arg(long)]
+    pub name: Option<String>,
+    /// Parent directory of the run directories.
+    #[arg(long, default_value = "runs")]
+    pub out: PathBuf,
+    /// Run this command (through `sh -c`) as the forecaster instead of `upc forecast`; it gets
+    /// UPC_PREFIX, UPC_DURATION and UPC_SCENARIO in its environment.
+    #[arg(long)]
+    pub forecaster: Option<String>,
+    /// No progress bar (logs only).
+    #[arg(long)]
+    pub quiet: bool,
+    /// Controller config (files and --set), passed to `upc controller`.
+    #[command(flatten)]
+    pub config: ConfigArgs,
+}
+
+/// One controller's run in the summary.
+#[derive(Debug, serde::Serialize)]
+struct Entry {
+    controller: String,
+    dir: String,
+    wall_time: f64,
+    controller_summary: Option<ServerSummary>,
+    sim_exit: Option<i32>,
+    forecaster_exit: Option<i32>,
+    controller_exit: Option<i32>,
+}
+
+pub fn run(args: RunArgs) -> CliResult {
+    let scenario = Scenario::load(&args.scenario)?;
+    // Fail early on a bad config, before starting processes.
+    args.config.load(Some(&scenario), &[])?;
+    let duration = args.duration.unwrap_or(scenario.duration);
+    let name = args.name.clone().unwrap_or_else(|| {
+        let secs = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        format!("{}-{secs}", scenario.name)
+    });
+    let root = args.out.join(&name);
+    std::fs::create_dir_all(&root)?;
+    let kinds: Vec<ControllerKind> = match args.controller {
+        Which::C0 => vec![ControllerKind::C0],
+        Which::C1 => vec![ControllerKind::C1],
+        Which::C2 => vec![ControllerKind::C2],
+        Which::All => vec![ControllerKind::C0, ControllerKind::C1, ControllerKind::C2],
+    };
+    let exe = std::env::current_exe()?;
+    let mut entries = Vec::new();
+    for kind in kinds {
+        entries.push(run_one(&exe, &args, duration, &root, &name, kind)?);
+    }
+    let summary = serde_json::json!({
+        "scenario": scenario.name,
+        "description": scenario.description,
+        "duration": duration,
+        "mode": if args.realtime { "realtime" } else { "lockstep" },
+        "runs": entries,
+    });
+    std::fs::write(
+        root.join("summary.json"),
+        serde_json::to_string_pretty(&summary)?,
+    )?;
+    print_table(&entries);
+    println!(
+        "\nwrote {}/ (open the logs with: rerun {}/<controller>/*.rrd)",
+        root.display(),
+        root.display()
+    );
+    if entries.iter().any(|e| e.controller_summary.is_none()) {
+        return Err("a controller run failed: see its controller.log".into());
+    }
+    Ok(())
+}
+
+fn run_one(
+    exe: &Path,
+    args: &RunArgs,
+    duration: f64,
+    root: &Path,
+    name: &str,
+    kind: ControllerKind,
+) -> Result<Entry, Box<dyn std::error::Error + Send + Sync>> {
+    let dir = root.join(kind.name());
+    std::fs::create_dir_all(&dir)?;
+    let prefix = format!("upc_{}_{}", std::process::id(), kind.name());
+    let recording = format!("{name}-{}", kind.name());
+    let mode = if args.realtime {
+        "realtime"
+    } else {
+        "lockstep"
+    };
+    let dur = format!("{duration}");
+    let start = Instant::now();
+    let log = |file: &str| -> std::io::Result<Stdio> {
+        Ok(Stdio::from(std::fs::File::create(dir.join(file))?))
+    };
+
+    let mut sim = Command::new(exe)
+        .args([
+            "sim",
+            "--mode",
+            mode,
+            "--duration",
+            &dur,
+            "--scenario",
+            &args.scenario,
+            "--prefix",
+            &prefix,
+        ])
+        .args(["--recording-id", &recording, "--rrd"])
+        .arg(dir.join("sim.rrd"))
+        .stdout(log("sim.log")?)
+        .stderr(log("sim.log")?)
+        .spawn()?;
+    let mut forecaster = match &args.forecaster {
+        Some(cmd) => {
+            let mut c = Command::new("sh");
+            c.args(["-c", cmd])
+                .env("UPC_PREFIX", &prefix)
+                .env("UPC_DURATION", &dur)
+                .env("UPC_SCENARIO", &args.scenario);
+            c
+        }
+        None => {
+            let mut c = Command::new(exe);
+            c.args([
+                "forecast",
+                "--scenario",
+                &args.scenario,
+                "--prefix",
+                &prefix,
+                "--until",
+                &dur,
+            ]);
+            c
+        }
+    };
+    let mut forecaster = forecaster
+        .stdout(log("forecaster.log")?)
+        .stderr(log("forecaster.log")?)
+        .spawn()?;
+    let mut controller = Command::new(exe)
+        .args([
+            "controller",
+            "--scenario",
+            &args.scenario,
+            "--controller",
+            kind.name(),
+            "--prefix",
+            &prefix,
+        ])
+        .args(["--duration", &dur, "--recording-id", &recording])
+        .args(if args.realtime {
+            &["--realtime"][..]
+        } else {
+            &[][..]
+        })
+        .arg("--rrd")
+        .arg(dir.join("controller.rrd"))
+        .arg("--csv")
+        .arg(dir.join("controller.csv"))
+        .arg("--summary")
+        .arg(dir.join("controller.json"))
+        .args(args.config.to_args())
+        .stdout(log("controller.log")?)
+        .stderr(log("controller.log")?)
+        .spawn()?;
+
+    // Progress from the simulator's state stream.
+    let bar = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new((duration * 1000.0) as u64)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{prefix:>3} [{bar:40}] {msg} sim time, {elapsed} wall")
+            .map(|s| s.progress_chars("=> "))
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.set_prefix(kind.name());
+    let watcher = Bus::open(&prefix, "launcher")
+        .and_then(|b| b.subscriber::<StateMsg>(ServiceKind::State).map(|s| (b, s)));
+    let controller_exit = loop {
+        if let Ok((_, states)) = &watcher
+            && let Ok(Some(s)) = states.latest()
+        {
+            bar.set_position((s.time * 1000.0) as u64);
+            bar.set_message(format!("{:.2}/{duration:.2} s", s.time));
+        }
+        if let Some(status) = controller.try_wait()? {
+            break status.code();
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    bar.finish_and_clear();
+    // The controller is done: give the others a moment, then ask them to stop.
+    let sim_exit = stop(&mut sim, Duration::from_secs(5));
+    let forecaster_exit = stop(&mut forecaster, Duration::from_secs(2));
+    let controller_summary = std::fs::read_to_string(dir.join("controller.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok());
+    Ok(Entry {
+        controller: kind.name().into(),
+        dir: dir.display().to_string(),
+        wall_time: start.elapsed().as_secs_f64(),
+        controller_summary,
+        sim_exit,
+        forecaster_exit,
+        controller_exit,
+    })
+}
+
+/// Wait up to `grace` for a child to exit, then SIGTERM it, then SIGKILL.
+fn stop(child: &mut Child, grace: Duration) -> Option<i32> {
+    let deadline = Instant::now() + grace;
+    let mut signalled = false;
+    loop {
+        match child.try_wait() {
+            Ok(Some(s)) => return s.code(),
+            Ok(None) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(20)),
+            Ok(None) if !signalled => {
+                // SAFETY: sending a signal to our own child process.
+                unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
+                signalled = true;
+                std::thread::sleep(Duration::from_millis(500));
+            }
+            _ => {
+                let _ = child.kill();
+                return child.wait().ok().and_then(|s| s.code());
+            }
+        }
+    }
+}
+
+fn print_table(entries: &[Entry]) {
+    println!(
+        "\n{:<4} {:>11} {:>11} {:>10} {:>10} {:>9} {:>9} {:>9} {:>8} {:>9} {:>8}",
+        "ctrl",
+        "ZMP margin",
+        "at edge",
+        "hand RMS",
+        "hand peak",
+        "tick p50",
+        "tick p99",
+        "tick max",
+        "misses",
+        "C2 solve",
+        "wall"
+    );
+    println!(
+        "{:<4} {:>11} {:>11} {:>10} {:>10} {:>9} {:>9} {:>9} {:>8} {:>9} {:>8}",
+        "", "min (mm)", "(s)", "(mm)", "(mm)", "(µs)", "(µs)", "(µs)", "", "mean(ms)", "(s)"
+    );
+    for e in entries {
+        match &e.controller_summary {
+            Some(s) => println!(
+                "{:<4} {:>11.1} {:>11.3} {:>10.2} {:>10.2} {:>9.0} {:>9.0} {:>9.0} {:>8} {:>9.2} {:>8.1}",
+                e.controller,
+                s.min_zmp_margin * 1e3,
+                s.time_at_support_edge,
+                s.hand_rms_error * 1e3,
+                s.hand_peak_error * 1e3,
+                s.tick_p50_us,
+                s.tick_p99_us,
+                s.tick_max_us,
+                s.deadline_misses,
+                s.c2_solve_mean_ms,
+                e.wall_time
+            ),
+            None => println!(
+                "{:<4} failed (exit {:?}); see {}/controller.log",
+                e.controller, e.controller_exit, e.dir
+            ),
+        }
+    }
+}

@@ -1,0 +1,408 @@
+//! One control tick, without IPC: robot state and force forecast in, joint torques out.
+//!
+//! Per tick: kinematics, CoM and the hand's M_e from the model; the hand previewer and C0/C1
+//! with the latest gain schedule; the whole-body QP. Allocation-free after construction.
+//!
+//! Choices, written down:
+//! - The preview runs on its own grid (period T of `[preview]`, 5 ms) from the measured CoM
+//!   position and velocity every control tick (1 kHz); the cart-table acceleration state is the
+//!   acceleration commanded at the previous tick (the model's own state, not a noisy estimate).
+//! - The CoM acceleration sent to the QP is the plan's acceleration one control period ahead,
+//!   ẍ + u·dt; the CoM height is held by a PD.
+//! - The ZMP reference and the hand set-point are latched at the first tick: the feet midpoint
+//!   (plus the scenario's offset) and the hand's initial position (holding the door closed).
+
+use nalgebra::{DVector, Matrix3, Vector3};
+
+use super::forecast_window::ForecastWindow;
+use super::gain_thread::StampedSchedule;
+use crate::channels::StateMsg;
+use crate::config::{Config, ControllerKind};
+use crate::dynamics::{
+    Data, DynamicsError, Model, OpSpaceWorkspace, ReferenceFrame, center_of_mass_velocity,
+    frame_velocity,
+};
+use crate::preview::{
+    AxisState, CartTable, GainSchedule, HandPreviewer, HandState, PreviewError, PreviewPlan,
+    ZmpPreview,
+};
+use crate::wbc::{WbcCommand, WbcStatus, WholeBodyController};
+
+/// Errors of a tick: the state message does not fit the model.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum TickError {
+    #[error("state has nq = {nq}, nv = {nv}; the model needs {model_nq}, {model_nv}")]
+    Dimensions {
+        nq: u32,
+        nv: u32,
+        model_nq: usize,
+        model_nv: usize,
+    },
+    #[error("state is not finite")]
+    NotFinite,
+    #[error("dynamics: {0}")]
+    Dynamics(#[from] DynamicsError),
+}
+
+/// What one tick produced, for logging and the summary.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct TickRecord {
+    pub time: f64,
+    pub com: [f64; 3],
+    pub com_vel: [f64; 3],
+    pub com_acc_cmd: [f64; 3],
+    pub zmp_ref: [f64; 2],
+    /// ZMP the preview predicts for the next preview step.
+    pub zmp_pred: [f64; 2],
+    /// Measured ZMP (from the simulator's contact forces).
+    pub zmp_meas: [f64; 2],
+    pub hand_pos: [f64; 3],
+    pub hand_err: f64,
+    pub kp: f64,
+    pub kd: f64,
+    /// F_dis forecast at the first preview step and the hand force forecast there.
+    pub f_dis: [f64; 3],
+    pub f_ext: [f64; 3],
+    pub wbc_solved: bool,
+    pub wbc_iterations: u32,
+    pub wbc_time: f64,
+    /// The preview fell back to C0 this tick (invalid disturbance forecast).
+    pub preview_fallback: bool,
+    pub schedule_age: f64,
+}
+
+/// The controller's state between ticks.
+pub struct ControllerCore {
+    pub model: Model,
+    data: Data,
+    op: OpSpaceWorkspace,
+    wbc: WholeBodyController,
+    zmp: ZmpPreview,
+    previewer: HandPreviewer,
+    pub kind: ControllerKind,
+    hand_frame: usize,
+    sole_frames: [usize; 2],
+    horizon: usize,
+    period: f64,
+    dt: f64,
+    height_gains: [f64; 2],
+    q: DVector<f64>,
+    v: DVector<f64>,
+    zmp_ref: Vec<[f64; 2]>,
+    hand_desired: Vec<HandState>,
+    f_ext: Vec<[f64; 3]>,
+    nominal: GainSchedule,
+    schedule: GainSchedule,
+    plan: PreviewPlan,
+    com_acc_cmd: Vector3<f64>,
+    hand_acc_cmd: Vector3<f64>,
+    latched: Option<Latched>,
+    zmp_offset: [f64; 2],
+    /// Ticks where the disturbance forecast was invalid and C0 ran instead.
+    pub preview_fallbacks: u64,
+    pub last: TickRecord,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Latched {
+    zmp_center: [f64; 2],
+    /// Axis-aligned support rectangle of the sole corners, [[x_min, x_max], [y_min, y_max]].
+    support: [[f64; 2]; 2],
+    com_height: f64,
+    hand_target: Vector3<f64>,
+}
+
+impl ControllerCore {
+    pub fn new(
+        model: Model,
+        config: &Config,
+        kind: ControllerKind,
+        control_period: f64,
+        height_gains: [f64; 2],
+        zmp_offset: [f64; 2],
+    ) -> Result<Self, Box<dyn std::error::Error + Send + Sync>> {
+        let p = &config.preview;
+        let n = p.horizon;
+        let cart = CartTable {
+            period: p.period,
+            com_height: config.robot.com_height,
+            mass: model.total_mass(),
+            gravity: config.robot.gravity,
+        };
+        let op = OpSpaceWorkspace::new(&model, "chest", "r_hand")?;
+        let wbc = WholeBodyController::new(&model, &config.wbc)?;
+        let hand_frame = model.frame_id("r_hand")?;
+        let sole_frames = [model.frame_id("l_sole")?, model.frame_id("r_sole")?];
+        let nominal = GainSchedule::constant(n, config.hand.kp, config.nominal_kd(config.hand.kp));
+        Ok(Self {
+            data: Data::new(&model),
+            q: DVector::zeros(model.nq),
+            v: DVector::zeros(model.nv),
+            op,
+            wbc,
+            zmp: ZmpPreview::new(cart, p.q_e, p.r, n, crate::config::LqSolverKind::Riccati),
+            previewer: HandPreviewer::new(p.period, Matrix3::identity(), n)?,
+            kind,
+            hand_frame,
+            sole_frames,
+            horizon: n,
+            period: p.period,
+            dt: control_period,
+            height_gains,
+            zmp_ref: vec![[0.0; 2]; n],
+            hand_desired: vec![HandState::default(); n],
+            f_ext: vec![[0.0; 3]; n],
+            schedule: nominal.clone(),
+            nominal,
+            plan: PreviewPlan::with_capacity(n),
+            com_acc_cmd: Vector3::zeros(),
+            hand_acc_cmd: Vector3::zeros(),
+            latched: None,
+            zmp_offset,
+            preview_fallbacks: 0,
+            last: TickRecord::default(),
+            model,
+        })
+    }
+
+    pub fn horizon(&self) -> usize {
+        self.horizon
+    }
+
+    /// The support rectangle latched at the first tick, [[x_min, x_max], [y_min, y_max]].
+    pub fn support(&self) -> Option<[[f64; 2]; 2]> {
+        self.latched.map(|l| l.support)
+    }
+
+    /// Copy the last tick's predicted horizon into a log record.
+    pub fn fill_plan(&self, out: &mut super::logger::PlanLog) {
+        out.time = self.last.time;
+        out.com_height = self.latched.map_or(0.0, |l| l.com_height);
+        for i in 0..self.horizon.min(out.zmp.len()) {
+            out.zmp[i] = [self.plan.zmp[0][i] as f32, self.plan.zmp[1][i] as f32];
+            out.com[i] = [self.plan.com[0][i][0] as f32, self.plan.com[1][i][0] as f32];
+            out.kp[i] = self.schedule.kp[i] as f32;
+            out.f_dis[i] = if self.kind == ControllerKind::C0 {
+                0.0
+            } else {
+                self.previewer
+                    .disturbance()
+                    .get(i)
+                    .map_or(0.0, |f| f[0] as f32)
+            };
+        }
+    }
+
+    /// The CoM and hand state of the last tick, the M_e and the forecast, as C2's snapshot.
+    pub fn snapshot(&self, out: &mut super::gain_thread::GainSnapshot, seq: u64) {
+        out.time = self.last.time;
+        out.seq = seq;
+        out.com = [0, 1]
+            .map(|a| Vector3::new(self.last.com[a], self.last.com_vel[a], self.com_acc_cmd[a]));
+        out.hand = HandState {
+            pos: Vector3::from(self.last.hand_pos),
+            vel: self.hand_vel(),
+            acc: self.hand_acc_cmd,
+        };
+        out.m_e = *self.previewer.effective_mass();
+        out.zmp_ref.copy_from_slice(&self.zmp_ref);
+        out.hand_desired.copy_from_slice(&self.hand_desired);
+        out.f_ext.copy_from_slice(&self.f_ext);
+        out.applied = [self.last.kp, self.last.kd];
+    }
+
+    fn hand_vel(&self) -> Vector3<f64> {
+        frame_velocity(
+            &self.model,
+            &self.data,
+            self.hand_frame,
+            ReferenceFrame::LocalWorldAligned,
+        )
+        .lin
+    }
+
+    /// One tick. `tau` receives the actuated torques (length nv − 6). Returns the WBC status.
+    pub fn tick(
+        &mut self,
+        state: &StateMsg,
+        forecast: &ForecastWindow,
+        c2: Option<&StampedSchedule>,
+        tau: &mut [f64],
+    ) -> Result<WbcStatus, TickError> {
+        let (nq, nv) = (self.model.nq, self.model.nv);
+        if state.nq as usize != nq || state.nv as usize != nv {
+            return Err(TickError::Dimensions {
+                nq: state.nq,
+                nv: state.nv,
+                model_nq: nq,
+                model_nv: nv,
+            });
+        }
+        if !state.q[..nq]
+            .iter()
+            .chain(&state.v[..nv])
+            .all(|x| x.is_finite())
+        {
+            return Err(TickError::NotFinite);
+        }
+        self.q.as_mut_slice().copy_from_slice(&state.q[..nq]);
+        self.v.as_mut_slice().copy_from_slice(&state.v[..nv]);
+        let t = state.time;
+
+        // Model quantities: CoM (with velocity), hand placement and velocity, M_e.
+        let (com, vcom) = center_of_mass_velocity(&self.model, &mut self.data, &self.q, &self.v)?;
+        let hand_pos = self.data.o_m_f[self.hand_frame].trans;
+        let hand_vel = self.hand_vel();
+        let latched = *self.latched.get_or_insert_with(|| {
+            let (l, r) = (
+                self.data.o_m_f[self.sole_frames[0]].trans,
+                self.data.o_m_f[self.sole_frames[1]].trans,
+            );
+            let mut support = [[f64::INFINITY, f64::NEG_INFINITY]; 2];
+            for f in self.wbc.contact_frames() {
+                let p = self.data.o_m_f[f].trans;
+                for a in 0..2 {
+                    support[a] = [support[a][0].min(p[a]), support[a][1].max(p[a])];
+                }
+            }
+            Latched {
+                zmp_center: [0.5 * (l.x + r.x), 0.5 * (l.y + r.y)],
+                support,
+                com_height: com.z,
+                hand_target: hand_pos,
+            }
+        });
+        let m_e = *self.op.compute(&self.model, &mut self.data, &self.q)?;
+        let m_e_ok = self.previewer.set_effective_mass(m_e).is_ok();
+
+        // Horizon inputs at t + (i+1)·T.
+        let zref = [
+            latched.zmp_center[0] + self.zmp_offset[0],
+            latched.zmp_center[1] + self.zmp_offset[1],
+        ];
+        let target = HandState {
+            pos: latched.hand_target,
+            ..Default::default()
+        };
+        for i in 0..self.horizon {
+            self.zmp_ref[i] = zref;
+            self.hand_desired[i] = target;
+            self.f_ext[i] = forecast.at(t + (i + 1) as f64 * self.period);
+        }
+        // The gain schedule: C2's, shifted to now, or the nominal one.
+        let mut age = 0.0;
+        match c2.filter(|s| s.seq > 0 && self.kind == ControllerKind::C2) {
+            Some(s) => {
+                age = t - s.time;
+                let shift = (age / self.period).round().max(0.0) as usize;
+                let n = self.horizon;
+                for i in 0..n {
+                    let j = (i + shift).min(n - 1);
+                    self.schedule.kp[i] = s.schedule.kp[j];
+                    self.schedule.kd[i] = s.schedule.kd[j];
+                }
+            }
+            None => {
+                self.schedule.kp.copy_from_slice(&self.nominal.kp);
+                self.schedule.kd.copy_from_slice(&self.nominal.kd);
+            }
+        }
+
+        // C0 / C1 on the CoM.
+        let x: [AxisState; 2] = [0, 1].map(|a| Vector3::new(com[a], vcom[a], self.com_acc_cmd[a]));
+        let hand = HandState {
+            pos: hand_pos,
+            vel: hand_vel,
+            acc: self.hand_acc_cmd,
+        };
+        let mut fallback = false;
+        let u = match self.kind {
+            ControllerKind::C0 => self.zmp.solve_c0(&x, &self.zmp_ref),
+            ControllerKind::C1 | ControllerKind::C2 => {
+                let r: Result<[f64; 2], PreviewError> = if m_e_ok {
+                    self.previewer
+                        .predict(
+                            &hand,
+                            &self.hand_desired,
+                            &self.schedule,
+                            &self.f_ext,
+                            self.horizon,
+                        )
+                        .and_then(|()| {
+                            self.zmp
+                                .solve_c1(&x, &self.zmp_ref, self.previewer.disturbance())
+                        })
+                } else {
+                    Err(PreviewError::EffectiveMassNotSpd)
+                };
+                r.or_else(|_| {
+                    fallback = true;
+                    self.zmp.solve_c0(&x, &self.zmp_ref)
+                })
+            }
+        };
+        // solve_c0 only fails on non-finite state, excluded above; keep the last command then.
+        let u = u.unwrap_or([0.0; 2]);
+        if fallback {
+            self.preview_fallbacks += 1;
+        }
+        for a in 0..2 {
+            self.com_acc_cmd[a] += u[a] * self.dt;
+        }
+        let [kpz, kdz] = self.height_gains;
+        self.com_acc_cmd.z = kpz * (latched.com_height - com.z) - kdz * vcom.z;
+        let (kp, kd) = (self.schedule.kp[0], self.schedule.kd[0]);
+        self.hand_acc_cmd = (latched.hand_target - hand_pos) * kp - hand_vel * kd;
+
+        // Whole-body QP.
+        let cmd = WbcCommand {
+            com_acc: self.com_acc_cmd,
+            hand_pos_des: latched.hand_target,
+            hand_vel_des: Vector3::zeros(),
+            hand_acc_des: Vector3::zeros(),
+            kp,
+            kd,
+            posture_ref: None,
+        };
+        let out = self
+            .wbc
+            .solve(&self.model, &mut self.data, &self.q, &self.v, &cmd);
+        let n = out.tau.len().min(tau.len());
+        tau[..n].copy_from_slice(&out.tau.as_slice()[..n]);
+        let status = out.status;
+        let (iterations, wbc_time) = (out.iterations, out.tick_time.as_secs_f64());
+
+        // The next preview step of the plan, for the logs.
+        self.zmp.plan(&x, &mut self.plan);
+        let f_dis = if self.kind == ControllerKind::C0 {
+            [0.0; 3]
+        } else {
+            self.previewer
+                .disturbance()
+                .first()
+                .copied()
+                .unwrap_or([0.0; 3])
+        };
+        self.last = TickRecord {
+            time: t,
+            com: com.into(),
+            com_vel: vcom.into(),
+            com_acc_cmd: self.com_acc_cmd.into(),
+            zmp_ref: zref,
+            zmp_pred: [self.plan.zmp[0][0], self.plan.zmp[1][0]],
+            zmp_meas: state.zmp,
+            hand_pos: hand_pos.into(),
+            hand_err: (hand_pos - latched.hand_target).norm(),
+            kp,
+            kd,
+            f_dis,
+            f_ext: self.f_ext[0],
+            wbc_solved: status == WbcStatus::Solved,
+            wbc_iterations: iterations,
+            wbc_time,
+            preview_fallback: fallback,
+            schedule_age: age,
+        };
+        Ok(status)
+    }
+}

@@ -1,0 +1,198 @@
+//! The controller's copy of the latest valid force forecast. Incoming messages are validated
+//! (rejected, counted and reported, never applied when bad) and copied into preallocated storage
+//! so the loop reads a stable window. Past its end, the forecast decays to zero.
+
+use crate::channels::{ForecastMsg, MAX_FORECAST};
+
+/// Why a forecast message was rejected.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum ForecastRejection {
+    #[error("forecast length {0} is 0 or beyond the capacity {MAX_FORECAST}")]
+    BadLength(u32),
+    #[error("forecast step dt = {0} s is not a positive finite number")]
+    BadStep(f64),
+    #[error("forecast sample {0} is not finite")]
+    NotFinite(usize),
+    #[error("forecast starts at t0 = {t0} s, too far from the current time {now} s")]
+    OutOfTime { t0: f64, now: f64 },
+    #[error("forecast seq {got} does not follow {last}")]
+    OutOfOrder { got: u64, last: u64 },
+    #[error("forecast lifts the robot: M g − F_z ≤ 0 at sample {0}")]
+    LiftOff(usize),
+}
+
+pub struct ForecastWindow {
+    forces: Vec<[f64; 3]>,
+    t0: f64,
+    dt: f64,
+    len: usize,
+    last_seq: u64,
+    /// Accepted and rejected messages so far.
+    pub accepted: u64,
+    pub rejected: u64,
+    /// Limits: how far before / after the current time a window may start (s).
+    max_age: f64,
+    max_lead: f64,
+    /// Time constant of the decay to zero past the window's end (s).
+    decay: f64,
+    /// M g: a forecast force with F_z ≥ M g would lift the robot.
+    weight: f64,
+}
+
+impl ForecastWindow {
+    pub fn new(max_age: f64, max_lead: f64, decay: f64, weight: f64) -> Self {
+        Self {
+            forces: vec![[0.0; 3]; MAX_FORECAST],
+            t0: 0.0,
+            dt: 1.0,
+            len: 0,
+            last_seq: 0,
+            accepted: 0,
+            rejected: 0,
+            max_age,
+            max_lead,
+            decay,
+            weight,
+        }
+    }
+
+    /// Validate `msg` at time `now` and take it if good.
+    pub fn offer(&mut self, msg: &ForecastMsg, now: f64) -> Result<(), ForecastRejection> {
+        let r = self.check(msg, now);
+        match r {
+            Ok(()) => {
+                let n = msg.len as usize;
+                self.forces[..n].copy_from_slice(&msg.forces[..n]);
+                self.t0 = msg.t0;
+                self.dt = msg.dt;
+                self.len = n;
+                self.last_seq = msg.seq;
+                self.accepted += 1;
+            }
+            Err(_) => self.rejected += 1,
+        }
+        r
+    }
+
+    fn check(&self, msg: &ForecastMsg, now: f64) -> Result<(), ForecastRejection> {
+        let n = msg.len as usize;
+        if n == 0 || n > MAX_FORECAST {
+            return Err(ForecastRejection::BadLength(msg.len));
+        }
+        if !(msg.dt.is_finite() && msg.dt > 0.0) {
+            return Err(ForecastRejection::BadStep(msg.dt));
+        }
+        if !msg.t0.is_finite() || msg.t0 < now - self.max_age || msg.t0 > now + self.max_lead {
+            return Err(ForecastRejection::OutOfTime { t0: msg.t0, now });
+        }
+        if self.accepted > 0 && msg.seq <= self.last_seq {
+            return Err(ForecastRejection::OutOfOrder {
+                got: msg.seq,
+                last: self.last_seq,
+            });
+        }
+        for (i, f) in msg.forces[..n].iter().enumerate() {
+            if !f.iter().all(|v| v.is_finite()) {
+                return Err(ForecastRejection::NotFinite(i));
+            }
+            if self.weight - f[2] <= 0.0 {
+                return Err(ForecastRejection::LiftOff(i));
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether a window covers time `t`.
+    pub fn covers(&self, t: f64) -> bool {
+        self.len > 0 && t >= self.t0 && t <= self.end()
+    }
+
+    fn end(&self) -> f64 {
+        self.t0 + (self.len.max(1) - 1) as f64 * self.dt
+    }
+
+    /// The forecast force at `t`: linear interpolation inside the window, the first sample
+    /// before it, an exponential decay from the last sample after it, zero with no window.
+    pub fn at(&self, t: f64) -> [f64; 3] {
+        if self.len == 0 {
+            return [0.0; 3];
+        }
+        let x = (t - self.t0) / self.dt;
+        if x <= 0.0 {
+            return self.forces[0];
+        }
+        let i = x.floor() as usize;
+        if i + 1 >= self.len {
+            let last = self.forces[self.len - 1];
+            let k = (-(t - self.end()).max(0.0) / self.decay).exp();
+            return last.map(|v| v * k);
+        }
+        let w = x - i as f64;
+        let (a, b) = (self.forces[i], self.forces[i + 1]);
+        [0, 1, 2].map(|c| a[c] + w * (b[c] - a[c]))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn msg(seq: u64, t0: f64, dt: f64, len: u32, f: f64) -> Box<ForecastMsg> {
+        let mut m: Box<ForecastMsg> = Box::default();
+        m.seq = seq;
+        m.t0 = t0;
+        m.dt = dt;
+        m.len = len;
+        for (i, s) in m.forces.iter_mut().enumerate() {
+            *s = [f * i as f64, 0.0, 0.0];
+        }
+        m
+    }
+
+    #[test]
+    fn validates_and_interpolates() {
+        let mut w = ForecastWindow::new(1.0, 1.0, 0.1, 300.0);
+        assert_eq!(w.at(0.3), [0.0; 3]);
+        w.offer(&msg(1, 0.0, 0.01, 100, 1.0), 0.0).unwrap();
+        assert!((w.at(0.055)[0] - 5.5).abs() < 1e-9);
+        // Past the end: decays from the last sample.
+        assert!(w.at(0.99 + 0.1)[0] < 99.0 * 0.37 && w.at(0.99 + 0.1)[0] > 0.0);
+        assert_eq!(
+            w.offer(&msg(2, 0.0, 0.0, 10, 1.0), 0.0),
+            Err(ForecastRejection::BadStep(0.0))
+        );
+        assert_eq!(
+            w.offer(&msg(2, 0.0, -1.0, 10, 1.0), 0.0),
+            Err(ForecastRejection::BadStep(-1.0))
+        );
+        assert!(matches!(
+            w.offer(&msg(2, 0.0, 0.01, 0, 1.0), 0.0),
+            Err(ForecastRejection::BadLength(0))
+        ));
+        assert!(matches!(
+            w.offer(&msg(2, 0.0, 0.01, MAX_FORECAST as u32 + 1, 1.0), 0.0),
+            Err(ForecastRejection::BadLength(_))
+        ));
+        assert!(matches!(
+            w.offer(&msg(2, -5.0, 0.01, 10, 1.0), 0.0),
+            Err(ForecastRejection::OutOfTime { .. })
+        ));
+        assert!(matches!(
+            w.offer(&msg(2, 50.0, 0.01, 10, 1.0), 0.0),
+            Err(ForecastRejection::OutOfTime { .. })
+        ));
+        assert!(matches!(
+            w.offer(&msg(1, 0.0, 0.01, 10, 1.0), 0.0),
+            Err(ForecastRejection::OutOfOrder { .. })
+        ));
+        let mut nan = msg(3, 0.0, 0.01, 10, 1.0);
+        nan.forces[4][1] = f64::NAN;
+        assert_eq!(w.offer(&nan, 0.0), Err(ForecastRejection::NotFinite(4)));
+        let mut lift = msg(3, 0.0, 0.01, 10, 1.0);
+        lift.forces[2][2] = 400.0;
+        assert_eq!(w.offer(&lift, 0.0), Err(ForecastRejection::LiftOff(2)));
+        assert_eq!((w.accepted, w.rejected), (1, 9));
+        // The rejected ones changed nothing.
+        assert!((w.at(0.055)[0] - 5.5).abs() < 1e-9);
+    }
+}

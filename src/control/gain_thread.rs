@@ -1,0 +1,195 @@
+//! C2's gain search in its own lower-priority thread. The control loop offers snapshots and
+//! takes time-stamped schedules through wait-free triple buffers: it never waits for C2. A
+//! schedule older than the horizon, or a dead worker, means the nominal gains (C1).
+
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use nalgebra::{Matrix3, Vector3};
+use triple_buffer::{Input, Output, triple_buffer};
+
+use crate::config::Config;
+use crate::preview::gain_search::{GainSearch, GainSearchInputs};
+use crate::preview::{AxisState, GainSchedule, HandState};
+
+/// What the gain search needs from one control tick (horizon samples at k+1…k+N).
+#[derive(Debug, Clone)]
+pub struct GainSnapshot {
+    /// Simulated time of the tick (s); 0 and `seq` 0 mean "no snapshot yet".
+    pub time: f64,
+    pub seq: u64,
+    pub com: [AxisState; 2],
+    pub hand: HandState,
+    pub m_e: Matrix3<f64>,
+    pub zmp_ref: Vec<[f64; 2]>,
+    pub hand_desired: Vec<HandState>,
+    pub f_ext: Vec<[f64; 3]>,
+    pub applied: [f64; 2],
+}
+
+impl GainSnapshot {
+    pub fn empty(n: usize) -> Self {
+        Self {
+            time: 0.0,
+            seq: 0,
+            com: [Vector3::zeros(); 2],
+            hand: HandState::default(),
+            m_e: Matrix3::identity(),
+            zmp_ref: vec![[0.0; 2]; n],
+            hand_desired: vec![HandState::default(); n],
+            f_ext: vec![[0.0; 3]; n],
+            applied: [0.0; 2],
+        }
+    }
+}
+
+/// A gain schedule with the time of the snapshot it was computed from.
+#[derive(Debug, Clone)]
+pub struct StampedSchedule {
+    /// Snapshot time (s): `schedule` sample i applies at `time + (i+1)·T`.
+    pub time: f64,
+    /// Snapshot sequence number; 0 = none yet.
+    pub seq: u64,
+    pub schedule: GainSchedule,
+    pub cost: f64,
+    pub nominal_cost: f64,
+    pub iterations: u32,
+    pub solve_time: f64,
+}
+
+/// Counters shared with the worker.
+#[derive(Debug, Default)]
+pub struct GainWorkerStats {
+    pub solves: AtomicU64,
+    pub failures: AtomicU64,
+    pub panics: AtomicU64,
+}
+
+/// The loop's side of the hand-off.
+pub struct GainHandoff {
+    snapshots: Input<GainSnapshot>,
+    schedules: Output<StampedSchedule>,
+    worker: Option<JoinHandle<()>>,
+    stop: Arc<AtomicBool>,
+    pub stats: Arc<GainWorkerStats>,
+}
+
+impl GainHandoff {
+    /// Start the worker thread with a gain search configured from `config`.
+    pub fn spawn(config: &Config) -> Result<Self, crate::preview::PreviewError> {
+        let n = config.preview.horizon;
+        let period = config.preview.period;
+        let mut search = GainSearch::from_config(config)?;
+        let nominal = GainSchedule::constant(n, config.hand.kp, config.nominal_kd(config.hand.kp));
+        let (snapshots, mut snap_out) = triple_buffer(&GainSnapshot::empty(n));
+        let empty = StampedSchedule {
+            time: 0.0,
+            seq: 0,
+            schedule: nominal,
+            cost: 0.0,
+            nominal_cost: 0.0,
+            iterations: 0,
+            solve_time: 0.0,
+        };
+        let (mut sched_in, schedules) = triple_buffer(&empty);
+        let stop = Arc::new(AtomicBool::new(false));
+        let stats = Arc::new(GainWorkerStats::default());
+        let (stop_w, stats_w) = (Arc::clone(&stop), Arc::clone(&stats));
+        let worker = std::thread::Builder::new()
+            .name("upc-c2".into())
+            .spawn(move || {
+                super::realtime::lower_priority(10);
+                let mut last_time: Option<f64> = None;
+                while !stop_w.load(Ordering::Relaxed) {
+                    if !snap_out.update() {
+                        std::thread::park_timeout(Duration::from_millis(2));
+                        continue;
+                    }
+                    let snap = snap_out.output_buffer();
+                    if snap.seq == 0 {
+                        continue;
+                    }
+                    let shift = last_time.map_or(0, |t| ((snap.time - t) / period).round().max(0.0) as usize);
+                    let outcome = catch_unwind(AssertUnwindSafe(|| {
+                        search.set_effective_mass(snap.m_e)?;
+                        let inputs = GainSearchInputs {
+                            com: snap.com,
+                            zmp_ref: &snap.zmp_ref,
+                            hand: snap.hand,
+                            hand_desired: &snap.hand_desired,
+                            f_ext: &snap.f_ext,
+                            applied: snap.applied,
+                        };
+                        search.search(&inputs, shift)
+                    }));
+                    match outcome {
+                        Ok(Ok(report)) => {
+                            let out = sched_in.input_buffer_mut();
+                            out.time = snap.time;
+                            out.seq = snap.seq;
+                            out.schedule.kp.copy_from_slice(&search.schedule().kp);
+                            out.schedule.kd.copy_from_slice(&search.schedule().kd);
+                            out.cost = report.cost;
+                            out.nominal_cost = report.nominal_cost;
+                            out.iterations = report.iterations as u32;
+                            out.solve_time = report.elapsed.as_secs_f64();
+                            sched_in.publish();
+                            stats_w.solves.fetch_add(1, Ordering::Relaxed);
+                            last_time = Some(snap.time);
+                        }
+                        Ok(Err(e)) => {
+                            stats_w.failures.fetch_add(1, Ordering::Relaxed);
+                            tracing::warn!("C2 gain search failed: {e}; C1 keeps the last or nominal gains");
+                            search.reset();
+                        }
+                        Err(_) => {
+                            stats_w.panics.fetch_add(1, Ordering::Relaxed);
+                            tracing::error!("C2 gain search panicked; restarting it cold, C1 keeps the nominal gains");
+                            search.reset();
+                            last_time = None;
+                        }
+                    }
+                }
+            })
+            .map_err(|e| crate::preview::PreviewError::Qp(format!("cannot start the C2 thread: {e}")))?;
+        Ok(Self {
+            snapshots,
+            schedules,
+            worker: Some(worker),
+            stop,
+            stats,
+        })
+    }
+
+    /// Offer a snapshot (filled in place, no allocation) and wake the worker. Wait-free.
+    pub fn offer(&mut self, fill: impl FnOnce(&mut GainSnapshot)) {
+        fill(self.snapshots.input_buffer_mut());
+        self.snapshots.publish();
+        if let Some(w) = &self.worker {
+            w.thread().unpark();
+        }
+    }
+
+    /// The newest schedule (seq 0: none yet). Wait-free.
+    pub fn latest(&mut self) -> &StampedSchedule {
+        self.schedules.read()
+    }
+
+    /// Whether the worker thread is still running.
+    pub fn alive(&self) -> bool {
+        self.worker.as_ref().is_some_and(|w| !w.is_finished())
+    }
+}
+
+impl Drop for GainHandoff {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(w) = self.worker.take() {
+            w.thread().unpark();
+            let _ = w.join();
+        }
+    }
+}

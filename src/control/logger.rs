@@ -1,0 +1,267 @@
+//! The controller's rerun log, written by its own thread. The loop hands records over a bounded
+//! channel with `try_send` (a full channel drops the record and counts it): logging never blocks
+//! the loop. Horizon-sized plan records come from a small pool of preallocated buffers that the
+//! logger returns after use, so the loop does not allocate either.
+
+use std::io::Write;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, TryRecvError, sync_channel};
+use std::thread::JoinHandle;
+
+use rerun::blueprint::{
+    Blueprint, BlueprintActivation, Horizontal, Spatial3DView, TimeSeriesView, Vertical,
+};
+
+use super::TickRecord;
+
+/// Per-tick figures beyond the controller core's record.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct TickLog {
+    pub core: TickRecord,
+    /// Tick compute time (s).
+    pub tick_time: f64,
+    /// Latest C2 result: eq. (26) cost, nominal cost, iterations, solve time (s).
+    pub c2_cost: f64,
+    pub c2_nominal_cost: f64,
+    pub c2_iterations: u32,
+    pub c2_solve_time: f64,
+}
+
+/// The predicted horizon at one tick (decimated).
+#[derive(Debug, Clone)]
+pub struct PlanLog {
+    pub time: f64,
+    pub com_height: f64,
+    pub zmp: Vec<[f32; 2]>,
+    pub com: Vec<[f32; 2]>,
+    pub f_dis: Vec<f32>,
+    pub kp: Vec<f32>,
+}
+
+// A tick record is copied by value (no allocation); plans travel boxed from the pool.
+#[allow(clippy::large_enum_variant)]
+enum Item {
+    Tick(TickLog),
+    Plan(Box<PlanLog>),
+}
+
+pub struct ControlLogger {
+    tx: Option<SyncSender<Item>>,
+    free: Receiver<Box<PlanLog>>,
+    handle: Option<JoinHandle<()>>,
+    pub dropped: Arc<AtomicU64>,
+}
+
+impl ControlLogger {
+    /// Start the logger writing `path` with the given recording id (shared with the simulator's
+    /// log so both open on one timeline).
+    pub fn start(
+        path: &std::path::Path,
+        csv: Option<&std::path::Path>,
+        recording_id: &str,
+        horizon: usize,
+    ) -> Result<Self, Box<dyn std::error::Error + Send + Sync>> {
+        let rec = rerun::RecordingStreamBuilder::new("upc")
+            .recording_id(recording_id)
+            .save(path)?;
+        send_blueprint(&rec);
+        let mut csv = match csv {
+            Some(p) => {
+                let mut w = std::io::BufWriter::new(std::fs::File::create(p)?);
+                writeln!(w, "{CSV_HEADER}")?;
+                Some(w)
+            }
+            None => None,
+        };
+        let (tx, rx) = sync_channel::<Item>(1024);
+        let (free_tx, free) = sync_channel::<Box<PlanLog>>(4);
+        for _ in 0..3 {
+            let plan = PlanLog {
+                time: 0.0,
+                com_height: 0.0,
+                zmp: vec![[0.0; 2]; horizon],
+                com: vec![[0.0; 2]; horizon],
+                f_dis: vec![0.0; horizon],
+                kp: vec![0.0; horizon],
+            };
+            let _ = free_tx.try_send(Box::new(plan));
+        }
+        let handle = std::thread::Builder::new()
+            .name("upc-ctl-log".into())
+            .spawn(move || {
+                super::realtime::lower_priority(15);
+                while let Ok(item) = rx.recv() {
+                    match item {
+                        Item::Tick(t) => {
+                            log_tick(&rec, &t);
+                            if let Some(w) = csv.as_mut() {
+                                let _ = write_csv(w, &t);
+                            }
+                        }
+                        Item::Plan(p) => {
+                            log_plan(&rec, &p);
+                            let _ = free_tx.try_send(p);
+                        }
+                    }
+                }
+                if let Some(w) = csv.as_mut() {
+                    let _ = w.flush();
+                }
+                let _ = rec.flush_blocking();
+            })?;
+        Ok(Self {
+            tx: Some(tx),
+            free,
+            handle: Some(handle),
+            dropped: Arc::new(AtomicU64::new(0)),
+        })
+    }
+
+    pub fn tick(&self, t: TickLog) {
+        if let Some(tx) = &self.tx
+            && tx.try_send(Item::Tick(t)).is_err()
+        {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// Borrow a free plan buffer, let `fill` write it, queue it. Skipped if none is free.
+    pub fn plan(&self, fill: impl FnOnce(&mut PlanLog)) {
+        match self.free.try_recv() {
+            Ok(mut p) => {
+                fill(&mut p);
+                if let Some(tx) = &self.tx
+                    && tx.try_send(Item::Plan(p)).is_err()
+                {
+                    self.dropped.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+            Err(TryRecvError::Empty | TryRecvError::Disconnected) => {
+                self.dropped.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+
+    /// Flush and close the file (the last tick is in it once this returns).
+    pub fn finish(mut self) {
+        self.tx.take();
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+impl Drop for ControlLogger {
+    fn drop(&mut self) {
+        self.tx.take();
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+const CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_ref_x,zmp_ref_y,zmp_pred_x,zmp_pred_y,zmp_meas_x,zmp_meas_y,hand_err,kp,kd,f_ext_x,f_dis_x,tick_us,wbc_us,wbc_solved,c2_cost,c2_iterations";
+
+fn write_csv(w: &mut impl Write, t: &TickLog) -> std::io::Result<()> {
+    let c = &t.core;
+    writeln!(
+        w,
+        "{:.4},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.2},{:.2},{:.3},{:.3},{:.1},{:.1},{},{:.5e},{}",
+        c.time,
+        c.com[0],
+        c.com[1],
+        c.com[2],
+        c.zmp_ref[0],
+        c.zmp_ref[1],
+        c.zmp_pred[0],
+        c.zmp_pred[1],
+        c.zmp_meas[0],
+        c.zmp_meas[1],
+        c.hand_err,
+        c.kp,
+        c.kd,
+        c.f_ext[0],
+        c.f_dis[0],
+        t.tick_time * 1e6,
+        c.wbc_time * 1e6,
+        u8::from(c.wbc_solved),
+        t.c2_cost,
+        t.c2_iterations
+    )
+}
+
+fn send_blueprint(rec: &rerun::RecordingStream) {
+    let blueprint = Blueprint::new(Horizontal::new([
+        Spatial3DView::new("3D").with_origin("/").into(),
+        Vertical::new([
+            TimeSeriesView::new("ZMP x")
+                .with_contents(["/controller/zmp/**"])
+                .into(),
+            TimeSeriesView::new("hand error")
+                .with_contents(["/controller/hand/**"])
+                .into(),
+            TimeSeriesView::new("gains")
+                .with_contents(["/controller/gains/**"])
+                .into(),
+            TimeSeriesView::new("timing")
+                .with_contents(["/controller/timing/**", "/controller/c2/**"])
+                .into(),
+        ])
+        .into(),
+    ]));
+    if let Err(e) = blueprint.send(
+        rec,
+        BlueprintActivation {
+            make_active: true,
+            make_default: true,
+        },
+    ) {
+        tracing::warn!("cannot write the rerun blueprint: {e}");
+    }
+}
+
+fn scalar(rec: &rerun::RecordingStream, path: &str, v: f64) {
+    let _ = rec.log(path, &rerun::Scalars::single(v));
+}
+
+fn log_tick(rec: &rerun::RecordingStream, t: &TickLog) {
+    let c = &t.core;
+    rec.set_duration_secs("sim_time", c.time);
+    scalar(rec, "controller/zmp/reference_x", c.zmp_ref[0]);
+    scalar(rec, "controller/zmp/predicted_x", c.zmp_pred[0]);
+    scalar(rec, "controller/zmp/measured_x", c.zmp_meas[0]);
+    scalar(rec, "controller/zmp/reference_y", c.zmp_ref[1]);
+    scalar(rec, "controller/zmp/predicted_y", c.zmp_pred[1]);
+    scalar(rec, "controller/zmp/measured_y", c.zmp_meas[1]);
+    scalar(rec, "controller/com/x", c.com[0]);
+    scalar(rec, "controller/com/y", c.com[1]);
+    scalar(rec, "controller/hand/error", c.hand_err);
+    scalar(rec, "controller/hand/f_ext_x", c.f_ext[0]);
+    scalar(rec, "controller/hand/f_dis_x", c.f_dis[0]);
+    scalar(rec, "controller/gains/kp", c.kp);
+    scalar(rec, "controller/gains/kd", c.kd);
+    scalar(rec, "controller/timing/tick_us", t.tick_time * 1e6);
+    scalar(rec, "controller/timing/wbc_us", c.wbc_time * 1e6);
+    scalar(rec, "controller/c2/cost", t.c2_cost);
+    scalar(rec, "controller/c2/nominal_cost", t.c2_nominal_cost);
+    scalar(rec, "controller/c2/iterations", t.c2_iterations as f64);
+    scalar(rec, "controller/c2/solve_ms", t.c2_solve_time * 1e3);
+}
+
+fn log_plan(rec: &rerun::RecordingStream, p: &PlanLog) {
+    rec.set_duration_secs("sim_time", p.time);
+    let zmp: Vec<[f32; 3]> = p.zmp.iter().map(|z| [z[0], z[1], 0.0]).collect();
+    let com: Vec<[f32; 3]> = p
+        .com
+        .iter()
+        .map(|c| [c[0], c[1], p.com_height as f32])
+        .collect();
+    let _ = rec.log("controller/plan/zmp", &rerun::LineStrips3D::new([zmp]));
+    let _ = rec.log("controller/plan/com", &rerun::LineStrips3D::new([com]));
+    let _ = rec.log(
+        "controller/plan/f_dis_x",
+        &rerun::BarChart::new(p.f_dis.clone()),
+    );
+    let _ = rec.log("controller/plan/kp", &rerun::BarChart::new(p.kp.clone()));
+}

@@ -1,0 +1,23 @@
+//! The control server: a fixed-rate loop that turns robot state and the hand force forecast
+//! into joint torques (C0/C1 every tick, C2's gain search in its own thread, the whole-body QP).
+//!
+//! - [`core`]: one tick without IPC ([`ControllerCore`]).
+//! - [`forecast_window`]: validated copy of the latest force forecast.
+//! - [`gain_thread`]: C2 in a lower-priority thread behind wait-free triple buffers.
+//! - [`logger`]: the rerun log, from its own thread, never blocking the loop.
+//! - [`server`]: the loop over iceoryx2 (`upc controller`), lockstep or real time.
+//! - [`timing`]: absolute-deadline ticker and latency histogram.
+//! - [`realtime`]: SCHED_FIFO, mlockall, CPU affinity (degrading with a warning).
+
+pub mod core;
+pub mod forecast_window;
+pub mod gain_thread;
+pub mod logger;
+pub mod realtime;
+pub mod server;
+pub mod timing;
+
+pub use core::{ControllerCore, TickError, TickRecord};
+pub use forecast_window::{ForecastRejection, ForecastWindow};
+pub use gain_thread::{GainHandoff, GainSnapshot, StampedSchedule};
+pub use timing::{LatencyHistogram, Ticker};

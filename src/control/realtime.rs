@@ -1,0 +1,81 @@
+//! Real-time process setup: SCHED_FIFO priority, locked memory, CPU affinity. Each step that
+//! the OS refuses (no CAP_SYS_NICE, container limits) degrades with a warning, never an error.
+
+use serde::Deserialize;
+
+/// `[controller.realtime]` settings.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RealtimeSettings {
+    /// SCHED_FIFO priority (1–99) of the control thread; 0 keeps the default scheduler.
+    pub fifo_priority: i32,
+    /// mlockall(MCL_CURRENT | MCL_FUTURE): no page faults on the control path.
+    pub lock_memory: bool,
+    /// CPU to pin the control thread to; none if absent.
+    pub cpu: Option<usize>,
+}
+
+/// What was actually applied.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
+pub struct RealtimeReport {
+    pub fifo: bool,
+    pub memory_locked: bool,
+    pub pinned: bool,
+}
+
+/// Apply to the calling thread (and, for mlockall, the process).
+pub fn apply(s: &RealtimeSettings) -> RealtimeReport {
+    let mut r = RealtimeReport::default();
+    if s.lock_memory {
+        // SAFETY: plain syscall with constant flags.
+        if unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) } == 0 {
+            r.memory_locked = true;
+        } else {
+            tracing::warn!(
+                "mlockall refused ({}); running with pageable memory",
+                std::io::Error::last_os_error()
+            );
+        }
+    }
+    if s.fifo_priority > 0 {
+        let param = libc::sched_param {
+            sched_priority: s.fifo_priority.clamp(1, 99),
+        };
+        // SAFETY: valid sched_param for the calling thread (pid 0).
+        if unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } == 0 {
+            r.fifo = true;
+        } else {
+            tracing::warn!(
+                "SCHED_FIFO priority {} refused ({}); running with the default scheduler",
+                s.fifo_priority,
+                std::io::Error::last_os_error()
+            );
+        }
+    }
+    if let Some(cpu) = s.cpu {
+        // SAFETY: cpu_set_t is plain data; CPU_SET bounds are checked against its size.
+        unsafe {
+            let mut set: libc::cpu_set_t = std::mem::zeroed();
+            if cpu < 8 * std::mem::size_of::<libc::cpu_set_t>() {
+                libc::CPU_SET(cpu, &mut set);
+                if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) == 0 {
+                    r.pinned = true;
+                }
+            }
+        }
+        if !r.pinned {
+            tracing::warn!("cannot pin the control thread to CPU {cpu}; running unpinned");
+        }
+    }
+    r
+}
+
+/// Lower the calling thread's priority (the C2 worker and loggers must never preempt the loop).
+pub fn lower_priority(nice: i32) {
+    // SAFETY: setpriority on the calling thread (who = 0 with PRIO_PROCESS applies to the thread
+    // on Linux, where threads are tasks).
+    unsafe {
+        let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+        libc::setpriority(libc::PRIO_PROCESS, tid, nice);
+    }
+}

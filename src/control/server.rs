@@ -1,0 +1,353 @@
+//! The control server's loop over iceoryx2 (`upc controller`): lockstep (answer each state as
+//! it arrives) or real time (absolute deadlines at `rate_hz`). Nothing on the loop's path
+//! allocates, blocks on logging or on C2, or panics on bad input.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+
+use super::logger::{ControlLogger, TickLog};
+use super::{ControllerCore, ForecastWindow, GainHandoff, LatencyHistogram, Ticker};
+use crate::channels::{
+    Bus, ForecastMsg, MAX_DOF, ServiceKind, StateMsg, TORQUE_FLAG_FALLBACK, TorqueMsg,
+};
+use crate::config::{Config, ControllerKind, LoopMode};
+use crate::dynamics::Model;
+
+/// A measured CoP closer than this to the support edge counts as at the edge (m).
+const EDGE_BAND: f64 = 1e-3;
+
+/// How to run, beyond the config.
+#[derive(Debug, Clone)]
+pub struct ServerOptions {
+    pub prefix: String,
+    /// Stop once the simulated time reaches this (s).
+    pub duration: Option<f64>,
+    pub rrd: Option<PathBuf>,
+    pub recording_id: String,
+    /// The scenario's ZMP reference offset from the feet midpoint (m).
+    pub zmp_offset: [f64; 2],
+    /// Give up if no state arrives within this time of starting (s).
+    pub startup_timeout: f64,
+    /// Write every `log_every`-th tick record as CSV here (written by the logger thread).
+    pub csv: Option<PathBuf>,
+}
+
+/// What a run measured; written as the controller's part of `summary.json`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct ServerSummary {
+    pub controller: String,
+    pub mode: String,
+    pub ticks: u64,
+    pub sim_time: f64,
+    pub tick_p50_us: f64,
+    pub tick_p99_us: f64,
+    pub tick_max_us: f64,
+    pub deadline_overruns: u64,
+    pub deadline_misses: u64,
+    pub stale_states: u64,
+    pub tick_errors: u64,
+    pub wbc_fallbacks: u64,
+    pub preview_fallbacks: u64,
+    pub forecasts_accepted: u64,
+    pub forecasts_rejected: u64,
+    pub forecast_lost: bool,
+    pub c2_solves: u64,
+    pub c2_failures: u64,
+    pub c2_panics: u64,
+    pub c2_stale_schedules: u64,
+    pub c2_solve_mean_ms: f64,
+    pub c2_solve_max_ms: f64,
+    pub c2_iterations_mean: f64,
+    /// Smallest distance of the measured ZMP (centre of pressure) to the support edge (m). The
+    /// measured CoP cannot leave the support: where the model ZMP would, the CoP sits on the
+    /// edge and the feet start to tip.
+    pub min_zmp_margin: f64,
+    /// Time the measured CoP spends within 1 mm of the support edge (s): the feet tipping.
+    pub time_at_support_edge: f64,
+    /// Largest drop of the CoM height below its initial height (m): a fall shows here.
+    pub com_height_drop: f64,
+    pub hand_rms_error: f64,
+    pub hand_peak_error: f64,
+    pub max_zmp_error: f64,
+    pub dropped_log_records: u64,
+    pub realtime: super::realtime::RealtimeReport,
+    pub stopped_by: String,
+}
+
+pub fn run_server(
+    config: &Config,
+    model: Model,
+    opts: &ServerOptions,
+    stop: Arc<AtomicBool>,
+) -> Result<ServerSummary, Box<dyn std::error::Error + Send + Sync>> {
+    let cc = &config.controller;
+    let kind = cc.kind;
+    let dt = 1.0 / cc.rate_hz;
+    let weight = model.total_mass() * config.robot.gravity;
+    let bus = Bus::open(&opts.prefix, "controller")?;
+    let states = bus.subscriber::<StateMsg>(ServiceKind::State)?;
+    let state_events = bus.listener(ServiceKind::State)?;
+    let forecasts = bus.subscriber::<ForecastMsg>(ServiceKind::Forecast)?;
+    let torques = bus.publisher::<TorqueMsg>(ServiceKind::Torques)?;
+    let torque_events = bus.notifier(ServiceKind::Torques)?;
+
+    let mut core = ControllerCore::new(
+        model,
+        config,
+        kind,
+        dt,
+        [cc.com_height_kp, cc.com_height_kd],
+        opts.zmp_offset,
+    )?;
+    let n_tau = core.model.nv - 6;
+    let horizon_time = config.preview.horizon as f64 * config.preview.period;
+    let mut window = ForecastWindow::new(
+        cc.forecast_max_age,
+        cc.forecast_max_lead,
+        cc.forecast_decay,
+        weight,
+    );
+    let mut c2 = if kind == ControllerKind::C2 {
+        Some(GainHandoff::spawn(config)?)
+    } else {
+        None
+    };
+    let logger = match &opts.rrd {
+        Some(p) => Some(ControlLogger::start(
+            p,
+            opts.csv.as_deref(),
+            &opts.recording_id,
+            config.preview.horizon,
+        )?),
+        None => None,
+    };
+    let rt = super::realtime::apply(&cc.realtime);
+    let mut ticker =
+        (cc.mode == LoopMode::Realtime).then(|| Ticker::new(Duration::from_secs_f64(dt)));
+
+    let mut s = ServerSummary {
+        controller: kind.name().into(),
+        mode: format!("{:?}", cc.mode).to_lowercase(),
+        min_zmp_margin: f64::INFINITY,
+        realtime: rt,
+        ..Default::default()
+    };
+    let mut hist = LatencyHistogram::new();
+    let mut tau = [0.0; MAX_DOF];
+    let mut seq = 0u64;
+    let mut last_step: Option<u64> = None;
+    let started = Instant::now();
+    let mut last_state_at = Instant::now();
+    let mut last_forecast_at = Instant::now();
+    let (mut hand_sq, mut c2_solve_sum, mut c2_iter_sum, mut c2_seen) = (0.0, 0.0, 0.0, 0u64);
+    let mut last_c2_seq = 0u64;
+    let mut schedule_was_stale = false;
+    let mut warned_forecast = 0u64;
+    let mut com_z0: Option<f64> = None;
+
+    s.stopped_by = loop {
+        if stop.load(Ordering::Relaxed) {
+            break "signal".into();
+        }
+        match ticker.as_mut() {
+            Some(t) => t.wait(),
+            None => {
+                state_events.wait(Duration::from_millis(20))?;
+            }
+        }
+        let Some(state) = states.latest()? else {
+            let quiet = last_state_at.elapsed().as_secs_f64();
+            if last_step.is_none() && started.elapsed().as_secs_f64() > opts.startup_timeout {
+                return Err(format!(
+                    "no state from the simulator on {}/state within {} s",
+                    opts.prefix, opts.startup_timeout
+                )
+                .into());
+            }
+            if last_step.is_some() {
+                s.stale_states += u64::from(ticker.is_some());
+                if cc.mode == LoopMode::Lockstep && quiet > cc.state_timeout {
+                    break "simulator stopped".into();
+                }
+            }
+            continue;
+        };
+        if last_step.is_some_and(|l| state.step <= l) {
+            s.stale_states += 1;
+            continue;
+        }
+        last_step = Some(state.step);
+        last_state_at = Instant::now();
+        let tick_start = Instant::now();
+
+        // The newest forecast, validated.
+        if let Some(r) = forecasts.with_latest(|m| window.offer(m, state.time))? {
+            last_forecast_at = Instant::now();
+            if let Err(e) = r
+                && window.rejected >= warned_forecast * 2
+            {
+                warned_forecast = window.rejected.max(1);
+                tracing::warn!("forecast rejected ({} so far): {e}", window.rejected);
+            }
+        }
+        if !s.forecast_lost
+            && window.accepted > 0
+            && last_forecast_at.elapsed().as_secs_f64() > cc.state_timeout
+            && !window.covers(state.time + horizon_time)
+        {
+            s.forecast_lost = true;
+            tracing::warn!(
+                "no forecast for {:.2} s: the forecast decays to zero",
+                last_forecast_at.elapsed().as_secs_f64()
+            );
+        }
+
+        // C2's newest schedule, unless older than the horizon.
+        let with_c2 = c2.is_some();
+        let schedule = c2
+            .as_mut()
+            .map(|h| h.latest())
+            .filter(|sch| sch.seq > 0 && state.time - sch.time <= horizon_time);
+        let stale = with_c2 && schedule.is_none() && state.time > horizon_time;
+        if stale && !schedule_was_stale {
+            s.c2_stale_schedules += 1;
+            tracing::warn!("C2 schedule missing or older than the horizon: nominal gains");
+        }
+        schedule_was_stale = stale;
+        if let Some(sch) = schedule
+            && sch.seq != last_c2_seq
+        {
+            last_c2_seq = sch.seq;
+            c2_seen += 1;
+            c2_solve_sum += sch.solve_time;
+            c2_iter_sum += sch.iterations as f64;
+            s.c2_solve_max_ms = s.c2_solve_max_ms.max(sch.solve_time * 1e3);
+        }
+        let c2_log =
+            schedule.map(|sch| (sch.cost, sch.nominal_cost, sch.iterations, sch.solve_time));
+
+        let mut flags = 0;
+        match core.tick(&state, &window, schedule, &mut tau[..n_tau]) {
+            Ok(crate::wbc::WbcStatus::Solved) => {}
+            Ok(_) => {
+                s.wbc_fallbacks += 1;
+                flags |= TORQUE_FLAG_FALLBACK;
+            }
+            Err(e) => {
+                // Safe behaviour on a malformed state: joint damping toward rest.
+                s.tick_errors += 1;
+                if s.tick_errors.is_power_of_two() {
+                    tracing::warn!(
+                        "bad state at step {}: {e} ({} so far); damping torques",
+                        state.step,
+                        s.tick_errors
+                    );
+                }
+                for (i, t) in tau[..n_tau].iter_mut().enumerate() {
+                    let qd = state
+                        .v
+                        .get(6 + i)
+                        .copied()
+                        .filter(|v| v.is_finite())
+                        .unwrap_or(0.0);
+                    *t = -config.wbc.fallback_damping * qd;
+                }
+                flags |= TORQUE_FLAG_FALLBACK;
+            }
+        }
+        seq += 1;
+        torques.send_with(|m| {
+            m.seq = seq;
+            m.state_step = state.step;
+            m.n = n_tau as u32;
+            m.flags = flags;
+            m.tau[..n_tau].copy_from_slice(&tau[..n_tau]);
+        })?;
+        torque_events.notify()?;
+        let tick_time = tick_start.elapsed();
+        hist.record(tick_time);
+        s.ticks += 1;
+        s.sim_time = state.time;
+
+        if let Some(h) = c2.as_mut()
+            && s.ticks.is_multiple_of(cc.c2_every as u64)
+        {
+            h.offer(|snap| core.snapshot(snap, seq));
+        }
+        // Metrics of the measured ZMP and the hand.
+        let rec = core.last;
+        if let Some(sup) = core.support() {
+            let margin = (0..2)
+                .map(|a| (rec.zmp_meas[a] - sup[a][0]).min(sup[a][1] - rec.zmp_meas[a]))
+                .fold(f64::INFINITY, f64::min);
+            s.min_zmp_margin = s.min_zmp_margin.min(margin);
+            if margin < EDGE_BAND {
+                s.time_at_support_edge += dt;
+            }
+        }
+        let z0 = *com_z0.get_or_insert(rec.com[2]);
+        s.com_height_drop = s.com_height_drop.max(z0 - rec.com[2]);
+        let zerr = ((rec.zmp_meas[0] - rec.zmp_ref[0]).powi(2)
+            + (rec.zmp_meas[1] - rec.zmp_ref[1]).powi(2))
+        .sqrt();
+        s.max_zmp_error = s.max_zmp_error.max(zerr);
+        hand_sq += rec.hand_err * rec.hand_err;
+        s.hand_peak_error = s.hand_peak_error.max(rec.hand_err);
+        if let Some(l) = &logger {
+            if s.ticks.is_multiple_of(cc.log_every as u64) {
+                let (c2_cost, c2_nominal_cost, c2_iterations, c2_solve_time) =
+                    c2_log.unwrap_or_default();
+                l.tick(TickLog {
+                    core: rec,
+                    tick_time: tick_time.as_secs_f64(),
+                    c2_cost,
+                    c2_nominal_cost,
+                    c2_iterations,
+                    c2_solve_time,
+                });
+            }
+            if s.ticks.is_multiple_of(10 * cc.log_every as u64) {
+                l.plan(|p| core.fill_plan(p));
+            }
+        }
+        if opts.duration.is_some_and(|d| state.time >= d - 0.5 * dt) {
+            break "duration reached".into();
+        }
+    };
+
+    s.tick_p50_us = hist.quantile(0.5) * 1e6;
+    s.tick_p99_us = hist.quantile(0.99) * 1e6;
+    s.tick_max_us = hist.max() * 1e6;
+    if let Some(t) = &ticker {
+        s.deadline_overruns = t.overruns;
+        s.deadline_misses = t.missed;
+    }
+    s.preview_fallbacks = core.preview_fallbacks;
+    s.forecasts_accepted = window.accepted;
+    s.forecasts_rejected = window.rejected;
+    if let Some(h) = &c2 {
+        s.c2_solves = h.stats.solves.load(Ordering::Relaxed);
+        s.c2_failures = h.stats.failures.load(Ordering::Relaxed);
+        s.c2_panics = h.stats.panics.load(Ordering::Relaxed);
+    }
+    if c2_seen > 0 {
+        s.c2_solve_mean_ms = c2_solve_sum / c2_seen as f64 * 1e3;
+        s.c2_iterations_mean = c2_iter_sum / c2_seen as f64;
+    }
+    if s.ticks > 0 {
+        s.hand_rms_error = (hand_sq / s.ticks as f64).sqrt();
+    }
+    if !s.min_zmp_margin.is_finite() {
+        s.min_zmp_margin = 0.0;
+    }
+    if let Some(l) = logger {
+        s.dropped_log_records = l.dropped.load(Ordering::Relaxed);
+        l.finish();
+    }
+    drop(c2);
+    Ok(s)
+}

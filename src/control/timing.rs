@@ -1,0 +1,182 @@
+//! Fixed-rate loop timing: sleep to absolute deadlines on CLOCK_MONOTONIC, skip (never catch up)
+//! missed ticks, and keep tick-time statistics in a fixed histogram (no allocation per tick).
+
+use std::time::{Duration, Instant};
+
+/// Absolute-deadline ticker.
+pub struct Ticker {
+    period: Duration,
+    next: Instant,
+    /// Ticks skipped because the loop overran its deadline.
+    pub missed: u64,
+    /// Ticks that overran (each may skip one or more deadlines).
+    pub overruns: u64,
+}
+
+impl Ticker {
+    pub fn new(period: Duration) -> Self {
+        Self {
+            period,
+            next: Instant::now() + period,
+            missed: 0,
+            overruns: 0,
+        }
+    }
+
+    pub fn period(&self) -> Duration {
+        self.period
+    }
+
+    /// Sleep until the next deadline. If it has already passed, count the overrun and move the
+    /// deadline to the next one in the future: missed ticks are skipped, not run in a burst.
+    pub fn wait(&mut self) {
+        let now = Instant::now();
+        if now > self.next {
+            let late = now - self.next;
+            let skipped = (late.as_nanos() / self.period.as_nanos().max(1)) as u64;
+            self.overruns += 1;
+            self.missed += skipped;
+            self.next += self.period * (skipped as u32 + 1);
+        }
+        sleep_until(self.next);
+        self.next += self.period;
+    }
+}
+
+/// Sleep until `deadline` with clock_nanosleep(TIMER_ABSTIME): no drift from relative sleeps.
+fn sleep_until(deadline: Instant) {
+    let now = Instant::now();
+    if deadline <= now {
+        return;
+    }
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime writes into a valid timespec.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    let target = Duration::new(ts.tv_sec as u64, ts.tv_nsec as u32) + (deadline - now);
+    let abs = libc::timespec {
+        tv_sec: target.as_secs() as libc::time_t,
+        tv_nsec: target.subsec_nanos() as libc::c_long,
+    };
+    loop {
+        // SAFETY: valid timespec; a null remainder is allowed with TIMER_ABSTIME.
+        let rc = unsafe {
+            libc::clock_nanosleep(
+                libc::CLOCK_MONOTONIC,
+                libc::TIMER_ABSTIME,
+                &abs,
+                std::ptr::null_mut(),
+            )
+        };
+        if rc != libc::EINTR {
+            break;
+        }
+    }
+}
+
+/// Latency statistics with 1 µs bins up to 20 ms (beyond: the last bin), allocated once.
+pub struct LatencyHistogram {
+    bins: Vec<u32>,
+    count: u64,
+    max: Duration,
+    sum: f64,
+}
+
+impl Default for LatencyHistogram {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl LatencyHistogram {
+    const BINS: usize = 20_000;
+
+    pub fn new() -> Self {
+        Self {
+            bins: vec![0; Self::BINS],
+            count: 0,
+            max: Duration::ZERO,
+            sum: 0.0,
+        }
+    }
+
+    pub fn record(&mut self, d: Duration) {
+        let us = (d.as_micros() as usize).min(Self::BINS - 1);
+        self.bins[us] = self.bins[us].saturating_add(1);
+        self.count += 1;
+        self.max = self.max.max(d);
+        self.sum += d.as_secs_f64();
+    }
+
+    pub fn count(&self) -> u64 {
+        self.count
+    }
+
+    /// The q-quantile (0…1) in seconds, at 1 µs resolution (upper bin edge).
+    pub fn quantile(&self, q: f64) -> f64 {
+        if self.count == 0 {
+            return 0.0;
+        }
+        let target = ((self.count as f64) * q).ceil().max(1.0) as u64;
+        let mut acc = 0u64;
+        for (us, &n) in self.bins.iter().enumerate() {
+            acc += n as u64;
+            if acc >= target {
+                return (us + 1) as f64 * 1e-6;
+            }
+        }
+        self.max.as_secs_f64()
+    }
+
+    pub fn max(&self) -> f64 {
+        self.max.as_secs_f64()
+    }
+
+    pub fn mean(&self) -> f64 {
+        if self.count == 0 {
+            0.0
+        } else {
+            self.sum / self.count as f64
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn histogram_quantiles() {
+        let mut h = LatencyHistogram::new();
+        for us in 1..=100u64 {
+            h.record(Duration::from_micros(us));
+        }
+        assert!(
+            (h.quantile(0.5) - 51e-6).abs() < 1.5e-6,
+            "{}",
+            h.quantile(0.5)
+        );
+        assert!((h.quantile(0.99) - 100e-6).abs() < 1.5e-6);
+        assert_eq!(h.max(), 100e-6);
+    }
+
+    #[test]
+    fn ticker_skips_missed_deadlines() {
+        let mut t = Ticker::new(Duration::from_millis(2));
+        t.wait();
+        std::thread::sleep(Duration::from_millis(9));
+        let before = Instant::now();
+        t.wait();
+        // No burst: the next wait sleeps to a future deadline.
+        assert!(
+            t.overruns == 1 && t.missed >= 3,
+            "overruns {} missed {}",
+            t.overruns,
+            t.missed
+        );
+        t.wait();
+        assert!(before.elapsed() >= Duration::from_millis(1));
+    }
+}

@@ -1,0 +1,184 @@
+//! The product as users meet it: `upc run` starts the simulator, the forecaster and the
+//! controller as separate processes over iceoryx2 and writes a run directory.
+
+use std::path::Path;
+use std::process::Command;
+
+fn upc() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_upc"))
+}
+
+/// Entity paths and timelines of every chunk in a `.rrd` file (it must decode to the end).
+fn rrd_contents(
+    p: &Path,
+) -> (
+    std::collections::BTreeSet<String>,
+    std::collections::BTreeSet<String>,
+) {
+    let file = std::fs::File::open(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    let mut entities = std::collections::BTreeSet::new();
+    let mut timelines = std::collections::BTreeSet::new();
+    for msg in re_log_encoding::DecoderApp::decode_lazy(std::io::BufReader::new(file)) {
+        let msg = msg.unwrap_or_else(|e| panic!("{} does not decode: {e}", p.display()));
+        if let re_log_types::LogMsg::ArrowMsg(_, arrow) = msg {
+            let chunk =
+                re_chunk::Chunk::from_arrow_msg(&arrow).unwrap_or_else(|e| panic!("chunk: {e}"));
+            entities.insert(chunk.entity_path().to_string());
+            timelines.extend(chunk.timelines().keys().map(|t| t.to_string()));
+        }
+    }
+    (entities, timelines)
+}
+
+fn read_json(p: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+#[test]
+fn launcher_runs_the_three_processes_and_writes_the_run() {
+    let out = std::env::temp_dir().join(format!("upc-system-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let status = upc()
+        .args([
+            "run",
+            "--scenario",
+            "single_impact",
+            "--duration",
+            "1.6",
+            "--controller",
+            "c1",
+            "--quiet",
+            "--name",
+            "t",
+        ])
+        .arg("--out")
+        .arg(&out)
+        .status()
+        .expect("upc runs");
+    assert!(status.success(), "upc run failed: {status}");
+    let dir = out.join("t");
+    let summary = read_json(&dir.join("summary.json"));
+    let run = &summary["runs"][0];
+    assert_eq!(run["controller"], "c1");
+    let c = &run["controller_summary"];
+    // 1.6 s at 1 kHz, answered tick by tick in lockstep.
+    let ticks = c["ticks"].as_u64().unwrap_or(0);
+    assert!((1590..=1602).contains(&ticks), "ticks {ticks}");
+    assert!(c["forecasts_accepted"].as_u64().unwrap_or(0) > 100, "{c}");
+    assert_eq!(c["forecasts_rejected"], 0);
+    assert_eq!(c["tick_errors"], 0);
+    // Balanced: the CoM height holds (no fall) and the hand stays near its set-point.
+    let drop = c["com_height_drop"].as_f64().unwrap_or(1.0);
+    assert!(drop < 0.03, "CoM dropped {drop} m");
+    let peak = c["hand_peak_error"].as_f64().unwrap_or(1.0);
+    assert!(peak < 0.1, "hand peak error {peak}");
+    for (f, min_len) in [
+        ("sim.rrd", 100_000),
+        ("controller.rrd", 100_000),
+        ("controller.csv", 10_000),
+        ("controller.json", 200),
+    ] {
+        let p = dir.join("c1").join(f);
+        let len = std::fs::metadata(&p).map(|m| m.len()).unwrap_or(0);
+        assert!(
+            len > min_len,
+            "{} is missing or too short ({len} bytes)",
+            p.display()
+        );
+    }
+    // The logs open and hold what a user looks for, on the shared sim_time timeline.
+    let (ctl, ctl_time) = rrd_contents(&dir.join("c1/controller.rrd"));
+    for e in [
+        "/controller/zmp/measured_x",
+        "/controller/zmp/predicted_x",
+        "/controller/hand/error",
+        "/controller/gains/kp",
+        "/controller/timing/tick_us",
+        "/controller/plan/zmp",
+    ] {
+        assert!(ctl.contains(e), "controller.rrd lacks {e}: {ctl:?}");
+    }
+    assert!(ctl_time.contains("sim_time"), "{ctl_time:?}");
+    let (sim, sim_time) = rrd_contents(&dir.join("c1/sim.rrd"));
+    assert!(
+        sim.iter().any(|e| e.contains("robot")),
+        "sim.rrd entities: {sim:?}"
+    );
+    assert!(sim_time.contains("sim_time"), "{sim_time:?}");
+    // The CSV holds the whole run: its last tick is at the end of the duration.
+    let csv = std::fs::read_to_string(dir.join("c1/controller.csv")).unwrap_or_default();
+    let last_t: f64 = csv
+        .lines()
+        .last()
+        .and_then(|l| l.split(',').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or(0.0);
+    assert!(last_t > 1.5, "last logged tick at {last_t} s");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn forecaster_and_controller_report_bad_arguments() {
+    let o = upc().args(["forecast", "--dt=-1"]).output().expect("runs");
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--dt must be > 0"));
+    let o = upc()
+        .args(["controller", "--set", "controller.rate_hz=0"])
+        .output()
+        .expect("runs");
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("controller.rate_hz") && err.contains("--set"),
+        "{err}"
+    );
+}
+
+#[test]
+fn python_forecaster_example_drives_a_run() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let python = root.join(".venv/bin/python");
+    assert!(
+        python.exists(),
+        "{} missing: run scripts/setup.sh (installs the iceoryx2 Python package)",
+        python.display()
+    );
+    let out = std::env::temp_dir().join(format!("upc-system-py-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let cmd = format!(
+        "{} {}",
+        python.display(),
+        root.join("examples/python/forecaster.py").display()
+    );
+    let status = upc()
+        .args([
+            "run",
+            "--scenario",
+            "single_impact",
+            "--duration",
+            "1.3",
+            "--controller",
+            "c1",
+            "--quiet",
+            "--name",
+            "py",
+        ])
+        .args(["--forecaster", &cmd])
+        .arg("--out")
+        .arg(&out)
+        .status()
+        .expect("upc runs");
+    assert!(status.success(), "upc run failed: {status}");
+    let c = read_json(&out.join("py/c1/controller.json"));
+    let accepted = c["forecasts_accepted"].as_u64().unwrap_or(0);
+    assert!(
+        accepted > 100,
+        "the controller took {accepted} Python forecasts"
+    );
+    assert_eq!(c["forecasts_rejected"], 0);
+    // The Python impact (50 N from t = 1 s) reached the hand: it moved off its set-point.
+    let peak = c["hand_peak_error"].as_f64().unwrap_or(0.0);
+    assert!(peak > 0.002 && peak < 0.1, "hand peak error {peak}");
+    let _ = std::fs::remove_dir_all(&out);
+}
