@@ -381,7 +381,9 @@ fn infeasible_com_request_gives_the_best_feasible_solution() {
     }
     let c = s.wbc.counters();
     assert_eq!((c.ticks, c.solved, c.fallbacks), (40, 40, 0), "{c:?}");
-    assert_eq!(c.solver_builds, 1);
+    // One solver for the QP without torque rows (screening), one for the full QP: the torque
+    // limits bind under these requests, so both were needed, and built once each.
+    assert_eq!(c.solver_builds, 2);
     // Back to a normal request: solved as before.
     let cmd = hold(&s);
     let sol = solve(&mut s, &cmd);
@@ -480,8 +482,8 @@ fn reused_solver_matches_a_fresh_solver_each_tick() {
         let dt = (a.tau.clone() - &b.tau).amax();
         assert!(dt < 2e-2, "tick {k}: torques differ by {dt} N·m");
     }
-    assert_eq!(warm.wbc.counters().solver_builds, 1);
-    assert_eq!(cold.wbc.counters().solver_builds, 5);
+    assert!(warm.wbc.counters().solver_builds <= 2);
+    assert!(cold.wbc.counters().solver_builds >= 5);
 }
 
 #[test]

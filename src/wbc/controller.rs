@@ -1,14 +1,17 @@
 //! The whole-body LQP (Salini, Padois, Bidaud 2011; SPEC §6), solved with clarabel each tick.
 //!
-//! Decision variables `z = [q̈ (nv); f (24)]`: the generalised accelerations (free-flyer part in
-//! the root's local frame, as `v`) and the world-axes forces at the 8 sole corners (4 per foot).
-//! The joint torques are eliminated through the actuated rows of the equations of motion,
+//! Decision variables `z = [q̈ (nv); f (24); e_com (3); e_hand (3)]`: the generalised
+//! accelerations (free-flyer part in the root's local frame, as `v`), the world-axes forces at
+//! the 8 sole corners (4 per foot), and the residuals of the CoM and hand tasks. The joint
+//! torques are eliminated through the actuated rows of the equations of motion,
 //! `τ = M_a q̈ + h_a − J_c,aᵀ f`, and recovered from the solution.
 //!
 //! ```text
-//! min ½ zᵀ P z + pᵀ z          (weighted tasks ½ w ‖A z − r‖², see below)
+//! min ½ zᵀ P z + pᵀ z          (weighted tasks ½ w ‖A z − r‖², P diagonal, see below)
 //! s.t. M_u q̈ − J_c,uᵀ f = −h_u                 floating-base rows of the EoM      (zero cone, 6)
 //!      J_s q̈ = −J̇_s q̇ − k J_s q̇                each sole, 6-D, world-aligned       (zero cone, 12)
+//!      J_com q̈ − e_com = a_com − J̇_com q̇        CoM task residual                  (zero cone, 3)
+//!      J_h q̈ − e_hand = ẍ_cmd − J̇_h q̇           hand task residual                 (zero cone, 3)
 //!      |M_a q̈ + h_a − J_c,aᵀ f| ≤ s τ_max      torque limits, both signs          (nonneg, 2·32)
 //!      ‖(t₁ᵀf_i, t₂ᵀf_i)‖ ≤ μ nᵀ f_i            friction cones, exact               (SOC(3) × 8)
 //! ```
@@ -22,7 +25,9 @@
 //! - Friction: exact second-order cones (clarabel `SecondOrderConeT(3)`) with the sole's z axis
 //!   as normal; they imply the normal force is ≥ 0, so no separate rows are needed. (The paper
 //!   linearised them; clarabel handles the true cone at the same cost.)
-//! - Tasks (`½ w ‖A z − r‖²`): CoM acceleration `J_com q̈ + J̇_com q̇ = a_com` (world), hand
+//! - Tasks (`½ w ‖A z − r‖²`; the CoM and hand tasks as `½ w ‖e‖²` on residual variables, which
+//!   keeps P diagonal and the KKT factor sparse — with `w JᵀJ` in P it was nearly dense and the
+//!   tick ≈ 5× slower): CoM acceleration `J_com q̈ + J̇_com q̇ = a_com` (world), hand
 //!   operational-space acceleration `J_h q̈ + J̇_h q̇ = ẍ_cmd` (linear rows, world-aligned) with
 //!   `ẍ_cmd = K_p (x_des − x) + K_d (ẋ_des − ẋ) + ẍ_des`, base orientation PD towards the posture
 //!   reference's root orientation, joint posture PD, and regularisation of q̈ and f (strictly
@@ -179,8 +184,9 @@ pub struct WholeBodyController {
     nv: usize,
     nq: usize,
     nz: usize,
-    /// Constraint row offsets: EoM (0), soles, torque rows, cones; total rows.
+    /// Constraint row offsets: EoM (0), soles, task residuals, torque rows, cones; total rows.
     row_feet: usize,
+    row_task: usize,
     row_tau: usize,
     row_soc: usize,
     n_rows: usize,
@@ -206,11 +212,12 @@ pub struct WholeBodyController {
     ad: DMatrix<f64>,
     bd: Vec<f64>,
     p_pattern: Pattern,
-    a_pattern: Pattern,
     p_val: Vec<f64>,
-    a_val: Vec<f64>,
-    cones: Vec<SupportedConeT<f64>>,
-    solver: Option<DefaultSolver<f64>>,
+    /// The full QP, and the same QP without the torque rows (tried first, see `solve_qp`).
+    full: QpInstance,
+    relaxed: Option<QpInstance>,
+    /// Copy of the accepted solution.
+    x: Vec<f64>,
     posture_ref: Option<DVector<f64>>,
     // Outputs.
     tau: DVector<f64>,
@@ -258,9 +265,13 @@ impl WholeBodyController {
         }
         let hand_id = model.frame_id(&config.hand_frame)?;
 
-        let nz = nv + 3 * N_CONTACTS;
+        // z = [q̈, f, e_com, e_hand]: the two dense 3-row tasks enter through residual
+        // variables (J q̈ − e = r, cost ½ w ‖e‖²) so that P is diagonal. With JᵀJ in P the
+        // 38×38 block would be dense and the KKT factor nearly dense (≈ 5× slower).
+        let nz = nv + 3 * N_CONTACTS + 6;
         let row_feet = 6;
-        let row_tau = row_feet + 12;
+        let row_task = row_feet + 12;
+        let row_tau = row_task + 6;
         let row_soc = row_tau + 2 * limited.len();
         let n_rows = row_soc + 3 * N_CONTACTS;
 
@@ -274,36 +285,54 @@ impl WholeBodyController {
             let (ja, jb) = (model.dof_joint[a], model.dof_joint[b]);
             model.is_ancestor(ja, jb) || model.is_ancestor(jb, ja)
         };
-        // P: the q̈ block is dense (J_com has every column), the force block diagonal.
-        let p_pattern = Pattern::from_mask(nz, nz, |r, c| r <= c && (c < nv || r == c));
+        // P: diagonal (posture, base orientation, regularisation, task residual weights).
+        let p_pattern = Pattern::from_mask(nz, nz, |r, c| r == c);
+        let e0 = nv + 3 * N_CONTACTS;
         let mut tau_row_dof = vec![usize::MAX; n_rows];
         for (k, &(dof, _)) in limited.iter().enumerate() {
             tau_row_dof[row_tau + 2 * k] = dof;
             tau_row_dof[row_tau + 2 * k + 1] = dof;
         }
         let a_pattern = Pattern::from_mask(n_rows, nz, |r, c| {
-            let force = (c >= nv).then(|| (c - nv) / 3);
+            let force = (c >= nv && c < e0).then(|| (c - nv) / 3);
             if r < row_feet {
                 // Floating-base rows: M_u is dense, every contact acts on the base.
-                true
-            } else if r < row_tau {
+                c < e0
+            } else if r < row_task {
                 let foot = foot_ids[(r - row_feet) / 6];
-                force.is_none() && supports(c, foot)
+                c < nv && supports(c, foot)
+            } else if r < row_tau {
+                // CoM rows (J_com has every column), then hand rows; −1 on the residual.
+                let t = r - row_task;
+                (c < nv && (t < 3 || supports(c, hand_id))) || c == e0 + t
             } else if r < row_soc {
                 let dof = tau_row_dof[r];
                 match force {
-                    None => m_struct(dof, c),
+                    None if c < nv => m_struct(dof, c),
+                    None => false,
                     Some(k) => supports(dof, corner_ids[k]),
                 }
             } else {
                 force == Some((r - row_soc) / 3)
             }
         });
+        let socs = || (0..N_CONTACTS).map(|_| SupportedConeT::SecondOrderConeT(3));
         let mut cones = vec![SupportedConeT::ZeroConeT(row_tau)];
         if !limited.is_empty() {
             cones.push(SupportedConeT::NonnegativeConeT(2 * limited.len()));
         }
-        cones.extend((0..N_CONTACTS).map(|_| SupportedConeT::SecondOrderConeT(3)));
+        cones.extend(socs());
+        // Same QP without the torque rows, same dense scratch.
+        let relaxed = (!limited.is_empty()).then(|| {
+            let rows: Vec<usize> = (0..row_tau).chain(row_soc..n_rows).collect();
+            let full_pattern = &a_pattern;
+            let pattern =
+                Pattern::from_mask_rows(n_rows, &rows, nz, |r, c| full_pattern.contains(r, c));
+            let mut cones = vec![SupportedConeT::ZeroConeT(row_tau)];
+            cones.extend(socs());
+            QpInstance::new(pattern, rows, cones)
+        });
+        let full = QpInstance::new(a_pattern, (0..n_rows).collect(), cones);
 
         let tol = config.tolerance;
         let settings = DefaultSettings {
@@ -317,6 +346,10 @@ impl WholeBodyController {
             input_sparse_dropzeros: false,
             direct_kkt_solver: true,
             direct_solve_method: "qdldl".to_string(),
+            // Iterative refinement of the KKT solves costs ≈ 35 % of the tick here and the
+            // tests' accuracy checks (EoM residual, limits, cones) hold without it;
+            // `tune_solver` re-enables it.
+            iterative_refinement_enable: false,
             ..DefaultSettings::default()
         };
 
@@ -342,6 +375,7 @@ impl WholeBodyController {
             nq: model.nq,
             nz,
             row_feet,
+            row_task,
             row_tau,
             row_soc,
             n_rows,
@@ -362,11 +396,10 @@ impl WholeBodyController {
             ad: DMatrix::zeros(n_rows, nz),
             bd: vec![0.0; n_rows],
             p_val: vec![0.0; p_pattern.nnz()],
-            a_val: vec![0.0; a_pattern.nnz()],
             p_pattern,
-            a_pattern,
-            cones,
-            solver: None,
+            full,
+            relaxed,
+            x: vec![0.0; nz],
             posture_ref: None,
             tau: DVector::zeros(na),
             last_tau: DVector::zeros(na),
@@ -375,6 +408,16 @@ impl WholeBodyController {
             counters: WbcCounters::default(),
             last_warn_tick: None,
         })
+    }
+
+    /// Adjusts clarabel's settings (tuning, benchmarks). Takes effect at the next tick, which
+    /// builds a new solver; presolve and zero dropping stay off (the in-place updates need them
+    /// off).
+    pub fn tune_solver(&mut self, f: impl FnOnce(&mut DefaultSettings<f64>)) {
+        f(&mut self.settings);
+        self.settings.presolve_enable = false;
+        self.settings.input_sparse_dropzeros = false;
+        self.drop_solvers();
     }
 
     /// Counters of ticks, solves and fallbacks since construction.
@@ -411,7 +454,7 @@ impl WholeBodyController {
             self.nz,
             self.n_rows,
             self.p_pattern.nnz(),
-            self.a_pattern.nnz(),
+            self.full.pattern.nnz(),
         )
     }
 
@@ -463,7 +506,7 @@ impl WholeBodyController {
                 self.counters.consecutive_fallbacks += 1;
                 if !matches!(reason, FallbackReason::InvalidInput) {
                     // A fresh solver (fresh equilibration) next tick.
-                    self.solver = None;
+                    self.drop_solvers();
                 }
                 self.apply_fallback(model, data, q, v);
                 self.warn(reason);
@@ -563,16 +606,18 @@ impl WholeBodyController {
         let p = self.p.clone();
         self.pd.fill(0.0);
         self.qd.fill(0.0);
-        // CoM task.
+        // CoM and hand tasks: weights on their residual variables (rows below).
+        let e0 = nv + 3 * N_CONTACTS;
         let r_com = cmd.com_acc - com_drift;
-        add_task(&mut self.pd, &mut self.qd, &self.jcom, &r_com, p.w_com);
-        // Hand impedance task.
         let hand_vel = mat3_mul_v(&self.jh, v);
         let x_cmd = cmd.kp * (cmd.hand_pos_des - hand_pos)
             + cmd.kd * (cmd.hand_vel_des - hand_vel)
             + cmd.hand_acc_des;
         let r_hand = x_cmd - hand_drift;
-        add_task(&mut self.pd, &mut self.qd, &self.jh, &r_hand, p.w_hand);
+        for k in 0..3 {
+            self.pd[(e0 + k, e0 + k)] = p.w_com;
+            self.pd[(e0 + 3 + k, e0 + 3 + k)] = p.w_hand;
+        }
         // Base orientation: world angular acceleration R ω̇_b (= R q̈[3..6] since d/dt(R ω_b) =
         // R ω̇_b) towards α = K_p log(R_ref Rᵀ) − K_d ω; in body axes the target is Rᵀ α.
         let q_ref = cmd
@@ -598,7 +643,7 @@ impl WholeBodyController {
             self.qd[d] -= p.w_posture * target;
         }
         // Regularisation.
-        for d in 0..self.nz {
+        for d in 0..e0 {
             self.pd[(d, d)] += if d < nv { p.w_reg_acc } else { p.w_reg_force };
         }
 
@@ -629,6 +674,18 @@ impl WholeBodyController {
                 }
                 self.bd[row] = -feet_drift[foot][i] - p.contact_damping * jv;
             }
+        }
+        // Task residuals: J_com q̈ − e_com = a_com − J̇_com v, J_h q̈ − e_h = ẍ_cmd − J̇_h v.
+        for k in 0..3 {
+            let (rc, rh) = (self.row_task + k, self.row_task + 3 + k);
+            for c in 0..nv {
+                ad[(rc, c)] = self.jcom[(k, c)];
+                ad[(rh, c)] = self.jh[(k, c)];
+            }
+            ad[(rc, e0 + k)] = -1.0;
+            ad[(rh, e0 + 3 + k)] = -1.0;
+            self.bd[rc] = r_com[k];
+            self.bd[rh] = r_hand[k];
         }
         // Torque limits: ±(M_a q̈ + h_a − J_c,aᵀ f) ≤ τ_max.
         for (k, &(dof, tmax)) in self.limited.iter().enumerate() {
@@ -661,53 +718,68 @@ impl WholeBodyController {
         }
 
         self.p_pattern.gather(&self.pd, &mut self.p_val);
-        self.a_pattern.gather(&self.ad, &mut self.a_val);
         let finite = |s: &[f64]| s.iter().all(|x| x.is_finite());
-        if !(finite(&self.p_val) && finite(&self.a_val) && finite(&self.qd) && finite(&self.bd)) {
+        if !(finite(&self.p_val)
+            && finite(&self.qd)
+            && finite(self.ad.as_slice())
+            && finite(&self.bd))
+        {
             return Err(NonFiniteProblem);
         }
 
-        // ---- Solve: update the data in place (fast path) or build a solver. ----
-        let reuse = self.p.reuse_solver && self.solver.is_some();
-        if reuse {
-            let s = self.solver.as_mut().ok_or(SolverSetup)?;
-            let updated = s
-                .update_P(&self.p_val)
-                .and_then(|_| s.update_A(&self.a_val))
-                .and_then(|_| s.update_q(&self.qd))
-                .and_then(|_| s.update_b(&self.bd));
-            if updated.is_err() {
-                return Err(SolverSetup);
-            }
-        } else {
-            let pm = self.p_pattern.to_csc(&self.p_val);
-            let am = self.a_pattern.to_csc(&self.a_val);
-            let s = DefaultSolver::new(
-                &pm,
+        // ---- Solve. Constraint screening: the QP without the torque rows is much cheaper
+        // (its KKT factor is far sparser); when its optimum satisfies every torque limit it is
+        // also the optimum of the full QP (dropping inactive constraints does not move the
+        // optimum of a convex problem). Otherwise the full QP is solved. ----
+        let mut almost = false;
+        let mut accepted = false;
+        if let Some(relaxed) = self.relaxed.as_mut() {
+            let run = relaxed.run(
+                &self.p_pattern,
+                &self.p_val,
                 &self.qd,
-                &am,
+                &self.ad,
                 &self.bd,
-                &self.cones,
-                self.settings.clone(),
-            )
-            .map_err(|_| SolverSetup)?;
-            self.counters.solver_builds += 1;
-            self.solver = Some(s);
+                &self.settings,
+                self.p.reuse_solver,
+                &mut self.counters,
+            );
+            *iterations += relaxed.iterations();
+            *solve_time += relaxed.solve_time();
+            if let Ok(a) = run {
+                let x = relaxed.x();
+                let within = self.limited.iter().all(|&(dof, tmax)| {
+                    let t = torque(m, &self.h, &self.jc, x, dof);
+                    t.abs() <= tmax
+                });
+                if within && x.len() == self.nz && finite(x) {
+                    self.x.copy_from_slice(x);
+                    almost = a;
+                    accepted = true;
+                }
+            }
         }
-        let solver = self.solver.as_mut().ok_or(SolverSetup)?;
-        catch_unwind(AssertUnwindSafe(|| solver.solve())).map_err(|_| SolverPanic)?;
-        let sol = &solver.solution;
-        *solve_time = Duration::from_secs_f64(sol.solve_time.max(0.0));
-        *iterations = sol.iterations;
-        let almost = match sol.status {
-            SolverStatus::Solved => false,
-            SolverStatus::AlmostSolved => true,
-            s => return Err(Solver(s)),
-        };
-        let x = &sol.x;
-        if x.len() != self.nz || !finite(x) {
-            return Err(NonFiniteSolution);
+        if !accepted {
+            let run = self.full.run(
+                &self.p_pattern,
+                &self.p_val,
+                &self.qd,
+                &self.ad,
+                &self.bd,
+                &self.settings,
+                self.p.reuse_solver,
+                &mut self.counters,
+            );
+            *iterations += self.full.iterations();
+            *solve_time += self.full.solve_time();
+            almost = run?;
+            let x = self.full.x();
+            if x.len() != self.nz || !finite(x) {
+                return Err(NonFiniteSolution);
+            }
+            self.x.copy_from_slice(x);
         }
+        let x = &self.x;
 
         // ---- Outputs: q̈, f, τ = M_a q̈ + h_a − J_c,aᵀ f. ----
         self.ddq.copy_from_slice(&x[..nv]);
@@ -715,20 +787,19 @@ impl WholeBodyController {
             self.forces[c] = Vector3::new(x[nv + 3 * c], x[nv + 3 * c + 1], x[nv + 3 * c + 2]);
         }
         for a in 0..nv - 6 {
-            let d = 6 + a;
-            let mut t = self.h[d];
-            for c in 0..nv {
-                t += m[(d, c)] * x[c];
-            }
-            for j in 0..3 * N_CONTACTS {
-                t -= self.jc[(j, d)] * x[nv + j];
-            }
-            self.tau[a] = t;
+            self.tau[a] = torque(m, &self.h, &self.jc, x, 6 + a);
         }
         if !finite(self.tau.as_slice()) {
             return Err(NonFiniteSolution);
         }
         Ok(almost)
+    }
+
+    fn drop_solvers(&mut self) {
+        self.full.solver = None;
+        if let Some(r) = self.relaxed.as_mut() {
+            r.solver = None;
+        }
     }
 
     /// World-aligned Jacobians of the corners (linear rows), soles (6 rows) and hand (linear
@@ -835,12 +906,103 @@ impl WholeBodyController {
     }
 }
 
-/// `P += w JᵀJ` (top-left block), `p −= w Jᵀ r` for a 3-row task.
-fn add_task(pd: &mut DMatrix<f64>, qd: &mut [f64], j: &DMatrix<f64>, r: &Vector3<f64>, w: f64) {
-    let nv = j.ncols();
-    pd.view_mut((0, 0), (nv, nv)).gemm_tr(w, j, j, 1.0);
+/// `τ_d = M[d, :] q̈ + h_d − Σ J_c[:, d]ᵀ f` from a solution `x = [q̈, f, …]`.
+fn torque(m: &DMatrix<f64>, h: &DVector<f64>, jc: &DMatrix<f64>, x: &[f64], d: usize) -> f64 {
+    let nv = m.ncols();
+    let mut t = h[d];
     for c in 0..nv {
-        qd[c] -= w * (j[(0, c)] * r.x + j[(1, c)] * r.y + j[(2, c)] * r.z);
+        t += m[(d, c)] * x[c];
+    }
+    for j in 0..3 * N_CONTACTS {
+        t -= jc[(j, d)] * x[nv + j];
+    }
+    t
+}
+
+/// One clarabel problem over the shared dense scratch: its rows, pattern, cones and solver.
+struct QpInstance {
+    rows: Vec<usize>,
+    pattern: Pattern,
+    a_val: Vec<f64>,
+    b_val: Vec<f64>,
+    cones: Vec<SupportedConeT<f64>>,
+    solver: Option<DefaultSolver<f64>>,
+}
+
+impl QpInstance {
+    fn new(pattern: Pattern, rows: Vec<usize>, cones: Vec<SupportedConeT<f64>>) -> Self {
+        Self {
+            a_val: vec![0.0; pattern.nnz()],
+            b_val: vec![0.0; rows.len()],
+            rows,
+            pattern,
+            cones,
+            solver: None,
+        }
+    }
+
+    /// Gathers A and b, updates the solver in place (or builds one), solves.
+    /// `Ok(almost_solved)` on Solved / AlmostSolved.
+    #[allow(clippy::too_many_arguments)]
+    fn run(
+        &mut self,
+        p_pattern: &Pattern,
+        p_val: &Vec<f64>,
+        q: &Vec<f64>,
+        ad: &DMatrix<f64>,
+        bd: &[f64],
+        settings: &DefaultSettings<f64>,
+        reuse: bool,
+        counters: &mut WbcCounters,
+    ) -> Result<bool, FallbackReason> {
+        use FallbackReason::*;
+        self.pattern.gather(ad, &mut self.a_val);
+        for (b, &r) in self.b_val.iter_mut().zip(&self.rows) {
+            *b = bd[r];
+        }
+        match self.solver.as_mut() {
+            Some(s) if reuse => {
+                let updated = s
+                    .update_P(p_val)
+                    .and_then(|_| s.update_A(&self.a_val))
+                    .and_then(|_| s.update_q(q))
+                    .and_then(|_| s.update_b(&self.b_val));
+                if updated.is_err() {
+                    self.solver = None;
+                    return Err(SolverSetup);
+                }
+            }
+            _ => {
+                let pm = p_pattern.to_csc(p_val);
+                let am = self.pattern.to_csc(&self.a_val);
+                let s = DefaultSolver::new(&pm, q, &am, &self.b_val, &self.cones, settings.clone())
+                    .map_err(|_| SolverSetup)?;
+                counters.solver_builds += 1;
+                self.solver = Some(s);
+            }
+        }
+        let solver = self.solver.as_mut().ok_or(SolverSetup)?;
+        if catch_unwind(AssertUnwindSafe(|| solver.solve())).is_err() {
+            self.solver = None;
+            return Err(SolverPanic);
+        }
+        match solver.solution.status {
+            SolverStatus::Solved => Ok(false),
+            SolverStatus::AlmostSolved => Ok(true),
+            s => Err(Solver(s)),
+        }
+    }
+
+    fn x(&self) -> &[f64] {
+        self.solver.as_ref().map_or(&[], |s| &s.solution.x)
+    }
+    fn iterations(&self) -> u32 {
+        self.solver.as_ref().map_or(0, |s| s.solution.iterations)
+    }
+    fn solve_time(&self) -> Duration {
+        self.solver.as_ref().map_or(Duration::ZERO, |s| {
+            Duration::from_secs_f64(s.solution.solve_time.max(0.0))
+        })
     }
 }
 

@@ -10,6 +10,7 @@ use clarabel::algebra::CscMatrix;
 use nalgebra::DMatrix;
 
 pub(crate) struct Pattern {
+    dense_nrows: usize,
     nrows: usize,
     ncols: usize,
     colptr: Vec<usize>,
@@ -23,6 +24,18 @@ impl Pattern {
     pub(crate) fn from_mask(
         nrows: usize,
         ncols: usize,
+        keep: impl FnMut(usize, usize) -> bool,
+    ) -> Self {
+        let rows: Vec<usize> = (0..nrows).collect();
+        Self::from_mask_rows(nrows, &rows, ncols, keep)
+    }
+
+    /// The sub-matrix made of the dense scratch's rows `rows` (renumbered 0..), entries
+    /// `(rows[i], c)` with `keep(rows[i], c)`.
+    pub(crate) fn from_mask_rows(
+        dense_nrows: usize,
+        rows: &[usize],
+        ncols: usize,
         mut keep: impl FnMut(usize, usize) -> bool,
     ) -> Self {
         let mut colptr = Vec::with_capacity(ncols + 1);
@@ -30,21 +43,30 @@ impl Pattern {
         let mut dense_index = Vec::new();
         colptr.push(0);
         for c in 0..ncols {
-            for r in 0..nrows {
+            for (i, &r) in rows.iter().enumerate() {
                 if keep(r, c) {
-                    rowval.push(r);
-                    dense_index.push(r + c * nrows);
+                    rowval.push(i);
+                    dense_index.push(r + c * dense_nrows);
                 }
             }
             colptr.push(rowval.len());
         }
         Self {
-            nrows,
+            dense_nrows,
+            nrows: rows.len(),
             ncols,
             colptr,
             rowval,
             dense_index,
         }
+    }
+
+    /// Whether dense entry `(r, c)` is stored.
+    pub(crate) fn contains(&self, r: usize, c: usize) -> bool {
+        let target = r + c * self.dense_nrows;
+        self.dense_index[self.colptr[c]..self.colptr[c + 1]]
+            .binary_search(&target)
+            .is_ok()
     }
 
     pub(crate) fn nnz(&self) -> usize {
@@ -53,7 +75,7 @@ impl Pattern {
 
     /// `out[k] = dense[entry k]` (no allocation; `out.len() == nnz`).
     pub(crate) fn gather(&self, dense: &DMatrix<f64>, out: &mut [f64]) {
-        debug_assert_eq!(dense.nrows(), self.nrows);
+        debug_assert_eq!(dense.nrows(), self.dense_nrows);
         debug_assert_eq!(dense.ncols(), self.ncols);
         let d = dense.as_slice();
         for (o, &i) in out.iter_mut().zip(&self.dense_index) {
