@@ -7,7 +7,6 @@
 //! - [`offline`]: the closed loop of the reduced models behind `upc preview`, with its metrics.
 //! - [`config`]: TOML configuration with errors that name the offending key.
 //! - [`wbc`]: the whole-body torque controller (LQP over q̈ and contact forces, clarabel).
-//! - [`wbc`]: the whole-body torque controller (LQP over q̈ and contact forces, clarabel).
 //! - [`forecast`]: the reference force forecaster process.
 //! - [`sim`]: the simulator process (humanoid on the ground, door on a spherical joint).
 //! - [`control`]: the control server's loop pieces (tick, C2 thread, timing, real-time setup).
@@ -21,6 +20,5 @@ pub mod forecast;
 pub mod offline;
 pub mod preview;
 pub mod scenario;
-pub mod wbc;
 pub mod sim;
 pub mod wbc;

@@ -161,45 +161,6 @@ pub struct WbcConfig {
     pub reuse_solver: bool,
 }
 
-/// Whole-body torque controller: the LQP of SPEC §6 (`src/wbc/`). Weights are those of the
-/// least-squares tasks `½ w ‖A z − r‖²` (accelerations in m/s², rad/s²; forces in N).
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct WbcConfig {
-    /// Sole frames of the two feet; the contact points are the frames `<foot>_fl`, `_fr`, `_rl`,
-    /// `_rr` (the sole corners), the contact normal is the sole frame's z axis.
-    pub feet: [String; 2],
-    /// Frame of the hand impedance task.
-    pub hand_frame: String,
-    /// Coulomb friction coefficient μ of the friction cones.
-    pub friction: f64,
-    /// Fraction of the URDF effort limits the QP may use, in (0, 1].
-    pub torque_limit_scale: f64,
-    /// Velocity stabilisation of the contacts (1/s): J q̈ = −J̇ q̇ − k J q̇ for each sole.
-    pub contact_damping: f64,
-    pub w_com: f64,
-    pub w_hand: f64,
-    pub w_base_orientation: f64,
-    pub w_posture: f64,
-    /// Regularisation of q̈ and of the contact forces.
-    pub w_reg_acceleration: f64,
-    pub w_reg_force: f64,
-    /// Orientation PD of the floating base towards the reference (1/s², 1/s).
-    pub base_kp: f64,
-    pub base_kd: f64,
-    /// Posture PD of the joints towards the reference (1/s², 1/s).
-    pub posture_kp: f64,
-    pub posture_kd: f64,
-    /// Joint damping of the fallback torque (N·m·s/rad).
-    pub fallback_damping: f64,
-    /// Interior-point iteration limit and tolerance (gap and feasibility) of clarabel.
-    pub max_iterations: u32,
-    pub tolerance: f64,
-    /// Keep one clarabel solver and update its data every tick (fast path); `false` builds a
-    /// new solver each tick (slow path, kept for comparison).
-    pub reuse_solver: bool,
-}
-
 impl Layers {
     /// Deserialize and range-check the merged layers into a [`Config`].
     pub fn build(&self) -> Result<Config, ConfigError> {
@@ -309,35 +270,6 @@ impl Config {
             return Err(l.range_error("gain_search.max_iterations", "iteration limits must be ≥ 1"));
         }
         pos("gain_search.tolerance", g.tolerance)?;
-        let w = &self.wbc;
-        pos("wbc.friction", w.friction)?;
-        if !(w.torque_limit_scale > 0.0 && w.torque_limit_scale <= 1.0) {
-            return Err(l.range_error(
-                "wbc.torque_limit_scale",
-                format!("must be in (0, 1], got {}", w.torque_limit_scale),
-            ));
-        }
-        for (key, v) in [
-            ("wbc.contact_damping", w.contact_damping),
-            ("wbc.w_com", w.w_com),
-            ("wbc.w_hand", w.w_hand),
-            ("wbc.w_base_orientation", w.w_base_orientation),
-            ("wbc.w_posture", w.w_posture),
-            ("wbc.base_kp", w.base_kp),
-            ("wbc.base_kd", w.base_kd),
-            ("wbc.posture_kp", w.posture_kp),
-            ("wbc.posture_kd", w.posture_kd),
-            ("wbc.fallback_damping", w.fallback_damping),
-        ] {
-            nonneg(key, v)?;
-        }
-        // Strictly positive regularisation keeps the QP strictly convex (unique q̈ and f).
-        pos("wbc.w_reg_acceleration", w.w_reg_acceleration)?;
-        pos("wbc.w_reg_force", w.w_reg_force)?;
-        if w.max_iterations == 0 {
-            return Err(l.range_error("wbc.max_iterations", "must be ≥ 1"));
-        }
-        pos("wbc.tolerance", w.tolerance)?;
         let w = &self.wbc;
         pos("wbc.friction", w.friction)?;
         if !(w.torque_limit_scale > 0.0 && w.torque_limit_scale <= 1.0) {
