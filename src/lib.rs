@@ -10,6 +10,7 @@
 //! - [`forecast`]: the reference force forecaster process.
 //! - [`sim`]: the simulator process (humanoid on the ground, door on a spherical joint).
 //! - [`control`]: the control server's loop pieces (tick, C2 thread, timing, real-time setup).
+//! - [`shutdown`]: SIGINT/SIGTERM handling shared by the processes.
 //! - [`channels`]: the iceoryx2 channel contract shared by every process.
 
 pub mod channels;
@@ -20,5 +21,6 @@ pub mod forecast;
 pub mod offline;
 pub mod preview;
 pub mod scenario;
+pub mod shutdown;
 pub mod sim;
 pub mod wbc;

@@ -52,6 +52,9 @@ pub struct TorqueMsg {
     pub n: u32,
     /// Controller status flags (see `TORQUE_FLAG_*`).
     pub flags: u32,
+    /// Controller compute time for this answer (ns): lets the simulator separate IPC latency
+    /// from compute in its round-trip measurement.
+    pub compute_ns: u64,
     /// Joint torques (N·m), model joint order.
     pub tau: [f64; MAX_DOF],
 }

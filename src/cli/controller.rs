@@ -6,8 +6,8 @@ use upc::channels::DEFAULT_PREFIX;
 use upc::config::ControllerKind;
 use upc::control::server::{ServerOptions, run_server};
 use upc::dynamics::{BaseJoint, Model, icub_like};
-use upc::forecast::stop_flag;
 use upc::scenario::Scenario;
+use upc::shutdown::stop_flag;
 
 use super::CliResult;
 use super::common::ConfigArgs;

@@ -1,8 +1,9 @@
 //! `upc forecast`: publish a scenario's hand force forecast.
 
 use upc::channels::{Bus, DEFAULT_PREFIX};
-use upc::forecast::{ForecastSettings, run, stop_flag};
+use upc::forecast::{ForecastSettings, run};
 use upc::scenario::Scenario;
+use upc::shutdown::stop_flag;
 
 use super::CliResult;
 

@@ -63,6 +63,7 @@ struct Entry {
     dir: String,
     wall_time: f64,
     controller_summary: Option<ServerSummary>,
+    sim_summary: Option<serde_json::Value>,
     sim_exit: Option<i32>,
     forecaster_exit: Option<i32>,
     controller_exit: Option<i32>,
@@ -152,6 +153,8 @@ fn run_one(
         ])
         .args(["--recording-id", &recording, "--rrd"])
         .arg(dir.join("sim.rrd"))
+        .arg("--summary")
+        .arg(dir.join("sim.json"))
         .stdout(log("sim.log")?)
         .stderr(log("sim.log")?)
         .spawn()?;
@@ -239,14 +242,15 @@ fn run_one(
     // The controller is done: give the others a moment, then ask them to stop.
     let sim_exit = stop(&mut sim, Duration::from_secs(5));
     let forecaster_exit = stop(&mut forecaster, Duration::from_secs(2));
-    let controller_summary = std::fs::read_to_string(dir.join("controller.json"))
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok());
+    let read = |f: &str| std::fs::read_to_string(dir.join(f)).ok();
+    let controller_summary = read("controller.json").and_then(|t| serde_json::from_str(&t).ok());
+    let sim_summary = read("sim.json").and_then(|t| serde_json::from_str(&t).ok());
     Ok(Entry {
         controller: kind.name().into(),
         dir: dir.display().to_string(),
         wall_time: start.elapsed().as_secs_f64(),
         controller_summary,
+        sim_summary,
         sim_exit,
         forecaster_exit,
         controller_exit,
@@ -277,7 +281,7 @@ fn stop(child: &mut Child, grace: Duration) -> Option<i32> {
 
 fn print_table(entries: &[Entry]) {
     println!(
-        "\n{:<4} {:>11} {:>11} {:>10} {:>10} {:>9} {:>9} {:>9} {:>8} {:>9} {:>8}",
+        "\n{:<4} {:>11} {:>11} {:>10} {:>10} {:>9} {:>9} {:>9} {:>8} {:>9} {:>8} {:>8}",
         "ctrl",
         "ZMP margin",
         "at edge",
@@ -288,16 +292,28 @@ fn print_table(entries: &[Entry]) {
         "tick max",
         "misses",
         "C2 solve",
+        "IPC p99",
         "wall"
     );
     println!(
-        "{:<4} {:>11} {:>11} {:>10} {:>10} {:>9} {:>9} {:>9} {:>8} {:>9} {:>8}",
-        "", "min (mm)", "(s)", "(mm)", "(mm)", "(µs)", "(µs)", "(µs)", "", "mean(ms)", "(s)"
+        "{:<4} {:>11} {:>11} {:>10} {:>10} {:>9} {:>9} {:>9} {:>8} {:>9} {:>8} {:>8}",
+        "",
+        "min (mm)",
+        "(s)",
+        "(mm)",
+        "(mm)",
+        "(µs)",
+        "(µs)",
+        "(µs)",
+        "",
+        "mean(ms)",
+        "(µs)",
+        "(s)"
     );
     for e in entries {
         match &e.controller_summary {
             Some(s) => println!(
-                "{:<4} {:>11.1} {:>11.3} {:>10.2} {:>10.2} {:>9.0} {:>9.0} {:>9.0} {:>8} {:>9.2} {:>8.1}",
+                "{:<4} {:>11.1} {:>11.3} {:>10.2} {:>10.2} {:>9.0} {:>9.0} {:>9.0} {:>8} {:>9.2} {:>8.1} {:>8.1}",
                 e.controller,
                 s.min_zmp_margin * 1e3,
                 s.time_at_support_edge,
@@ -308,6 +324,11 @@ fn print_table(entries: &[Entry]) {
                 s.tick_max_us,
                 s.deadline_misses,
                 s.c2_solve_mean_ms,
+                e.sim_summary
+                    .as_ref()
+                    .and_then(|j| j["ipc_overhead_p99"].as_f64())
+                    .unwrap_or(f64::NAN)
+                    * 1e6,
                 e.wall_time
             ),
             None => println!(

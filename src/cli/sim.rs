@@ -2,8 +2,9 @@
 
 use std::path::PathBuf;
 
+use upc::shutdown::stop_flag;
 use upc::sim::SimConfig;
-use upc::sim::process::{RunOptions, run, stop_on_signals};
+use upc::sim::process::{RunOptions, run};
 
 use super::CliResult;
 
@@ -34,6 +35,9 @@ pub struct SimArgs {
     /// Rerun recording id (give the controller the same one to merge recordings).
     #[arg(long)]
     pub recording_id: Option<String>,
+    /// Write the run's figures (step time, contacts, IPC overhead) as JSON here.
+    #[arg(long)]
+    pub summary: Option<PathBuf>,
     /// Extra config files (layout of config/sim.toml) over the embedded defaults, in order.
     #[arg(long = "config")]
     pub configs: Vec<PathBuf>,
@@ -75,11 +79,14 @@ pub fn run_cli(args: SimArgs) -> CliResult {
     let opts = RunOptions {
         node_name: format!("upc-sim-{}", std::process::id()),
         config,
-        rrd: args.rrd,
-        recording_id: args.recording_id,
+        rrd: args.rrd.clone(),
+        recording_id: args.recording_id.clone(),
     };
-    let stop = stop_on_signals();
+    let stop = stop_flag();
     let s = run(&opts, &stop)?;
+    if let Some(p) = &args.summary {
+        std::fs::write(p, serde_json::to_string_pretty(&s)?)?;
+    }
     println!(
         "sim: {} steps, {:.3} s simulated in {:.3} s; step time p50 {:.1} µs, p99 {:.1} µs, max {:.1} µs; \
          overruns {}; commands accepted {}, rejected {} (length {}, non-finite {}, order {}), stale {}; \
@@ -105,5 +112,13 @@ pub fn run_cli(args: SimArgs) -> CliResult {
         s.recorder.written,
         s.recorder.dropped
     );
+    if s.ipc_overhead_p50 > 0.0 {
+        println!(
+            "sim: IPC round-trip overhead (excluding controller compute) p50 {:.1} µs, p99 {:.1} µs, max {:.1} µs",
+            s.ipc_overhead_p50 * 1e6,
+            s.ipc_overhead_p99 * 1e6,
+            s.ipc_overhead_max * 1e6
+        );
+    }
     Ok(())
 }

@@ -265,6 +265,7 @@ pub fn run_server(
             m.state_step = state.step;
             m.n = n_tau as u32;
             m.flags = flags;
+            m.compute_ns = tick_start.elapsed().as_nanos() as u64;
             m.tau[..n_tau].copy_from_slice(&tau[..n_tau]);
         })?;
         torque_events.notify()?;

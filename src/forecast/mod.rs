@@ -78,14 +78,3 @@ pub fn run(
     }
     Ok(seq)
 }
-
-/// A flag raised by SIGINT or SIGTERM, for processes that stop cleanly.
-pub fn stop_flag() -> Arc<AtomicBool> {
-    let flag = Arc::new(AtomicBool::new(false));
-    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        if let Err(e) = signal_hook::flag::register(sig, Arc::clone(&flag)) {
-            tracing::warn!("cannot handle signal {sig}: {e}");
-        }
-    }
-    flag
-}

@@ -14,7 +14,7 @@ pub enum Rejection {
 }
 
 /// Counters of the command stream.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct CommandStats {
     pub accepted: u64,
     pub wrong_length: u64,

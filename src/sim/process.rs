@@ -14,11 +14,12 @@
 //! non-increasing `seq` is rejected, counted and never applied (logged, rate-limited).
 
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use nalgebra::DVector;
+
+use crate::control::timing::LatencyHistogram;
 
 use crate::channels::{
     Bus, ChannelError, GroundTruthMsg, MAX_DOF, N_CONTACTS, ServiceKind, StateMsg, TorqueMsg,
@@ -57,7 +58,7 @@ pub struct RunOptions {
 }
 
 /// Step-time histogram (1 µs bins up to 20 ms) and counters of a run.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize)]
 pub struct RunSummary {
     pub steps: u64,
     pub sim_time: f64,
@@ -72,55 +73,11 @@ pub struct RunSummary {
     pub max_slip_speed: f64,
     pub max_loop_error: f64,
     pub recorder: RecorderStats,
-}
-
-const BINS: usize = 20_000;
-
-struct Timing {
-    hist: Vec<u64>,
-    max: f64,
-    n: u64,
-}
-
-impl Timing {
-    fn new() -> Self {
-        Self {
-            hist: vec![0; BINS],
-            max: 0.0,
-            n: 0,
-        }
-    }
-    fn add(&mut self, secs: f64) {
-        let b = ((secs * 1e6) as usize).min(BINS - 1);
-        self.hist[b] += 1;
-        self.max = self.max.max(secs);
-        self.n += 1;
-    }
-    fn quantile(&self, p: f64) -> f64 {
-        if self.n == 0 {
-            return 0.0;
-        }
-        let target = (p * self.n as f64).ceil().max(1.0) as u64;
-        let mut acc = 0;
-        for (i, c) in self.hist.iter().enumerate() {
-            acc += c;
-            if acc >= target {
-                return (i as f64 + 0.5) * 1e-6;
-            }
-        }
-        self.max
-    }
-}
-
-/// Raised by SIGINT / SIGTERM.
-pub fn stop_on_signals() -> Arc<AtomicBool> {
-    let flag = Arc::new(AtomicBool::new(false));
-    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        if let Err(e) = signal_hook::flag::register(sig, Arc::clone(&flag)) {
-            tracing::warn!("cannot handle signal {sig}: {e}");
-        }
-    }
-    flag
+    /// Lockstep: state published → answering torques received, minus the controller's own
+    /// compute time (s): the IPC and wake-up overhead of one round trip.
+    pub ipc_overhead_p50: f64,
+    pub ipc_overhead_p99: f64,
+    pub ipc_overhead_max: f64,
 }
 
 /// Fills a [`StateMsg`] from the world (allocation-free).
@@ -191,7 +148,9 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
     let mut looper = Looper {
         tau: DVector::zeros(world.n_actuated()),
         gate: CommandGate::default(),
-        timing: Timing::new(),
+        timing: LatencyHistogram::new(),
+        ipc: LatencyHistogram::new(),
+        published_at: Instant::now(),
         zmp: [0.0; 2],
         hand_force: [0.0; 3],
         max_pen: 0.0,
@@ -242,7 +201,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
         wall_time: wall,
         step_time_p50: looper.timing.quantile(0.5),
         step_time_p99: looper.timing.quantile(0.99),
-        step_time_max: looper.timing.max,
+        step_time_max: looper.timing.max(),
         overruns: looper.overruns,
         commands: looper.gate.stats,
         safe_mode_steps: looper.safe_steps,
@@ -250,6 +209,9 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
         max_slip_speed: looper.max_slip,
         max_loop_error: looper.max_loop,
         recorder: rec_stats,
+        ipc_overhead_p50: looper.ipc.quantile(0.5),
+        ipc_overhead_p99: looper.ipc.quantile(0.99),
+        ipc_overhead_max: looper.ipc.max(),
     };
     tracing::info!("sim finished: {summary:?}");
     Ok(summary)
@@ -258,7 +220,9 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
 struct Looper {
     tau: DVector<f64>,
     gate: CommandGate,
-    timing: Timing,
+    timing: LatencyHistogram,
+    ipc: LatencyHistogram,
+    published_at: Instant,
     zmp: [f64; 2],
     hand_force: [f64; 3],
     max_pen: f64,
@@ -306,7 +270,7 @@ impl Looper {
         let door_torque = drive.torque(world.time());
         let rep = world.step(&self.tau, door_torque)?;
         let dt_step = t0.elapsed().as_secs_f64();
-        self.timing.add(dt_step);
+        self.timing.record(Duration::from_secs_f64(dt_step));
         if let Some(z) = rep.zmp {
             self.zmp = z;
         }
@@ -347,6 +311,7 @@ impl Looper {
             g.stale_commands = stats.stale;
         })?;
         ep.state_event.notify()?;
+        self.published_at = Instant::now();
         ep.truth_event.notify()?;
         Ok(())
     }
@@ -377,6 +342,10 @@ impl Looper {
                         continue;
                     }
                     if msg.state_step == want {
+                        let round_trip = self.published_at.elapsed();
+                        self.ipc.record(
+                            round_trip.saturating_sub(Duration::from_nanos(msg.compute_ns)),
+                        );
                         break 'wait;
                     }
                     // A valid answer to another state: not applied.

@@ -25,7 +25,7 @@ use super::world::World;
 const FORCE_SCALE: f32 = 1.0 / 500.0;
 
 /// Frames the logger wrote and dropped.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct RecorderStats {
     pub written: u64,
     pub dropped: u64,
