@@ -1,3 +1,5 @@
-//! Helpers shared by the integration tests.
+//! Helpers shared by the integration tests (each test binary uses a part of them).
+#![allow(dead_code)]
 
 pub mod counting_alloc;
+pub mod humanoid;

@@ -1,0 +1,48 @@
+//! The controller on the humanoid at its home posture, for control-loop tests.
+
+use upc::channels::{ForecastMsg, StateMsg};
+use upc::config::{Config, ControllerKind};
+use upc::control::{ControllerCore, ForecastWindow};
+use upc::dynamics::icub_like;
+
+/// A controller core with the humanoid standing at home, its state message, an empty forecast
+/// window and a torque buffer.
+pub struct Rig {
+    pub core: ControllerCore,
+    pub state: StateMsg,
+    pub window: ForecastWindow,
+    pub tau: Vec<f64>,
+}
+
+pub fn rig(config: &Config, kind: ControllerKind) -> Rig {
+    let model = icub_like::load().expect("model");
+    let q = icub_like::home_configuration(&model).expect("home");
+    let mut state = StateMsg {
+        nq: model.nq as u32,
+        nv: model.nv as u32,
+        ..Default::default()
+    };
+    state.q[..model.nq].copy_from_slice(q.as_slice());
+    let tau = vec![0.0; model.nv - 6];
+    let core =
+        ControllerCore::new(model, config, kind, 0.001, [100.0, 20.0], [0.0, 0.0]).expect("core");
+    Rig {
+        core,
+        state,
+        window: ForecastWindow::new(1.0, 1.0, 0.2, 300.0),
+        tau,
+    }
+}
+
+/// A forecast from `t0` (5 ms samples, 2.5 s) of a constant push `fx` starting at sample 100.
+pub fn push_forecast(t0: f64, fx: f64) -> Box<ForecastMsg> {
+    let mut m: Box<ForecastMsg> = Box::default();
+    m.seq = 1;
+    m.t0 = t0;
+    m.dt = 0.005;
+    m.len = 500;
+    for (i, s) in m.forces.iter_mut().enumerate().take(500) {
+        *s = [if i > 100 { fx } else { 0.0 }, 0.0, 0.0];
+    }
+    m
+}
