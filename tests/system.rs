@@ -170,6 +170,19 @@ fn python_forecaster_example_drives_a_run() {
         .status()
         .expect("upc runs");
     assert!(status.success(), "upc run failed: {status}");
+    // The external forecaster ended with the run: no process of it is left behind.
+    let script = root.join("examples/python/forecaster.py");
+    let left = Command::new("pgrep")
+        .arg("-f")
+        .arg(&script)
+        .output()
+        .map(|o| o.stdout)
+        .unwrap_or_default();
+    assert!(
+        left.is_empty(),
+        "forecaster processes left running: {}",
+        String::from_utf8_lossy(&left)
+    );
     let c = read_json(&out.join("py/c1/controller.json"));
     let accepted = c["forecasts_accepted"].as_u64().unwrap_or(0);
     assert!(

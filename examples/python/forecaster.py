@@ -18,6 +18,7 @@ import math
 import os
 import signal
 import sys
+import time
 
 import iceoryx2 as iox2
 
@@ -125,12 +126,14 @@ def main() -> int:
     n = min(MAX_FORECAST, int(math.ceil(a.window / a.dt)))
 
     seq, now, next_at = 0, 0.0, -1.0
+    last_state = time.monotonic()
     while not stop["now"]:
         while True:
             sample = states.receive()
             if sample is None:
                 break
             now = sample.payload().contents.time
+            last_state = time.monotonic()
         if now >= next_at:
             seq += 1
             msg = ForecastMsg(seq=seq, t0=now, dt=a.dt, len=n)
@@ -139,7 +142,8 @@ def main() -> int:
             publisher.loan_uninit().write_payload(msg).send()
             notifier.notify()
             next_at = (math.floor(now / a.period) + 1) * a.period
-        if now >= a.until:
+        # Done at the end of the run, or when the simulator has gone quiet.
+        if now >= a.until - 0.5 * a.period or (seq > 1 and time.monotonic() - last_state > 5.0):
             break
         node.wait(iox2.Duration.from_millis(2))
     print(f"python forecaster: {seq} windows published", file=sys.stderr)

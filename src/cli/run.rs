@@ -161,7 +161,8 @@ fn run_one(
     let mut forecaster = match &args.forecaster {
         Some(cmd) => {
             let mut c = Command::new("sh");
-            c.args(["-c", cmd])
+            // `exec` so that the command itself, not the shell, gets our SIGTERM at the end.
+            c.args(["-c", &format!("exec {cmd}")])
                 .env("UPC_PREFIX", &prefix)
                 .env("UPC_DURATION", &dur)
                 .env("UPC_SCENARIO", &args.scenario);

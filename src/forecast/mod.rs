@@ -68,7 +68,7 @@ pub fn run(
             notifier.notify()?;
             next = (now / s.period).floor() * s.period + s.period;
         }
-        if s.until.is_some_and(|u| now >= u) {
+        if s.until.is_some_and(|u| now >= u - 0.5 * s.period) {
             break;
         }
         wake.wait(Duration::from_millis(50))?;
