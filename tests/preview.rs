@@ -736,3 +736,24 @@ fn riccati_workspace_reports_its_horizon() {
     r.factor(&model(&c), 1.0, 1e-6, &[-0.05; 7]);
     assert_eq!((r.len(), r.capacity()), (7, 10));
 }
+
+#[test]
+fn next_zmp_is_the_first_sample_of_the_plan() {
+    let c = config_with(&[]);
+    let n = 200;
+    let (state, refs) = busy_problem(n);
+    let forces = busy_forces(n);
+    let mut p = preview(&c, n, LqSolverKind::Riccati);
+    let u = p.solve_c1(&state, &refs, &forces).unwrap();
+    let next = p.next_zmp(&state, u);
+    let mut plan = PreviewPlan::with_capacity(n);
+    p.plan(&state, &mut plan);
+    for a in 0..2 {
+        assert!(
+            (next[a] - plan.zmp[a][0]).abs() < 1e-12,
+            "axis {a}: {} vs {}",
+            next[a],
+            plan.zmp[a][0]
+        );
+    }
+}

@@ -94,6 +94,8 @@ pub struct ControllerCore {
     nominal: GainSchedule,
     schedule: GainSchedule,
     plan: PreviewPlan,
+    /// The cart-table state the last tick solved from (to roll its plan out on demand).
+    last_x: [AxisState; 2],
     com_acc_cmd: Vector3<f64>,
     hand_acc_cmd: Vector3<f64>,
     latched: Option<Latched>,
@@ -155,6 +157,7 @@ impl ControllerCore {
             schedule: nominal.clone(),
             nominal,
             plan: PreviewPlan::with_capacity(n),
+            last_x: [Vector3::zeros(); 2],
             com_acc_cmd: Vector3::zeros(),
             hand_acc_cmd: Vector3::zeros(),
             latched: None,
@@ -174,8 +177,9 @@ impl ControllerCore {
         self.latched.map(|l| l.support)
     }
 
-    /// Copy the last tick's predicted horizon into a log record.
-    pub fn fill_plan(&self, out: &mut super::logger::PlanLog) {
+    /// Roll out the last tick's predicted horizon and copy it into a log record.
+    pub fn fill_plan(&mut self, out: &mut super::logger::PlanLog) {
+        self.zmp.plan(&self.last_x, &mut self.plan);
         out.time = self.last.time;
         out.com_height = self.latched.map_or(0.0, |l| l.com_height);
         for i in 0..self.horizon.min(out.zmp.len()) {
@@ -372,8 +376,10 @@ impl ControllerCore {
         let status = out.status;
         let (iterations, wbc_time) = (out.iterations, out.tick_time.as_secs_f64());
 
-        // The next preview step of the plan, for the logs.
-        self.zmp.plan(&x, &mut self.plan);
+        // The ZMP one preview step ahead, for the logs: O(1). The whole plan is rolled out
+        // only when a log record asks for it (`fill_plan`), off the per-tick path.
+        let zmp_pred = self.zmp.next_zmp(&x, u);
+        self.last_x = x;
         let f_dis = if self.kind == ControllerKind::C0 {
             [0.0; 3]
         } else {
@@ -389,7 +395,7 @@ impl ControllerCore {
             com_vel: vcom.into(),
             com_acc_cmd: self.com_acc_cmd.into(),
             zmp_ref: zref,
-            zmp_pred: [self.plan.zmp[0][0], self.plan.zmp[1][0]],
+            zmp_pred,
             zmp_meas: state.zmp,
             hand_pos: hand_pos.into(),
             hand_err: (hand_pos - latched.hand_target).norm(),

@@ -185,6 +185,19 @@ impl ZmpPreview {
         }
     }
 
+    /// The ZMP the model predicts one preview step ahead after applying `u` from `state`
+    /// (eq. 11, first row), O(1): the first sample of [`ZmpPreview::plan`]'s ZMP.
+    pub fn next_zmp(&self, state: &[AxisState; 2], u: [f64; 2]) -> [f64; 2] {
+        [0, 1].map(|a| {
+            let x1 = self.model.step(&state[a], u[a]);
+            self.model.zmp(
+                &x1,
+                self.disturbance.alpha0[0],
+                self.disturbance.alpha[a][0],
+            )
+        })
+    }
+
     /// Output-row coefficients c2 and references of the last solve (for C2's Jacobians).
     pub(crate) fn last_problem(&self) -> (&[f64], &Riccati, &Disturbance) {
         (&self.c2[..self.horizon], &self.riccati, &self.disturbance)
