@@ -343,9 +343,12 @@ impl Looper {
                     }
                     if msg.state_step == want {
                         let round_trip = self.published_at.elapsed();
-                        self.ipc.record(
-                            round_trip.saturating_sub(Duration::from_nanos(msg.compute_ns)),
-                        );
+                        // State 0 waits for the controller to start: not an IPC figure.
+                        if want > 0 {
+                            self.ipc.record(
+                                round_trip.saturating_sub(Duration::from_nanos(msg.compute_ns)),
+                            );
+                        }
                         break 'wait;
                     }
                     // A valid answer to another state: not applied.
@@ -361,8 +364,16 @@ impl Looper {
                 if stop.load(Ordering::Relaxed) {
                     return Ok(());
                 }
-                ep.torque_event
+                let woken = ep
+                    .torque_event
                     .wait((deadline - now).min(Duration::from_millis(20)))?;
+                if !woken {
+                    // A controller that connected after this state was sent has neither the
+                    // sample nor its wake-up: send the same state again (it skips duplicates).
+                    let (zmp, hand) = (self.zmp, self.hand_force);
+                    ep.state.send_with(|m| fill_state(m, world, zmp, hand))?;
+                    ep.state_event.notify()?;
+                }
             }
             self.step(ep, world, drive, recorder)?;
         }
