@@ -69,6 +69,9 @@ pub struct TickRecord {
     /// The preview fell back to C0 this tick (invalid disturbance forecast).
     pub preview_fallback: bool,
     pub schedule_age: f64,
+    /// Support rectangle latched at the first tick, [[x_min, x_max], [y_min, y_max]] (world
+    /// frame), so that logs can draw the ZMP against it.
+    pub support: [[f64; 2]; 2],
 }
 
 /// The controller's state between ticks.
@@ -408,6 +411,7 @@ impl ControllerCore {
             wbc_time,
             preview_fallback: fallback,
             schedule_age: age,
+            support: latched.support,
         };
         Ok(status)
     }

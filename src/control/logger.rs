@@ -161,13 +161,14 @@ impl Drop for ControlLogger {
     }
 }
 
-const CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_ref_x,zmp_ref_y,zmp_pred_x,zmp_pred_y,zmp_meas_x,zmp_meas_y,hand_err,kp,kd,f_ext_x,f_dis_x,tick_us,wbc_us,wbc_solved,c2_cost,c2_iterations";
+/// Columns of `controller.csv`; readers go by name (`upc compare`), so columns may be added.
+pub const CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_ref_x,zmp_ref_y,zmp_pred_x,zmp_pred_y,zmp_meas_x,zmp_meas_y,hand_err,kp,kd,f_ext_x,f_ext_y,f_ext_z,f_dis_x,f_dis_y,f_dis_z,hand_x,hand_y,hand_z,sup_x_min,sup_x_max,sup_y_min,sup_y_max,tick_us,wbc_us,wbc_solved,c2_cost,c2_iterations";
 
 fn write_csv(w: &mut impl Write, t: &TickLog) -> std::io::Result<()> {
     let c = &t.core;
     writeln!(
         w,
-        "{:.4},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.2},{:.2},{:.3},{:.3},{:.1},{:.1},{},{:.5e},{}",
+        "{:.4},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.2},{:.2},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.1},{:.1},{},{:.5e},{}",
         c.time,
         c.com[0],
         c.com[1],
@@ -182,7 +183,18 @@ fn write_csv(w: &mut impl Write, t: &TickLog) -> std::io::Result<()> {
         c.kp,
         c.kd,
         c.f_ext[0],
+        c.f_ext[1],
+        c.f_ext[2],
         c.f_dis[0],
+        c.f_dis[1],
+        c.f_dis[2],
+        c.hand_pos[0],
+        c.hand_pos[1],
+        c.hand_pos[2],
+        c.support[0][0],
+        c.support[0][1],
+        c.support[1][0],
+        c.support[1][1],
         t.tick_time * 1e6,
         c.wbc_time * 1e6,
         u8::from(c.wbc_solved),
