@@ -5,6 +5,7 @@
 //! - [`dynamics`]: rigid-body dynamics from URDF (Model / Data, RNEA, CRBA, ABA, Jacobians).
 //! - [`scenario`]: hand force profiles (impacts, CSV) and the ZMP reference of a run.
 //! - [`offline`]: the closed loop of the reduced models behind `upc preview`, with its metrics.
+//! - [`report`]: `upc compare`'s report: figures and metrics tables of runs.
 //! - [`config`]: TOML configuration with errors that name the offending key.
 //! - [`wbc`]: the whole-body torque controller (LQP over q̈ and contact forces, clarabel).
 //! - [`forecast`]: the reference force forecaster process.
@@ -20,6 +21,7 @@ pub mod dynamics;
 pub mod forecast;
 pub mod offline;
 pub mod preview;
+pub mod report;
 pub mod scenario;
 pub mod shutdown;
 pub mod sim;

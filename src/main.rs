@@ -20,6 +20,8 @@ struct Cli {
 enum Command {
     /// Launch simulator, forecaster and controller as processes on a scenario; write runs/<name>/.
     Run(cli::run::RunArgs),
+    /// Write report.md with figures and metrics tables for run directories of `upc run`.
+    Compare(cli::compare::CompareArgs),
     /// Run the closed loop of the reduced models (cart-table + hand impedance) on a scenario.
     Preview(cli::preview::PreviewArgs),
     /// Run the control server: state and forecast in, joint torques out, over iceoryx2.
@@ -43,6 +45,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Run(args) => cli::run::run(args),
         Command::Preview(args) => cli::preview::run(args),
+        Command::Compare(args) => cli::compare::run(args),
         Command::Model(args) => cli::model::run(args),
         Command::Sim(args) => cli::sim::run_cli(args),
         Command::Forecast(args) => cli::forecast::run_cli(args),

@@ -1,6 +1,7 @@
 //! Subcommand implementations; each returns an error value, never panics on user input.
 
 pub mod common;
+pub mod compare;
 pub mod controller;
 pub mod forecast;
 pub mod model;

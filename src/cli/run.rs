@@ -95,6 +95,10 @@ pub fn run(args: RunArgs) -> CliResult {
     }
     let summary = serde_json::json!({
         "scenario": scenario.name,
+        // What --scenario was given and the config layers: `upc compare` reloads both.
+        "scenario_source": args.scenario,
+        "config_files": args.config.configs,
+        "config_sets": args.config.sets,
         "description": scenario.description,
         "duration": duration,
         "mode": if args.realtime { "realtime" } else { "lockstep" },
@@ -110,7 +114,28 @@ pub fn run(args: RunArgs) -> CliResult {
         root.display(),
         root.display()
     );
-    if entries.iter().any(|e| e.controller_summary.is_none()) {
+    let failed = entries.iter().any(|e| e.controller_summary.is_none());
+    if args.controller == Which::All {
+        // The run's config layers are in summary.json already: none added here.
+        let report = super::compare::compare(
+            std::slice::from_ref(&root),
+            root.clone(),
+            &super::common::ConfigArgs::default(),
+            true,
+            true,
+        );
+        match report {
+            Ok(path) => println!(
+                "wrote {} (figures in {}/figures/)",
+                path.display(),
+                root.display()
+            ),
+            // A failed controller explains a failed report: report the controller first.
+            Err(e) if failed => tracing::warn!("no report: {e}"),
+            Err(e) => return Err(format!("report: {e}").into()),
+        }
+    }
+    if failed {
         return Err("a controller run failed: see its controller.log".into());
     }
     Ok(())

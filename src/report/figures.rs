@@ -1,0 +1,614 @@
+//! The report's figures (the paper's Figs. 7–14): ZMP with the support bounds, hand tracking
+//! error, CoM, K_p and the hand force, each controller overlaid. Every figure is written as SVG
+//! and, when the font can be loaded, as PNG, from any [`SeriesSource`].
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+// BackendStyle stays qualified: in scope it would clash with `Color::stroke_width`.
+use plotters_backend::{BackendColor, BackendCoord, BackendTextStyle, DrawingErrorKind};
+
+use super::ReportError;
+use super::series::{Quantity, SeriesSource};
+
+/// The font the PNGs are drawn with (Debian package fonts-dejavu-core); `UPC_REPORT_FONT`
+/// overrides the path.
+pub const DEFAULT_FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
+const FONT_FAMILY: &str = "sans-serif";
+
+/// Load and register the font once per process. `false` (with one warning) if it cannot be.
+pub fn font_available() -> bool {
+    static LOADED: OnceLock<bool> = OnceLock::new();
+    *LOADED.get_or_init(|| {
+        let path = std::env::var_os("UPC_REPORT_FONT")
+            .map(PathBuf::from)
+            .unwrap_or_else(|| PathBuf::from(DEFAULT_FONT));
+        let bytes = match std::fs::read(&path) {
+            Ok(b) => b,
+            Err(e) => {
+                tracing::warn!(
+                    "font {} cannot be read ({e}): writing SVG figures only, no PNG \
+                     (install fonts-dejavu-core, or run scripts/setup.sh)",
+                    path.display()
+                );
+                return false;
+            }
+        };
+        // plotters keeps fonts for the life of the process: leak the one buffer, once.
+        let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+        match plotters::style::register_font(FONT_FAMILY, FontStyle::Normal, bytes) {
+            Ok(()) => true,
+            Err(_) => {
+                tracing::warn!(
+                    "{} is not a usable font: writing SVG figures only, no PNG",
+                    path.display()
+                );
+                false
+            }
+        }
+    })
+}
+
+/// One plotted line of a panel.
+#[derive(Debug, Clone, Copy)]
+pub enum Line {
+    /// One line per source, coloured by controller.
+    PerSource(Quantity),
+    /// A signal common to all sources (reference, forecast): drawn once, from the first source
+    /// that has it, with its own label.
+    Common(Quantity, &'static str),
+}
+
+#[derive(Debug, Clone)]
+pub struct Panel {
+    pub title: &'static str,
+    pub y_label: &'static str,
+    /// Values are multiplied by this before plotting (e.g. 1e3 for mm).
+    pub scale: f64,
+    pub lines: Vec<Line>,
+    /// Draw the support bounds of this axis (0: x, 1: y).
+    pub support_axis: Option<usize>,
+}
+
+#[derive(Debug, Clone)]
+pub struct Figure {
+    /// File stem under `figures/`.
+    pub name: String,
+    pub title: String,
+    pub panels: Vec<Panel>,
+}
+
+/// The figure set of one section (one scenario's full-simulation or reduced-model runs).
+pub fn standard_figures(prefix: &str, what: &str) -> Vec<Figure> {
+    use Quantity::*;
+    let p = |title, y_label, scale, lines: Vec<Line>, support_axis| Panel {
+        title,
+        y_label,
+        scale,
+        lines,
+        support_axis,
+    };
+    let fig = |name: &str, title: String, panels| Figure {
+        name: format!("{prefix}_{name}"),
+        title,
+        panels,
+    };
+    vec![
+        fig(
+            "zmp",
+            format!("ZMP and support bounds — {what}"),
+            vec![
+                p(
+                    "ZMP x",
+                    "x (m)",
+                    1.0,
+                    vec![Line::Common(ZmpRefX, "reference"), Line::PerSource(ZmpX)],
+                    Some(0),
+                ),
+                p(
+                    "ZMP y",
+                    "y (m)",
+                    1.0,
+                    vec![Line::Common(ZmpRefY, "reference"), Line::PerSource(ZmpY)],
+                    Some(1),
+                ),
+            ],
+        ),
+        fig(
+            "zmp_pred",
+            format!("Preview-model ZMP one step ahead — {what}"),
+            vec![
+                p(
+                    "predicted ZMP x",
+                    "x (m)",
+                    1.0,
+                    vec![Line::PerSource(ZmpPredX)],
+                    Some(0),
+                ),
+                p(
+                    "predicted ZMP y",
+                    "y (m)",
+                    1.0,
+                    vec![Line::PerSource(ZmpPredY)],
+                    Some(1),
+                ),
+            ],
+        ),
+        fig(
+            "hand_error",
+            format!("Hand tracking error — {what}"),
+            vec![p(
+                "hand error",
+                "error (mm)",
+                1e3,
+                vec![Line::PerSource(HandError)],
+                None,
+            )],
+        ),
+        fig(
+            "com",
+            format!("CoM position — {what}"),
+            vec![
+                p("CoM x", "x (m)", 1.0, vec![Line::PerSource(ComX)], None),
+                p("CoM y", "y (m)", 1.0, vec![Line::PerSource(ComY)], None),
+                p("CoM z", "z (m)", 1.0, vec![Line::PerSource(ComZ)], None),
+            ],
+        ),
+        fig(
+            "kp",
+            format!("Hand stiffness K_p — {what}"),
+            vec![p("K_p", "K_p (1/s²)", 1.0, vec![Line::PerSource(Kp)], None)],
+        ),
+        fig(
+            "force",
+            format!("Hand force forecast and CoM disturbance — {what}"),
+            vec![
+                p(
+                    "hand force forecast F_ext",
+                    "force (N)",
+                    1.0,
+                    vec![
+                        Line::Common(FExtX, "F_ext x"),
+                        Line::Common(FExtY, "F_ext y"),
+                        Line::Common(FExtZ, "F_ext z"),
+                    ],
+                    None,
+                ),
+                p(
+                    "CoM disturbance F_dis x",
+                    "force (N)",
+                    1.0,
+                    vec![Line::PerSource(FDisX)],
+                    None,
+                ),
+            ],
+        ),
+    ]
+}
+
+/// A figure as written: its file names relative to the report and its title.
+#[derive(Debug, Clone)]
+pub struct Written {
+    pub title: String,
+    pub svg: String,
+    pub png: Option<String>,
+}
+
+/// A line ready to draw: label, colour, dashed, points.
+struct Trace {
+    label: String,
+    color: RGBColor,
+    dashed: bool,
+    width: u32,
+    points: Vec<(f64, f64)>,
+}
+
+const WIDTH: u32 = 1000;
+const PANEL_HEIGHT: u32 = 280;
+const TITLE_HEIGHT: u32 = 36;
+
+/// Colour of a controller's line, the same in every figure.
+pub fn color_of(label: &str, index: usize) -> RGBColor {
+    match label.to_ascii_lowercase().as_str() {
+        "c0" => RGBColor(214, 39, 40),
+        "c1" => RGBColor(31, 119, 180),
+        "c2" => RGBColor(44, 160, 44),
+        _ => [
+            RGBColor(148, 103, 189),
+            RGBColor(255, 127, 14),
+            RGBColor(140, 86, 75),
+            RGBColor(227, 119, 194),
+        ][index % 4],
+    }
+}
+
+fn panel_traces(panel: &Panel, sources: &[&dyn SeriesSource]) -> Vec<Trace> {
+    let points = |s: &dyn SeriesSource, q: Quantity| -> Option<Vec<(f64, f64)>> {
+        let v = s.values(q)?;
+        Some(
+            s.time()
+                .iter()
+                .zip(v)
+                .filter(|(t, y)| t.is_finite() && y.is_finite())
+                .map(|(t, y)| (*t, y * panel.scale))
+                .collect(),
+        )
+    };
+    let mut traces = Vec::new();
+    let grays = [
+        RGBColor(110, 110, 110),
+        RGBColor(160, 160, 160),
+        RGBColor(60, 60, 60),
+    ];
+    let mut common = 0;
+    for line in &panel.lines {
+        match *line {
+            Line::PerSource(q) => {
+                for (i, s) in sources.iter().enumerate() {
+                    if let Some(p) = points(*s, q) {
+                        traces.push(Trace {
+                            label: s.label().to_string(),
+                            color: color_of(s.label(), i),
+                            dashed: false,
+                            width: 2,
+                            points: p,
+                        });
+                    }
+                }
+            }
+            Line::Common(q, label) => {
+                if let Some(p) = sources.iter().find_map(|s| points(*s, q)) {
+                    // Several common lines in one panel (F_ext x/y/z) need distinct colours.
+                    let color = if panel.lines.len() > 1
+                        && panel.lines.iter().all(|l| matches!(l, Line::Common(..)))
+                    {
+                        [RGBColor(31, 119, 180), RGBColor(255, 127, 14), grays[2]][common % 3]
+                    } else {
+                        grays[common % 3]
+                    };
+                    common += 1;
+                    traces.push(Trace {
+                        label: label.to_string(),
+                        color,
+                        dashed: false,
+                        width: 1,
+                        points: p,
+                    });
+                }
+            }
+        }
+    }
+    if traces.is_empty() {
+        return traces;
+    }
+    if let Some(axis) = panel.support_axis
+        && let Some(sup) = sources.iter().find_map(|s| s.support())
+    {
+        let (t0, t1) = time_range(sources);
+        for (k, bound) in sup[axis].iter().enumerate() {
+            if bound.is_finite() {
+                traces.push(Trace {
+                    label: if k == 0 {
+                        "support".into()
+                    } else {
+                        String::new()
+                    },
+                    color: BLACK,
+                    dashed: true,
+                    width: 1,
+                    points: vec![(t0, bound * panel.scale), (t1, bound * panel.scale)],
+                });
+            }
+        }
+    }
+    traces
+}
+
+/// The support bounds drawn in a panel (its dashed traces), low and high.
+fn support_bounds(traces: &[Trace]) -> Option<[f64; 2]> {
+    let b: Vec<f64> = traces
+        .iter()
+        .filter(|t| t.dashed)
+        .filter_map(|t| t.points.first().map(|p| p.1))
+        .collect();
+    match b[..] {
+        [lo, hi] if hi > lo => Some([lo, hi]),
+        _ => None,
+    }
+}
+
+fn time_range(sources: &[&dyn SeriesSource]) -> (f64, f64) {
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
+    for s in sources {
+        for t in s.time().iter().filter(|t| t.is_finite()) {
+            lo = lo.min(*t);
+            hi = hi.max(*t);
+        }
+    }
+    if !lo.is_finite() {
+        return (0.0, 1.0);
+    }
+    if hi - lo < 1e-9 {
+        hi = lo + 1.0;
+    }
+    (lo, hi)
+}
+
+fn value_range(traces: &[Trace]) -> (f64, f64) {
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
+    for p in traces.iter().flat_map(|t| &t.points) {
+        lo = lo.min(p.1);
+        hi = hi.max(p.1);
+    }
+    if !lo.is_finite() {
+        return (-1.0, 1.0);
+    }
+    let span = hi - lo;
+    let pad = if span > 1e-12 {
+        0.06 * span
+    } else {
+        1e-3_f64.max(lo.abs() * 0.05)
+    };
+    (lo - pad, hi + pad)
+}
+
+/// Write `fig` as `<dir>/<name>.svg` (and `.png` if the font is loaded). `None` if no source
+/// has any of its quantities.
+pub fn write_figure(
+    dir: &Path,
+    fig: &Figure,
+    sources: &[&dyn SeriesSource],
+    png: bool,
+) -> Result<Option<Written>, ReportError> {
+    let panels: Vec<(&Panel, Vec<Trace>)> = fig
+        .panels
+        .iter()
+        .map(|p| (p, panel_traces(p, sources)))
+        .filter(|(_, t)| !t.is_empty())
+        .collect();
+    if panels.is_empty() {
+        return Ok(None);
+    }
+    let size = (WIDTH, TITLE_HEIGHT + PANEL_HEIGHT * panels.len() as u32);
+    let x_range = time_range(sources);
+    let svg_name = format!("{}.svg", fig.name);
+    let svg_path = dir.join(&svg_name);
+    let plot_err = |path: &Path, e: String| ReportError::Plot {
+        path: path.to_path_buf(),
+        message: e,
+    };
+    {
+        let root = SvgText(SVGBackend::new(&svg_path, size)).into_drawing_area();
+        draw(&root, &fig.title, &panels, x_range).map_err(|e| plot_err(&svg_path, e))?;
+        root.present()
+            .map_err(|e| plot_err(&svg_path, e.to_string()))?;
+    }
+    let png_name = if png && font_available() {
+        let name = format!("{}.png", fig.name);
+        let path = dir.join(&name);
+        let root = BitMapBackend::new(&path, size).into_drawing_area();
+        draw(&root, &fig.title, &panels, x_range).map_err(|e| plot_err(&path, e))?;
+        root.present().map_err(|e| plot_err(&path, e.to_string()))?;
+        Some(name)
+    } else {
+        None
+    };
+    Ok(Some(Written {
+        title: fig.title.clone(),
+        svg: svg_name,
+        png: png_name,
+    }))
+}
+
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    title: &str,
+    panels: &[(&Panel, Vec<Trace>)],
+    x_range: (f64, f64),
+) -> Result<(), String> {
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    root.fill(&WHITE).map_err(e)?;
+    let (top, rest) = root.split_vertically(TITLE_HEIGHT);
+    top.draw(&Text::new(
+        title.to_string(),
+        (12, TITLE_HEIGHT as i32 / 2),
+        (FONT_FAMILY, 18)
+            .into_font()
+            .color(&BLACK)
+            .pos(Pos::new(HPos::Left, VPos::Center)),
+    ))
+    .map_err(e)?;
+    let areas = rest.split_evenly((panels.len(), 1));
+    for (area, (panel, traces)) in areas.iter().zip(panels) {
+        let (mut y0, mut y1) = value_range(traces);
+        // A run that falls sends the ZMP metres away: keep the axis on the support (1.5 of its
+        // widths either side), draw what lies beyond on the axis edge and say whose it is.
+        let mut cut: Vec<&str> = Vec::new();
+        if let Some([lo, hi]) = support_bounds(traces) {
+            let (a, b) = (lo - 1.5 * (hi - lo), hi + 1.5 * (hi - lo));
+            if y0 < a || y1 > b {
+                for t in traces.iter().filter(|t| !t.dashed) {
+                    if t.points.iter().any(|p| p.1 < a || p.1 > b) && !cut.contains(&&*t.label) {
+                        cut.push(&t.label);
+                    }
+                }
+                (y0, y1) = (y0.max(a), y1.min(b));
+            }
+        }
+        let mut chart = ChartBuilder::on(area)
+            .margin(8)
+            .margin_top(26)
+            .x_label_area_size(34)
+            .y_label_area_size(72)
+            .build_cartesian_2d(x_range.0..x_range.1, y0..y1)
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .x_desc("t (s)")
+            .y_desc(panel.y_label)
+            .label_style((FONT_FAMILY, 12))
+            .axis_desc_style((FONT_FAMILY, 13))
+            .light_line_style(RGBColor(235, 235, 235))
+            .bold_line_style(RGBColor(215, 215, 215))
+            .draw()
+            .map_err(e)?;
+        for t in traces {
+            let style = t.color.stroke_width(t.width);
+            let points = t.points.iter().map(|&(x, y)| (x, y.clamp(y0, y1)));
+            if t.dashed {
+                chart
+                    .draw_series(DashedLineSeries::new(points, 6, 4, style))
+                    .map_err(e)?;
+            } else {
+                chart
+                    .draw_series(LineSeries::new(points, style))
+                    .map_err(e)?;
+            }
+        }
+        // Title and legend in the strip above the plot, drawn as plain text: plotters' own
+        // legend measures text with the font, which the SVG must not need.
+        let text = |s: &str, x: i32, color: &RGBColor| {
+            Text::new(
+                s.to_string(),
+                (x, 12),
+                (FONT_FAMILY, 13)
+                    .into_font()
+                    .color(color)
+                    .pos(Pos::new(HPos::Left, VPos::Center)),
+            )
+        };
+        let title = if cut.is_empty() {
+            panel.title.to_string()
+        } else {
+            format!(
+                "{} (axis cut at 1.5 support widths; {} beyond, drawn on the edge)",
+                panel.title,
+                cut.join(", ")
+            )
+        };
+        area.draw(&text(&title, 80, &BLACK)).map_err(e)?;
+        let entries: Vec<&Trace> = traces.iter().filter(|t| !t.label.is_empty()).collect();
+        let widths: Vec<i32> = entries
+            .iter()
+            .map(|t| 30 + 8 * t.label.chars().count() as i32 + 14)
+            .collect();
+        let mut x = area.dim_in_pixel().0 as i32 - 12 - widths.iter().sum::<i32>();
+        for (t, w) in entries.iter().zip(&widths) {
+            let style = t.color.stroke_width(2);
+            if t.dashed {
+                area.draw(&PathElement::new(vec![(x, 12), (x + 9, 12)], style))
+                    .map_err(e)?;
+                area.draw(&PathElement::new(vec![(x + 15, 12), (x + 24, 12)], style))
+                    .map_err(e)?;
+            } else {
+                area.draw(&PathElement::new(vec![(x, 12), (x + 24, 12)], style))
+                    .map_err(e)?;
+            }
+            area.draw(&text(&t.label, x + 30, &BLACK)).map_err(e)?;
+            x += w;
+        }
+    }
+    Ok(())
+}
+
+/// The SVG backend, measuring text without a font when none is loaded: SVG text is laid out
+/// by the viewer, so the estimate only places axis labels, and the SVGs never need the font.
+struct SvgText<'a>(SVGBackend<'a>);
+
+impl DrawingBackend for SvgText<'_> {
+    type ErrorType = <SVGBackend<'static> as DrawingBackend>::ErrorType;
+
+    fn get_size(&self) -> (u32, u32) {
+        self.0.get_size()
+    }
+    fn ensure_prepared(&mut self) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.ensure_prepared()
+    }
+    fn present(&mut self) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.present()
+    }
+    fn draw_pixel(
+        &mut self,
+        point: BackendCoord,
+        color: BackendColor,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.draw_pixel(point, color)
+    }
+    fn draw_line<S: plotters_backend::BackendStyle>(
+        &mut self,
+        from: BackendCoord,
+        to: BackendCoord,
+        style: &S,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.draw_line(from, to, style)
+    }
+    fn draw_rect<S: plotters_backend::BackendStyle>(
+        &mut self,
+        upper_left: BackendCoord,
+        bottom_right: BackendCoord,
+        style: &S,
+        fill: bool,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.draw_rect(upper_left, bottom_right, style, fill)
+    }
+    fn draw_path<S: plotters_backend::BackendStyle, I: IntoIterator<Item = BackendCoord>>(
+        &mut self,
+        path: I,
+        style: &S,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.draw_path(path, style)
+    }
+    fn draw_circle<S: plotters_backend::BackendStyle>(
+        &mut self,
+        center: BackendCoord,
+        radius: u32,
+        style: &S,
+        fill: bool,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.draw_circle(center, radius, style, fill)
+    }
+    fn fill_polygon<S: plotters_backend::BackendStyle, I: IntoIterator<Item = BackendCoord>>(
+        &mut self,
+        vert: I,
+        style: &S,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.fill_polygon(vert, style)
+    }
+    fn draw_text<S: BackendTextStyle>(
+        &mut self,
+        text: &str,
+        style: &S,
+        pos: BackendCoord,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.draw_text(text, style, pos)
+    }
+    fn estimate_text_size<S: BackendTextStyle>(
+        &self,
+        text: &str,
+        style: &S,
+    ) -> Result<(u32, u32), DrawingErrorKind<Self::ErrorType>> {
+        match style.layout_box(text) {
+            Ok(((x0, y0), (x1, y1))) => Ok(((x1 - x0) as u32, (y1 - y0) as u32)),
+            Err(_) => {
+                let size = style.size();
+                Ok((
+                    (0.6 * size * text.chars().count() as f64).ceil() as u32,
+                    size.ceil() as u32,
+                ))
+            }
+        }
+    }
+    fn blit_bitmap(
+        &mut self,
+        pos: BackendCoord,
+        (iw, ih): (u32, u32),
+        src: &[u8],
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.blit_bitmap(pos, (iw, ih), src)
+    }
+}

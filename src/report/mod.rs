@@ -1,0 +1,265 @@
+//! `upc compare`: a Markdown report with figures (the paper's Figs. 7–14: ZMP with the support
+//! bounds, hand tracking error, CoM, K_p, C0 / C1 / C2 overlaid) and metrics tables, for run
+//! directories of `upc run`, plus the same on the reduced models run in-process.
+//!
+//! - [`series`]: time series behind one trait, from `controller.csv` or the reduced loop;
+//! - [`figures`]: SVG and PNG figures (plotters);
+//! - [`rundir`]: reading a run directory; [`reduced`]: the reduced-model runs;
+//! - [`markdown`]: the report's text.
+
+pub mod figures;
+pub mod markdown;
+pub mod reduced;
+pub mod rundir;
+pub mod series;
+
+use std::fmt::Write;
+use std::path::PathBuf;
+
+use crate::config::ConfigError;
+use crate::preview::PreviewError;
+use crate::scenario::{Scenario, ScenarioError};
+pub use reduced::ConfigLayers;
+use rundir::RunDir;
+use series::SeriesSource;
+
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}, line {line}: {message}", path.display())]
+    Csv {
+        path: PathBuf,
+        line: usize,
+        message: String,
+    },
+    #[error("{}: {message}", path.display())]
+    Summary { path: PathBuf, message: String },
+    #[error("cannot draw {}: {message}", path.display())]
+    Plot { path: PathBuf, message: String },
+    #[error("reduced models, scenario {scenario}, {controller}: {source}")]
+    Preview {
+        scenario: String,
+        controller: String,
+        source: PreviewError,
+    },
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error("no run directory given")]
+    NoRuns,
+}
+
+/// What `compare` does beyond the run directories.
+#[derive(Debug, Clone)]
+pub struct CompareOptions {
+    /// Where `report.md` and `figures/` go.
+    pub out: PathBuf,
+    /// Config layers added to each run's own (files after the run's files, sets after its sets).
+    pub config: ConfigLayers,
+    /// Run and report the reduced models.
+    pub reduced: bool,
+    /// Write PNGs besides the SVGs (when the font loads).
+    pub png: bool,
+}
+
+/// What `compare` wrote.
+#[derive(Debug, Clone)]
+pub struct CompareOutput {
+    pub report: PathBuf,
+    /// Every figure file written (SVG and PNG).
+    pub figures: Vec<PathBuf>,
+    /// Whether PNGs were written (false when the font is missing or PNGs were not asked for).
+    pub png: bool,
+}
+
+/// The scenario of a run, as the run loaded it (its recorded source first, then its name),
+/// cut to the simulated duration so that both test beds cover the same time.
+fn run_scenario(run: &RunDir) -> Result<Scenario, ScenarioError> {
+    let mut scenario = match &run.scenario_source {
+        Some(src) => Scenario::load(src).or_else(|_| Scenario::load(&run.scenario))?,
+        None => Scenario::load(&run.scenario)?,
+    };
+    scenario.duration = run.duration;
+    Ok(scenario)
+}
+
+/// A file-name-safe tag.
+fn slug(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// Write `<out>/report.md` and `<out>/figures/` for the given run directories.
+pub fn compare(runs: &[PathBuf], opts: &CompareOptions) -> Result<CompareOutput, ReportError> {
+    if runs.is_empty() {
+        return Err(ReportError::NoRuns);
+    }
+    // Read everything first: a bad input fails before any file is written.
+    let dirs = runs
+        .iter()
+        .map(|p| RunDir::load(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let fig_dir = opts.out.join("figures");
+    std::fs::create_dir_all(&fig_dir).map_err(|source| ReportError::Io {
+        path: fig_dir.clone(),
+        source,
+    })?;
+    let png = opts.png && figures::font_available();
+    let mut out = CompareOutput {
+        report: opts.out.join("report.md"),
+        figures: Vec::new(),
+        png,
+    };
+    let mut write_figures =
+        |prefix: &str, what: &str, sources: &[&dyn SeriesSource]| -> Result<String, ReportError> {
+            let mut written = Vec::new();
+            for fig in figures::standard_figures(prefix, what) {
+                if let Some(w) = figures::write_figure(&fig_dir, &fig, sources, png)? {
+                    out.figures.push(fig_dir.join(&w.svg));
+                    if let Some(p) = &w.png {
+                        out.figures.push(fig_dir.join(p));
+                    }
+                    written.push(w);
+                }
+            }
+            Ok(markdown::figures_block(&written))
+        };
+
+    let scenarios: Vec<String> = {
+        let mut v: Vec<String> = Vec::new();
+        for d in &dirs {
+            if !v.contains(&d.scenario) {
+                v.push(d.scenario.clone());
+            }
+        }
+        v
+    };
+    let mut md = format!("# upc compare — {}\n\n", scenarios.join(", "));
+    md += "C0: ZMP preview control, disturbance ignored. C1: with the hand force forecast turned \
+           into a CoM disturbance by the hand previewer. C2: C1 with the hand gains optimised \
+           over the horizon. Full simulation: the multibody humanoid and door simulator, the \
+           controller process and whole-body QP, as run by `upc run`. Reduced models: the \
+           controllers' own cart-table and hand impedance models as plants (`upc preview`).\n\n";
+    let mut used_tags = Vec::<String>::new();
+    // Reduced sections already written, by (scenario, duration, config layers).
+    let mut reduced_done: Vec<(String, String)> = Vec::new();
+    for run in &dirs {
+        let mut tag = slug(&run.name);
+        while used_tags.contains(&tag) {
+            tag.push('_');
+        }
+        used_tags.push(tag.clone());
+        let scenario = run_scenario(run);
+        let _ = writeln!(md, "## {} — `{}`\n", run.scenario, run.path.display());
+        md += &markdown::scenario_block(run, scenario.as_ref().ok());
+
+        md += "### Full simulation: metrics\n\n";
+        md += &markdown::full_metrics_table(run);
+        md += "\n### Full simulation: figures\n\n";
+        if run.controllers.iter().all(|c| c.csv.support().is_none()) {
+            md += "The CSVs of this run have no support columns: the ZMP figures show no \
+                   support bounds.\n\n";
+        }
+        let sources: Vec<&dyn SeriesSource> = run
+            .controllers
+            .iter()
+            .map(|c| &c.csv as &dyn SeriesSource)
+            .collect();
+        md += &write_figures(
+            &tag,
+            &format!("{}, full simulation", run.scenario),
+            &sources,
+        )?;
+
+        if !opts.reduced {
+            continue;
+        }
+        md += "### Reduced models\n\n";
+        let scenario = match scenario {
+            Ok(s) => s,
+            Err(e) => {
+                tracing::warn!("no reduced-model section for {}: {e}", run.path.display());
+                let _ = writeln!(md, "Not run: the scenario cannot be loaded ({e}).\n");
+                continue;
+            }
+        };
+        let layers = ConfigLayers {
+            files: run
+                .config_files
+                .iter()
+                .chain(&opts.config.files)
+                .cloned()
+                .collect(),
+            sets: run
+                .config_sets
+                .iter()
+                .chain(&opts.config.sets)
+                .cloned()
+                .collect(),
+        };
+        let key = format!(
+            "{}|{}|{:?}|{:?}",
+            run.scenario_source.as_deref().unwrap_or(&run.scenario),
+            run.duration,
+            layers.files,
+            layers.sets
+        );
+        if let Some((_, anchor)) = reduced_done.iter().find(|(k, _)| *k == key) {
+            let _ = writeln!(
+                md,
+                "Same scenario, duration and config as `{anchor}`: see its reduced-model section.\n"
+            );
+            continue;
+        }
+        reduced_done.push((key, run.path.display().to_string()));
+        let config = layers.load(&scenario)?;
+        tracing::info!(
+            "reduced models: {} for {:.2} s, C0, C1, C2",
+            scenario.name,
+            scenario.duration
+        );
+        let reduced = reduced::run_reduced(&config, &scenario)?;
+        md += &markdown::reduced_config_line(&config, &scenario);
+        md += "\n";
+        md += &markdown::reduced_metrics_table(&reduced);
+        md += "\n";
+        let sources: Vec<&dyn SeriesSource> =
+            reduced.iter().map(|r| r as &dyn SeriesSource).collect();
+        md += &write_figures(
+            &format!("{tag}_reduced"),
+            &format!("{}, reduced models", run.scenario),
+            &sources,
+        )?;
+    }
+    if !png {
+        md += "\nFigures are SVG only: no PNG was written (PNGs not asked for, or the font \
+               could not be loaded).\n";
+    }
+    std::fs::write(&out.report, md).map_err(|source| ReportError::Io {
+        path: out.report.clone(),
+        source,
+    })?;
+    Ok(out)
+}
+
+/// The default output directory: the run directory itself for one run, `<parent>/compare`
+/// beside the first run for several.
+pub fn default_out(runs: &[PathBuf]) -> PathBuf {
+    match runs {
+        [one] => one.clone(),
+        [first, ..] => first
+            .parent()
+            .map_or_else(|| PathBuf::from("compare"), |p| p.join("compare")),
+        [] => PathBuf::from("."),
+    }
+}

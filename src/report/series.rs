@@ -1,0 +1,237 @@
+//! Time series of one controller's run, from a full-simulation CSV or from the reduced-model
+//! loop, behind one trait so that every figure is drawn by the same code.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use super::ReportError;
+use crate::offline::RunResult;
+
+/// What a figure can plot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Quantity {
+    /// The ZMP the run is judged on: measured (centre of pressure) in the full simulation, the
+    /// cart-table ZMP in the reduced models.
+    ZmpX,
+    ZmpY,
+    /// The ZMP the preview predicts one preview step ahead (full simulation only).
+    ZmpPredX,
+    ZmpPredY,
+    ZmpRefX,
+    ZmpRefY,
+    /// ‖hand − set-point‖ (m).
+    HandError,
+    ComX,
+    ComY,
+    ComZ,
+    Kp,
+    FExtX,
+    FExtY,
+    FExtZ,
+    FDisX,
+    FDisY,
+    FDisZ,
+}
+
+/// One controller's time series.
+pub trait SeriesSource {
+    /// Legend label, e.g. "C1".
+    fn label(&self) -> &str;
+    /// Sample times (s).
+    fn time(&self) -> &[f64];
+    /// The samples of `q`, one per time, or `None` if this source does not have it.
+    fn values(&self, q: Quantity) -> Option<&[f64]>;
+    /// Support rectangle [[x_min, x_max], [y_min, y_max]] in the frame of the ZMP, if known.
+    fn support(&self) -> Option<[[f64; 2]; 2]>;
+}
+
+/// `controller.csv` of one full-simulation run, read by column name.
+#[derive(Debug, Clone)]
+pub struct CsvRun {
+    pub label: String,
+    pub path: PathBuf,
+    t: Vec<f64>,
+    columns: HashMap<Quantity, Vec<f64>>,
+    support: Option<[[f64; 2]; 2]>,
+    /// Raw columns by name, for metrics computed here (e.g. `com_z`).
+    raw: HashMap<String, Vec<f64>>,
+}
+
+/// Columns without which a run cannot be plotted at all.
+const REQUIRED: [&str; 4] = ["t", "zmp_meas_x", "zmp_meas_y", "hand_err"];
+
+const COLUMNS: [(&str, Quantity); 17] = [
+    ("zmp_meas_x", Quantity::ZmpX),
+    ("zmp_meas_y", Quantity::ZmpY),
+    ("zmp_pred_x", Quantity::ZmpPredX),
+    ("zmp_pred_y", Quantity::ZmpPredY),
+    ("zmp_ref_x", Quantity::ZmpRefX),
+    ("zmp_ref_y", Quantity::ZmpRefY),
+    ("hand_err", Quantity::HandError),
+    ("com_x", Quantity::ComX),
+    ("com_y", Quantity::ComY),
+    ("com_z", Quantity::ComZ),
+    ("kp", Quantity::Kp),
+    ("f_ext_x", Quantity::FExtX),
+    ("f_ext_y", Quantity::FExtY),
+    ("f_ext_z", Quantity::FExtZ),
+    ("f_dis_x", Quantity::FDisX),
+    ("f_dis_y", Quantity::FDisY),
+    ("f_dis_z", Quantity::FDisZ),
+];
+
+impl CsvRun {
+    /// Read `path`; every error names the file (and the line for a bad value).
+    pub fn read(path: &Path, label: &str) -> Result<CsvRun, ReportError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ReportError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&text, path, label)
+    }
+
+    pub fn parse(text: &str, path: &Path, label: &str) -> Result<CsvRun, ReportError> {
+        let bad = |line: usize, message: String| ReportError::Csv {
+            path: path.to_path_buf(),
+            line,
+            message,
+        };
+        let mut lines = text.lines().enumerate();
+        let header: Vec<&str> = match lines.next() {
+            Some((_, h)) => h.split(',').map(str::trim).collect(),
+            None => return Err(bad(1, "the file is empty (no header)".into())),
+        };
+        for name in REQUIRED {
+            if !header.contains(&name) {
+                return Err(bad(1, format!("no `{name}` column in the header")));
+            }
+        }
+        let mut cols: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
+        for (i, line) in lines {
+            if line.trim().is_empty() {
+                continue;
+            }
+            let fields: Vec<&str> = line.split(',').collect();
+            if fields.len() != header.len() {
+                return Err(bad(
+                    i + 1,
+                    format!(
+                        "{} fields where the header has {}",
+                        fields.len(),
+                        header.len()
+                    ),
+                ));
+            }
+            for (c, f) in fields.iter().enumerate() {
+                let v: f64 = f.trim().parse().map_err(|_| {
+                    bad(
+                        i + 1,
+                        format!("`{}` in column `{}` is not a number", f.trim(), header[c]),
+                    )
+                })?;
+                cols[c].push(v);
+            }
+        }
+        if cols[0].is_empty() {
+            return Err(bad(2, "no data rows after the header".into()));
+        }
+        let raw: HashMap<String, Vec<f64>> =
+            header.iter().map(|h| h.to_string()).zip(cols).collect();
+        let columns = COLUMNS
+            .iter()
+            .filter_map(|(name, q)| raw.get(*name).map(|v| (*q, v.clone())))
+            .collect();
+        // The core latches the support at its first tick: any finite row holds it.
+        let support = ["sup_x_min", "sup_x_max", "sup_y_min", "sup_y_max"]
+            .iter()
+            .map(|n| {
+                raw.get(*n)
+                    .and_then(|v| v.iter().copied().find(|x| x.is_finite()))
+            })
+            .collect::<Option<Vec<f64>>>()
+            .map(|s| [[s[0], s[1]], [s[2], s[3]]]);
+        Ok(CsvRun {
+            label: label.to_string(),
+            path: path.to_path_buf(),
+            t: raw["t"].clone(),
+            columns,
+            support,
+            raw,
+        })
+    }
+
+    /// A raw column by its CSV name.
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        self.raw.get(name).map(Vec::as_slice)
+    }
+}
+
+impl SeriesSource for CsvRun {
+    fn label(&self) -> &str {
+        &self.label
+    }
+    fn time(&self) -> &[f64] {
+        &self.t
+    }
+    fn values(&self, q: Quantity) -> Option<&[f64]> {
+        self.columns.get(&q).map(Vec::as_slice)
+    }
+    fn support(&self) -> Option<[[f64; 2]; 2]> {
+        self.support
+    }
+}
+
+/// A reduced-model run, its rows laid out as columns.
+#[derive(Debug, Clone)]
+pub struct ReducedRun {
+    pub label: String,
+    pub result: RunResult,
+    t: Vec<f64>,
+    columns: HashMap<Quantity, Vec<f64>>,
+    support: [[f64; 2]; 2],
+}
+
+impl ReducedRun {
+    pub fn new(result: RunResult, support: [[f64; 2]; 2]) -> ReducedRun {
+        let rows = &result.rows;
+        let col = |f: &dyn Fn(&crate::offline::Row) -> f64| rows.iter().map(f).collect::<Vec<_>>();
+        let columns = HashMap::from([
+            (Quantity::ZmpX, col(&|r| r.zmp[0])),
+            (Quantity::ZmpY, col(&|r| r.zmp[1])),
+            (Quantity::ZmpRefX, col(&|r| r.zmp_ref[0])),
+            (Quantity::ZmpRefY, col(&|r| r.zmp_ref[1])),
+            (Quantity::HandError, col(&|r| r.hand_error)),
+            (Quantity::ComX, col(&|r| r.com[0])),
+            (Quantity::ComY, col(&|r| r.com[1])),
+            (Quantity::Kp, col(&|r| r.kp)),
+            (Quantity::FExtX, col(&|r| r.f_ext[0])),
+            (Quantity::FExtY, col(&|r| r.f_ext[1])),
+            (Quantity::FExtZ, col(&|r| r.f_ext[2])),
+            (Quantity::FDisX, col(&|r| r.f_dis[0])),
+            (Quantity::FDisY, col(&|r| r.f_dis[1])),
+            (Quantity::FDisZ, col(&|r| r.f_dis[2])),
+        ]);
+        ReducedRun {
+            label: result.controller.name().to_uppercase(),
+            t: col(&|r| r.t),
+            columns,
+            support,
+            result,
+        }
+    }
+}
+
+impl SeriesSource for ReducedRun {
+    fn label(&self) -> &str {
+        &self.label
+    }
+    fn time(&self) -> &[f64] {
+        &self.t
+    }
+    fn values(&self, q: Quantity) -> Option<&[f64]> {
+        self.columns.get(&q).map(Vec::as_slice)
+    }
+    fn support(&self) -> Option<[[f64; 2]; 2]> {
+        Some(self.support)
+    }
+}
