@@ -354,6 +354,12 @@ pub struct ControllerConfig {
     /// Seconds without a new state after which the loop holds its safe behaviour (real time) or
     /// considers the run over (lockstep).
     pub state_timeout: f64,
+    /// Lockstep: seconds to wait, beyond `state_timeout`, for a restarted simulator before the
+    /// run is over (0: stop at `state_timeout`). Real time always waits, holding damping torques.
+    pub reconnect_timeout: f64,
+    /// Log a status line (ticks, deadline misses, stale periods) every this many seconds of
+    /// wall time; 0: never. For soak tests: each line is formatted on the loop's thread.
+    pub status_every: f64,
     /// PD on the CoM height (1/s², 1/s).
     pub com_height_kp: f64,
     pub com_height_kd: f64,
@@ -385,6 +391,8 @@ impl ControllerConfig {
         for (key, v) in [
             ("controller.com_height_kp", self.com_height_kp),
             ("controller.com_height_kd", self.com_height_kd),
+            ("controller.reconnect_timeout", self.reconnect_timeout),
+            ("controller.status_every", self.status_every),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(l.range_error(key, format!("must be finite and ≥ 0, got {v}")));

@@ -180,6 +180,17 @@ impl ControllerCore {
         self.latched.map(|l| l.support)
     }
 
+    /// Forget the latched references and the commands carried between ticks, so the next tick
+    /// latches again from its state as a first tick does: for a restarted simulator, whose robot
+    /// starts over from its initial posture. Allocation-free.
+    pub fn reset(&mut self) {
+        self.latched = None;
+        self.com_acc_cmd = Vector3::zeros();
+        self.hand_acc_cmd = Vector3::zeros();
+        self.last_x = [Vector3::zeros(); 2];
+        self.last = TickRecord::default();
+    }
+
     /// Roll out the last tick's predicted horizon and copy it into a log record.
     pub fn fill_plan(&mut self, out: &mut super::logger::PlanLog) {
         self.zmp.plan(&self.last_x, &mut self.plan);

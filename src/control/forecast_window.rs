@@ -21,6 +21,31 @@ pub enum ForecastRejection {
     LiftOff(usize),
 }
 
+/// Rejected forecast messages by reason.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct RejectionCounts {
+    pub bad_length: u64,
+    pub bad_step: u64,
+    pub not_finite: u64,
+    pub out_of_time: u64,
+    pub out_of_order: u64,
+    pub lift_off: u64,
+}
+
+impl RejectionCounts {
+    fn count(&mut self, r: &ForecastRejection) {
+        *match r {
+            ForecastRejection::BadLength(_) => &mut self.bad_length,
+            ForecastRejection::BadStep(_) => &mut self.bad_step,
+            ForecastRejection::NotFinite(_) => &mut self.not_finite,
+            ForecastRejection::OutOfTime { .. } => &mut self.out_of_time,
+            ForecastRejection::OutOfOrder { .. } => &mut self.out_of_order,
+            ForecastRejection::LiftOff(_) => &mut self.lift_off,
+        } += 1;
+    }
+}
+
 pub struct ForecastWindow {
     forces: Vec<[f64; 3]>,
     t0: f64,
@@ -30,6 +55,9 @@ pub struct ForecastWindow {
     /// Accepted and rejected messages so far.
     pub accepted: u64,
     pub rejected: u64,
+    pub rejections: RejectionCounts,
+    /// Accepted windows whose seq went back: a restarted forecaster.
+    pub restarts: u64,
     /// Limits: how far before / after the current time a window may start (s).
     max_age: f64,
     max_lead: f64,
@@ -49,6 +77,8 @@ impl ForecastWindow {
             last_seq: 0,
             accepted: 0,
             rejected: 0,
+            rejections: RejectionCounts::default(),
+            restarts: 0,
             max_age,
             max_lead,
             decay,
@@ -61,6 +91,9 @@ impl ForecastWindow {
         let r = self.check(msg, now);
         match r {
             Ok(()) => {
+                if self.len > 0 && msg.seq <= self.last_seq {
+                    self.restarts += 1;
+                }
                 let n = msg.len as usize;
                 self.forces[..n].copy_from_slice(&msg.forces[..n]);
                 self.t0 = msg.t0;
@@ -69,9 +102,19 @@ impl ForecastWindow {
                 self.last_seq = msg.seq;
                 self.accepted += 1;
             }
-            Err(_) => self.rejected += 1,
+            Err(e) => {
+                self.rejected += 1;
+                self.rejections.count(&e);
+            }
         }
         r
+    }
+
+    /// Drop the window (its times belong to a simulator that restarted) and accept the next
+    /// valid message whatever its seq. Counters are kept.
+    pub fn reset(&mut self) {
+        self.len = 0;
+        self.last_seq = 0;
     }
 
     fn check(&self, msg: &ForecastMsg, now: f64) -> Result<(), ForecastRejection> {
@@ -85,7 +128,9 @@ impl ForecastWindow {
         if !msg.t0.is_finite() || msg.t0 < now - self.max_age || msg.t0 > now + self.max_lead {
             return Err(ForecastRejection::OutOfTime { t0: msg.t0, now });
         }
-        if self.accepted > 0 && msg.seq <= self.last_seq {
+        // A seq that goes back is a replayed old window, unless the window also starts later
+        // than the current one: then it is a restarted forecaster counting from 1 again.
+        if self.len > 0 && msg.seq <= self.last_seq && msg.t0 <= self.t0 {
             return Err(ForecastRejection::OutOfOrder {
                 got: msg.seq,
                 last: self.last_seq,
@@ -185,14 +230,55 @@ mod tests {
             w.offer(&msg(1, 0.0, 0.01, 10, 1.0), 0.0),
             Err(ForecastRejection::OutOfOrder { .. })
         ));
+        assert!(matches!(
+            w.offer(&msg(1, -0.5, 0.01, 10, 1.0), 0.0),
+            Err(ForecastRejection::OutOfOrder { .. })
+        ));
         let mut nan = msg(3, 0.0, 0.01, 10, 1.0);
         nan.forces[4][1] = f64::NAN;
         assert_eq!(w.offer(&nan, 0.0), Err(ForecastRejection::NotFinite(4)));
         let mut lift = msg(3, 0.0, 0.01, 10, 1.0);
         lift.forces[2][2] = 400.0;
         assert_eq!(w.offer(&lift, 0.0), Err(ForecastRejection::LiftOff(2)));
-        assert_eq!((w.accepted, w.rejected), (1, 9));
+        let mut inf_t0 = msg(3, f64::INFINITY, 0.01, 10, 1.0);
+        inf_t0.t0 = f64::INFINITY;
+        assert!(matches!(
+            w.offer(&inf_t0, 0.0),
+            Err(ForecastRejection::OutOfTime { .. })
+        ));
+        assert_eq!(
+            w.offer(&msg(3, 0.0, f64::NAN, 10, 1.0), 0.0)
+                .map_err(|e| e.to_string()),
+            Err("forecast step dt = NaN s is not a positive finite number".into())
+        );
+        assert_eq!((w.accepted, w.rejected), (1, 12));
+        assert_eq!(
+            w.rejections,
+            RejectionCounts {
+                bad_length: 2,
+                bad_step: 3,
+                not_finite: 1,
+                out_of_time: 3,
+                out_of_order: 2,
+                lift_off: 1,
+            }
+        );
         // The rejected ones changed nothing.
         assert!((w.at(0.055)[0] - 5.5).abs() < 1e-9);
+    }
+
+    #[test]
+    fn restarts_of_forecaster_and_simulator() {
+        let mut w = ForecastWindow::new(1.0, 1.0, 0.1, 300.0);
+        w.offer(&msg(40, 5.0, 0.01, 100, 1.0), 5.0).unwrap();
+        // A restarted forecaster counts from 1 again with a later window: taken.
+        w.offer(&msg(1, 5.2, 0.01, 100, 1.0), 5.2).unwrap();
+        assert_eq!(w.restarts, 1);
+        assert!(w.covers(5.3));
+        // A restarted simulator starts over at t = 0: the old window is dropped, any seq goes.
+        w.reset();
+        assert!(!w.covers(5.3) && w.at(5.3) == [0.0; 3]);
+        w.offer(&msg(2, 0.0, 0.01, 100, 1.0), 0.0).unwrap();
+        assert_eq!((w.accepted, w.rejected, w.restarts), (3, 0, 1));
     }
 }

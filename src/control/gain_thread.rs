@@ -68,6 +68,53 @@ pub struct GainWorkerStats {
     pub panics: AtomicU64,
 }
 
+/// One gain search from a snapshot, as run by the C2 thread. [`GainSearch`] is the one used in
+/// production; tests put a failing, panicking or slow one in its place with
+/// [`GainHandoff::spawn_with`] to exercise the loop's fallback to the nominal gains.
+pub trait GainSolver: Send {
+    /// Search from `snap`, warm-started from the last result shifted by `shift` preview steps;
+    /// on success fill `out` (schedule, costs, iterations, solve time) without allocating.
+    fn solve(
+        &mut self,
+        snap: &GainSnapshot,
+        shift: usize,
+        out: &mut StampedSchedule,
+    ) -> Result<(), crate::preview::PreviewError>;
+    /// Forget the warm start (after a failure or a panic).
+    fn reset(&mut self);
+}
+
+impl GainSolver for GainSearch {
+    fn solve(
+        &mut self,
+        snap: &GainSnapshot,
+        shift: usize,
+        out: &mut StampedSchedule,
+    ) -> Result<(), crate::preview::PreviewError> {
+        self.set_effective_mass(snap.m_e)?;
+        let inputs = GainSearchInputs {
+            com: snap.com,
+            zmp_ref: &snap.zmp_ref,
+            hand: snap.hand,
+            hand_desired: &snap.hand_desired,
+            f_ext: &snap.f_ext,
+            applied: snap.applied,
+        };
+        let report = self.search(&inputs, shift)?;
+        out.schedule.kp.copy_from_slice(&self.schedule().kp);
+        out.schedule.kd.copy_from_slice(&self.schedule().kd);
+        out.cost = report.cost;
+        out.nominal_cost = report.nominal_cost;
+        out.iterations = report.iterations as u32;
+        out.solve_time = report.elapsed.as_secs_f64();
+        Ok(())
+    }
+
+    fn reset(&mut self) {
+        GainSearch::reset(self);
+    }
+}
+
 /// The loop's side of the hand-off.
 pub struct GainHandoff {
     snapshots: Input<GainSnapshot>,
@@ -80,9 +127,16 @@ pub struct GainHandoff {
 impl GainHandoff {
     /// Start the worker thread with a gain search configured from `config`.
     pub fn spawn(config: &Config) -> Result<Self, crate::preview::PreviewError> {
+        Self::spawn_with(config, Box::new(GainSearch::from_config(config)?))
+    }
+
+    /// Start the worker thread with `solver` (horizon and nominal gains from `config`).
+    pub fn spawn_with(
+        config: &Config,
+        mut solver: Box<dyn GainSolver>,
+    ) -> Result<Self, crate::preview::PreviewError> {
         let n = config.preview.horizon;
         let period = config.preview.period;
-        let mut search = GainSearch::from_config(config)?;
         let nominal = GainSchedule::constant(n, config.hand.kp, config.nominal_kd(config.hand.kp));
         let (snapshots, mut snap_out) = triple_buffer(&GainSnapshot::empty(n));
         let empty = StampedSchedule {
@@ -112,30 +166,14 @@ impl GainHandoff {
                     if snap.seq == 0 {
                         continue;
                     }
+                    // A snapshot earlier than the last (a restarted simulator) shifts nothing.
                     let shift = last_time.map_or(0, |t| ((snap.time - t) / period).round().max(0.0) as usize);
-                    let outcome = catch_unwind(AssertUnwindSafe(|| {
-                        search.set_effective_mass(snap.m_e)?;
-                        let inputs = GainSearchInputs {
-                            com: snap.com,
-                            zmp_ref: &snap.zmp_ref,
-                            hand: snap.hand,
-                            hand_desired: &snap.hand_desired,
-                            f_ext: &snap.f_ext,
-                            applied: snap.applied,
-                        };
-                        search.search(&inputs, shift)
-                    }));
+                    let out = sched_in.input_buffer_mut();
+                    let outcome = catch_unwind(AssertUnwindSafe(|| solver.solve(snap, shift, out)));
                     match outcome {
-                        Ok(Ok(report)) => {
-                            let out = sched_in.input_buffer_mut();
+                        Ok(Ok(())) => {
                             out.time = snap.time;
                             out.seq = snap.seq;
-                            out.schedule.kp.copy_from_slice(&search.schedule().kp);
-                            out.schedule.kd.copy_from_slice(&search.schedule().kd);
-                            out.cost = report.cost;
-                            out.nominal_cost = report.nominal_cost;
-                            out.iterations = report.iterations as u32;
-                            out.solve_time = report.elapsed.as_secs_f64();
                             sched_in.publish();
                             stats_w.solves.fetch_add(1, Ordering::Relaxed);
                             last_time = Some(snap.time);
@@ -143,12 +181,12 @@ impl GainHandoff {
                         Ok(Err(e)) => {
                             stats_w.failures.fetch_add(1, Ordering::Relaxed);
                             tracing::warn!("C2 gain search failed: {e}; C1 keeps the last or nominal gains");
-                            search.reset();
+                            solver.reset();
                         }
                         Err(_) => {
                             stats_w.panics.fetch_add(1, Ordering::Relaxed);
                             tracing::error!("C2 gain search panicked; restarting it cold, C1 keeps the nominal gains");
-                            search.reset();
+                            solver.reset();
                             last_time = None;
                         }
                     }

@@ -1,6 +1,15 @@
 //! The control server's loop over iceoryx2 (`upc controller`): lockstep (answer each state as
 //! it arrives) or real time (absolute deadlines at `rate_hz`). Nothing on the loop's path
 //! allocates, blocks on logging or on C2, or panics on bad input.
+//!
+//! Faults (see `services/FAULTS.md`):
+//! - No fresh state for `state_timeout`: a stale period. In real time the loop keeps ticking and
+//!   publishes joint damping torques flagged [`TORQUE_FLAG_FALLBACK`]; in lockstep it waits
+//!   `reconnect_timeout` more for a simulator, then stops.
+//! - A state whose step goes back: a restarted simulator. The core, the forecast window and the
+//!   metrics' initial CoM height latch again from its first state, and control resumes.
+//! - Forecasts are validated by [`ForecastWindow`]; without one the forecast decays to zero.
+//! - C2 dead, failing or late: C1 runs with the nominal gains.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -9,6 +18,8 @@ use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
+use super::forecast_window::RejectionCounts;
+use super::gain_thread::GainSolver;
 use super::logger::{ControlLogger, TickLog};
 use super::{ControllerCore, ForecastWindow, GainHandoff, LatencyHistogram, Ticker};
 use crate::channels::{
@@ -38,6 +49,7 @@ pub struct ServerOptions {
 
 /// What a run measured; written as the controller's part of `summary.json`.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[serde(default)]
 pub struct ServerSummary {
     pub controller: String,
     pub mode: String,
@@ -48,13 +60,31 @@ pub struct ServerSummary {
     pub tick_max_us: f64,
     pub deadline_overruns: u64,
     pub deadline_misses: u64,
+    /// Loop passes without a new state (real time) or with a repeated one.
     pub stale_states: u64,
+    /// Times the state stopped for longer than `controller.state_timeout`.
+    pub stale_periods: u64,
+    /// Real time: damping torques published (flagged fallback) while the state was stale.
+    pub stale_ticks: u64,
+    /// Longest wall time between two fresh states (s).
+    pub longest_state_gap: f64,
+    /// Restarted simulators the controller latched onto and resumed with.
+    pub reconnects: u64,
+    /// Control ticks since the last reconnect (all ticks without one).
+    pub ticks_since_reconnect: u64,
     pub tick_errors: u64,
     pub wbc_fallbacks: u64,
     pub preview_fallbacks: u64,
     pub forecasts_accepted: u64,
     pub forecasts_rejected: u64,
+    pub forecasts_rejected_by: RejectionCounts,
+    /// Windows accepted from a forecaster that restarted (its seq went back).
+    pub forecaster_restarts: u64,
+    /// The forecast was lost at some point: no valid window for `state_timeout` and the
+    /// current one no longer covering the horizon (it decays to zero).
     pub forecast_lost: bool,
+    /// Times the forecast was lost.
+    pub forecast_losses: u64,
     pub c2_solves: u64,
     pub c2_failures: u64,
     pub c2_panics: u64,
@@ -84,6 +114,18 @@ pub fn run_server(
     opts: &ServerOptions,
     stop: Arc<AtomicBool>,
 ) -> Result<ServerSummary, Box<dyn std::error::Error + Send + Sync>> {
+    run_server_with(config, model, opts, stop, None)
+}
+
+/// [`run_server`] with C2's gain search replaced by `c2_solver` (when the controller is C2):
+/// for tests that make C2 fail, panic or lag. Not reachable from the command line.
+pub fn run_server_with(
+    config: &Config,
+    model: Model,
+    opts: &ServerOptions,
+    stop: Arc<AtomicBool>,
+    c2_solver: Option<Box<dyn GainSolver>>,
+) -> Result<ServerSummary, Box<dyn std::error::Error + Send + Sync>> {
     let cc = &config.controller;
     let kind = cc.kind;
     let dt = 1.0 / cc.rate_hz;
@@ -111,10 +153,10 @@ pub fn run_server(
         cc.forecast_decay,
         weight,
     );
-    let mut c2 = if kind == ControllerKind::C2 {
-        Some(GainHandoff::spawn(config)?)
-    } else {
-        None
+    let mut c2 = match (kind, c2_solver) {
+        (ControllerKind::C2, Some(solver)) => Some(GainHandoff::spawn_with(config, solver)?),
+        (ControllerKind::C2, None) => Some(GainHandoff::spawn(config)?),
+        _ => None,
     };
     let logger = match &opts.rrd {
         Some(p) => Some(ControlLogger::start(
@@ -138,11 +180,18 @@ pub fn run_server(
     };
     let mut hist = LatencyHistogram::new();
     let mut tau = [0.0; MAX_DOF];
+    // Joint rates of the last fresh state, for the damping torques of a stale period.
+    let mut last_qd = [0.0; MAX_DOF];
     let mut seq = 0u64;
     let mut last_step: Option<u64> = None;
+    let mut last_time = 0.0;
     let started = Instant::now();
     let mut last_state_at = Instant::now();
+    let mut stale = false;
     let mut last_forecast_at = Instant::now();
+    let mut forecast_missing = false;
+    let status_every = Duration::from_secs_f64(cc.status_every);
+    let mut next_status = Instant::now() + status_every;
     let (mut hand_sq, mut c2_solve_sum, mut c2_iter_sum, mut c2_seen) = (0.0, 0.0, 0.0, 0u64);
     let mut last_c2_seq = 0u64;
     let mut schedule_was_stale = false;
@@ -153,65 +202,174 @@ pub fn run_server(
         if stop.load(Ordering::Relaxed) {
             break "signal".into();
         }
+        if !status_every.is_zero() && Instant::now() >= next_status {
+            next_status += status_every;
+            let (misses, overruns) = ticker.as_ref().map_or((0, 0), |t| (t.missed, t.overruns));
+            tracing::info!(
+                "status: ticks {} misses {misses} overruns {overruns} stale_periods {} \
+                 reconnects {} t {:.3}",
+                s.ticks,
+                s.stale_periods,
+                s.reconnects,
+                s.sim_time
+            );
+        }
         match ticker.as_mut() {
             Some(t) => t.wait(),
             None => {
                 state_events.wait(Duration::from_millis(20))?;
             }
         }
-        let Some(state) = states.latest()? else {
-            let quiet = last_state_at.elapsed().as_secs_f64();
-            if last_step.is_none() && started.elapsed().as_secs_f64() > opts.startup_timeout {
-                return Err(format!(
-                    "no state from the simulator on {}/state within {} s",
-                    opts.prefix, opts.startup_timeout
-                )
-                .into());
-            }
-            if last_step.is_some() {
-                s.stale_states += u64::from(ticker.is_some());
-                if cc.mode == LoopMode::Lockstep && quiet > cc.state_timeout {
-                    break "simulator stopped".into();
+        let received = states.latest()?;
+        // A step that goes back is a new simulator (restarted: it counts from 0 again); the
+        // same step again is the lockstep simulator re-sending a state it waits on.
+        let restarted = matches!((&received, last_step), (Some(st), Some(l)) if st.step < l);
+        let state = match received {
+            Some(st) if restarted || last_step.is_none_or(|l| st.step > l) => st,
+            repeated => {
+                let Some(l) = last_step else {
+                    if started.elapsed().as_secs_f64() > opts.startup_timeout {
+                        return Err(format!(
+                            "no state from the simulator on {}/state within {} s",
+                            opts.prefix, opts.startup_timeout
+                        )
+                        .into());
+                    }
+                    continue;
+                };
+                s.stale_states += u64::from(ticker.is_some() || repeated.is_some());
+                let quiet = last_state_at.elapsed().as_secs_f64();
+                if quiet <= cc.state_timeout {
+                    continue;
                 }
+                if !stale {
+                    stale = true;
+                    s.stale_periods += 1;
+                    match cc.mode {
+                        LoopMode::Realtime => tracing::warn!(
+                            "no state for {quiet:.3} s after step {l} (t = {last_time:.3} s): \
+                             damping torques until a simulator publishes again"
+                        ),
+                        LoopMode::Lockstep => tracing::warn!(
+                            "no state for {quiet:.3} s after step {l} (t = {last_time:.3} s): \
+                             waiting {} s for a simulator",
+                            cc.reconnect_timeout
+                        ),
+                    }
+                }
+                match cc.mode {
+                    LoopMode::Lockstep => {
+                        if quiet > cc.state_timeout + cc.reconnect_timeout {
+                            break "simulator stopped".into();
+                        }
+                    }
+                    LoopMode::Realtime => {
+                        // No state to control from: joint damping on the last measured rates,
+                        // flagged so the receiver knows these are not control torques.
+                        let tick_start = Instant::now();
+                        for (t, qd) in tau[..n_tau].iter_mut().zip(&last_qd[..n_tau]) {
+                            *t = -config.wbc.fallback_damping * qd;
+                        }
+                        seq += 1;
+                        torques.send_with(|m| {
+                            m.seq = seq;
+                            m.state_step = l;
+                            m.n = n_tau as u32;
+                            m.flags = TORQUE_FLAG_FALLBACK;
+                            m.compute_ns = tick_start.elapsed().as_nanos() as u64;
+                            m.tau[..n_tau].copy_from_slice(&tau[..n_tau]);
+                        })?;
+                        torque_events.notify()?;
+                        s.stale_ticks += 1;
+                    }
+                }
+                continue;
             }
-            continue;
         };
-        if last_step.is_some_and(|l| state.step <= l) {
-            s.stale_states += 1;
-            continue;
+        if last_step.is_some() {
+            let gap = last_state_at.elapsed().as_secs_f64();
+            s.longest_state_gap = s.longest_state_gap.max(gap);
+            if restarted {
+                // The new simulator's robot starts over: latch references, the forecast's time
+                // line and the metrics' initial CoM height again from this state.
+                s.reconnects += 1;
+                s.ticks_since_reconnect = 0;
+                core.reset();
+                window.reset();
+                com_z0 = None;
+                last_forecast_at = Instant::now();
+                tracing::warn!(
+                    "simulator restarted: step {} (t = {:.3} s) after step {} (t = {last_time:.3} \
+                     s), {gap:.3} s without state; references re-latched, control resumes \
+                     (reconnect {})",
+                    state.step,
+                    state.time,
+                    last_step.unwrap_or(0),
+                    s.reconnects
+                );
+            } else if stale {
+                tracing::info!(
+                    "state back at step {} after {gap:.3} s: control resumes",
+                    state.step
+                );
+            }
         }
+        stale = false;
         last_step = Some(state.step);
+        last_time = state.time;
         last_state_at = Instant::now();
         let tick_start = Instant::now();
+        let nv = (state.nv as usize).min(MAX_DOF);
+        for (i, qd) in last_qd[..n_tau].iter_mut().enumerate() {
+            *qd = state
+                .v
+                .get(6 + i)
+                .copied()
+                .filter(|v| v.is_finite() && 6 + i < nv)
+                .unwrap_or(0.0);
+        }
 
         // The newest forecast, validated.
         if let Some(r) = forecasts.with_latest(|m| window.offer(m, state.time))? {
-            last_forecast_at = Instant::now();
-            if let Err(e) = r
-                && window.rejected >= warned_forecast * 2
-            {
-                warned_forecast = window.rejected.max(1);
-                tracing::warn!("forecast rejected ({} so far): {e}", window.rejected);
+            match r {
+                Ok(()) => {
+                    last_forecast_at = Instant::now();
+                    if forecast_missing {
+                        forecast_missing = false;
+                        tracing::info!("forecast back at t = {:.3} s", state.time);
+                    }
+                }
+                // Logged at the 1st, 2nd, 4th, 8th… rejection: a flood costs no log I/O.
+                Err(e) if window.rejected >= warned_forecast * 2 => {
+                    warned_forecast = window.rejected.max(1);
+                    tracing::warn!("forecast rejected ({} so far): {e}", window.rejected);
+                }
+                Err(_) => {}
             }
         }
-        if !s.forecast_lost
+        // Lost: nothing valid for a while (rejected messages do not count) and the window no
+        // longer covers the horizon.
+        if !forecast_missing
             && window.accepted > 0
             && last_forecast_at.elapsed().as_secs_f64() > cc.state_timeout
             && !window.covers(state.time + horizon_time)
         {
+            forecast_missing = true;
             s.forecast_lost = true;
+            s.forecast_losses += 1;
             tracing::warn!(
-                "no forecast for {:.2} s: the forecast decays to zero",
-                last_forecast_at.elapsed().as_secs_f64()
+                "no valid forecast for {:.2} s at t = {:.3} s: the forecast decays to zero",
+                last_forecast_at.elapsed().as_secs_f64(),
+                state.time
             );
         }
 
-        // C2's newest schedule, unless older than the horizon.
+        // C2's newest schedule, unless older than the horizon (or from before a restart).
         let with_c2 = c2.is_some();
         let schedule = c2
             .as_mut()
             .map(|h| h.latest())
-            .filter(|sch| sch.seq > 0 && state.time - sch.time <= horizon_time);
+            .filter(|sch| sch.seq > 0 && (0.0..=horizon_time).contains(&(state.time - sch.time)));
         let stale = with_c2 && schedule.is_none() && state.time > horizon_time;
         if stale && !schedule_was_stale {
             s.c2_stale_schedules += 1;
@@ -272,6 +430,7 @@ pub fn run_server(
         let tick_time = tick_start.elapsed();
         hist.record(tick_time);
         s.ticks += 1;
+        s.ticks_since_reconnect += 1;
         s.sim_time = state.time;
 
         if let Some(h) = c2.as_mut()
@@ -330,6 +489,8 @@ pub fn run_server(
     s.preview_fallbacks = core.preview_fallbacks;
     s.forecasts_accepted = window.accepted;
     s.forecasts_rejected = window.rejected;
+    s.forecasts_rejected_by = window.rejections;
+    s.forecaster_restarts = window.restarts;
     if let Some(h) = &c2 {
         s.c2_solves = h.stats.solves.load(Ordering::Relaxed);
         s.c2_failures = h.stats.failures.load(Ordering::Relaxed);
