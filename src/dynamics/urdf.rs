@@ -79,7 +79,153 @@ fn diagnose(text: &str, message: &str) -> DynamicsError {
             };
         }
     }
-    DynamicsError::Parse(message.to_owned())
+    match locate(text) {
+        Some(culprit) => DynamicsError::Parse(format!("{culprit} ({message})")),
+        None => DynamicsError::Parse(message.to_owned()),
+    }
+}
+
+/// Numeric attributes of URDF elements and how many numbers each holds.
+const NUMERIC: [(&str, &[&str], usize); 14] = [
+    ("mass", &["value"], 1),
+    ("inertia", &["ixx", "ixy", "ixz", "iyy", "iyz", "izz"], 1),
+    ("origin", &["xyz", "rpy"], 3),
+    ("axis", &["xyz"], 3),
+    ("limit", &["lower", "upper", "effort", "velocity"], 1),
+    ("dynamics", &["damping", "friction"], 1),
+    ("box", &["size"], 3),
+    ("cylinder", &["radius", "length"], 1),
+    ("sphere", &["radius"], 1),
+    ("mesh", &["scale"], 3),
+    ("color", &["rgba"], 4),
+    ("mimic", &["multiplier", "offset"], 1),
+    ("calibration", &["rising", "falling"], 1),
+    (
+        "safety_controller",
+        &[
+            "soft_lower_limit",
+            "soft_upper_limit",
+            "k_position",
+            "k_velocity",
+        ],
+        1,
+    ),
+];
+
+/// Attributes without which urdf-rs refuses an element.
+const REQUIRED: [(&str, &[&str]); 5] = [
+    ("link", &["name"]),
+    ("joint", &["name", "type"]),
+    ("parent", &["link"]),
+    ("child", &["link"]),
+    ("mass", &["value"]),
+];
+
+/// urdf-rs's parse errors name no element: find the first one at fault in the raw text (a
+/// number that does not parse, a missing required attribute, an element not closed or closed
+/// by the wrong tag), described with the link or joint it belongs to.
+fn locate(text: &str) -> Option<String> {
+    // Open elements: (tag name, its `name` attribute).
+    let mut open: Vec<(&str, Option<&str>)> = Vec::new();
+    let owner = |open: &[(&str, Option<&str>)]| {
+        open.iter()
+            .rev()
+            .find_map(|(tag, name)| {
+                matches!(*tag, "link" | "joint")
+                    .then(|| format!(" of {tag} '{}'", name.unwrap_or("?")))
+            })
+            .unwrap_or_default()
+    };
+    let mut rest = text;
+    while let Some(at) = rest.find('<') {
+        rest = &rest[at..];
+        let skip_to = |end: &str| rest.find(end).map(|i| i + end.len());
+        let skipped = if rest.starts_with("<!--") {
+            skip_to("-->")
+        } else if rest.starts_with("<![CDATA[") {
+            skip_to("]]>")
+        } else if rest.starts_with("<?") || rest.starts_with("<!") {
+            skip_to(">")
+        } else {
+            None
+        };
+        if let Some(n) = skipped {
+            rest = &rest[n..];
+            continue;
+        }
+        let Some(end) = rest.find('>') else {
+            let tag = rest[1..].split_whitespace().next().unwrap_or_default();
+            return Some(format!(
+                "element <{tag}>{} has no closing `>`",
+                owner(&open)
+            ));
+        };
+        let tag = &rest[1..end];
+        rest = &rest[end + 1..];
+        if let Some(closing) = tag.strip_prefix('/') {
+            let closing = closing.trim();
+            match open.pop() {
+                Some((name, _)) if name == closing => continue,
+                Some((name, id)) => {
+                    return Some(format!(
+                        "</{closing}> closes <{name}{}>{}",
+                        id.map(|i| format!(" name=\"{i}\"")).unwrap_or_default(),
+                        owner(&open)
+                    ));
+                }
+                None => return Some(format!("</{closing}> closes no open element")),
+            }
+        }
+        let self_closing = tag.ends_with('/');
+        let tag = tag.trim_end_matches('/');
+        let name = tag.split_whitespace().next().unwrap_or_default();
+        let id = attribute(tag, "name");
+        let mut context = open.clone();
+        context.push((name, id));
+        for (element, attrs) in REQUIRED {
+            if element == name
+                && let Some(a) = attrs.iter().find(|a| attribute(tag, a).is_none())
+            {
+                return Some(format!(
+                    "<{name}>{} lacks the attribute `{a}`",
+                    owner(&context)
+                ));
+            }
+        }
+        for (element, attrs, count) in NUMERIC {
+            if element != name {
+                continue;
+            }
+            for a in attrs {
+                let Some(v) = attribute(tag, a) else { continue };
+                let numbers: Vec<&str> = v.split_whitespace().collect();
+                let bad = numbers.iter().find(|x| x.parse::<f64>().is_err());
+                if let Some(x) = bad {
+                    return Some(format!(
+                        "<{name} {a}=\"{v}\">{}: `{x}` is not a number",
+                        owner(&context)
+                    ));
+                }
+                if numbers.len() != count {
+                    return Some(format!(
+                        "<{name} {a}=\"{v}\">{}: expected {count} number(s), found {}",
+                        owner(&context),
+                        numbers.len()
+                    ));
+                }
+            }
+        }
+        if !self_closing {
+            open.push((name, id));
+        }
+    }
+    open.pop().map(|(name, id)| {
+        format!(
+            "<{name}{}>{} is not closed",
+            id.map(|i| format!(" name=\"{i}\"")).unwrap_or_default(),
+            owner(&open)
+        )
+    })
 }
 
 fn attribute<'t>(tag: &'t str, key: &str) -> Option<&'t str> {
