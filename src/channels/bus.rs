@@ -267,6 +267,32 @@ impl Listener {
         Ok(n > 0)
     }
 
+    /// Wait until `ready()` holds or a notification arrives, for at most `timeout`; true unless
+    /// the time ran out. `ready` is first polled for up to `spin` without sleeping. Why: in
+    /// lockstep the answer comes within a few hundred µs, and waking a blocked process on a busy
+    /// two-core machine costs tens to hundreds of µs (the scheduler's latency, not iceoryx2's).
+    /// Pending notifications are consumed first; a publisher sends its sample before notifying,
+    /// so a notification consumed here belongs to a sample `ready` already sees.
+    pub fn wait_until(
+        &self,
+        timeout: Duration,
+        spin: Duration,
+        mut ready: impl FnMut() -> bool,
+    ) -> Result<bool, ChannelError> {
+        self.drain()?;
+        let start = std::time::Instant::now();
+        loop {
+            if ready() {
+                return Ok(true);
+            }
+            let spent = start.elapsed();
+            if spent >= spin.min(timeout) {
+                return self.wait(timeout.saturating_sub(spent));
+            }
+            std::hint::spin_loop();
+        }
+    }
+
     /// Consume pending notifications without blocking; true if there were any.
     pub fn drain(&self) -> Result<bool, ChannelError> {
         let n = self.inner.try_wait(|_| {}).map_err(|e| err("wait", e))?;

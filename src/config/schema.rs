@@ -360,6 +360,9 @@ pub struct ControllerConfig {
     /// Log a status line (ticks, deadline misses, stale periods) every this many seconds of
     /// wall time; 0: never. For soak tests: each line is formatted on the loop's thread.
     pub status_every: f64,
+    /// Lockstep: poll for the next state this long (µs) before sleeping on its event (see
+    /// `Listener::wait_until`); 0 sleeps at once.
+    pub ipc_spin_us: f64,
     /// PD on the CoM height (1/s², 1/s).
     pub com_height_kp: f64,
     pub com_height_kd: f64,
@@ -393,6 +396,7 @@ impl ControllerConfig {
             ("controller.com_height_kd", self.com_height_kd),
             ("controller.reconnect_timeout", self.reconnect_timeout),
             ("controller.status_every", self.status_every),
+            ("controller.ipc_spin_us", self.ipc_spin_us),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(l.range_error(key, format!("must be finite and ≥ 0, got {v}")));

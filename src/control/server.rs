@@ -217,7 +217,11 @@ pub fn run_server_with(
         match ticker.as_mut() {
             Some(t) => t.wait(),
             None => {
-                state_events.wait(Duration::from_millis(20))?;
+                state_events.wait_until(
+                    Duration::from_millis(20),
+                    Duration::from_secs_f64(cc.ipc_spin_us * 1e-6),
+                    || states.has_samples(),
+                )?;
             }
         }
         let received = states.latest()?;

@@ -73,6 +73,10 @@ pub fn run(
         }
         wake.wait(Duration::from_millis(50))?;
         if let Some(t) = states.latest()?.map(|m| m.time) {
+            // Time going back is a restarted simulator: publish for its timeline at once.
+            if t + s.period < now {
+                next = f64::NEG_INFINITY;
+            }
             now = t;
         }
     }

@@ -62,6 +62,8 @@ pub struct ProcessConfig {
     pub command_timeout: f64,
     pub safe_damping: f64,
     pub first_command_timeout: f64,
+    /// Lockstep: poll for the answering torques this long (µs) before sleeping on their event.
+    pub ipc_spin_us: f64,
 }
 
 impl SimConfig {
@@ -138,6 +140,7 @@ impl SimConfig {
         )?;
         pos("sim.process.command_timeout", self.process.command_timeout)?;
         nonneg("sim.process.safe_damping", self.process.safe_damping)?;
+        nonneg("sim.process.ipc_spin_us", self.process.ipc_spin_us)?;
         pos(
             "sim.process.first_command_timeout",
             self.process.first_command_timeout,

@@ -364,9 +364,11 @@ impl Looper {
                 if stop.load(Ordering::Relaxed) {
                     return Ok(());
                 }
-                let woken = ep
-                    .torque_event
-                    .wait((deadline - now).min(Duration::from_millis(20)))?;
+                let woken = ep.torque_event.wait_until(
+                    (deadline - now).min(Duration::from_millis(20)),
+                    Duration::from_secs_f64(cfg.process.ipc_spin_us * 1e-6),
+                    || ep.torques.has_samples(),
+                )?;
                 if !woken {
                     // A controller that connected after this state was sent has neither the
                     // sample nor its wake-up: send the same state again (it skips duplicates).
