@@ -15,7 +15,9 @@
 //!    velocity targets remove a fraction of the penetration / loop gap per step
 //!    (`contact_stabilisation`, `loop_stabilisation`); a contact still above the plane may
 //!    approach it by at most its gap in this step (speculative contact, so nothing tunnels);
-//! 4. impulses `λ` from [`ConstraintSystem`] (Coulomb cones, projected Gauss–Seidel, warm start);
+//! 4. impulses `λ` from [`ConstraintSystem`]: a direct solve with every row at zero velocity
+//!    (all contacts sticking) when its result is admissible, projected Gauss–Seidel from the
+//!    previous step's impulses otherwise (Coulomb cones);
 //! 5. `v⁺ = v* + (M + dt D)⁻¹ Jᵀ λ`, `q⁺ = q ⊕ v⁺ dt` (SE(3) for the free-flyer).
 //!
 //! Why `h` at the midpoint. At fixed `q` the kinetic energy changes by `v̄ᵀ M Δv`, exactly the
@@ -188,6 +190,8 @@ pub struct StepReport {
     /// Steps done so far (this step included) and simulated time after it.
     pub step: u64,
     pub time: f64,
+    /// Gauss–Seidel sweeps of the constraint solver (0 when the direct all-stick solve was the
+    /// solution, or without constraints).
     pub solver_iterations: u32,
     /// Largest impulse change in the solver's last sweep (N·s).
     pub solver_change: f64,
