@@ -269,8 +269,9 @@ impl Listener {
 
     /// Wait until `ready()` holds or a notification arrives, for at most `timeout`; true unless
     /// the time ran out. `ready` is first polled for up to `spin` without sleeping. Why: in
-    /// lockstep the answer comes within a few hundred µs, and waking a blocked process on a busy
-    /// two-core machine costs tens to hundreds of µs (the scheduler's latency, not iceoryx2's).
+    /// lockstep the answer often comes within tens of µs (a simulator step), and waking a blocked
+    /// process on a busy two-core machine costs tens to hundreds of µs (the scheduler's latency,
+    /// not iceoryx2's). Spin only where the wait is short: a spinning waiter takes a core.
     /// Pending notifications are consumed first; a publisher sends its sample before notifying,
     /// so a notification consumed here belongs to a sample `ready` already sees.
     pub fn wait_until(

@@ -46,6 +46,9 @@ enum Item {
     Plan(Box<PlanLog>),
 }
 
+/// How often the logger thread takes the queued records (the queue holds 1024 ticks' worth).
+const DRAIN_PERIOD: std::time::Duration = std::time::Duration::from_millis(20);
+
 pub struct ControlLogger {
     tx: Option<SyncSender<Item>>,
     free: Receiver<Box<PlanLog>>,
@@ -91,20 +94,18 @@ impl ControlLogger {
             .name("upc-ctl-log".into())
             .spawn(move || {
                 super::realtime::lower_priority(15);
-                while let Ok(item) = rx.recv() {
-                    match item {
-                        Item::Tick(t) => {
-                            log_tick(&rec, &t);
-                            if let Some(w) = csv.as_mut() {
-                                let _ = write_csv(w, &t);
-                            }
-                        }
-                        Item::Plan(p) => {
-                            log_plan(&rec, &p);
-                            let _ = free_tx.try_send(p);
+                super::realtime::drain_periodically(&rx, DRAIN_PERIOD, |item| match item {
+                    Item::Tick(t) => {
+                        log_tick(&rec, &t);
+                        if let Some(w) = csv.as_mut() {
+                            let _ = write_csv(w, &t);
                         }
                     }
-                }
+                    Item::Plan(p) => {
+                        log_plan(&rec, &p);
+                        let _ = free_tx.try_send(p);
+                    }
+                });
                 if let Some(w) = csv.as_mut() {
                     let _ = w.flush();
                 }

@@ -70,6 +70,59 @@ pub fn apply(s: &RealtimeSettings) -> RealtimeReport {
     r
 }
 
+/// Run `f` with the calling thread in the SCHED_IDLE class, then restore its class. Threads that
+/// `f` starts (the rerun SDK's batcher and file writer, our logger threads) inherit the class,
+/// so they run only on a core nothing else wants: in lockstep the simulator and the controller
+/// wake each other every step, and a logging thread holding the core they wake on is the tail
+/// of the IPC latency. Where the class cannot be changed, `f` just runs.
+pub fn in_background<T>(f: impl FnOnce() -> T) -> T {
+    // SAFETY: sched_getscheduler/getparam/setscheduler on the calling thread (pid 0) with a
+    // valid sched_param.
+    let (policy, param) = unsafe {
+        let mut p = libc::sched_param { sched_priority: 0 };
+        (libc::sched_getscheduler(0), {
+            libc::sched_getparam(0, &mut p);
+            p
+        })
+    };
+    let idle = libc::sched_param { sched_priority: 0 };
+    let lowered =
+        policy >= 0 && unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &idle) } == 0;
+    let out = f();
+    if lowered {
+        // SAFETY: as above; restores what was read.
+        if unsafe { libc::sched_setscheduler(0, policy, &param) } != 0 {
+            tracing::warn!(
+                "could not restore the scheduling class after starting the log threads: {}",
+                std::io::Error::last_os_error()
+            );
+        }
+    }
+    out
+}
+
+/// A log thread's receive loop: every `period`, handle what has been queued, until every
+/// sender is gone (then the rest). Why not `recv`: a blocked receiver makes each `try_send` of
+/// the real-time loop a futex wake-up of this thread, which then lands on the core the other
+/// lockstep process is about to wake on. Polling keeps the loop's send a plain queue write.
+pub fn drain_periodically<T>(
+    rx: &std::sync::mpsc::Receiver<T>,
+    period: std::time::Duration,
+    mut handle: impl FnMut(T),
+) {
+    use std::sync::mpsc::TryRecvError;
+    loop {
+        loop {
+            match rx.try_recv() {
+                Ok(item) => handle(item),
+                Err(TryRecvError::Empty) => break,
+                Err(TryRecvError::Disconnected) => return,
+            }
+        }
+        std::thread::sleep(period);
+    }
+}
+
 /// Lower the calling thread's priority (the C2 worker and loggers must never preempt the loop).
 pub fn lower_priority(nice: i32) {
     // SAFETY: setpriority on the calling thread (who = 0 with PRIO_PROCESS applies to the thread

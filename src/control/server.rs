@@ -159,12 +159,15 @@ pub fn run_server_with(
         _ => None,
     };
     let logger = match &opts.rrd {
-        Some(p) => Some(ControlLogger::start(
-            p,
-            opts.csv.as_deref(),
-            &opts.recording_id,
-            config.preview.horizon,
-        )?),
+        // Its threads (ours and the rerun SDK's) in the idle class, see `in_background`.
+        Some(p) => Some(super::realtime::in_background(|| {
+            ControlLogger::start(
+                p,
+                opts.csv.as_deref(),
+                &opts.recording_id,
+                config.preview.horizon,
+            )
+        })?),
         None => None,
     };
     let rt = super::realtime::apply(&cc.realtime);

@@ -139,9 +139,11 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
     };
     let mut recorder = match &opts.rrd {
         Some(path) => Some(
-            Recorder::spawn(path, opts.recording_id.as_deref(), &world).map_err(|e| {
-                ProcessError::Setup(format!("rerun recording {}: {e}", path.display()))
-            })?,
+            // Its threads in the idle class: they must not delay the lockstep wake-ups.
+            crate::control::realtime::in_background(|| {
+                Recorder::spawn(path, opts.recording_id.as_deref(), &world)
+            })
+            .map_err(|e| ProcessError::Setup(format!("rerun recording {}: {e}", path.display())))?,
         ),
         None => None,
     };

@@ -263,7 +263,8 @@ fn logger(
 ) -> u64 {
     let mut written = 0;
     let mut failed = false;
-    while let Ok(f) = rx.recv() {
+    // Polled, not `recv`: see `drain_periodically` (the queue holds 64 frames, 0.64 s).
+    crate::control::realtime::drain_periodically(&rx, std::time::Duration::from_millis(20), |f| {
         match write_frame(&rec, &f, &robot, &door) {
             Ok(()) => written += 1,
             Err(e) if !failed => {
@@ -272,7 +273,7 @@ fn logger(
             }
             Err(_) => {}
         }
-    }
+    });
     if let Err(e) = rec.flush_blocking() {
         tracing::warn!("rerun flush failed: {e}");
     }
