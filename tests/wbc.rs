@@ -182,6 +182,80 @@ fn eom_residual(s: &Setup, sol: &Solution) -> f64 {
     r.amax()
 }
 
+/// The hand's world-aligned linear Jacobian (3×nv), from the dynamics library.
+fn hand_jacobian(s: &Setup) -> DMatrix<f64> {
+    let mut d = Data::new(&s.model);
+    let mut jac = DMatrix::zeros(6, s.model.nv);
+    upc::dynamics::compute_joint_jacobians(&s.model, &mut d, &s.q).unwrap();
+    let id = s.model.frame_id("r_hand").unwrap();
+    upc::dynamics::get_frame_jacobian(
+        &s.model,
+        &d,
+        id,
+        ReferenceFrame::LocalWorldAligned,
+        &mut jac,
+    )
+    .unwrap();
+    jac.rows(0, 3).into_owned()
+}
+
+#[test]
+fn a_known_hand_force_enters_the_equations_of_motion() {
+    let mut s = setup();
+    let f = Vector3::new(-30.0, 5.0, -10.0);
+    let cmd = WbcCommand {
+        hand_force: f,
+        ..hold(&s)
+    };
+    let sol = solve(&mut s, &cmd);
+    assert_eq!(sol.status, WbcStatus::Solved);
+    // M q̈ + h − Sᵀτ − J_cᵀ f_c = J_hᵀ F: the residual without the hand term is J_hᵀ F.
+    let jh = hand_jacobian(&s);
+    let without = eom_residual(&s, &sol);
+    let jtf = jh.transpose() * f;
+    assert!(
+        without > 0.5 * jtf.amax(),
+        "the force was ignored: {without}"
+    );
+    // Same residual with the hand term: recompute it from the full equations.
+    let model = &s.model;
+    let mut d = Data::new(model);
+    let m = crba(model, &mut d, &s.q).unwrap().clone();
+    let h = nonlinear_effects(model, &mut d, &s.q, &s.v)
+        .unwrap()
+        .clone();
+    let mut r = &m * &sol.ddq + h - jtf;
+    for a in 0..model.nv - 6 {
+        r[6 + a] -= sol.tau[a];
+    }
+    let mut jac = DMatrix::zeros(6, model.nv);
+    upc::dynamics::compute_joint_jacobians(model, &mut d, &s.q).unwrap();
+    for (c, id) in s.wbc.contact_frames().iter().enumerate() {
+        upc::dynamics::get_frame_jacobian(
+            model,
+            &d,
+            *id,
+            ReferenceFrame::LocalWorldAligned,
+            &mut jac,
+        )
+        .unwrap();
+        r -= jac.rows(0, 3).transpose() * sol.forces[c];
+    }
+    assert!(
+        r.amax() < 1e-5,
+        "EoM residual with the hand force {}",
+        r.amax()
+    );
+    // Newton: the feet push back on the hand force, the CoM does not accelerate.
+    let com_acc = (total_force(&sol) + f) / model.total_mass() - Vector3::new(0.0, 0.0, G);
+    assert!(com_acc.norm() < 1e-2, "{com_acc:?}");
+    assert!(
+        (total_force(&sol).x + f.x).abs() < 0.5,
+        "{:?}",
+        total_force(&sol)
+    );
+}
+
 #[test]
 fn static_standing_forces_carry_the_weight() {
     let mut s = setup();

@@ -363,6 +363,9 @@ pub struct ControllerConfig {
     /// Lockstep: poll for the next state this long (µs) before sleeping on its event (see
     /// `Listener::wait_until`); 0 sleeps at once.
     pub ipc_spin_us: f64,
+    /// Feed the hand force measured by the simulator (a wrist force sensor on a robot) to the
+    /// whole-body QP, so that the arm behaves as the hand impedance model (eq. 23) says.
+    pub hand_force_feedback: bool,
     /// PD on the CoM height (1/s², 1/s).
     pub com_height_kp: f64,
     pub com_height_kd: f64,

@@ -89,6 +89,8 @@ pub struct ControllerCore {
     period: f64,
     dt: f64,
     height_gains: [f64; 2],
+    /// Feed the measured hand force to the whole-body QP (`controller.hand_force_feedback`).
+    force_feedback: bool,
     q: DVector<f64>,
     v: DVector<f64>,
     zmp_ref: Vec<[f64; 2]>,
@@ -154,6 +156,7 @@ impl ControllerCore {
             period: p.period,
             dt: control_period,
             height_gains,
+            force_feedback: config.controller.hand_force_feedback,
             zmp_ref: vec![[0.0; 2]; n],
             hand_desired: vec![HandState::default(); n],
             f_ext: vec![[0.0; 3]; n],
@@ -370,16 +373,32 @@ impl ControllerCore {
         let [kpz, kdz] = self.height_gains;
         self.com_acc_cmd.z = kpz * (latched.com_height - com.z) - kdz * vcom.z;
         let (kp, kd) = (self.schedule.kp[0], self.schedule.kd[0]);
-        self.hand_acc_cmd = (latched.hand_target - hand_pos) * kp - hand_vel * kd;
+        // The measured hand force, when fed back: the QP's equations of motion account for it
+        // and the hand task asks for the impedance law's own response to it, eq. (23):
+        // M_e ẍ = F_ext + M_e ẍ_cmd, i.e. ẍ = ẍ_cmd + M_e⁻¹ F_ext. Without it the QP ignores the
+        // force, which then folds the arm's lightest joints instead of acting through M_e.
+        let f_hand = Vector3::from(state.hand_force);
+        let f_hand = if self.force_feedback && f_hand.iter().all(|x| x.is_finite()) {
+            f_hand
+        } else {
+            Vector3::zeros()
+        };
+        let acc_ext = if m_e_ok {
+            self.op.lambda_inv * f_hand
+        } else {
+            Vector3::zeros()
+        };
+        self.hand_acc_cmd = (latched.hand_target - hand_pos) * kp - hand_vel * kd + acc_ext;
 
         // Whole-body QP.
         let cmd = WbcCommand {
             com_acc: self.com_acc_cmd,
             hand_pos_des: latched.hand_target,
             hand_vel_des: Vector3::zeros(),
-            hand_acc_des: Vector3::zeros(),
+            hand_acc_des: acc_ext,
             kp,
             kd,
+            hand_force: f_hand,
             posture_ref: None,
         };
         let out = self

@@ -96,6 +96,10 @@ pub struct WbcCommand<'a> {
     /// Current impedance gains K_p (1/s²) and K_d (1/s) (from C2, or the fixed ones of C0/C1).
     pub kp: f64,
     pub kd: f64,
+    /// Known external force on the hand (N, world; measured, e.g. a wrist force sensor): enters
+    /// the equations of motion, so the torques account for it instead of letting it accelerate
+    /// whatever joints are lightest. Zero when unknown.
+    pub hand_force: Vector3<f64>,
     /// Posture reference (length nq; its root quaternion is the base-orientation target). `None`:
     /// the stored one ([`WholeBodyController::set_posture_reference`], else the first `q` seen).
     pub posture_ref: Option<&'a DVector<f64>>,
@@ -562,6 +566,7 @@ impl WholeBodyController {
             cmd.hand_pos_des,
             cmd.hand_vel_des,
             cmd.hand_acc_des,
+            cmd.hand_force,
         ]
         .iter()
         .all(|x| x.iter().all(|c| c.is_finite()))
@@ -600,6 +605,12 @@ impl WholeBodyController {
         // Bias h(q, v) last: RNEA overwrites data.v / data.a but not data.m.
         nonlinear_effects(model, data, q, v).map_err(|_| InvalidInput)?;
         self.h.copy_from(&data.tau);
+        // A known hand force acts like a bias: M q̈ + (h − J_hᵀ F) = Sᵀτ + J_cᵀ f.
+        for c in 0..self.nv {
+            self.h[c] -= (0..3)
+                .map(|k| self.jh[(k, c)] * cmd.hand_force[k])
+                .sum::<f64>();
+        }
 
         // ---- Objective (dense scratch; only the upper triangle is gathered). ----
         let nv = self.nv;
