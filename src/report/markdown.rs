@@ -129,9 +129,9 @@ pub fn full_metrics_table(run: &RunDir) -> String {
     ]);
     for c in &run.controllers {
         let excursion = match (
-            c.csv.support(),
-            c.csv.values(Quantity::ZmpPredX),
-            c.csv.values(Quantity::ZmpPredY),
+            c.csv.series.support(),
+            c.csv.series.values(Quantity::ZmpPredX),
+            c.csv.series.values(Quantity::ZmpPredY),
         ) {
             (Some(sup), Some(x), Some(y)) => min_support_margin(x, y, sup).map(|m| (-m).max(0.0)),
             _ => None,
@@ -187,8 +187,14 @@ pub fn reduced_metrics_table(runs: &[ReducedRun]) -> String {
     ]);
     for r in runs {
         let m = &r.result.metrics;
-        let margin = match (r.values(Quantity::ZmpX), r.values(Quantity::ZmpY)) {
-            (Some(x), Some(y)) => r.support().and_then(|sup| min_support_margin(x, y, sup)),
+        let margin = match (
+            r.series.values(Quantity::ZmpX),
+            r.series.values(Quantity::ZmpY),
+        ) {
+            (Some(x), Some(y)) => r
+                .series
+                .support()
+                .and_then(|sup| min_support_margin(x, y, sup)),
             _ => None,
         };
         let reports = &r.result.gain_search;
@@ -196,7 +202,7 @@ pub fn reduced_metrics_table(runs: &[ReducedRun]) -> String {
             reports.iter().map(|g| g.iterations as f64).sum::<f64>() / reports.len() as f64
         });
         s += &row(&[
-            r.label.clone(),
+            r.series.label.clone(),
             num(Some(m.max_zmp_error * 1e3), 2),
             num(margin.map(|v| v * 1e3), 2),
             num(Some(m.time_outside_support), 3),

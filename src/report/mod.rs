@@ -166,14 +166,18 @@ pub fn compare(runs: &[PathBuf], opts: &CompareOptions) -> Result<CompareOutput,
         md += "### Full simulation: metrics\n\n";
         md += &markdown::full_metrics_table(run);
         md += "\n### Full simulation: figures\n\n";
-        if run.controllers.iter().all(|c| c.csv.support().is_none()) {
+        if run
+            .controllers
+            .iter()
+            .all(|c| c.csv.series.support().is_none())
+        {
             md += "The CSVs of this run have no support columns: the ZMP figures show no \
                    support bounds.\n\n";
         }
         let sources: Vec<&dyn SeriesSource> = run
             .controllers
             .iter()
-            .map(|c| &c.csv as &dyn SeriesSource)
+            .map(|c| &c.csv.series as &dyn SeriesSource)
             .collect();
         md += &write_figures(
             &tag,
@@ -233,8 +237,10 @@ pub fn compare(runs: &[PathBuf], opts: &CompareOptions) -> Result<CompareOutput,
         md += "\n";
         md += &markdown::reduced_metrics_table(&reduced);
         md += "\n";
-        let sources: Vec<&dyn SeriesSource> =
-            reduced.iter().map(|r| r as &dyn SeriesSource).collect();
+        let sources: Vec<&dyn SeriesSource> = reduced
+            .iter()
+            .map(|r| &r.series as &dyn SeriesSource)
+            .collect();
         md += &write_figures(
             &format!("{tag}_reduced"),
             &format!("{}, reduced models", run.scenario),

@@ -45,14 +45,35 @@ pub trait SeriesSource {
     fn support(&self) -> Option<[[f64; 2]; 2]>;
 }
 
-/// `controller.csv` of one full-simulation run, read by column name.
+/// One controller's columns by quantity: the store behind both kinds of run.
 #[derive(Debug, Clone)]
-pub struct CsvRun {
+pub struct Series {
     pub label: String,
-    pub path: PathBuf,
     t: Vec<f64>,
     columns: HashMap<Quantity, Vec<f64>>,
     support: Option<[[f64; 2]; 2]>,
+}
+
+impl SeriesSource for Series {
+    fn label(&self) -> &str {
+        &self.label
+    }
+    fn time(&self) -> &[f64] {
+        &self.t
+    }
+    fn values(&self, q: Quantity) -> Option<&[f64]> {
+        self.columns.get(&q).map(Vec::as_slice)
+    }
+    fn support(&self) -> Option<[[f64; 2]; 2]> {
+        self.support
+    }
+}
+
+/// `controller.csv` of one full-simulation run, read by column name.
+#[derive(Debug, Clone)]
+pub struct CsvRun {
+    pub path: PathBuf,
+    pub series: Series,
     /// Raw columns by name, for metrics computed here (e.g. `com_z`).
     raw: HashMap<String, Vec<f64>>,
 }
@@ -151,11 +172,13 @@ impl CsvRun {
             .collect::<Option<Vec<f64>>>()
             .map(|s| [[s[0], s[1]], [s[2], s[3]]]);
         Ok(CsvRun {
-            label: label.to_string(),
             path: path.to_path_buf(),
-            t: raw["t"].clone(),
-            columns,
-            support,
+            series: Series {
+                label: label.to_string(),
+                t: raw["t"].clone(),
+                columns,
+                support,
+            },
             raw,
         })
     }
@@ -166,29 +189,11 @@ impl CsvRun {
     }
 }
 
-impl SeriesSource for CsvRun {
-    fn label(&self) -> &str {
-        &self.label
-    }
-    fn time(&self) -> &[f64] {
-        &self.t
-    }
-    fn values(&self, q: Quantity) -> Option<&[f64]> {
-        self.columns.get(&q).map(Vec::as_slice)
-    }
-    fn support(&self) -> Option<[[f64; 2]; 2]> {
-        self.support
-    }
-}
-
 /// A reduced-model run, its rows laid out as columns.
 #[derive(Debug, Clone)]
 pub struct ReducedRun {
-    pub label: String,
     pub result: RunResult,
-    t: Vec<f64>,
-    columns: HashMap<Quantity, Vec<f64>>,
-    support: [[f64; 2]; 2],
+    pub series: Series,
 }
 
 impl ReducedRun {
@@ -212,26 +217,13 @@ impl ReducedRun {
             (Quantity::FDisZ, col(&|r| r.f_dis[2])),
         ]);
         ReducedRun {
-            label: result.controller.name().to_uppercase(),
-            t: col(&|r| r.t),
-            columns,
-            support,
+            series: Series {
+                label: result.controller.name().to_uppercase(),
+                t: col(&|r| r.t),
+                columns,
+                support: Some(support),
+            },
             result,
         }
-    }
-}
-
-impl SeriesSource for ReducedRun {
-    fn label(&self) -> &str {
-        &self.label
-    }
-    fn time(&self) -> &[f64] {
-        &self.t
-    }
-    fn values(&self, q: Quantity) -> Option<&[f64]> {
-        self.columns.get(&q).map(Vec::as_slice)
-    }
-    fn support(&self) -> Option<[[f64; 2]; 2]> {
-        Some(self.support)
     }
 }
