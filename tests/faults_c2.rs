@@ -268,6 +268,7 @@ fn run(
         zmp_offset: [0.0, 0.0],
         startup_timeout: 40.0,
         csv: Some(csv.clone()),
+        scenario_hash: None,
     };
     let model = icub_like::load().expect("model");
     let stop = Arc::new(AtomicBool::new(false));

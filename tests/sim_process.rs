@@ -8,7 +8,7 @@ use std::time::Duration;
 use nalgebra::DVector;
 use upc::channels::{Bus, MAX_DOF, ServiceKind, StateMsg, TorqueMsg};
 use upc::sim::process::{RunOptions, RunSummary, run};
-use upc::sim::{CommandGate, PosturePd, Rejection, SimConfig, validate_command};
+use upc::sim::{CommandGate, CommandOrigin, PosturePd, Rejection, SimConfig, validate_command};
 
 #[test]
 fn commands_with_wrong_length_nan_or_old_seq_are_rejected() {
@@ -44,16 +44,45 @@ fn commands_with_wrong_length_nan_or_old_seq_are_rejected() {
     assert!(validate_command(Some(5), 4, 32, &tau, 32).is_err());
     assert_eq!(validate_command(Some(5), 9, 32, &tau, 32), Ok(()));
 
-    let mut gate = CommandGate::default();
-    assert!(gate.check(1, 32, &tau, 32).is_ok());
-    assert!(gate.check(2, 30, &tau, 32).is_err());
-    assert!(gate.check(1, 32, &tau, 32).is_err());
-    assert!(gate.check(2, 32, &bad[..32], 32).is_ok());
+    let mut gate = CommandGate::for_session(77);
+    let me = CommandOrigin {
+        session: 77,
+        controller: 5,
+    };
+    assert!(gate.check(me, 1, 32, &tau, 32).is_ok());
+    assert!(gate.check(me, 2, 30, &tau, 32).is_err());
+    assert!(gate.check(me, 1, 32, &tau, 32).is_err());
+    assert!(gate.check(me, 2, 32, &bad[..32], 32).is_ok());
+    // Torques computed from another plant run's states: never applied, whatever their seq.
+    let stale_run = CommandOrigin {
+        session: 76,
+        controller: 5,
+    };
+    assert_eq!(
+        gate.check(stale_run, 3, 32, &tau, 32),
+        Err(Rejection::ForeignSession {
+            expected: 77,
+            got: 76
+        })
+    );
     assert_eq!(gate.stats.accepted, 2);
     assert_eq!(gate.stats.wrong_length, 1);
     assert_eq!(gate.stats.out_of_order, 1);
-    assert_eq!(gate.stats.rejected(), 2);
+    assert_eq!(gate.stats.foreign, 1);
+    assert_eq!(gate.stats.rejected(), 3);
     assert_eq!(gate.last_seq, Some(2));
+    // A restarted controller (another id) starts its seq over; its old seq does not come back.
+    let next = CommandOrigin {
+        session: 77,
+        controller: 6,
+    };
+    assert!(gate.check(next, 1, 32, &tau, 32).is_ok());
+    assert_eq!(gate.stats.controller_changes, 1);
+    assert!(gate.check(next, 1, 32, &tau, 32).is_err());
+    assert!(
+        gate.check(me, 3, 32, &tau, 32).is_ok(),
+        "the first controller's own seq"
+    );
 }
 
 /// Runs the simulator in a thread and a PD controller here; returns the sim's summary and the
@@ -70,6 +99,7 @@ fn lockstep_run(tag: &str, steps: u64, inject_bad: bool) -> (RunSummary, StateMs
         rrd: None,
         recording_id: None,
         node_name: format!("sim_{tag}"),
+        truth_csv: None,
     };
 
     let bus = Bus::open(&prefix, &format!("ctrl_{tag}")).unwrap();
@@ -90,11 +120,12 @@ fn lockstep_run(tag: &str, steps: u64, inject_bad: bool) -> (RunSummary, StateMs
     let mut tau = DVector::zeros(n);
     let mut seq = 0u64;
     let mut last = StateMsg::default();
-    let send = |seq: u64, step: u64, n: u32, tau: &[f64]| {
+    let send = |seq: u64, st: &StateMsg, n: u32, tau: &[f64]| {
         torques
             .send_with(|m| {
                 m.seq = seq;
-                m.state_step = step;
+                m.state_step = st.step;
+                m.session = st.session;
                 m.n = n;
                 m.tau[..tau.len()].copy_from_slice(tau);
             })
@@ -112,16 +143,16 @@ fn lockstep_run(tag: &str, steps: u64, inject_bad: bool) -> (RunSummary, StateMs
             let v = DVector::from_column_slice(&s.v[..s.nv as usize]);
             pd.torques(&q, &v, &mut tau);
             if inject_bad && s.step == 5 {
-                send(seq + 1, s.step, n as u32 - 1, tau.as_slice()); // wrong length
+                send(seq + 1, &s, n as u32 - 1, tau.as_slice()); // wrong length
                 let mut nan = tau.clone();
                 nan[3] = f64::NAN;
-                send(seq + 1, s.step, n as u32, nan.as_slice()); // NaN
+                send(seq + 1, &s, n as u32, nan.as_slice()); // NaN
             }
             if inject_bad && s.step == 7 {
-                send(seq, s.step, n as u32, tau.as_slice()); // seq not increasing
+                send(seq, &s, n as u32, tau.as_slice()); // seq not increasing
             }
             seq += 1;
-            send(seq, s.step, n as u32, tau.as_slice());
+            send(seq, &s, n as u32, tau.as_slice());
         }
         if sim.is_finished() {
             break;

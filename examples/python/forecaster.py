@@ -25,6 +25,7 @@ import iceoryx2 as iox2
 MAX_DOF = 48
 N_CONTACTS = 8
 MAX_FORECAST = 2048
+SCENARIO_NAME_LEN = 128
 
 
 class StateMsg(ctypes.Structure):
@@ -40,6 +41,12 @@ class StateMsg(ctypes.Structure):
         ("door_angle", ctypes.c_double),
         ("door_velocity", ctypes.c_double),
         ("hand_force", ctypes.c_double * 3),
+        ("session", ctypes.c_uint64),
+        ("scenario_hash", ctypes.c_uint64),
+        ("scenario_start", ctypes.c_double),
+        ("flags", ctypes.c_uint32),
+        ("_pad", ctypes.c_uint32),
+        ("scenario", ctypes.c_uint8 * SCENARIO_NAME_LEN),
     ]
 
     @staticmethod
@@ -54,6 +61,8 @@ class ForecastMsg(ctypes.Structure):
         ("dt", ctypes.c_double),
         ("len", ctypes.c_uint32),
         ("_pad", ctypes.c_uint32),
+        ("period", ctypes.c_double),
+        ("scenario_hash", ctypes.c_uint64),
         ("forces", (ctypes.c_double * 3) * MAX_FORECAST),
     ]
 
@@ -125,25 +134,43 @@ def main() -> int:
     states = pubsub(node, f"{a.prefix}/state", StateMsg).subscriber_builder().create()
     n = min(MAX_FORECAST, int(math.ceil(a.window / a.dt)))
 
-    seq, now, next_at = 0, 0.0, -1.0
+    # Window k starts at k * period and is published once the plant's time reaches it: its
+    # content depends on simulated time only, and with `period` set a lockstep controller waits
+    # for it, so a lockstep run with this forecaster reproduces (services/CHANNELS.md).
+    seq, now, last_k, session, start = 0, None, None, 0, None
     last_state = time.monotonic()
     while not stop["now"]:
         while True:
             sample = states.receive()
             if sample is None:
                 break
-            now = sample.payload().contents.time
+            st = sample.payload().contents
+            if st.session != session:  # a new plant run: publish for its timeline at once
+                session, last_k = st.session, None
+            # The plant's scenario clock (negative: not started, nothing pushes yet).
+            s0 = st.scenario_start if st.scenario_start >= 0 else None
+            if s0 != start:
+                start, last_k = s0, None
+            now = st.time
             last_state = time.monotonic()
-        if now >= next_at:
+        k = None if now is None else math.floor(now / a.period + 1e-6)
+        if k is not None and k != last_k:
+            last_k = k
             seq += 1
-            msg = ForecastMsg(seq=seq, t0=now, dt=a.dt, len=n)
-            for i in range(n):
-                msg.forces[i][0] = -impact(now + i * a.dt, a.start, a.rise, a.hold, a.fall, a.peak)
+            t0 = k * a.period
+            # scenario_hash 0: this forecast is its own model, not one of upc's scenarios.
+            msg = ForecastMsg(seq=seq, t0=t0, dt=a.dt, len=n, period=a.period, scenario_hash=0)
+            if start is not None:
+                for i in range(n):
+                    t = t0 - start + i * a.dt
+                    msg.forces[i][0] = -impact(t, a.start, a.rise, a.hold, a.fall, a.peak)
             publisher.loan_uninit().write_payload(msg).send()
             notifier.notify()
-            next_at = (math.floor(now / a.period) + 1) * a.period
         # Done at the end of the run, or when the simulator has gone quiet.
-        if now >= a.until - 0.5 * a.period or (seq > 1 and time.monotonic() - last_state > 5.0):
+        # Done once the window covering `until` is out (a lockstep controller waits for it).
+        if (now is not None and now >= a.until - 1e-9) or (
+            seq > 1 and time.monotonic() - last_state > 5.0
+        ):
             break
         node.wait(iox2.Duration.from_millis(2))
     print(f"python forecaster: {seq} windows published", file=sys.stderr)

@@ -197,6 +197,15 @@ impl<T: ZeroCopySend + Debug + Copy + 'static> Publisher<T> {
     pub fn send(&self, msg: &T) -> Result<(), ChannelError> {
         self.send_with(|m| *m = *msg)
     }
+
+    /// Connect subscribers that appeared since the last send and hand them the history (a
+    /// publisher otherwise does so only when it sends): for publishers that send rarely.
+    pub fn update_connections(&self) -> Result<(), ChannelError> {
+        use iceoryx2::port::update_connections::UpdateConnections;
+        self.inner
+            .update_connections()
+            .map_err(|e| err("update connections", e))
+    }
 }
 
 /// Receives `T`.

@@ -37,6 +37,54 @@ pub struct StateMsg {
     pub door_velocity: f64,
     /// Force of the door on the right hand (N, world): the true hand–door force.
     pub hand_force: [f64; 3],
+    /// Identifies this run of the plant (random, non-zero, fixed from its first state to its
+    /// last): a restarted plant has a new one. Torques echo it (`TorqueMsg::session`).
+    pub session: u64,
+    /// Content hash of the scenario the plant plays ([`crate::scenario::Scenario::content_hash`]);
+    /// 0: none announced (a real robot).
+    pub scenario_hash: u64,
+    /// Plant time (s) at which the scenario's time 0 fell: the door pushes with the scenario's
+    /// force at `time − scenario_start`. A real-time simulator starts the scenario when a
+    /// controller has taken the robot over; lockstep at 0. Negative: not started yet.
+    pub scenario_start: f64,
+    /// `STATE_FLAG_*` bits.
+    pub flags: u32,
+    pub _pad: u32,
+    /// Name (embedded) or path of the scenario the plant plays, UTF-8, NUL-padded.
+    pub scenario: [u8; SCENARIO_NAME_LEN],
+}
+
+/// Capacity of `StateMsg::scenario` (bytes).
+pub const SCENARIO_NAME_LEN: usize = 128;
+
+/// The plant holds the robot itself (start-up posture hold, or the hold after the controller was
+/// lost): torques are not applied yet, or only in part during the hand-over.
+pub const STATE_FLAG_HOLD: u32 = 1;
+/// The plant runs in lockstep (waits for the torques answering each state).
+pub const STATE_FLAG_LOCKSTEP: u32 = 2;
+/// The hold gave way to bare joint damping (`sim.hold.lost_timeout` passed without a controller).
+pub const STATE_FLAG_DAMPING: u32 = 4;
+
+impl StateMsg {
+    /// The scenario name announced by the plant (empty when none or not valid UTF-8).
+    pub fn scenario_name(&self) -> &str {
+        let end = self
+            .scenario
+            .iter()
+            .position(|&b| b == 0)
+            .unwrap_or(SCENARIO_NAME_LEN);
+        std::str::from_utf8(&self.scenario[..end]).unwrap_or("")
+    }
+
+    /// Announce `name` (truncated to the capacity at a character boundary).
+    pub fn set_scenario_name(&mut self, name: &str) {
+        let mut end = name.len().min(SCENARIO_NAME_LEN);
+        while !name.is_char_boundary(end) {
+            end -= 1;
+        }
+        self.scenario = [0; SCENARIO_NAME_LEN];
+        self.scenario[..end].copy_from_slice(&name.as_bytes()[..end]);
+    }
 }
 
 /// Joint torques, controller → simulator, answering one state.
@@ -55,6 +103,12 @@ pub struct TorqueMsg {
     /// Controller compute time for this answer (ns): lets the simulator separate IPC latency
     /// from compute in its round-trip measurement.
     pub compute_ns: u64,
+    /// The `StateMsg::session` of the plant run these torques answer: a plant applies only
+    /// torques computed from its own states.
+    pub session: u64,
+    /// Identifies this run of the controller (random, non-zero): a plant accepts a `seq` that
+    /// starts over when this changes (a restarted controller).
+    pub controller: u64,
     /// Joint torques (N·m), model joint order.
     pub tau: [f64; MAX_DOF],
 }
@@ -77,6 +131,13 @@ pub struct ForecastMsg {
     /// Number of valid samples, ≤ MAX_FORECAST.
     pub len: u32,
     pub _pad: u32,
+    /// The window is the forecaster's word for simulated times in [t0, t0 + period): the next
+    /// window starts at t0 + period. In lockstep the controller waits for the window whose
+    /// period covers the state's time, which makes the run reproducible. 0: no promise (the
+    /// controller uses the newest window, as in real time).
+    pub period: f64,
+    /// Content hash of the scenario forecast (as in `StateMsg::scenario_hash`); 0: unknown.
+    pub scenario_hash: u64,
     /// Forces (N, world).
     pub forces: [[f64; 3]; MAX_FORECAST],
 }
@@ -105,6 +166,11 @@ pub struct GroundTruthMsg {
     pub rejected_commands: u32,
     /// Steps run with stale (or no) torques so far.
     pub stale_commands: u64,
+    /// `STATE_FLAG_*` of the state published with it.
+    pub flags: u32,
+    pub _pad: u32,
+    /// Steps the plant held the robot itself so far (start-up and after a lost controller).
+    pub hold_steps: u64,
 }
 
 macro_rules! zeroed_default {

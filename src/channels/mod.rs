@@ -11,6 +11,20 @@ pub mod messages;
 pub use bus::{Bus, ChannelError, Listener, Notifier, Publisher, Subscriber};
 pub use messages::*;
 
+/// A fresh non-zero identifier for a run of a process (`StateMsg::session`,
+/// `TorqueMsg::controller`): wall clock and process id mixed (splitmix64), so two runs started in
+/// the same nanosecond by different processes still differ.
+pub fn new_run_id() -> u64 {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64);
+    let mut z = nanos ^ (u64::from(std::process::id()) << 32);
+    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    (z ^ (z >> 31)).max(1)
+}
+
 /// Default service prefix.
 pub const DEFAULT_PREFIX: &str = "upc";
 

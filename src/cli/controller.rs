@@ -15,7 +15,7 @@ use super::common::ConfigArgs;
 #[derive(clap::Args, Debug, Clone)]
 pub struct ControllerArgs {
     /// Scenario: its ZMP reference and [config] overrides (the force comes from the forecaster).
-    #[arg(long, default_value = "multiple_impacts")]
+    #[arg(long, default_value = upc::scenario::DEFAULT)]
     pub scenario: String,
     /// Controller (overrides controller.kind).
     #[arg(long, value_enum)]
@@ -41,7 +41,8 @@ pub struct ControllerArgs {
     /// Write the run's figures as JSON here.
     #[arg(long)]
     pub summary: Option<PathBuf>,
-    /// Stop at this simulated time (s); default: the scenario's duration.
+    /// Stop at this simulated time (s); default: the scenario's duration; 0: run until stopped
+    /// (a deployed controller).
     #[arg(long)]
     pub duration: Option<f64>,
     #[command(flatten)]
@@ -64,12 +65,16 @@ pub fn run(args: ControllerArgs) -> CliResult {
     };
     let opts = ServerOptions {
         prefix: args.prefix.clone(),
-        duration: Some(args.duration.unwrap_or(scenario.duration)),
+        duration: match args.duration.unwrap_or(scenario.duration) {
+            d if d > 0.0 => Some(d),
+            _ => None,
+        },
         rrd: args.rrd.clone(),
         recording_id: args.recording_id.clone(),
         zmp_offset: scenario.zmp_reference,
         startup_timeout: 60.0,
         csv: args.csv.clone(),
+        scenario_hash: Some(scenario.content_hash()),
     };
     tracing::info!(
         "controller {} ({:?}) on {}/*, {} Hz",

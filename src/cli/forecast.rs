@@ -1,7 +1,7 @@
 //! `upc forecast`: publish a scenario's hand force forecast.
 
 use upc::channels::{Bus, DEFAULT_PREFIX};
-use upc::forecast::{ForecastSettings, run};
+use upc::forecast::{ForecastSettings, Source, run};
 use upc::scenario::Scenario;
 use upc::shutdown::stop_flag;
 
@@ -10,8 +10,10 @@ use super::CliResult;
 #[derive(clap::Args)]
 pub struct ForecastArgs {
     /// Scenario whose hand force is forecast: embedded name or TOML path.
-    #[arg(long, default_value = "multiple_impacts")]
-    pub scenario: String,
+    /// Scenario whose hand force is forecast: embedded name or TOML path. Default: the one the
+    /// plant announces in its states (followed when it changes).
+    #[arg(long)]
+    pub scenario: Option<String>,
     /// Sample spacing (s).
     #[arg(long, default_value_t = 0.005)]
     pub dt: f64,
@@ -21,7 +23,8 @@ pub struct ForecastArgs {
     /// Simulated time between windows (s).
     #[arg(long, default_value_t = 0.01)]
     pub period: f64,
-    /// Stop at this simulated time (s); default: the scenario's duration.
+    /// Stop at this simulated time (s); default: the scenario's duration with --scenario, never
+    /// when following the plant.
     #[arg(long)]
     pub until: Option<f64>,
     /// Service prefix of the run.
@@ -30,7 +33,7 @@ pub struct ForecastArgs {
 }
 
 pub fn run_cli(args: ForecastArgs) -> CliResult {
-    let scenario = Scenario::load(&args.scenario)?;
+    let scenario = args.scenario.as_deref().map(Scenario::load).transpose()?;
     for (name, v) in [
         ("--dt", args.dt),
         ("--window", args.window),
@@ -44,17 +47,23 @@ pub fn run_cli(args: ForecastArgs) -> CliResult {
         dt: args.dt,
         window: args.window,
         period: args.period,
-        until: Some(args.until.unwrap_or(scenario.duration)),
+        until: args.until.or(scenario.as_ref().map(|s| s.duration)),
     };
     let bus = Bus::open(&args.prefix, "forecaster")?;
     tracing::info!(
-        "forecasting `{}` on {}/forecast: {} samples every {} s of sim time",
-        scenario.name,
+        "forecasting {} on {}/forecast: {} samples every {} s of sim time",
+        scenario
+            .as_ref()
+            .map_or("the plant's scenario".into(), |s| format!("`{}`", s.name)),
         args.prefix,
         settings.samples(),
         settings.period
     );
-    let sent = run(&bus, &scenario.force, &settings, stop_flag())?;
+    let source = match scenario {
+        Some(s) => Source::Fixed(s),
+        None => Source::FollowPlant,
+    };
+    let sent = run(&bus, &source, &settings, stop_flag())?;
     tracing::info!("forecaster stopped after {sent} windows");
     Ok(())
 }

@@ -20,7 +20,7 @@ pub enum ControllerChoice {
 #[derive(clap::Args)]
 pub struct PreviewArgs {
     /// Scenario: an embedded name (single_impact, multiple_impacts) or a path to a TOML file.
-    #[arg(long, default_value = "multiple_impacts")]
+    #[arg(long, default_value = upc::scenario::DEFAULT)]
     pub scenario: String,
     /// Controller to run; `all` runs C0, C1 and C2 and compares them.
     #[arg(long, value_enum, default_value = "all")]

@@ -1,7 +1,8 @@
 //! `upc run`: the one-command launcher. Starts the simulator, the forecaster and the controller
 //! as separate processes for each controller asked for, shows progress, stops them cleanly and
 //! writes `runs/<name>/` (per controller: `sim.rrd`, `controller.rrd`, `controller.csv`,
-//! `controller.json`, the processes' logs) with a `summary.json` and a metrics table.
+//! `controller.json`, the processes' logs, and in lockstep the simulator's ground truth as
+//! `sim.csv`) with a `summary.json` and a metrics table.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -27,7 +28,7 @@ pub enum Which {
 #[derive(clap::Args, Debug)]
 pub struct RunArgs {
     /// Scenario: embedded name (single_impact, multiple_impacts) or TOML path.
-    #[arg(long, default_value = "multiple_impacts")]
+    #[arg(long, default_value = upc::scenario::DEFAULT)]
     pub scenario: String,
     /// Controller(s) to run, one after the other.
     #[arg(long, value_enum, default_value = "all")]
@@ -102,6 +103,11 @@ pub fn run(args: RunArgs) -> CliResult {
         "description": scenario.description,
         "duration": duration,
         "mode": if args.realtime { "realtime" } else { "lockstep" },
+        // Lockstep runs whose every controller kept its inputs on simulated time reproduce
+        // byte for byte (services/CHANNELS.md).
+        "reproducible": entries.iter().all(|e| {
+            e.controller_summary.as_ref().is_some_and(|s| s.reproducible)
+        }),
         "runs": entries,
     });
     std::fs::write(
@@ -180,6 +186,11 @@ fn run_one(
         .arg(dir.join("sim.rrd"))
         .arg("--summary")
         .arg(dir.join("sim.json"))
+        .args(if args.realtime {
+            vec![]
+        } else {
+            vec!["--truth-csv".into(), dir.join("sim.csv")]
+        })
         .stdout(log("sim.log")?)
         .stderr(log("sim.log")?)
         .spawn()?;

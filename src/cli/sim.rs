@@ -15,9 +15,10 @@ pub enum ModeChoice {
 }
 
 /// Start the simulator: `upc sim` runs the embedded default scene (the iCub-like humanoid at its
-/// home posture on flat ground, the door held by its right hand, the `single_impact` hinge
-/// torque profile) in lockstep with a controller on the `upc/*` services. Start the controller
-/// next to it; with no controller, use `--mode realtime` (the safe joint damping takes over).
+/// home posture on flat ground, the door held by its right hand, the hinge torque profile of the
+/// default scenario, `multiple_impacts`) in lockstep with a controller on the `upc/*` services.
+/// In real time (`--mode realtime`) the robot is held at its start posture until a controller's
+/// torques arrive, and held again if they stop (`[sim.hold]`): start the processes in any order.
 #[derive(clap::Args)]
 #[command(
     after_help = "Examples:\n  upc sim                                   # lockstep, 10 s, waits for a controller\n  upc sim --mode realtime --duration 5 --rrd sim.rrd\n  upc sim --set sim.friction=0.5 --scenario multiple_impacts --prefix test1"
@@ -50,6 +51,10 @@ pub struct SimArgs {
     /// Door torque profile: embedded scenario name (single_impact, multiple_impacts) or a path.
     #[arg(long)]
     pub scenario: Option<String>,
+    /// Lockstep: write the ground truth (CoM, CoP, hand force, door, contact figures) every
+    /// record period as CSV here: the same bytes on every rerun.
+    #[arg(long)]
+    pub truth_csv: Option<PathBuf>,
 }
 
 pub fn load_config(args: &SimArgs) -> Result<SimConfig, upc::config::ConfigError> {
@@ -81,6 +86,7 @@ pub fn run_cli(args: SimArgs) -> CliResult {
         config,
         rrd: args.rrd.clone(),
         recording_id: args.recording_id.clone(),
+        truth_csv: args.truth_csv.clone(),
     };
     let stop = stop_flag();
     let s = run(&opts, &stop)?;
@@ -89,8 +95,8 @@ pub fn run_cli(args: SimArgs) -> CliResult {
     }
     println!(
         "sim: {} steps, {:.3} s simulated in {:.3} s; step time p50 {:.1} µs, p99 {:.1} µs, max {:.1} µs; \
-         overruns {}; commands accepted {}, rejected {} (length {}, non-finite {}, order {}), stale {}; \
-         safe-mode steps {}; max penetration {:.2e} m, max slip {:.2e} m/s, max loop error {:.2e} m; \
+         overruns {}; commands accepted {}, rejected {} (length {}, non-finite {}, order {}, foreign {}), stale {}; \
+         hold steps {}, hand-overs {}, controller losses {}, safe-mode steps {}; max penetration {:.2e} m, max slip {:.2e} m/s, max loop error {:.2e} m; \
          rerun frames {} written, {} dropped",
         s.steps,
         s.sim_time,
@@ -104,7 +110,11 @@ pub fn run_cli(args: SimArgs) -> CliResult {
         s.commands.wrong_length,
         s.commands.non_finite,
         s.commands.out_of_order,
+        s.commands.foreign,
         s.commands.stale,
+        s.hold.hold_steps,
+        s.hold.handovers,
+        s.hold.losses,
         s.safe_mode_steps,
         s.max_penetration,
         s.max_slip_speed,

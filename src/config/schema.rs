@@ -376,6 +376,13 @@ pub struct ControllerConfig {
     pub forecast_decay: f64,
     /// Control ticks between two C2 snapshots.
     pub c2_every: usize,
+    /// Lockstep: wait this long (s, wall) for the forecast window whose period covers the
+    /// state's time (what makes a rerun reproducible); past it, go on with the newest window
+    /// and stop waiting until a window comes again. 0: never wait.
+    pub lockstep_forecast_wait: f64,
+    /// Lockstep: wait this long (s, wall) for the C2 search started `c2_every` ticks earlier,
+    /// whose schedule applies from then on. 0: never wait (asynchronous, as in real time).
+    pub lockstep_c2_wait: f64,
     /// Control ticks between two rerun records (and 10× that between plan records).
     pub log_every: usize,
     pub realtime: crate::control::realtime::RealtimeSettings,
@@ -400,6 +407,11 @@ impl ControllerConfig {
             ("controller.reconnect_timeout", self.reconnect_timeout),
             ("controller.status_every", self.status_every),
             ("controller.ipc_spin_us", self.ipc_spin_us),
+            (
+                "controller.lockstep_forecast_wait",
+                self.lockstep_forecast_wait,
+            ),
+            ("controller.lockstep_c2_wait", self.lockstep_c2_wait),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(l.range_error(key, format!("must be finite and ≥ 0, got {v}")));

@@ -52,6 +52,9 @@ pub struct ForecastWindow {
     dt: f64,
     len: usize,
     last_seq: u64,
+    /// The accepted window's promise (`ForecastMsg::period`, 0: none) and scenario hash.
+    period: f64,
+    scenario_hash: u64,
     /// Accepted and rejected messages so far.
     pub accepted: u64,
     pub rejected: u64,
@@ -75,6 +78,8 @@ impl ForecastWindow {
             dt: 1.0,
             len: 0,
             last_seq: 0,
+            period: 0.0,
+            scenario_hash: 0,
             accepted: 0,
             rejected: 0,
             rejections: RejectionCounts::default(),
@@ -100,6 +105,12 @@ impl ForecastWindow {
                 self.dt = msg.dt;
                 self.len = n;
                 self.last_seq = msg.seq;
+                self.period = if msg.period.is_finite() && msg.period > 0.0 {
+                    msg.period
+                } else {
+                    0.0
+                };
+                self.scenario_hash = msg.scenario_hash;
                 self.accepted += 1;
             }
             Err(e) => {
@@ -145,6 +156,22 @@ impl ForecastWindow {
             }
         }
         Ok(())
+    }
+
+    /// Whether the window is its forecaster's word at `t`: it promised a period and `t` lies
+    /// within it (see [`crate::forecast::window_covers`]). False without a promise.
+    pub fn promised_at(&self, t: f64) -> bool {
+        self.len > 0 && self.period > 0.0 && crate::forecast::window_covers(self.t0, self.period, t)
+    }
+
+    /// Whether the window came with a period promise (`ForecastMsg::period` > 0).
+    pub fn has_promise(&self) -> bool {
+        self.len > 0 && self.period > 0.0
+    }
+
+    /// The scenario hash of the accepted window (0: unknown, or no window).
+    pub fn scenario_hash(&self) -> u64 {
+        if self.len > 0 { self.scenario_hash } else { 0 }
     }
 
     /// Whether a window covers time `t`.

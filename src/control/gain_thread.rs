@@ -63,6 +63,8 @@ pub struct StampedSchedule {
 /// Counters shared with the worker.
 #[derive(Debug, Default)]
 pub struct GainWorkerStats {
+    /// Sequence number of the last snapshot the worker finished with (solved or failed).
+    pub processed: AtomicU64,
     pub solves: AtomicU64,
     pub failures: AtomicU64,
     pub panics: AtomicU64,
@@ -169,6 +171,7 @@ impl GainHandoff {
                     // A snapshot earlier than the last (a restarted simulator) shifts nothing.
                     let shift = last_time.map_or(0, |t| ((snap.time - t) / period).round().max(0.0) as usize);
                     let out = sched_in.input_buffer_mut();
+                    let seq = snap.seq;
                     let outcome = catch_unwind(AssertUnwindSafe(|| solver.solve(snap, shift, out)));
                     match outcome {
                         Ok(Ok(())) => {
@@ -190,6 +193,9 @@ impl GainHandoff {
                             last_time = None;
                         }
                     }
+                    // After the publish: a loop that sees `processed` reach its snapshot finds
+                    // the schedule (or knows the search failed).
+                    stats_w.processed.store(seq, Ordering::Release);
                 }
             })
             .map_err(|e| crate::preview::PreviewError::Qp(format!("cannot start the C2 thread: {e}")))?;
@@ -214,6 +220,32 @@ impl GainHandoff {
     /// The newest schedule (seq 0: none yet). Wait-free.
     pub fn latest(&mut self) -> &StampedSchedule {
         self.schedules.read()
+    }
+
+    /// The schedule taken by the last [`latest`](Self::latest) or [`take_newest`](Self::take_newest),
+    /// without looking for a newer one: lockstep applies schedules at chosen ticks only.
+    pub fn current(&self) -> &StampedSchedule {
+        self.schedules.output_buffer()
+    }
+
+    /// Take the newest schedule (for [`current`](Self::current)). Wait-free.
+    pub fn take_newest(&mut self) {
+        self.schedules.update();
+    }
+
+    /// Lockstep: wait until the worker is done with snapshot `seq` (solved or failed), at most
+    /// `timeout`. False on time-out or a dead worker.
+    pub fn wait_processed(&self, seq: u64, timeout: Duration) -> bool {
+        let until = std::time::Instant::now() + timeout;
+        loop {
+            if self.stats.processed.load(Ordering::Acquire) >= seq {
+                return true;
+            }
+            if !self.alive() || std::time::Instant::now() >= until {
+                return false;
+            }
+            std::thread::sleep(Duration::from_micros(20));
+        }
     }
 
     /// Whether the worker thread is still running.

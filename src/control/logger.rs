@@ -1,6 +1,7 @@
 //! The controller's rerun log, written by its own thread. The loop hands records over a bounded
 //! channel with `try_send` (a full channel drops the record and counts it): logging never blocks
-//! the loop. Horizon-sized plan records come from a small pool of preallocated buffers that the
+//! the real-time loop. In lockstep (`lossless`) tick records wait for room instead, so that the
+//! CSV of a rerun holds the same rows. Horizon-sized plan records come from a small pool of preallocated buffers that the
 //! logger returns after use, so the loop does not allocate either.
 
 use std::io::Write;
@@ -54,6 +55,7 @@ pub struct ControlLogger {
     free: Receiver<Box<PlanLog>>,
     handle: Option<JoinHandle<()>>,
     pub dropped: Arc<AtomicU64>,
+    lossless: bool,
 }
 
 impl ControlLogger {
@@ -64,6 +66,7 @@ impl ControlLogger {
         csv: Option<&std::path::Path>,
         recording_id: &str,
         horizon: usize,
+        lossless: bool,
     ) -> Result<Self, Box<dyn std::error::Error + Send + Sync>> {
         let rec = rerun::RecordingStreamBuilder::new("upc")
             .recording_id(recording_id)
@@ -93,7 +96,9 @@ impl ControlLogger {
         let handle = std::thread::Builder::new()
             .name("upc-ctl-log".into())
             .spawn(move || {
-                super::realtime::lower_priority(15);
+                if !lossless {
+                    super::realtime::lower_priority(15);
+                }
                 super::realtime::drain_periodically(&rx, DRAIN_PERIOD, |item| match item {
                     Item::Tick(t) => {
                         log_tick(&rec, &t);
@@ -116,13 +121,18 @@ impl ControlLogger {
             free,
             handle: Some(handle),
             dropped: Arc::new(AtomicU64::new(0)),
+            lossless,
         })
     }
 
     pub fn tick(&self, t: TickLog) {
-        if let Some(tx) = &self.tx
-            && tx.try_send(Item::Tick(t)).is_err()
-        {
+        let Some(tx) = &self.tx else { return };
+        let sent = if self.lossless {
+            tx.send(Item::Tick(t)).is_ok()
+        } else {
+            tx.try_send(Item::Tick(t)).is_ok()
+        };
+        if !sent {
             self.dropped.fetch_add(1, Ordering::Relaxed);
         }
     }

@@ -8,8 +8,16 @@
 //!   `reconnect_timeout` more for a simulator, then stops.
 //! - A state whose step goes back: a restarted simulator. The core, the forecast window and the
 //!   metrics' initial CoM height latch again from its first state, and control resumes.
-//! - Forecasts are validated by [`ForecastWindow`]; without one the forecast decays to zero.
+//! - Forecasts are validated by [`ForecastWindow`]; without one the forecast decays to zero. A
+//!   forecast of another scenario than the plant announces is counted and logged.
 //! - C2 dead, failing or late: C1 runs with the nominal gains.
+//!
+//! Lockstep is reproducible (same build, config and machine architecture → the same bytes in
+//! `controller.csv` and the summaries, timing figures aside): every input of tick k is a
+//! function of simulated time. The loop waits (bounded) for the forecast window whose period
+//! covers the state's time, takes C2's schedule exactly `c2_every` ticks after the snapshot it
+//! answers, logs every tick record (no drops), and runs faer single-threaded. Real time stays
+//! asynchronous: it never waits for the forecaster, C2 or the logger.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -23,7 +31,8 @@ use super::gain_thread::GainSolver;
 use super::logger::{ControlLogger, TickLog};
 use super::{ControllerCore, ForecastWindow, GainHandoff, LatencyHistogram, Ticker};
 use crate::channels::{
-    Bus, ForecastMsg, MAX_DOF, ServiceKind, StateMsg, TORQUE_FLAG_FALLBACK, TorqueMsg,
+    Bus, ForecastMsg, MAX_DOF, STATE_FLAG_HOLD, ServiceKind, StateMsg, TORQUE_FLAG_FALLBACK,
+    TorqueMsg,
 };
 use crate::config::{Config, ControllerKind, LoopMode};
 use crate::dynamics::Model;
@@ -45,6 +54,9 @@ pub struct ServerOptions {
     pub startup_timeout: f64,
     /// Write every `log_every`-th tick record as CSV here (written by the logger thread).
     pub csv: Option<PathBuf>,
+    /// Content hash of the scenario this controller was configured with (its ZMP reference and
+    /// config layer): a plant announcing another one is reported.
+    pub scenario_hash: Option<u64>,
 }
 
 /// What a run measured; written as the controller's part of `summary.json`.
@@ -53,6 +65,10 @@ pub struct ServerOptions {
 pub struct ServerSummary {
     pub controller: String,
     pub mode: String,
+    /// Lockstep with every input a function of simulated time (see the module doc): a rerun
+    /// gives the same bytes. `reproducibility` says why not, when not.
+    pub reproducible: bool,
+    pub reproducibility: String,
     pub ticks: u64,
     pub sim_time: f64,
     pub tick_p50_us: f64,
@@ -85,6 +101,20 @@ pub struct ServerSummary {
     pub forecast_lost: bool,
     /// Times the forecast was lost.
     pub forecast_losses: u64,
+    /// Accepted forecast windows whose scenario differs from the one the plant announces.
+    pub forecast_scenario_mismatches: u64,
+    /// The plant announced another scenario than this controller's `--scenario`.
+    pub plant_scenario_mismatch: bool,
+    /// The plant's announced scenario (name and hash) at the last state.
+    pub plant_scenario: String,
+    /// Lockstep: ticks that waited for their forecast window / for C2, and waits that timed out.
+    pub forecast_waits: u64,
+    pub forecast_wait_timeouts: u64,
+    pub c2_waits: u64,
+    pub c2_wait_timeouts: u64,
+    /// Ticks computed while the plant still held the robot itself (its start-up hold or a
+    /// hand-over): the torques were blended in, not applied as such.
+    pub ticks_in_plant_hold: u64,
     pub c2_solves: u64,
     pub c2_failures: u64,
     pub c2_panics: u64,
@@ -106,6 +136,15 @@ pub struct ServerSummary {
     pub dropped_log_records: u64,
     pub realtime: super::realtime::RealtimeReport,
     pub stopped_by: String,
+}
+
+/// Record why a lockstep run will not reproduce (the first reason only).
+fn not_reproducible(s: &mut ServerSummary, why: &str) {
+    if s.reproducible {
+        s.reproducible = false;
+        s.reproducibility = why.to_string();
+        tracing::warn!("this run is not reproducible: {why}");
+    }
 }
 
 pub fn run_server(
@@ -136,6 +175,12 @@ pub fn run_server_with(
     let forecasts = bus.subscriber::<ForecastMsg>(ServiceKind::Forecast)?;
     let torques = bus.publisher::<TorqueMsg>(ServiceKind::Torques)?;
     let torque_events = bus.notifier(ServiceKind::Torques)?;
+    let forecast_events = bus.listener(ServiceKind::Forecast)?;
+    let lockstep = cc.mode == LoopMode::Lockstep;
+    // One thread for faer (C2's normal equations): parallel reductions may sum in another order
+    // from one run to the next, and on two cores rayon's workers compete with the loop.
+    faer::set_global_parallelism(faer::Par::Seq);
+    let controller_id = crate::channels::new_run_id();
 
     let mut core = ControllerCore::new(
         model,
@@ -159,15 +204,25 @@ pub fn run_server_with(
         _ => None,
     };
     let logger = match &opts.rrd {
-        // Its threads (ours and the rerun SDK's) in the idle class, see `in_background`.
-        Some(p) => Some(super::realtime::in_background(|| {
-            ControlLogger::start(
-                p,
-                opts.csv.as_deref(),
-                &opts.recording_id,
-                config.preview.horizon,
-            )
-        })?),
+        Some(p) => {
+            // Lockstep keeps every tick record (the CSV is part of what reruns reproduce), so its
+            // logger must get CPU time when the machine is loaded: the normal class. In real time
+            // its threads (ours and the rerun SDK's) run in the idle class, see `in_background`.
+            let start = || {
+                ControlLogger::start(
+                    p,
+                    opts.csv.as_deref(),
+                    &opts.recording_id,
+                    config.preview.horizon,
+                    lockstep,
+                )
+            };
+            Some(if lockstep {
+                start()?
+            } else {
+                super::realtime::in_background(start)?
+            })
+        }
         None => None,
     };
     let rt = super::realtime::apply(&cc.realtime);
@@ -177,6 +232,7 @@ pub fn run_server_with(
     let mut s = ServerSummary {
         controller: kind.name().into(),
         mode: format!("{:?}", cc.mode).to_lowercase(),
+        reproducible: lockstep,
         min_zmp_margin: f64::INFINITY,
         realtime: rt,
         ..Default::default()
@@ -187,11 +243,22 @@ pub fn run_server_with(
     let mut last_qd = [0.0; MAX_DOF];
     let mut seq = 0u64;
     let mut last_step: Option<u64> = None;
+    let mut session = 0u64;
+    // Lockstep: the forecast is waited for (until a wait times out with no window coming).
+    let mut await_forecast = lockstep && cc.lockstep_forecast_wait > 0.0;
+    // Lockstep: the C2 snapshot whose schedule is due, and the tick it is due at.
+    let mut c2_due: Option<(u64, u64)> = None;
+    let mut plant_hash = 0u64;
+    let mut mismatch_warned = 0u64;
+    if !lockstep {
+        s.reproducibility = "real time: inputs arrive on wall-clock time".into();
+    }
     let mut last_time = 0.0;
     let started = Instant::now();
     let mut last_state_at = Instant::now();
     let mut stale = false;
-    let mut last_forecast_at = Instant::now();
+    // Simulated time of the last accepted window (the loss is judged on the plant's time).
+    let mut last_forecast_t = 0.0;
     let mut forecast_missing = false;
     let status_every = Duration::from_secs_f64(cc.status_every);
     let mut next_status = Instant::now() + status_every;
@@ -228,9 +295,10 @@ pub fn run_server_with(
             }
         }
         let received = states.latest()?;
-        // A step that goes back is a new simulator (restarted: it counts from 0 again); the
-        // same step again is the lockstep simulator re-sending a state it waits on.
-        let restarted = matches!((&received, last_step), (Some(st), Some(l)) if st.step < l);
+        // A new session, or a step that goes back, is a new plant run (a restarted simulator);
+        // the same step again is the lockstep simulator re-sending a state it waits on.
+        let restarted = matches!((&received, last_step),
+            (Some(st), Some(l)) if st.step < l || (st.session != session && st.session != 0));
         let state = match received {
             Some(st) if restarted || last_step.is_none_or(|l| st.step > l) => st,
             repeated => {
@@ -281,6 +349,8 @@ pub fn run_server_with(
                         torques.send_with(|m| {
                             m.seq = seq;
                             m.state_step = l;
+                            m.session = session;
+                            m.controller = controller_id;
                             m.n = n_tau as u32;
                             m.flags = TORQUE_FLAG_FALLBACK;
                             m.compute_ns = tick_start.elapsed().as_nanos() as u64;
@@ -304,7 +374,9 @@ pub fn run_server_with(
                 core.reset();
                 window.reset();
                 com_z0 = None;
-                last_forecast_at = Instant::now();
+                last_forecast_t = state.time;
+                c2_due = None;
+                await_forecast = lockstep && cc.lockstep_forecast_wait > 0.0;
                 tracing::warn!(
                     "simulator restarted: step {} (t = {:.3} s) after step {} (t = {last_time:.3} \
                      s), {gap:.3} s without state; references re-latched, control resumes \
@@ -323,9 +395,11 @@ pub fn run_server_with(
         }
         stale = false;
         last_step = Some(state.step);
+        session = state.session;
         last_time = state.time;
-        last_state_at = Instant::now();
         let tick_start = Instant::now();
+        // Lockstep waits for the forecast and C2: not the tick's compute time.
+        let mut waited = Duration::ZERO;
         let nv = (state.nv as usize).min(MAX_DOF);
         for (i, qd) in last_qd[..n_tau].iter_mut().enumerate() {
             *qd = state
@@ -336,29 +410,82 @@ pub fn run_server_with(
                 .unwrap_or(0.0);
         }
 
-        // The newest forecast, validated.
-        if let Some(r) = forecasts.with_latest(|m| window.offer(m, state.time))? {
-            match r {
-                Ok(()) => {
-                    last_forecast_at = Instant::now();
-                    if forecast_missing {
-                        forecast_missing = false;
-                        tracing::info!("forecast back at t = {:.3} s", state.time);
+        // The newest forecast, validated; in lockstep, the one whose period covers this
+        // state's time, waited for.
+        let mut offer =
+            |window: &mut ForecastWindow| -> Result<bool, crate::channels::ChannelError> {
+                let Some(r) = forecasts.with_latest(|m| window.offer(m, state.time))? else {
+                    return Ok(false);
+                };
+                match r {
+                    Ok(()) => {
+                        last_forecast_t = state.time;
+                        if forecast_missing {
+                            forecast_missing = false;
+                            tracing::info!("forecast back at t = {:.3} s", state.time);
+                        }
+                        Ok(true)
+                    }
+                    // Logged at the 1st, 2nd, 4th, 8th… rejection: a flood costs no log I/O.
+                    Err(e) => {
+                        if window.rejected >= warned_forecast * 2 {
+                            warned_forecast = window.rejected.max(1);
+                            tracing::warn!("forecast rejected ({} so far): {e}", window.rejected);
+                        }
+                        Ok(false)
                     }
                 }
-                // Logged at the 1st, 2nd, 4th, 8th… rejection: a flood costs no log I/O.
-                Err(e) if window.rejected >= warned_forecast * 2 => {
-                    warned_forecast = window.rejected.max(1);
-                    tracing::warn!("forecast rejected ({} so far): {e}", window.rejected);
+            };
+        let got = offer(&mut window)?;
+        if lockstep && got && !await_forecast && cc.lockstep_forecast_wait > 0.0 {
+            await_forecast = true; // a forecaster is back: wait for it again
+        }
+        if await_forecast && !window.promised_at(state.time) {
+            if window.accepted > 0 && !window.has_promise() {
+                not_reproducible(
+                    &mut s,
+                    "the forecaster promises no period (ForecastMsg.period = 0): the window a tick sees depends on timing",
+                );
+                await_forecast = false;
+            } else {
+                s.forecast_waits += 1;
+                let wait_start = Instant::now();
+                let until = wait_start + Duration::from_secs_f64(cc.lockstep_forecast_wait);
+                loop {
+                    let now = Instant::now();
+                    if now >= until {
+                        s.forecast_wait_timeouts += 1;
+                        await_forecast = false;
+                        tracing::warn!(
+                            "no forecast window for t = {:.3} s within {} s: going on with the newest \
+                             (not waiting again until a window arrives)",
+                            state.time,
+                            cc.lockstep_forecast_wait
+                        );
+                        not_reproducible(&mut s, "a lockstep wait for the forecast timed out");
+                        break;
+                    }
+                    forecast_events.wait_until(
+                        (until - now).min(Duration::from_millis(20)),
+                        Duration::ZERO,
+                        || forecasts.has_samples(),
+                    )?;
+                    offer(&mut window)?;
+                    if window.promised_at(state.time) {
+                        break;
+                    }
+                    if stop.load(Ordering::Relaxed) {
+                        break;
+                    }
                 }
-                Err(_) => {}
+                waited += wait_start.elapsed();
             }
         }
-        // Lost: nothing valid for a while (rejected messages do not count) and the window no
-        // longer covers the horizon.
+        // Lost: nothing valid for a while of the plant's time (rejected messages do not count)
+        // and the window no longer covers the horizon.
         if !forecast_missing
             && window.accepted > 0
-            && last_forecast_at.elapsed().as_secs_f64() > cc.state_timeout
+            && state.time - last_forecast_t > cc.state_timeout
             && !window.covers(state.time + horizon_time)
         {
             forecast_missing = true;
@@ -366,16 +493,73 @@ pub fn run_server_with(
             s.forecast_losses += 1;
             tracing::warn!(
                 "no valid forecast for {:.2} s at t = {:.3} s: the forecast decays to zero",
-                last_forecast_at.elapsed().as_secs_f64(),
+                state.time - last_forecast_t,
                 state.time
             );
         }
+        // Scenarios: the plant's against this controller's and the forecast's.
+        if state.scenario_hash != plant_hash {
+            plant_hash = state.scenario_hash;
+            s.plant_scenario = format!("{} ({plant_hash:016x})", state.scenario_name());
+            if let Some(mine) = opts.scenario_hash
+                && plant_hash != 0
+                && mine != plant_hash
+            {
+                s.plant_scenario_mismatch = true;
+                tracing::warn!(
+                    "the plant plays `{}` (hash {plant_hash:016x}), this controller was started for \
+                     another scenario (hash {mine:016x}): its ZMP reference and config may not fit",
+                    state.scenario_name()
+                );
+            }
+        }
+        let fh = window.scenario_hash();
+        if got && fh != 0 && plant_hash != 0 && fh != plant_hash {
+            s.forecast_scenario_mismatches += 1;
+            if mismatch_warned != fh {
+                mismatch_warned = fh;
+                tracing::warn!(
+                    "the forecast is of another scenario (hash {fh:016x}) than the plant plays \
+                     (`{}`, {plant_hash:016x}): {} such windows so far",
+                    state.scenario_name(),
+                    s.forecast_scenario_mismatches
+                );
+            }
+        }
+        if state.flags & STATE_FLAG_HOLD != 0 {
+            s.ticks_in_plant_hold += 1;
+        }
 
-        // C2's newest schedule, unless older than the horizon (or from before a restart).
+        // C2's newest schedule, unless older than the horizon (or from before a restart). In
+        // lockstep, exactly the one answering the snapshot of `c2_every` ticks ago, waited for.
         let with_c2 = c2.is_some();
+        if let Some(h) = c2.as_mut() {
+            match c2_due {
+                _ if !lockstep || cc.lockstep_c2_wait == 0.0 => h.take_newest(),
+                Some((snap_seq, due)) if s.ticks + 1 >= due => {
+                    c2_due = None;
+                    s.c2_waits += 1;
+                    let wait_start = Instant::now();
+                    let done =
+                        h.wait_processed(snap_seq, Duration::from_secs_f64(cc.lockstep_c2_wait));
+                    waited += wait_start.elapsed();
+                    if !done {
+                        s.c2_wait_timeouts += 1;
+                        tracing::warn!(
+                            "C2 did not finish the search of tick {} within {} s",
+                            s.ticks + 1 - cc.c2_every as u64,
+                            cc.lockstep_c2_wait
+                        );
+                        not_reproducible(&mut s, "a lockstep wait for C2 timed out");
+                    }
+                    h.take_newest();
+                }
+                _ => {}
+            }
+        }
         let schedule = c2
-            .as_mut()
-            .map(|h| h.latest())
+            .as_ref()
+            .map(|h| h.current())
             .filter(|sch| sch.seq > 0 && (0.0..=horizon_time).contains(&(state.time - sch.time)));
         let stale = with_c2 && schedule.is_none() && state.time > horizon_time;
         if stale && !schedule_was_stale {
@@ -428,13 +612,17 @@ pub fn run_server_with(
         torques.send_with(|m| {
             m.seq = seq;
             m.state_step = state.step;
+            m.session = state.session;
+            m.controller = controller_id;
             m.n = n_tau as u32;
             m.flags = flags;
-            m.compute_ns = tick_start.elapsed().as_nanos() as u64;
+            m.compute_ns = tick_start.elapsed().saturating_sub(waited).as_nanos() as u64;
             m.tau[..n_tau].copy_from_slice(&tau[..n_tau]);
         })?;
         torque_events.notify()?;
-        let tick_time = tick_start.elapsed();
+        // Lockstep waits for the forecast or C2 are not the plant's silence.
+        last_state_at = Instant::now();
+        let tick_time = tick_start.elapsed().saturating_sub(waited);
         hist.record(tick_time);
         s.ticks += 1;
         s.ticks_since_reconnect += 1;
@@ -444,6 +632,7 @@ pub fn run_server_with(
             && s.ticks.is_multiple_of(cc.c2_every as u64)
         {
             h.offer(|snap| core.snapshot(snap, seq));
+            c2_due = Some((seq, s.ticks + cc.c2_every as u64));
         }
         // Metrics of the measured ZMP and the hand.
         let rec = core.last;

@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use crate::channels::{Bus, ChannelError, ForecastMsg, MAX_FORECAST, ServiceKind, StateMsg};
-use crate::scenario::ForceProfile;
+use crate::scenario::{ForceProfile, Scenario};
 
 /// How the forecaster samples and paces its windows.
 #[derive(Debug, Clone, Copy)]
@@ -29,12 +29,28 @@ impl ForecastSettings {
     }
 }
 
-/// Fill `msg` with the window of `profile` starting at `t0`.
+/// Index of the forecast window that covers simulated time `t` when windows start every
+/// `period` at 0, period, 2·period, …: the forecaster publishes window k at t0 = k·period once
+/// the plant's time reaches it, and a lockstep controller at time `t` waits for window
+/// `window_index(t)`. The 1e-6 absorbs the rounding of a time accumulated in steps.
+pub fn window_index(t: f64, period: f64) -> i64 {
+    (t / period + 1e-6).floor() as i64
+}
+
+/// Whether a window starting at `t0` and promising `period` is the forecaster's word at `t`
+/// (`t` in [t0, t0 + period), with the tolerance of [`window_index`]).
+pub fn window_covers(t0: f64, period: f64, t: f64) -> bool {
+    window_index(t - t0, period) < 1
+}
+
+/// Fill `msg` with the window starting at plant time `t0` of `profile` played from plant time
+/// `scenario_start` (infinite: not started, all zeros).
 pub fn fill_window(
     msg: &mut ForecastMsg,
     profile: &ForceProfile,
     seq: u64,
     t0: f64,
+    scenario_start: f64,
     s: &ForecastSettings,
 ) {
     let len = s.samples();
@@ -42,14 +58,37 @@ pub fn fill_window(
     msg.t0 = t0;
     msg.dt = s.dt;
     msg.len = len as u32;
-    profile.sample_into(t0, s.dt, &mut msg.forces[..len]);
+    msg.period = s.period;
+    if scenario_start.is_finite() {
+        profile.sample_into(t0 - scenario_start, s.dt, &mut msg.forces[..len]);
+    } else {
+        msg.forces[..len].fill([0.0; 3]);
+    }
+}
+
+/// What to forecast.
+#[derive(Debug, Clone)]
+pub enum Source {
+    /// This scenario, whatever the plant plays (the controller warns when they differ).
+    Fixed(Scenario),
+    /// The scenario the plant announces in its states (reloaded when it changes); the default
+    /// scenario when the plant announces none.
+    FollowPlant,
+}
+
+/// The scenario being forecast.
+struct Current {
+    scenario: Scenario,
+    hash: u64,
 }
 
 /// Publish windows until `stop` is raised, the state stream passes `until`, or IPC fails.
-/// Paced by the simulator's time: a window per `period` of simulated time, aligned to it.
+/// Paced by the plant's time: window k starts at k·period and is published as soon as a state
+/// at or past that time is seen (see [`window_index`]), so its content is a function of the
+/// simulated time only. A new plant run (its session changes) gets a window at once.
 pub fn run(
     bus: &Bus,
-    profile: &ForceProfile,
+    source: &Source,
     s: &ForecastSettings,
     stop: Arc<AtomicBool>,
 ) -> Result<u64, ChannelError> {
@@ -57,28 +96,119 @@ pub fn run(
     let notifier = bus.notifier(ServiceKind::Forecast)?;
     let states = bus.subscriber::<StateMsg>(ServiceKind::State)?;
     let wake = bus.listener(ServiceKind::State)?;
+    let mut current = match source {
+        Source::Fixed(sc) => Some(Current {
+            hash: sc.content_hash(),
+            scenario: sc.clone(),
+        }),
+        Source::FollowPlant => None,
+    };
     let mut seq = 0u64;
-    let mut next = f64::NEG_INFINITY;
-    // Publish a first window at t = 0 so a controller starting before the simulator has one.
-    let mut now = 0.0;
+    let mut last_index: Option<i64> = None;
+    let mut session = 0u64;
+    let mut scenario_start = 0.0;
+    let mut plant_hash = 0u64;
+    let mut warned_hash = 0u64;
     while !stop.load(Ordering::Relaxed) {
-        if now >= next {
-            seq += 1;
-            publisher.send_with(|m| fill_window(m, profile, seq, now, s))?;
-            notifier.notify()?;
-            next = (now / s.period).floor() * s.period + s.period;
-        }
-        if s.until.is_some_and(|u| now >= u - 0.5 * s.period) {
-            break;
-        }
         wake.wait(Duration::from_millis(50))?;
-        if let Some(t) = states.latest()?.map(|m| m.time) {
-            // Time going back is a restarted simulator: publish for its timeline at once.
-            if t + s.period < now {
-                next = f64::NEG_INFINITY;
+        // A controller that subscribed after the last window gets it now, not at the next one
+        // (a lockstep plant waiting on that controller sends no new time).
+        publisher.update_connections()?;
+        let Some(st) = states.latest()? else {
+            continue;
+        };
+        if st.session != session {
+            if session != 0 {
+                tracing::info!(
+                    "new plant run (session {:016x}) at t = {:.3} s: forecasting for its timeline",
+                    st.session,
+                    st.time
+                );
             }
-            now = t;
+            session = st.session;
+            last_index = None;
+        }
+        // The plant started its scenario (or restarted it): windows shift with it.
+        let start = st.scenario_start.max(0.0);
+        if st.scenario_start >= 0.0 && start != scenario_start {
+            scenario_start = start;
+            last_index = None;
+        }
+        if st.scenario_hash != plant_hash || (current.is_none() && warned_hash != st.scenario_hash)
+        {
+            plant_hash = st.scenario_hash;
+            if let Source::FollowPlant = source {
+                current = follow(&st, &mut warned_hash);
+                last_index = None;
+            }
+        }
+        let Some(cur) = &current else { continue };
+        if plant_hash != 0 && cur.hash != plant_hash && warned_hash != plant_hash {
+            warned_hash = plant_hash;
+            tracing::warn!(
+                "forecasting `{}` (hash {:016x}) while the plant plays `{}` (hash {plant_hash:016x})",
+                cur.scenario.name,
+                cur.hash,
+                st.scenario_name()
+            );
+        }
+        let now = st.time;
+        let k = window_index(now, s.period);
+        if last_index != Some(k) {
+            last_index = Some(k);
+            seq += 1;
+            let t0 = k as f64 * s.period;
+            let hash = cur.hash;
+            // Before the plant starts the scenario nothing pushes: a window of zeros.
+            let offset = if st.scenario_start >= 0.0 {
+                scenario_start
+            } else {
+                f64::INFINITY
+            };
+            publisher.send_with(|m| {
+                fill_window(m, &cur.scenario.force, seq, t0, offset, s);
+                m.scenario_hash = hash;
+            })?;
+            notifier.notify()?;
+        }
+        // Done once the window covering `until` is out (a lockstep controller waits for it).
+        if s.until.is_some_and(|u| now >= u - 1e-9) {
+            break;
         }
     }
     Ok(seq)
+}
+
+/// Load the scenario a state announces (the default one when it announces none).
+fn follow(st: &StateMsg, warned: &mut u64) -> Option<Current> {
+    let name = match st.scenario_name() {
+        "" => crate::scenario::DEFAULT,
+        n => n,
+    };
+    match Scenario::load(name) {
+        Ok(scenario) => {
+            let hash = scenario.content_hash();
+            tracing::info!(
+                "following the plant's scenario `{name}` ({}, hash {hash:016x})",
+                scenario.name
+            );
+            if st.scenario_hash != 0 && hash != st.scenario_hash {
+                tracing::warn!(
+                    "`{name}` here hashes to {hash:016x}, the plant's to {:016x}: the files differ",
+                    st.scenario_hash
+                );
+            }
+            *warned = st.scenario_hash;
+            Some(Current { scenario, hash })
+        }
+        Err(e) => {
+            if *warned != st.scenario_hash {
+                *warned = st.scenario_hash;
+                tracing::error!(
+                    "cannot load the plant's scenario `{name}`: {e}; publishing nothing (give --scenario)"
+                );
+            }
+            None
+        }
+    }
 }

@@ -26,6 +26,41 @@ pub use profile::{ForceProfile, Impact};
 
 use crate::config::{ConfigError, Layers};
 
+/// The scenario every process plays when started without `--scenario` (simulator, forecaster,
+/// controller, `upc run`): one default, so processes started by hand or by the systemd units
+/// agree.
+pub const DEFAULT: &str = "multiple_impacts";
+
+/// FNV-1a (64 bit) over the bytes fed to it: a stable content hash (no per-process keys, unlike
+/// std's hasher), used to tell whether two processes play the same scenario.
+#[derive(Debug, Clone, Copy)]
+pub struct ContentHash(u64);
+
+impl Default for ContentHash {
+    fn default() -> Self {
+        Self(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl ContentHash {
+    pub fn bytes(&mut self, b: &[u8]) {
+        for &x in b {
+            self.0 ^= u64::from(x);
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+    pub fn u64(&mut self, v: u64) {
+        self.bytes(&v.to_le_bytes());
+    }
+    pub fn f64(&mut self, v: f64) {
+        self.u64(v.to_bits());
+    }
+    /// The hash, never 0 (0 means "none" in the channel contract).
+    pub fn finish(&self) -> u64 {
+        self.0.max(1)
+    }
+}
+
 /// The scenarios shipped with upc, embedded so they run without files: (name, TOML).
 pub const EMBEDDED: [(&str, &str); 2] = [
     (
@@ -90,6 +125,18 @@ pub enum ScenarioError {
 }
 
 impl Scenario {
+    /// Hash of what the processes must agree on: the force profile, the ZMP reference and the
+    /// duration (not the name, nor the config overrides, which only the controller reads).
+    pub fn content_hash(&self) -> u64 {
+        let mut h = ContentHash::default();
+        self.force.hash_into(&mut h);
+        for v in self.zmp_reference {
+            h.f64(v);
+        }
+        h.f64(self.duration);
+        h.finish()
+    }
+
     /// Load by embedded name (`single_impact`) or by path to a TOML file.
     pub fn load(name_or_path: &str) -> Result<Scenario, ScenarioError> {
         if let Some((name, text)) = EMBEDDED.iter().find(|(n, _)| *n == name_or_path) {

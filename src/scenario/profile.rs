@@ -85,6 +85,33 @@ impl ForceProfile {
         }
     }
 
+    /// Feed the profile's defining numbers (bit patterns, in order) to `h`: equal profiles give
+    /// equal hashes on every machine, so processes can tell whether they play the same one.
+    pub fn hash_into(&self, h: &mut super::ContentHash) {
+        match self {
+            ForceProfile::Impacts(impacts) => {
+                h.u64(1);
+                for i in impacts {
+                    for v in [i.start, i.rise, i.hold, i.fall] {
+                        h.f64(v);
+                    }
+                    for v in i.force {
+                        h.f64(v);
+                    }
+                }
+            }
+            ForceProfile::Samples(s) => {
+                h.u64(2);
+                for (t, f) in s {
+                    h.f64(*t);
+                    for v in f {
+                        h.f64(*v);
+                    }
+                }
+            }
+        }
+    }
+
     /// Fill `out[i]` with the force at `t0 + i·dt`.
     pub fn sample_into(&self, t0: f64, dt: f64, out: &mut [[f64; 3]]) {
         for (i, f) in out.iter_mut().enumerate() {

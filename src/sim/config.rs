@@ -42,6 +42,30 @@ pub struct SimConfig {
     pub record_period: f64,
     pub solver: SolverConfig,
     pub process: ProcessConfig,
+    pub hold: HoldConfig,
+}
+
+/// What holds the robot when no controller does (`[sim.hold]`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HoldKind {
+    /// A stiff joint-space PD at the posture to hold (as a robot's start-up controller).
+    PosturePd,
+    /// Joint damping only: the robot is not held (the behaviour before holds existed).
+    Damping,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HoldConfig {
+    pub kind: HoldKind,
+    pub frequency: f64,
+    pub damping_ratio: f64,
+    pub leg_kp: f64,
+    pub leg_kd: f64,
+    pub handover: f64,
+    pub feedforward_fade: f64,
+    pub lost_timeout: f64,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
@@ -145,6 +169,13 @@ impl SimConfig {
             "sim.process.first_command_timeout",
             self.process.first_command_timeout,
         )?;
+        pos("sim.hold.frequency", self.hold.frequency)?;
+        pos("sim.hold.damping_ratio", self.hold.damping_ratio)?;
+        nonneg("sim.hold.leg_kp", self.hold.leg_kp)?;
+        nonneg("sim.hold.leg_kd", self.hold.leg_kd)?;
+        nonneg("sim.hold.handover", self.hold.handover)?;
+        nonneg("sim.hold.feedforward_fade", self.hold.feedforward_fade)?;
+        nonneg("sim.hold.lost_timeout", self.hold.lost_timeout)?;
         Ok(())
     }
 }

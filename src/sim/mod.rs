@@ -13,12 +13,14 @@ pub mod command;
 pub mod config;
 pub mod contact;
 pub mod factor;
+pub mod hold;
 pub mod process;
 pub mod record;
 pub mod scene;
 pub mod world;
 
-pub use command::{CommandGate, CommandStats, Rejection, validate_command};
-pub use config::{Mode, SimConfig};
+pub use command::{CommandGate, CommandOrigin, CommandStats, Rejection, validate_command};
+pub use config::{HoldConfig, HoldKind, Mode, SimConfig};
+pub use hold::{HoldStats, Phase, Supervisor};
 pub use scene::{CONTACT_FRAMES, DoorDrive, PosturePd, Scene, humanoid_scene};
 pub use world::{DoorSpec, PhysicsParams, Plane, SimError, StepReport, World, WorldSpec};

@@ -5,13 +5,18 @@
 //!   Answers to older states are counted as stale and skipped; no answer within
 //!   `sim.process.lockstep_timeout` (`first_command_timeout` for the first one) is an error. The
 //!   run is a pure function of the commands: two runs are bit-identical.
-//! - **Real-time**: step every `dt` of wall time (absolute deadlines, overruns counted) with the
-//!   newest valid torques; steps without a fresh command are counted as stale. With no command
-//!   for longer than `sim.process.command_timeout`, the safe behaviour applies joint damping
-//!   torques `−D q̇` (`safe_damping`) until commands return; both transitions are logged.
+//! - **Real-time**: step every `dt` of wall time (absolute deadlines, overruns counted). Who
+//!   drives the robot is the [`Supervisor`]'s call: until the controller's first valid torques
+//!   the robot is held at its start posture (`[sim.hold]`), then handed over to the torques
+//!   without a jump; with no command for `sim.process.command_timeout` it is held again, and
+//!   after `sim.hold.lost_timeout` only damped. Transitions are logged; the state's flags say
+//!   when the plant holds.
 //!
-//! Every torque message goes through [`CommandGate`]: a wrong `n`, a non-finite torque or a
-//! non-increasing `seq` is rejected, counted and never applied (logged, rate-limited).
+//! Every state carries the run's `session` and the scenario played (name and content hash):
+//! forecasters follow it, controllers check their forecast against it. Every torque message
+//! goes through [`CommandGate`]: a wrong `n`, a non-finite torque, a non-increasing `seq` (per
+//! controller run) or another plant session is rejected, counted and never applied (logged,
+//! rate-limited).
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -22,11 +27,13 @@ use nalgebra::DVector;
 use crate::control::timing::LatencyHistogram;
 
 use crate::channels::{
-    Bus, ChannelError, GroundTruthMsg, MAX_DOF, N_CONTACTS, ServiceKind, StateMsg, TorqueMsg,
+    Bus, ChannelError, GroundTruthMsg, MAX_DOF, N_CONTACTS, STATE_FLAG_DAMPING, STATE_FLAG_HOLD,
+    STATE_FLAG_LOCKSTEP, ServiceKind, StateMsg, TORQUE_FLAG_FALLBACK, TorqueMsg,
 };
 
-use super::command::{CommandGate, CommandStats};
+use super::command::{CommandGate, CommandOrigin, CommandStats};
 use super::config::{Mode, SimConfig};
+use super::hold::{HoldStats, Phase, Supervisor};
 use super::record::{Recorder, RecorderStats};
 use super::scene::{DoorDrive, default_scene};
 use super::world::{SimError, StepReport, World};
@@ -55,6 +62,8 @@ pub struct RunOptions {
     pub recording_id: Option<String>,
     /// iceoryx2 node name.
     pub node_name: String,
+    /// Lockstep: write the ground truth every `record_period` as CSV here (reproducible bytes).
+    pub truth_csv: Option<PathBuf>,
 }
 
 /// Step-time histogram (1 µs bins up to 20 ms) and counters of a run.
@@ -68,7 +77,16 @@ pub struct RunSummary {
     pub step_time_max: f64,
     pub overruns: u64,
     pub commands: CommandStats,
+    /// Steps under bare joint damping (no hold, or the hold gave up).
     pub safe_mode_steps: u64,
+    /// The plant's own hold: steps per phase, hand-overs, controller losses (real time).
+    pub hold: HoldStats,
+    pub mode: String,
+    pub scenario: String,
+    pub scenario_hash: String,
+    pub session: String,
+    /// Plant time at which the scenario started (negative: never).
+    pub scenario_start: f64,
     pub max_penetration: f64,
     pub max_slip_speed: f64,
     pub max_loop_error: f64,
@@ -80,8 +98,26 @@ pub struct RunSummary {
     pub ipc_overhead_max: f64,
 }
 
+/// What a state says about the plant besides the world: the run's session, the scenario it
+/// plays, its flags.
+#[derive(Debug, Clone)]
+pub struct PlantInfo {
+    pub session: u64,
+    pub scenario_hash: u64,
+    pub scenario: String,
+    /// Plant time of the scenario's time 0 (negative: not started).
+    pub scenario_start: f64,
+    pub flags: u32,
+}
+
 /// Fills a [`StateMsg`] from the world (allocation-free).
-pub fn fill_state(m: &mut StateMsg, w: &World, zmp: [f64; 2], hand_force: [f64; 3]) {
+pub fn fill_state(
+    m: &mut StateMsg,
+    w: &World,
+    info: &PlantInfo,
+    zmp: [f64; 2],
+    hand_force: [f64; 3],
+) {
     m.step = w.steps();
     m.time = w.time();
     let (q, v) = (w.q(), w.v());
@@ -96,6 +132,11 @@ pub fn fill_state(m: &mut StateMsg, w: &World, zmp: [f64; 2], hand_force: [f64; 
     m.door_angle = w.door_angle();
     m.door_velocity = w.door_velocity();
     m.hand_force = hand_force;
+    m.session = info.session;
+    m.scenario_hash = info.scenario_hash;
+    m.scenario_start = info.scenario_start;
+    m.flags = info.flags;
+    m.set_scenario_name(&info.scenario);
 }
 
 struct Endpoints {
@@ -119,14 +160,44 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
             world.contact_forces().len()
         )));
     }
+    let info = PlantInfo {
+        session: crate::channels::new_run_id(),
+        scenario_hash: scenario.content_hash(),
+        scenario: cfg.scenario.clone(),
+        // Lockstep plays the scenario from 0; real time once a controller drives the robot.
+        scenario_start: match cfg.mode {
+            Mode::Lockstep => 0.0,
+            Mode::Realtime => -1.0,
+        },
+        flags: match cfg.mode {
+            Mode::Lockstep => STATE_FLAG_LOCKSTEP,
+            Mode::Realtime => STATE_FLAG_HOLD,
+        },
+    };
+    if cfg.scenario.len() > crate::channels::SCENARIO_NAME_LEN {
+        return Err(ProcessError::Setup(format!(
+            "scenario `{}` is longer than the {} bytes a state announces: use a shorter path",
+            cfg.scenario,
+            crate::channels::SCENARIO_NAME_LEN
+        )));
+    }
+    if opts.truth_csv.is_some() && cfg.mode != Mode::Lockstep {
+        return Err(ProcessError::Setup(
+            "--truth-csv is written from the stepping loop: lockstep only".into(),
+        ));
+    }
     tracing::info!(
-        "sim: {:?} mode, dt = {} s, duration = {} s, scenario `{}`, prefix `{}`, door {}",
+        "sim: {:?} mode, dt = {} s, duration = {} s, scenario `{}` ({}, hash {:016x}), prefix `{}`, door {}, session {:016x}, hold {:?}",
         cfg.mode,
         cfg.dt,
         cfg.duration,
+        cfg.scenario,
         scenario.name,
+        info.scenario_hash,
         cfg.process.prefix,
-        if cfg.door { "on" } else { "off" }
+        if cfg.door { "on" } else { "off" },
+        info.session,
+        cfg.hold.kind
     );
     let bus = Bus::open(&cfg.process.prefix, &opts.node_name)?;
     let ep = Endpoints {
@@ -147,9 +218,31 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
         ),
         None => None,
     };
+    let truth_csv = match &opts.truth_csv {
+        Some(p) => {
+            let mut w = std::io::BufWriter::new(std::fs::File::create(p).map_err(|e| {
+                ProcessError::Setup(format!("ground-truth CSV {}: {e}", p.display()))
+            })?);
+            use std::io::Write;
+            writeln!(w, "{TRUTH_CSV_HEADER}")
+                .map_err(|e| ProcessError::Setup(format!("ground-truth CSV: {e}")))?;
+            Some(w)
+        }
+        None => None,
+    };
+    let supervisor = Supervisor::new(
+        world.robot(),
+        world.q(),
+        &cfg.hold,
+        cfg.process.safe_damping,
+        cfg.dt,
+    )?;
     let mut looper = Looper {
         tau: DVector::zeros(world.n_actuated()),
-        gate: CommandGate::default(),
+        gate: CommandGate::for_session(info.session),
+        info: info.clone(),
+        supervisor,
+        truth_csv,
         timing: LatencyHistogram::new(),
         ipc: LatencyHistogram::new(),
         published_at: Instant::now(),
@@ -158,7 +251,6 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
         max_pen: 0.0,
         max_slip: 0.0,
         max_loop: 0.0,
-        safe_steps: 0,
         overruns: 0,
         last_reject_log: None,
         record_every: (cfg.record_period / cfg.dt).round().max(1.0) as u64,
@@ -196,6 +288,11 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
     };
     let wall = start.elapsed().as_secs_f64();
     let rec_stats = recorder.map(|r| r.finish()).unwrap_or_default();
+    if let Some(w) = &mut looper.truth_csv {
+        use std::io::Write;
+        w.flush()
+            .map_err(|e| ProcessError::Setup(format!("ground-truth CSV: {e}")))?;
+    }
     result?;
     let summary = RunSummary {
         steps: world.steps(),
@@ -206,7 +303,13 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
         step_time_max: looper.timing.max(),
         overruns: looper.overruns,
         commands: looper.gate.stats,
-        safe_mode_steps: looper.safe_steps,
+        safe_mode_steps: looper.supervisor.stats.damping_steps,
+        hold: looper.supervisor.stats,
+        mode: format!("{:?}", cfg.mode).to_lowercase(),
+        scenario: cfg.scenario.clone(),
+        scenario_hash: format!("{:016x}", info.scenario_hash),
+        session: format!("{:016x}", info.session),
+        scenario_start: looper.info.scenario_start,
         max_penetration: looper.max_pen,
         max_slip_speed: looper.max_slip,
         max_loop_error: looper.max_loop,
@@ -219,9 +322,15 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
     Ok(summary)
 }
 
+/// Columns of the lockstep ground-truth CSV (`--truth-csv`).
+pub const TRUTH_CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_x,zmp_y,hand_fx,hand_fy,hand_fz,door_angle,door_torque,loop_error,max_penetration,max_slip_speed,solver_iterations";
+
 struct Looper {
     tau: DVector<f64>,
     gate: CommandGate,
+    info: PlantInfo,
+    supervisor: Supervisor,
+    truth_csv: Option<std::io::BufWriter<std::fs::File>>,
     timing: LatencyHistogram,
     ipc: LatencyHistogram,
     published_at: Instant,
@@ -230,16 +339,67 @@ struct Looper {
     max_pen: f64,
     max_slip: f64,
     max_loop: f64,
-    safe_steps: u64,
     overruns: u64,
     last_reject_log: Option<Instant>,
     record_every: u64,
 }
 
+fn log_transition(from: Phase, to: Phase, t: f64, cfg: &SimConfig) {
+    match (from, to) {
+        (_, Phase::Handover) => tracing::info!(
+            "t = {t:.3} s: the controller's torques arrived; handing over from {from:?} in {} s",
+            cfg.hold.handover
+        ),
+        (_, Phase::Control) => tracing::info!("t = {t:.3} s: the controller drives the robot"),
+        (_, Phase::Hold) => tracing::warn!(
+            "t = {t:.3} s: no torques for {} s: holding the robot ({:?}; bare damping after {} s)",
+            cfg.process.command_timeout,
+            cfg.hold.kind,
+            cfg.hold.lost_timeout
+        ),
+        (_, Phase::Damping) => tracing::warn!(
+            "t = {t:.3} s: safe behaviour, joint damping {} N·m·s/rad (no hold)",
+            cfg.process.safe_damping
+        ),
+    }
+}
+
+fn write_truth(
+    w: &mut impl std::io::Write,
+    world: &World,
+    rep: &StepReport,
+    zmp: [f64; 2],
+    hand: [f64; 3],
+) -> std::io::Result<()> {
+    writeln!(
+        w,
+        "{:.4},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{:.4},{:.4},{:.6},{:.4},{:.3e},{:.3e},{:.3e},{}",
+        world.time(),
+        rep.com[0],
+        rep.com[1],
+        rep.com[2],
+        zmp[0],
+        zmp[1],
+        hand[0],
+        hand[1],
+        hand[2],
+        world.door_angle(),
+        rep.door_torque,
+        rep.loop_error,
+        rep.max_penetration,
+        rep.max_slip_speed,
+        rep.solver_iterations
+    )
+}
+
 impl Looper {
     /// Validates a command; on acceptance copies its torques into `self.tau`.
     fn accept(&mut self, msg: &TorqueMsg, n: usize) -> bool {
-        match self.gate.check(msg.seq, msg.n, &msg.tau, n) {
+        let origin = CommandOrigin {
+            session: msg.session,
+            controller: msg.controller,
+        };
+        match self.gate.check(origin, msg.seq, msg.n, &msg.tau, n) {
             Ok(()) => {
                 self.tau.as_mut_slice().copy_from_slice(&msg.tau[..n]);
                 true
@@ -269,7 +429,11 @@ impl Looper {
         recorder: &mut Option<Recorder>,
     ) -> Result<(), ProcessError> {
         let t0 = Instant::now();
-        let door_torque = drive.torque(world.time());
+        let door_torque = if self.info.scenario_start >= 0.0 {
+            drive.torque(world.time() - self.info.scenario_start)
+        } else {
+            0.0
+        };
         let rep = world.step(&self.tau, door_torque)?;
         let dt_step = t0.elapsed().as_secs_f64();
         self.timing.record(Duration::from_secs_f64(dt_step));
@@ -281,10 +445,14 @@ impl Looper {
         self.max_slip = self.max_slip.max(rep.max_slip_speed);
         self.max_loop = self.max_loop.max(rep.loop_error);
         self.publish(ep, world, &rep, dt_step)?;
-        if let Some(r) = recorder
-            && world.steps().is_multiple_of(self.record_every)
-        {
-            r.offer(world, &self.hand_force);
+        if world.steps().is_multiple_of(self.record_every) {
+            if let Some(r) = recorder {
+                r.offer(world, &self.hand_force);
+            }
+            if let Some(w) = &mut self.truth_csv {
+                write_truth(w, world, &rep, self.zmp, self.hand_force)
+                    .map_err(|e| ProcessError::Setup(format!("ground-truth CSV: {e}")))?;
+            }
         }
         Ok(())
     }
@@ -297,8 +465,19 @@ impl Looper {
         step_time: f64,
     ) -> Result<(), ProcessError> {
         let (zmp, hand) = (self.zmp, self.hand_force);
-        ep.state.send_with(|m| fill_state(m, world, zmp, hand))?;
+        // Lockstep never holds: it does not step without torques.
+        if self.info.flags & STATE_FLAG_LOCKSTEP == 0 {
+            self.info.flags = match self.supervisor.phase() {
+                Phase::Hold | Phase::Handover => STATE_FLAG_HOLD,
+                Phase::Damping => STATE_FLAG_DAMPING,
+                Phase::Control => 0,
+            };
+        }
+        let info = &self.info;
+        ep.state
+            .send_with(|m| fill_state(m, world, info, zmp, hand))?;
         let stats = self.gate.stats;
+        let (flags, hold_steps) = (self.info.flags, self.supervisor.stats.hold_steps);
         ep.truth.send_with(|g| {
             g.step = world.steps();
             g.time = world.time();
@@ -311,6 +490,8 @@ impl Looper {
             g.solver_iterations = rep.solver_iterations;
             g.rejected_commands = stats.rejected().min(u32::MAX as u64) as u32;
             g.stale_commands = stats.stale;
+            g.flags = flags;
+            g.hold_steps = hold_steps;
         })?;
         ep.state_event.notify()?;
         self.published_at = Instant::now();
@@ -374,8 +555,9 @@ impl Looper {
                 if !woken {
                     // A controller that connected after this state was sent has neither the
                     // sample nor its wake-up: send the same state again (it skips duplicates).
-                    let (zmp, hand) = (self.zmp, self.hand_force);
-                    ep.state.send_with(|m| fill_state(m, world, zmp, hand))?;
+                    let (zmp, hand, info) = (self.zmp, self.hand_force, &self.info);
+                    ep.state
+                        .send_with(|m| fill_state(m, world, info, zmp, hand))?;
                     ep.state_event.notify()?;
                 }
             }
@@ -400,49 +582,46 @@ impl Looper {
         let cmd_timeout = Duration::from_secs_f64(cfg.process.command_timeout);
         let start = Instant::now();
         let mut next = start + period;
-        let mut last_cmd = start;
+        let mut last_cmd: Option<Instant> = None;
         let mut commanded = DVector::zeros(n);
-        let mut safe = false;
+        let mut applied = DVector::zeros(n);
         while world.steps() < total && !stop.load(Ordering::Relaxed) {
             let mut fresh = false;
             while let Some(msg) = ep.torques.receive()? {
+                // A controller's own fallback (it has no state to control from) does not take
+                // the robot from the hold; once it drives the robot, its fallbacks apply.
+                let holding = matches!(self.supervisor.phase(), Phase::Hold | Phase::Damping);
+                if holding && msg.flags & TORQUE_FLAG_FALLBACK != 0 {
+                    continue;
+                }
                 if self.accept(&msg, n) {
                     fresh = true;
+                    commanded.copy_from(&self.tau);
                 }
             }
             let now = Instant::now();
             if fresh {
-                last_cmd = now;
-                commanded.copy_from(&self.tau);
+                last_cmd = Some(now);
             } else {
                 self.gate.stats.stale += 1;
             }
-            let timed_out = now.duration_since(last_cmd) > cmd_timeout;
-            if timed_out != safe {
-                safe = timed_out;
-                if safe {
-                    tracing::warn!(
-                        "no torques for {:.3} s at t = {:.3} s: safe behaviour (joint damping {} N·m·s/rad)",
-                        now.duration_since(last_cmd).as_secs_f64(),
-                        world.time(),
-                        cfg.process.safe_damping
-                    );
-                } else {
-                    tracing::info!(
-                        "torques are back at t = {:.3} s: leaving the safe behaviour",
-                        world.time()
-                    );
+            let current = last_cmd.is_some_and(|t| now.duration_since(t) <= cmd_timeout);
+            let t = world.time();
+            let transition = self.supervisor.torques(
+                t,
+                world.q(),
+                world.v(),
+                current.then_some(&commanded),
+                &mut applied,
+            );
+            if let Some(tr) = transition {
+                log_transition(tr.from, tr.to, t, cfg);
+                if tr.to == Phase::Control && self.info.scenario_start < 0.0 {
+                    self.info.scenario_start = t;
+                    tracing::info!("t = {t:.3} s: scenario `{}` starts", cfg.scenario);
                 }
             }
-            if safe {
-                self.safe_steps += 1;
-                let off = world.v().len() - n;
-                for i in 0..n {
-                    self.tau[i] = -cfg.process.safe_damping * world.v()[off + i];
-                }
-            } else {
-                self.tau.copy_from(&commanded);
-            }
+            self.tau.copy_from(&applied);
             self.step(ep, world, drive, recorder)?;
             let now = Instant::now();
             if now > next {

@@ -3,3 +3,4 @@
 
 pub mod counting_alloc;
 pub mod humanoid;
+pub mod procs;

@@ -1,0 +1,202 @@
+//! Lockstep reproduces itself: the same `upc run` twice gives the same bytes in the controller's
+//! CSV, the simulator's ground-truth CSV and both summaries, timing figures aside
+//! (services/CHANNELS.md states the guarantee). C0, C1 and C2 on the multiple-impact scenario,
+//! and once with both cores kept busy by other processes.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+use serde_json::Value;
+
+/// Columns of `controller.csv` that are wall-clock measurements.
+const TIMING_COLUMNS: [&str; 2] = ["tick_us", "wbc_us"];
+/// Summary fields that are wall-clock measurements, or identify a process run.
+const TIMING_FIELDS: [&str; 22] = [
+    "tick_p50_us",
+    "tick_p99_us",
+    "tick_max_us",
+    "deadline_overruns",
+    "deadline_misses",
+    "longest_state_gap",
+    "c2_solve_mean_ms",
+    "c2_solve_max_ms",
+    "realtime",
+    "wall_time",
+    "step_time_p50",
+    "step_time_p99",
+    "step_time_max",
+    "overruns",
+    "ipc_overhead_p50",
+    "ipc_overhead_p99",
+    "ipc_overhead_max",
+    "recorder",
+    "session",
+    // Lockstep waits are counted per wait, and a fast C2 thread needs none: timing.
+    "c2_waits",
+    "forecast_waits",
+    // The simulator re-sends a state it waits on every 20 ms of wall time (a slow controller).
+    "stale",
+];
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("upc-determinism-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("scratch dir");
+    d
+}
+
+/// `upc run --controller <c> --duration <d>` into `out/<name>`; returns the run directory.
+fn run(out: &Path, name: &str, controller: &str, duration: &str) -> PathBuf {
+    let st = Command::new(env!("CARGO_BIN_EXE_upc"))
+        .args(["run", "--quiet", "--controller", controller])
+        .args(["--duration", duration, "--name", name, "--out"])
+        .arg(out)
+        .stdout(Stdio::null())
+        .status()
+        .expect("upc run");
+    let dir = out.join(name).join(controller);
+    assert!(
+        st.success(),
+        "upc run failed: {st}\n{}",
+        std::fs::read_to_string(dir.join("controller.log")).unwrap_or_default()
+    );
+    dir
+}
+
+/// The CSV without the named columns, line by line.
+fn csv_without(path: &Path, skip: &[&str]) -> Vec<String> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let keep: Vec<bool> = header.iter().map(|h| !skip.contains(h)).collect();
+    std::iter::once(header.join(","))
+        .chain(lines.map(|l| {
+            l.split(',')
+                .zip(&keep)
+                .filter(|(_, k)| **k)
+                .map(|(v, _)| v)
+                .collect::<Vec<_>>()
+                .join(",")
+        }))
+        .collect()
+}
+
+fn strip(v: &mut Value) {
+    if let Value::Object(m) = v {
+        for k in TIMING_FIELDS {
+            m.remove(k);
+        }
+        for x in m.values_mut() {
+            strip(x);
+        }
+    }
+}
+
+fn summary(path: &Path) -> Value {
+    let mut v: Value = serde_json::from_str(&std::fs::read_to_string(path).expect("summary"))
+        .expect("summary JSON");
+    strip(&mut v);
+    v
+}
+
+/// The two runs agree byte for byte outside the timing figures.
+fn assert_same(a: &Path, b: &Path) {
+    let ca = csv_without(&a.join("controller.csv"), &TIMING_COLUMNS);
+    let cb = csv_without(&b.join("controller.csv"), &TIMING_COLUMNS);
+    assert!(ca.len() > 100, "{} rows only", ca.len());
+    if let Some(i) = (0..ca.len().min(cb.len())).find(|&i| ca[i] != cb[i]) {
+        panic!(
+            "controller.csv differs from row {i}:\n{}\n{}\n{}",
+            ca[0], ca[i], cb[i]
+        );
+    }
+    assert_eq!(ca.len(), cb.len(), "controller.csv row counts");
+    let ta = std::fs::read(a.join("sim.csv")).expect("sim.csv");
+    let tb = std::fs::read(b.join("sim.csv")).expect("sim.csv");
+    assert!(ta.len() > 1000);
+    assert!(ta == tb, "sim.csv (ground truth) differs");
+    let (ja, jb) = (
+        summary(&a.join("controller.json")),
+        summary(&b.join("controller.json")),
+    );
+    assert_eq!(ja, jb, "controller.json");
+    assert_eq!(ja["reproducible"], Value::Bool(true), "{ja}");
+    assert_eq!(
+        summary(&a.join("sim.json")),
+        summary(&b.join("sim.json")),
+        "sim.json"
+    );
+}
+
+fn twice(controller: &str, duration: &str) {
+    let out = scratch(controller);
+    let a = run(&out, "a", controller, duration);
+    let b = run(&out, "b", controller, duration);
+    assert_same(&a, &b);
+    let c: Value =
+        serde_json::from_str(&std::fs::read_to_string(a.join("controller.json")).expect("summary"))
+            .expect("json");
+    // The run saw the forecast and, for C2, applied its schedules.
+    assert!(c["forecasts_accepted"].as_u64().unwrap_or(0) > 100, "{c}");
+    assert_eq!(c["forecast_wait_timeouts"], 0, "{c}");
+    if controller == "c2" {
+        assert!(c["c2_solves"].as_u64().unwrap_or(0) > 100, "{c}");
+        assert_eq!(c["c2_wait_timeouts"], 0, "{c}");
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn lockstep_c0_reruns_byte_for_byte() {
+    twice("c0", "1.5");
+}
+
+#[test]
+fn lockstep_c1_reruns_byte_for_byte() {
+    twice("c1", "2.5");
+}
+
+#[test]
+fn lockstep_c2_reruns_byte_for_byte() {
+    twice("c2", "2.5");
+}
+
+/// Busy-loop processes, one per core, killed when dropped.
+struct Load(Vec<Child>);
+
+impl Load {
+    fn start() -> Self {
+        let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+        Load(
+            (0..cores)
+                .map(|_| {
+                    Command::new("sh")
+                        .args(["-c", "while :; do :; done"])
+                        .spawn()
+                        .expect("busy loop")
+                })
+                .collect(),
+        )
+    }
+}
+
+impl Drop for Load {
+    fn drop(&mut self) {
+        for c in &mut self.0 {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+#[test]
+fn lockstep_c2_reruns_byte_for_byte_on_a_loaded_machine() {
+    let out = scratch("load");
+    let a = run(&out, "quiet", "c2", "1.5");
+    let b = {
+        let _load = Load::start();
+        run(&out, "loaded", "c2", "1.5")
+    };
+    assert_same(&a, &b);
+    let _ = std::fs::remove_dir_all(&out);
+}

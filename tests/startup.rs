@@ -1,0 +1,220 @@
+//! The deployed processes keep the robot up in any start order (services/README.md): each is
+//! launched with the exact command line of its systemd unit (`services/*.service`; only the
+//! binary, the prefix and the log directory are the test's), in real time, on the default
+//! scenario with its pushes. Also the simulator killed mid-push and restarted, and the
+//! controller killed and restarted. Asserts what the simulator's ground truth shows (CoM height
+//! from the very first state, the plant's hold) and the processes' summaries.
+
+mod support;
+
+use std::time::Duration;
+
+use serde_json::Value;
+use support::procs::*;
+use upc::channels::STATE_FLAG_HOLD;
+
+/// The unit's `ExecStart=` command line, continuation lines joined, as arguments after the
+/// binary; `--prefix` set to the test's and `/var/log/upc/` moved into its scratch directory.
+fn unit_args(unit: &str, s: &Scratch) -> Vec<String> {
+    let path = format!("{}/services/{unit}.service", env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(&path).expect("unit file");
+    let joined = text.replace("\\\n", " ");
+    let line = joined
+        .lines()
+        .find_map(|l| l.strip_prefix("ExecStart="))
+        .unwrap_or_else(|| panic!("{path} has no ExecStart"));
+    let mut words = line.split_whitespace();
+    assert_eq!(words.next(), Some("/usr/local/bin/upc"), "{path}");
+    let logs = format!("{}/", s.dir.display());
+    let mut args: Vec<String> = words.map(|w| w.replace("/var/log/upc/", &logs)).collect();
+    let p = args
+        .iter()
+        .position(|a| a == "--prefix")
+        .unwrap_or_else(|| panic!("{path}: no --prefix"));
+    args[p + 1] = s.prefix.clone();
+    args
+}
+
+/// Start the unit `unit` as process `name`, with `extra` arguments appended.
+fn start_unit(p: &mut Procs, s: &Scratch, unit: &str, name: &str, extra: &[&str]) {
+    let mut args = unit_args(unit, s);
+    args.extend(extra.iter().map(|x| x.to_string()));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    p.start(s, name, &args);
+}
+
+fn start_sim(p: &mut Procs, s: &Scratch, name: &str) {
+    let summary = s.path(&format!("{name}.json")).display().to_string();
+    start_unit(p, s, "upc-sim", name, &["--summary", &summary]);
+}
+
+/// Wait `secs` of wall time, failing early if a process died.
+fn pause(p: &mut Procs, s: &Scratch, secs: f64) {
+    let until = std::time::Instant::now() + Duration::from_secs_f64(secs);
+    while std::time::Instant::now() < until {
+        for (name, child) in &mut p.0 {
+            if let Ok(Some(st)) = child.try_wait() {
+                panic!("{name} exited early ({st}):\n{}", log(s, name));
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The robot stands: the CoM within 5 mm of its height in the plant's first state, the feet
+/// not sliding, and the controller (not the plant's hold) drives it.
+fn assert_stands(seen: &Seen, what: &str) {
+    let drop = seen.com_z0 - seen.com_z_min;
+    assert!(drop < 5e-3, "{what}: the CoM dropped {drop} m: {seen:?}");
+    assert!(seen.max_slip < 0.05, "{what}: the feet slid: {seen:?}");
+    assert_eq!(
+        seen.flags & STATE_FLAG_HOLD,
+        0,
+        "{what}: still held: {seen:?}"
+    );
+}
+
+fn stop_all(p: &mut Procs, s: &Scratch, names: &[&str]) {
+    for n in names {
+        p.stop(s, n, libc::SIGTERM);
+    }
+}
+
+/// The three units in `order`, `gap` seconds of wall time after the first; then the scenario's
+/// 25 N and 60 N pushes (its first 3 s) under control.
+fn start_order(tag: &str, order: [&str; 3], gap: f64) {
+    let _serial = serial();
+    let s = Scratch::new(&format!("startup_{tag}"));
+    let mut p = Procs::default();
+    let obs = Observer::start(&s.prefix);
+    for (i, unit) in order.iter().enumerate() {
+        if i == 1 {
+            pause(&mut p, &s, gap);
+        }
+        match *unit {
+            "sim" => start_sim(&mut p, &s, "sim"),
+            "controller" => start_unit(&mut p, &s, "upc-controller", "controller", &[]),
+            "forecaster" => start_unit(&mut p, &s, "upc-forecaster", "forecaster", &[]),
+            u => panic!("no unit {u}"),
+        }
+    }
+    // The scenario starts once the controller has the robot (≈ 0.2 s after its first torques).
+    obs.wait_for(1, gap + 3.5, &mut p, &s);
+    let seen = obs.get();
+    stop_all(&mut p, &s, &["controller", "forecaster", "sim"]);
+    assert_stands(&seen, tag);
+    let sim = json(&s.path("sim.json"));
+    let c = json(&s.path("controller.json"));
+    assert_eq!(u(&sim["hold"], "handovers"), 1, "{sim}");
+    assert_eq!(u(&sim["hold"], "losses"), 0, "{sim}");
+    assert_eq!(u(&sim, "safe_mode_steps"), 0, "{sim}");
+    assert!(f(&sim, "scenario_start") >= 0.0, "{sim}");
+    // Started after the simulator, the controller found it holding the robot.
+    if order[0] == "sim" {
+        assert!(u(&sim["hold"], "hold_steps") > 500, "{sim}");
+    }
+    assert_eq!(u(&c, "forecast_scenario_mismatches"), 0, "{c}");
+    assert_eq!(c["plant_scenario_mismatch"], Value::Bool(false), "{c}");
+    assert!(u(&c, "forecasts_accepted") > 100, "{c}");
+    assert_eq!(u(&c, "tick_errors"), 0, "{c}");
+    eprintln!(
+        "{tag}: CoM drop {:.2} mm, min ZMP margin {:.1} mm, hold steps {}, stale commands {}",
+        (seen.com_z0 - seen.com_z_min) * 1e3,
+        f(&c, "min_zmp_margin") * 1e3,
+        u(&sim["hold"], "hold_steps"),
+        u(&sim["commands"], "stale")
+    );
+}
+
+#[test]
+fn simulator_first_controller_a_second_later() {
+    start_order("sim_first", ["sim", "controller", "forecaster"], 1.0);
+}
+
+#[test]
+fn controller_first_simulator_a_second_later() {
+    start_order("controller_first", ["controller", "forecaster", "sim"], 1.0);
+}
+
+#[test]
+fn forecaster_last() {
+    start_order("forecaster_last", ["sim", "controller", "forecaster"], 0.0);
+    start_order(
+        "forecaster_last_late",
+        ["controller", "sim", "forecaster"],
+        1.0,
+    );
+}
+
+#[test]
+fn simulator_killed_mid_push_and_restarted_is_held_handed_over_and_stands() {
+    let _serial = serial();
+    let s = Scratch::new("startup_sim_restart");
+    let mut p = Procs::default();
+    let obs = Observer::start(&s.prefix);
+    start_unit(&mut p, &s, "upc-controller", "controller", &[]);
+    start_unit(&mut p, &s, "upc-forecaster", "forecaster", &[]);
+    start_sim(&mut p, &s, "sim1");
+    // The 60 N push holds from 2.25 to 2.4 s of the scenario, which starts ≈ 0.2 s in.
+    obs.wait_for(1, 2.55, &mut p, &s);
+    p.signal("sim1", libc::SIGKILL);
+    let _ = p.wait("sim1", Duration::from_secs(5));
+    pause(&mut p, &s, 0.5);
+    start_sim(&mut p, &s, "sim2");
+    obs.wait_for(2, 3.5, &mut p, &s);
+    let seen = obs.get();
+    stop_all(&mut p, &s, &["controller", "forecaster", "sim2"]);
+    assert_eq!(seen.runs, 2);
+    assert_stands(&seen, "restarted simulator");
+    let c = json(&s.path("controller.json"));
+    let sim2 = json(&s.path("sim2.json"));
+    assert_eq!(u(&c, "reconnects"), 1, "{c}");
+    assert_eq!(u(&sim2["hold"], "handovers"), 1, "{sim2}");
+    assert_eq!(u(&sim2, "safe_mode_steps"), 0, "{sim2}");
+    assert_eq!(u(&c, "forecast_scenario_mismatches"), 0, "{c}");
+    eprintln!(
+        "sim restart: CoM drop {:.2} mm, hold steps {}, foreign commands {}, stale {}",
+        (seen.com_z0 - seen.com_z_min) * 1e3,
+        u(&sim2["hold"], "hold_steps"),
+        u(&sim2["commands"], "foreign"),
+        u(&sim2["commands"], "stale")
+    );
+}
+
+#[test]
+fn controller_killed_and_restarted_plant_holds_and_the_new_one_takes_over() {
+    let _serial = serial();
+    let s = Scratch::new("startup_ctl_restart");
+    let mut p = Procs::default();
+    let obs = Observer::start(&s.prefix);
+    start_sim(&mut p, &s, "sim");
+    start_unit(&mut p, &s, "upc-controller", "controller", &[]);
+    start_unit(&mut p, &s, "upc-forecaster", "forecaster", &[]);
+    // Between the 60 N push (ends at 2.75 s of the scenario) and the 40 N one (3.6 s).
+    obs.wait_for(1, 3.1, &mut p, &s);
+    p.signal("controller", libc::SIGKILL);
+    let _ = p.wait("controller", Duration::from_secs(5));
+    pause(&mut p, &s, 0.3);
+    let held = obs.get();
+    start_unit(&mut p, &s, "upc-controller", "controller", &[]);
+    obs.wait_for(1, held.time + 3.0, &mut p, &s);
+    let seen = obs.get();
+    stop_all(&mut p, &s, &["controller", "forecaster", "sim"]);
+    assert_ne!(
+        held.flags & STATE_FLAG_HOLD,
+        0,
+        "the plant held the robot: {held:?}"
+    );
+    assert_stands(&seen, "restarted controller");
+    let sim = json(&s.path("sim.json"));
+    assert_eq!(u(&sim["hold"], "losses"), 1, "{sim}");
+    assert_eq!(u(&sim["hold"], "handovers"), 2, "{sim}");
+    assert_eq!(u(&sim["commands"], "controller_changes"), 1, "{sim}");
+    assert_eq!(u(&sim["commands"], "out_of_order"), 0, "{sim}");
+    eprintln!(
+        "controller restart: CoM drop {:.2} mm, hold steps {}, stale commands {}",
+        (seen.com_z0 - seen.com_z_min) * 1e3,
+        u(&sim["hold"], "hold_steps"),
+        u(&sim["commands"], "stale")
+    );
+}

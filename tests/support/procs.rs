@@ -1,0 +1,248 @@
+//! Real `upc` processes for the multi-process tests: a scratch directory and prefix per test,
+//! child processes killed on every path, and an observer of the simulator's ground truth.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+use upc::channels::{Bus, GroundTruthMsg, ServiceKind};
+
+/// The real-time tests share two cores with everything else: one at a time.
+pub static SERIAL: Mutex<()> = Mutex::new(());
+
+pub fn serial() -> MutexGuard<'static, ()> {
+    SERIAL.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// No push on the door: the robot only has to stand, so that what a test sees is the fault's
+/// doing (an unforecast impact tips the robot by design, see config/scenarios).
+pub const QUIET: &str = "name = \"quiet\"\nduration = 1000.0\nzmp_reference = [0.0, 0.0]\n\
+                     [force]\nkind = \"impacts\"\nimpacts = []\n";
+
+/// A scratch directory and a service prefix unique to one test.
+pub struct Scratch {
+    pub dir: PathBuf,
+    pub prefix: String,
+}
+
+impl Scratch {
+    pub fn new(name: &str) -> Self {
+        let prefix = format!("{name}_{}", std::process::id());
+        let dir = std::env::temp_dir().join(format!("upc-{prefix}"));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("scratch dir");
+        std::fs::write(dir.join("quiet.toml"), QUIET).expect("scenario");
+        Scratch { dir, prefix }
+    }
+
+    pub fn scenario(&self) -> String {
+        self.path("quiet.toml").display().to_string()
+    }
+
+    pub fn path(&self, f: &str) -> PathBuf {
+        self.dir.join(f)
+    }
+}
+
+impl Drop for Scratch {
+    pub fn drop(&mut self) {
+        if !std::thread::panicking() {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+    }
+}
+
+/// Child processes, SIGKILLed and reaped when dropped (a failing assertion leaves none behind).
+#[derive(Default)]
+pub struct Procs(pub Vec<(String, Child)>);
+
+impl Procs {
+    /// Start `upc args…` with its stderr in `<dir>/<name>.log`.
+    pub fn start(&mut self, s: &Scratch, name: &str, args: &[&str]) {
+        let log = std::fs::File::create(s.path(&format!("{name}.log"))).expect("log file");
+        let child = Command::new(env!("CARGO_BIN_EXE_upc"))
+            .args(args)
+            .env("RUST_LOG", "info")
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .expect("upc starts");
+        self.0.push((name.to_string(), child));
+    }
+
+    pub fn pid(&self, name: &str) -> i32 {
+        self.0
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, c)| c.id() as i32)
+            .unwrap_or_else(|| panic!("no process {name}"))
+    }
+
+    pub fn signal(&self, name: &str, sig: i32) {
+        // SAFETY: signalling our own child, which we have not reaped yet.
+        unsafe { libc::kill(self.pid(name), sig) };
+    }
+
+    /// Wait for `name` to exit (at most `limit`) and forget it.
+    pub fn wait(&mut self, name: &str, limit: Duration) -> ExitStatus {
+        let i = self
+            .0
+            .iter()
+            .position(|(n, _)| n == name)
+            .unwrap_or_else(|| panic!("no process {name}"));
+        let (_, mut child) = self.0.remove(i);
+        let until = Instant::now() + limit;
+        loop {
+            if let Some(st) = child.try_wait().expect("try_wait") {
+                return st;
+            }
+            if Instant::now() > until {
+                let _ = child.kill();
+                let _ = child.wait();
+                panic!("{name} did not exit within {limit:?}");
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Signal `name` and expect a clean exit (status 0).
+    pub fn stop(&mut self, s: &Scratch, name: &str, sig: i32) {
+        self.signal(name, sig);
+        let st = self.wait(name, Duration::from_secs(15));
+        assert!(
+            st.success(),
+            "{name} exited with {st} after signal {sig}:\n{}",
+            log(s, name)
+        );
+    }
+
+    pub fn kill_all(&mut self) {
+        for (_, c) in &mut self.0 {
+            let _ = c.kill();
+        }
+        for (_, c) in &mut self.0 {
+            let _ = c.wait();
+        }
+        self.0.clear();
+    }
+}
+
+impl Drop for Procs {
+    pub fn drop(&mut self) {
+        self.kill_all();
+    }
+}
+
+pub fn log(s: &Scratch, name: &str) -> String {
+    std::fs::read_to_string(s.path(&format!("{name}.log"))).unwrap_or_default()
+}
+
+pub fn json(p: &Path) -> Value {
+    let text = std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+pub fn u(v: &Value, k: &str) -> u64 {
+    v[k].as_u64()
+        .unwrap_or_else(|| panic!("{k} missing in {v}"))
+}
+
+pub fn f(v: &Value, k: &str) -> f64 {
+    v[k].as_f64()
+        .unwrap_or_else(|| panic!("{k} missing in {v}"))
+}
+
+/// What the test sees of the simulator's ground truth: the current run's time and CoM height.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Seen {
+    pub time: f64,
+    /// Simulator runs seen (the time going back starts a new one).
+    pub runs: u32,
+    pub com_z0: f64,
+    pub com_z_min: f64,
+    /// Of the current run: the plant's flags, its hold steps, the fastest slip seen.
+    pub flags: u32,
+    pub hold_steps: u64,
+    pub max_slip: f64,
+}
+
+/// Watches `<prefix>/ground_truth` from a thread of the test process.
+pub struct Observer {
+    seen: Arc<Mutex<Seen>>,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Observer {
+    pub fn start(prefix: &str) -> Self {
+        let seen = Arc::new(Mutex::new(Seen::default()));
+        let stop = Arc::new(AtomicBool::new(false));
+        let (seen_t, stop_t, prefix) = (Arc::clone(&seen), Arc::clone(&stop), prefix.to_string());
+        let thread = std::thread::spawn(move || {
+            let bus = Bus::open(&prefix, "faults-observer").expect("observer bus");
+            let truth = bus
+                .subscriber::<GroundTruthMsg>(ServiceKind::GroundTruth)
+                .expect("ground truth");
+            while !stop_t.load(Ordering::Relaxed) {
+                while let Some(g) = truth.receive().expect("receive") {
+                    let mut s = seen_t.lock().unwrap();
+                    if s.runs == 0 || g.time < s.time - 1e-9 {
+                        s.runs += 1;
+                        s.com_z0 = g.com[2];
+                        s.com_z_min = g.com[2];
+                        s.max_slip = 0.0;
+                    }
+                    s.flags = g.flags;
+                    s.hold_steps = g.hold_steps;
+                    s.max_slip = s.max_slip.max(g.max_slip_speed);
+                    s.time = g.time;
+                    s.com_z_min = s.com_z_min.min(g.com[2]);
+                }
+                std::thread::sleep(Duration::from_millis(2));
+            }
+        });
+        Observer {
+            seen,
+            stop,
+            thread: Some(thread),
+        }
+    }
+
+    pub fn get(&self) -> Seen {
+        *self.seen.lock().unwrap()
+    }
+
+    /// Wait until the simulator's run number `run` reaches simulated time `t`.
+    pub fn wait_for(&self, run: u32, t: f64, procs: &mut Procs, s: &Scratch) {
+        let until = Instant::now() + Duration::from_secs(40);
+        loop {
+            let seen = self.get();
+            if seen.runs > run || (seen.runs == run && seen.time >= t) {
+                return;
+            }
+            // A process that died early fails here with its log rather than by a timeout.
+            for (name, child) in &mut procs.0 {
+                if let Ok(Some(st)) = child.try_wait() {
+                    panic!("{name} exited early ({st}):\n{}", log(s, name));
+                }
+            }
+            assert!(
+                Instant::now() < until,
+                "simulator run {run} did not reach t = {t} s: {seen:?}"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+}
+
+impl Drop for Observer {
+    pub fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
