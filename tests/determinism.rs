@@ -11,7 +11,7 @@ use serde_json::Value;
 /// Columns of `controller.csv` that are wall-clock measurements.
 const TIMING_COLUMNS: [&str; 2] = ["tick_us", "wbc_us"];
 /// Summary fields that are wall-clock measurements, or identify a process run.
-const TIMING_FIELDS: [&str; 22] = [
+const TIMING_FIELDS: [&str; 24] = [
     "tick_p50_us",
     "tick_p99_us",
     "tick_max_us",
@@ -34,8 +34,12 @@ const TIMING_FIELDS: [&str; 22] = [
     // Lockstep waits are counted per wait, and a fast C2 thread needs none: timing.
     "c2_waits",
     "forecast_waits",
-    // The simulator re-sends a state it waits on every 20 ms of wall time (a slow controller).
+    // The search offered at the last tick races the controller's exit.
+    "c2_solves",
+    // The simulator re-sends a state it waits on every 20 ms of wall time (a slow controller),
+    // which the controller counts and skips.
     "stale",
+    "stale_states",
 ];
 
 fn scratch(name: &str) -> PathBuf {

@@ -248,6 +248,7 @@ pub fn run_server_with(
     let mut await_forecast = lockstep && cc.lockstep_forecast_wait > 0.0;
     // Lockstep: the C2 snapshot whose schedule is due, and the tick it is due at.
     let mut c2_due: Option<(u64, u64)> = None;
+    let mut c2_behind = false;
     let mut plant_hash = 0u64;
     let mut mismatch_warned = 0u64;
     if !lockstep {
@@ -534,8 +535,13 @@ pub fn run_server_with(
         // lockstep, exactly the one answering the snapshot of `c2_every` ticks ago, waited for.
         let with_c2 = c2.is_some();
         if let Some(h) = c2.as_mut() {
+            // After a timed-out wait, asynchronous (as in real time) until the worker has
+            // caught up with the snapshots offered meanwhile.
+            if c2_behind && h.stats.processed.load(Ordering::Acquire) >= seq {
+                c2_behind = false;
+            }
             match c2_due {
-                _ if !lockstep || cc.lockstep_c2_wait == 0.0 => h.take_newest(),
+                _ if !lockstep || cc.lockstep_c2_wait == 0.0 || c2_behind => h.take_newest(),
                 Some((snap_seq, due)) if s.ticks + 1 >= due => {
                     c2_due = None;
                     s.c2_waits += 1;
@@ -545,8 +551,10 @@ pub fn run_server_with(
                     waited += wait_start.elapsed();
                     if !done {
                         s.c2_wait_timeouts += 1;
+                        c2_behind = true;
                         tracing::warn!(
-                            "C2 did not finish the search of tick {} within {} s",
+                            "C2 did not finish the search of tick {} within {} s: its schedules \
+                             apply when they come until it catches up",
                             s.ticks + 1 - cc.c2_every as u64,
                             cc.lockstep_c2_wait
                         );

@@ -209,13 +209,18 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
         torque_event: bus.listener(ServiceKind::Torques)?,
     };
     let mut recorder = match &opts.rrd {
-        Some(path) => Some(
-            // Its threads in the idle class: they must not delay the lockstep wake-ups.
-            crate::control::realtime::in_background(|| {
-                Recorder::spawn(path, opts.recording_id.as_deref(), &world)
-            })
-            .map_err(|e| ProcessError::Setup(format!("rerun recording {}: {e}", path.display())))?,
-        ),
+        Some(path) => {
+            let spawn = || Recorder::spawn(path, opts.recording_id.as_deref(), &world);
+            // Real time: its threads in the idle class, they must not delay the steps. Lockstep
+            // must end on a loaded machine too, where idle-class threads hardly run.
+            let rec = match cfg.mode {
+                Mode::Realtime => crate::control::realtime::in_background(spawn),
+                Mode::Lockstep => spawn(),
+            };
+            Some(rec.map_err(|e| {
+                ProcessError::Setup(format!("rerun recording {}: {e}", path.display()))
+            })?)
+        }
         None => None,
     };
     let truth_csv = match &opts.truth_csv {
@@ -287,12 +292,13 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
         ),
     };
     let wall = start.elapsed().as_secs_f64();
-    let rec_stats = recorder.map(|r| r.finish()).unwrap_or_default();
+    // The CSV first: the recording's flush may take long on a loaded machine.
     if let Some(w) = &mut looper.truth_csv {
         use std::io::Write;
         w.flush()
             .map_err(|e| ProcessError::Setup(format!("ground-truth CSV: {e}")))?;
     }
+    let rec_stats = recorder.map(|r| r.finish()).unwrap_or_default();
     result?;
     let summary = RunSummary {
         steps: world.steps(),

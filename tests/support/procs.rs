@@ -48,7 +48,7 @@ impl Scratch {
 }
 
 impl Drop for Scratch {
-    pub fn drop(&mut self) {
+    fn drop(&mut self) {
         if !std::thread::panicking() {
             let _ = std::fs::remove_dir_all(&self.dir);
         }
@@ -131,7 +131,7 @@ impl Procs {
 }
 
 impl Drop for Procs {
-    pub fn drop(&mut self) {
+    fn drop(&mut self) {
         self.kill_all();
     }
 }
@@ -239,7 +239,7 @@ impl Observer {
 }
 
 impl Drop for Observer {
-    pub fn drop(&mut self) {
+    fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
         if let Some(t) = self.thread.take() {
             let _ = t.join();
