@@ -57,6 +57,15 @@ pub struct StateMsg {
 /// Capacity of `StateMsg::scenario` (bytes).
 pub const SCENARIO_NAME_LEN: usize = 128;
 
+/// The text of a NUL-padded scenario name (empty when not valid UTF-8).
+pub fn scenario_name(bytes: &[u8; SCENARIO_NAME_LEN]) -> &str {
+    let end = bytes
+        .iter()
+        .position(|&b| b == 0)
+        .unwrap_or(SCENARIO_NAME_LEN);
+    std::str::from_utf8(&bytes[..end]).unwrap_or("")
+}
+
 /// The plant holds the robot itself (start-up posture hold, or the hold after the controller was
 /// lost): torques are not applied yet, or only in part during the hand-over.
 pub const STATE_FLAG_HOLD: u32 = 1;
@@ -68,12 +77,7 @@ pub const STATE_FLAG_DAMPING: u32 = 4;
 impl StateMsg {
     /// The scenario name announced by the plant (empty when none or not valid UTF-8).
     pub fn scenario_name(&self) -> &str {
-        let end = self
-            .scenario
-            .iter()
-            .position(|&b| b == 0)
-            .unwrap_or(SCENARIO_NAME_LEN);
-        std::str::from_utf8(&self.scenario[..end]).unwrap_or("")
+        scenario_name(&self.scenario)
     }
 
     /// Announce `name` (truncated to the capacity at a character boundary).

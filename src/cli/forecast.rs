@@ -9,7 +9,6 @@ use super::CliResult;
 
 #[derive(clap::Args)]
 pub struct ForecastArgs {
-    /// Scenario whose hand force is forecast: embedded name or TOML path.
     /// Scenario whose hand force is forecast: embedded name or TOML path. Default: the one the
     /// plant announces in its states (followed when it changes).
     #[arg(long)]

@@ -1,6 +1,10 @@
 //! C2's gain search in its own lower-priority thread. The control loop offers snapshots and
-//! takes time-stamped schedules through wait-free triple buffers: it never waits for C2. A
-//! schedule older than the horizon, or a dead worker, means the nominal gains (C1).
+//! takes time-stamped schedules through wait-free triple buffers. In real time it never waits
+//! for C2 and takes the newest schedule each tick. In lockstep (with a non-zero
+//! `controller.lockstep_c2_wait`) the schedule answering a snapshot applies exactly `c2_every`
+//! ticks after it, the loop waiting for it (bounded): the tick a schedule reaches the loop is then a function of the
+//! tick count, not of the machine's timing. A schedule older than the horizon, or a dead
+//! worker, means the nominal gains (C1).
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::Arc;
@@ -117,12 +121,41 @@ impl GainSolver for GainSearch {
     }
 }
 
+/// When the loop takes a new schedule.
+#[derive(Debug, Clone, Copy)]
+enum Pickup {
+    /// The newest, every tick (real time).
+    Newest,
+    /// The one answering the snapshot of `every` ticks earlier, waited for up to `wait`; after a
+    /// time-out, the newest until the worker has caught up (`behind`).
+    Lagged {
+        every: u64,
+        wait: Duration,
+        /// Snapshot seq and the tick (1-based) from which its schedule applies.
+        due: Option<(u64, u64)>,
+        behind: bool,
+    },
+}
+
+/// What [`GainHandoff::take_for_tick`] did.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PickupReport {
+    /// It waited for the worker (lockstep, a schedule due this tick).
+    pub waited_for: Option<Duration>,
+    /// The wait ended without the schedule (time-out or a dead worker).
+    pub timed_out: bool,
+}
+
 /// The loop's side of the hand-off.
 pub struct GainHandoff {
     snapshots: Input<GainSnapshot>,
     schedules: Output<StampedSchedule>,
     worker: Option<JoinHandle<()>>,
     stop: Arc<AtomicBool>,
+    pickup: Pickup,
+    /// Ticks begun ([`take_for_tick`](Self::take_for_tick) calls) and the last offered seq.
+    ticks: u64,
+    last_offered: u64,
     pub stats: Arc<GainWorkerStats>,
 }
 
@@ -204,53 +237,106 @@ impl GainHandoff {
             schedules,
             worker: Some(worker),
             stop,
+            pickup: if config.controller.mode == crate::config::LoopMode::Lockstep
+                && config.controller.lockstep_c2_wait > 0.0
+            {
+                Pickup::Lagged {
+                    every: config.controller.c2_every as u64,
+                    wait: Duration::from_secs_f64(config.controller.lockstep_c2_wait),
+                    due: None,
+                    behind: false,
+                }
+            } else {
+                Pickup::Newest
+            },
+            ticks: 0,
+            last_offered: 0,
             stats,
         })
     }
 
     /// Offer a snapshot (filled in place, no allocation) and wake the worker. Wait-free.
     pub fn offer(&mut self, fill: impl FnOnce(&mut GainSnapshot)) {
-        fill(self.snapshots.input_buffer_mut());
+        let snap = self.snapshots.input_buffer_mut();
+        fill(snap);
+        self.last_offered = snap.seq;
+        if let Pickup::Lagged { every, due, .. } = &mut self.pickup {
+            *due = Some((snap.seq, self.ticks + *every));
+        }
         self.snapshots.publish();
         if let Some(w) = &self.worker {
             w.thread().unpark();
         }
     }
 
-    /// The newest schedule (seq 0: none yet). Wait-free.
+    /// Begin a tick: take the schedule it applies, [`current`](Self::current) until the next
+    /// call. Real time: the newest (wait-free). Lockstep: a new one only at the tick it is due,
+    /// waiting for the worker if needed.
+    pub fn take_for_tick(&mut self) -> PickupReport {
+        self.ticks += 1;
+        let mut report = PickupReport::default();
+        let processed = self.stats.processed.load(Ordering::Acquire);
+        let take = match &mut self.pickup {
+            Pickup::Newest => true,
+            Pickup::Lagged { behind: true, .. } if processed < self.last_offered => true,
+            Pickup::Lagged {
+                wait, due, behind, ..
+            } => {
+                *behind = false;
+                match *due {
+                    Some((seq, at)) if self.ticks >= at => {
+                        *due = None;
+                        let start = std::time::Instant::now();
+                        let done = wait_until_processed(&self.stats, seq, *wait, &self.worker);
+                        report.waited_for = Some(start.elapsed());
+                        report.timed_out = !done;
+                        *behind = !done;
+                        true
+                    }
+                    _ => false,
+                }
+            }
+        };
+        if take {
+            self.schedules.update();
+        }
+        report
+    }
+
+    /// The newest schedule (seq 0: none yet), taking it now whatever the pick-up policy: for
+    /// tests and tools outside the loop. Wait-free.
     pub fn latest(&mut self) -> &StampedSchedule {
         self.schedules.read()
     }
 
-    /// The schedule taken by the last [`latest`](Self::latest) or [`take_newest`](Self::take_newest),
-    /// without looking for a newer one: lockstep applies schedules at chosen ticks only.
+    /// The schedule of the current tick (seq 0: none yet).
     pub fn current(&self) -> &StampedSchedule {
         self.schedules.output_buffer()
-    }
-
-    /// Take the newest schedule (for [`current`](Self::current)). Wait-free.
-    pub fn take_newest(&mut self) {
-        self.schedules.update();
-    }
-
-    /// Lockstep: wait until the worker is done with snapshot `seq` (solved or failed), at most
-    /// `timeout`. False on time-out or a dead worker.
-    pub fn wait_processed(&self, seq: u64, timeout: Duration) -> bool {
-        let until = std::time::Instant::now() + timeout;
-        loop {
-            if self.stats.processed.load(Ordering::Acquire) >= seq {
-                return true;
-            }
-            if !self.alive() || std::time::Instant::now() >= until {
-                return false;
-            }
-            std::thread::sleep(Duration::from_micros(20));
-        }
     }
 
     /// Whether the worker thread is still running.
     pub fn alive(&self) -> bool {
         self.worker.as_ref().is_some_and(|w| !w.is_finished())
+    }
+}
+
+/// Wait until the worker is done with snapshot `seq` (solved or failed), at most `timeout`.
+/// False on time-out or a dead worker.
+fn wait_until_processed(
+    stats: &GainWorkerStats,
+    seq: u64,
+    timeout: Duration,
+    worker: &Option<JoinHandle<()>>,
+) -> bool {
+    let until = std::time::Instant::now() + timeout;
+    loop {
+        if stats.processed.load(Ordering::Acquire) >= seq {
+            return true;
+        }
+        if worker.as_ref().is_none_or(|w| w.is_finished()) || std::time::Instant::now() >= until {
+            return false;
+        }
+        std::thread::sleep(Duration::from_micros(20));
     }
 }
 

@@ -10,6 +10,7 @@
 //! - [`realtime`]: SCHED_FIFO, mlockall, CPU affinity (degrading with a warning).
 
 pub mod core;
+pub mod forecast_intake;
 pub mod forecast_window;
 pub mod gain_thread;
 pub mod logger;

@@ -26,6 +26,7 @@ use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
+use super::forecast_intake::ForecastIntake;
 use super::forecast_window::RejectionCounts;
 use super::gain_thread::GainSolver;
 use super::logger::{ControlLogger, TickLog};
@@ -139,10 +140,9 @@ pub struct ServerSummary {
 }
 
 /// Record why a lockstep run will not reproduce (the first reason only).
-fn not_reproducible(s: &mut ServerSummary, why: &str) {
-    if s.reproducible {
-        s.reproducible = false;
-        s.reproducibility = why.to_string();
+fn not_reproducible(reason: &mut Option<&'static str>, why: &'static str) {
+    if reason.is_none() {
+        *reason = Some(why);
         tracing::warn!("this run is not reproducible: {why}");
     }
 }
@@ -172,10 +172,8 @@ pub fn run_server_with(
     let bus = Bus::open(&opts.prefix, "controller")?;
     let states = bus.subscriber::<StateMsg>(ServiceKind::State)?;
     let state_events = bus.listener(ServiceKind::State)?;
-    let forecasts = bus.subscriber::<ForecastMsg>(ServiceKind::Forecast)?;
     let torques = bus.publisher::<TorqueMsg>(ServiceKind::Torques)?;
     let torque_events = bus.notifier(ServiceKind::Torques)?;
-    let forecast_events = bus.listener(ServiceKind::Forecast)?;
     let lockstep = cc.mode == LoopMode::Lockstep;
     // One thread for faer (C2's normal equations): parallel reductions may sum in another order
     // from one run to the next, and on two cores rayon's workers compete with the loop.
@@ -192,11 +190,19 @@ pub fn run_server_with(
     )?;
     let n_tau = core.model.nv - 6;
     let horizon_time = config.preview.horizon as f64 * config.preview.period;
-    let mut window = ForecastWindow::new(
-        cc.forecast_max_age,
-        cc.forecast_max_lead,
-        cc.forecast_decay,
-        weight,
+    let mut intake = ForecastIntake::new(
+        ForecastWindow::new(
+            cc.forecast_max_age,
+            cc.forecast_max_lead,
+            cc.forecast_decay,
+            weight,
+        ),
+        bus.subscriber::<ForecastMsg>(ServiceKind::Forecast)?,
+        bus.listener(ServiceKind::Forecast)?,
+        (lockstep && cc.lockstep_forecast_wait > 0.0)
+            .then(|| Duration::from_secs_f64(cc.lockstep_forecast_wait)),
+        cc.state_timeout,
+        horizon_time,
     );
     let mut c2 = match (kind, c2_solver) {
         (ControllerKind::C2, Some(solver)) => Some(GainHandoff::spawn_with(config, solver)?),
@@ -232,7 +238,6 @@ pub fn run_server_with(
     let mut s = ServerSummary {
         controller: kind.name().into(),
         mode: format!("{:?}", cc.mode).to_lowercase(),
-        reproducible: lockstep,
         min_zmp_margin: f64::INFINITY,
         realtime: rt,
         ..Default::default()
@@ -244,29 +249,22 @@ pub fn run_server_with(
     let mut seq = 0u64;
     let mut last_step: Option<u64> = None;
     let mut session = 0u64;
-    // Lockstep: the forecast is waited for (until a wait times out with no window coming).
-    let mut await_forecast = lockstep && cc.lockstep_forecast_wait > 0.0;
-    // Lockstep: the C2 snapshot whose schedule is due, and the tick it is due at.
-    let mut c2_due: Option<(u64, u64)> = None;
-    let mut c2_behind = false;
+    // Why the run will not reproduce, if it will not (no allocation on the loop: set at the end).
+    let mut irreproducible: Option<&'static str> =
+        (!lockstep).then_some("real time: inputs arrive on wall-clock time");
+    // The plant's announced scenario: hash, and name for the summary.
     let mut plant_hash = 0u64;
+    let mut plant_name = [0u8; crate::channels::SCENARIO_NAME_LEN];
     let mut mismatch_warned = 0u64;
-    if !lockstep {
-        s.reproducibility = "real time: inputs arrive on wall-clock time".into();
-    }
     let mut last_time = 0.0;
     let started = Instant::now();
     let mut last_state_at = Instant::now();
     let mut stale = false;
-    // Simulated time of the last accepted window (the loss is judged on the plant's time).
-    let mut last_forecast_t = 0.0;
-    let mut forecast_missing = false;
     let status_every = Duration::from_secs_f64(cc.status_every);
     let mut next_status = Instant::now() + status_every;
     let (mut hand_sq, mut c2_solve_sum, mut c2_iter_sum, mut c2_seen) = (0.0, 0.0, 0.0, 0u64);
     let mut last_c2_seq = 0u64;
     let mut schedule_was_stale = false;
-    let mut warned_forecast = 0u64;
     let mut com_z0: Option<f64> = None;
 
     s.stopped_by = loop {
@@ -373,11 +371,8 @@ pub fn run_server_with(
                 s.reconnects += 1;
                 s.ticks_since_reconnect = 0;
                 core.reset();
-                window.reset();
+                intake.restart(state.time);
                 com_z0 = None;
-                last_forecast_t = state.time;
-                c2_due = None;
-                await_forecast = lockstep && cc.lockstep_forecast_wait > 0.0;
                 tracing::warn!(
                     "simulator restarted: step {} (t = {:.3} s) after step {} (t = {last_time:.3} \
                      s), {gap:.3} s without state; references re-latched, control resumes \
@@ -413,95 +408,23 @@ pub fn run_server_with(
 
         // The newest forecast, validated; in lockstep, the one whose period covers this
         // state's time, waited for.
-        let mut offer =
-            |window: &mut ForecastWindow| -> Result<bool, crate::channels::ChannelError> {
-                let Some(r) = forecasts.with_latest(|m| window.offer(m, state.time))? else {
-                    return Ok(false);
-                };
-                match r {
-                    Ok(()) => {
-                        last_forecast_t = state.time;
-                        if forecast_missing {
-                            forecast_missing = false;
-                            tracing::info!("forecast back at t = {:.3} s", state.time);
-                        }
-                        Ok(true)
-                    }
-                    // Logged at the 1st, 2nd, 4th, 8th… rejection: a flood costs no log I/O.
-                    Err(e) => {
-                        if window.rejected >= warned_forecast * 2 {
-                            warned_forecast = window.rejected.max(1);
-                            tracing::warn!("forecast rejected ({} so far): {e}", window.rejected);
-                        }
-                        Ok(false)
-                    }
-                }
-            };
-        let got = offer(&mut window)?;
-        if lockstep && got && !await_forecast && cc.lockstep_forecast_wait > 0.0 {
-            await_forecast = true; // a forecaster is back: wait for it again
+        let f = intake.take(state.time, || stop.load(Ordering::Relaxed))?;
+        if let Some(w) = f.waited {
+            s.forecast_waits += 1;
+            waited += w;
         }
-        if await_forecast && !window.promised_at(state.time) {
-            if window.accepted > 0 && !window.has_promise() {
-                not_reproducible(
-                    &mut s,
-                    "the forecaster promises no period (ForecastMsg.period = 0): the window a tick sees depends on timing",
-                );
-                await_forecast = false;
-            } else {
-                s.forecast_waits += 1;
-                let wait_start = Instant::now();
-                let until = wait_start + Duration::from_secs_f64(cc.lockstep_forecast_wait);
-                loop {
-                    let now = Instant::now();
-                    if now >= until {
-                        s.forecast_wait_timeouts += 1;
-                        await_forecast = false;
-                        tracing::warn!(
-                            "no forecast window for t = {:.3} s within {} s: going on with the newest \
-                             (not waiting again until a window arrives)",
-                            state.time,
-                            cc.lockstep_forecast_wait
-                        );
-                        not_reproducible(&mut s, "a lockstep wait for the forecast timed out");
-                        break;
-                    }
-                    forecast_events.wait_until(
-                        (until - now).min(Duration::from_millis(20)),
-                        Duration::ZERO,
-                        || forecasts.has_samples(),
-                    )?;
-                    offer(&mut window)?;
-                    if window.promised_at(state.time) {
-                        break;
-                    }
-                    if stop.load(Ordering::Relaxed) {
-                        break;
-                    }
-                }
-                waited += wait_start.elapsed();
-            }
-        }
-        // Lost: nothing valid for a while of the plant's time (rejected messages do not count)
-        // and the window no longer covers the horizon.
-        if !forecast_missing
-            && window.accepted > 0
-            && state.time - last_forecast_t > cc.state_timeout
-            && !window.covers(state.time + horizon_time)
-        {
-            forecast_missing = true;
+        s.forecast_wait_timeouts += u64::from(f.timed_out);
+        if f.lost {
             s.forecast_lost = true;
             s.forecast_losses += 1;
-            tracing::warn!(
-                "no valid forecast for {:.2} s at t = {:.3} s: the forecast decays to zero",
-                state.time - last_forecast_t,
-                state.time
-            );
+        }
+        if let Some(why) = f.not_reproducible {
+            not_reproducible(&mut irreproducible, why);
         }
         // Scenarios: the plant's against this controller's and the forecast's.
         if state.scenario_hash != plant_hash {
             plant_hash = state.scenario_hash;
-            s.plant_scenario = format!("{} ({plant_hash:016x})", state.scenario_name());
+            plant_name = state.scenario;
             if let Some(mine) = opts.scenario_hash
                 && plant_hash != 0
                 && mine != plant_hash
@@ -514,8 +437,8 @@ pub fn run_server_with(
                 );
             }
         }
-        let fh = window.scenario_hash();
-        if got && fh != 0 && plant_hash != 0 && fh != plant_hash {
+        let fh = intake.window.scenario_hash();
+        if f.accepted && fh != 0 && plant_hash != 0 && fh != plant_hash {
             s.forecast_scenario_mismatches += 1;
             if mismatch_warned != fh {
                 mismatch_warned = fh;
@@ -531,38 +454,23 @@ pub fn run_server_with(
             s.ticks_in_plant_hold += 1;
         }
 
-        // C2's newest schedule, unless older than the horizon (or from before a restart). In
-        // lockstep, exactly the one answering the snapshot of `c2_every` ticks ago, waited for.
+        // C2's schedule for this tick (see `GainHandoff::take_for_tick`), unless older than the
+        // horizon (or from before a restart).
         let with_c2 = c2.is_some();
         if let Some(h) = c2.as_mut() {
-            // After a timed-out wait, asynchronous (as in real time) until the worker has
-            // caught up with the snapshots offered meanwhile.
-            if c2_behind && h.stats.processed.load(Ordering::Acquire) >= seq {
-                c2_behind = false;
+            let r = h.take_for_tick();
+            if let Some(w) = r.waited_for {
+                s.c2_waits += 1;
+                waited += w;
             }
-            match c2_due {
-                _ if !lockstep || cc.lockstep_c2_wait == 0.0 || c2_behind => h.take_newest(),
-                Some((snap_seq, due)) if s.ticks + 1 >= due => {
-                    c2_due = None;
-                    s.c2_waits += 1;
-                    let wait_start = Instant::now();
-                    let done =
-                        h.wait_processed(snap_seq, Duration::from_secs_f64(cc.lockstep_c2_wait));
-                    waited += wait_start.elapsed();
-                    if !done {
-                        s.c2_wait_timeouts += 1;
-                        c2_behind = true;
-                        tracing::warn!(
-                            "C2 did not finish the search of tick {} within {} s: its schedules \
-                             apply when they come until it catches up",
-                            s.ticks + 1 - cc.c2_every as u64,
-                            cc.lockstep_c2_wait
-                        );
-                        not_reproducible(&mut s, "a lockstep wait for C2 timed out");
-                    }
-                    h.take_newest();
-                }
-                _ => {}
+            if r.timed_out {
+                s.c2_wait_timeouts += 1;
+                tracing::warn!(
+                    "C2 did not finish a search within {} s: its schedules apply when they come \
+                     until it catches up",
+                    cc.lockstep_c2_wait
+                );
+                not_reproducible(&mut irreproducible, "a lockstep wait for C2 timed out");
             }
         }
         let schedule = c2
@@ -588,7 +496,7 @@ pub fn run_server_with(
             schedule.map(|sch| (sch.cost, sch.nominal_cost, sch.iterations, sch.solve_time));
 
         let mut flags = 0;
-        match core.tick(&state, &window, schedule, &mut tau[..n_tau]) {
+        match core.tick(&state, &intake.window, schedule, &mut tau[..n_tau]) {
             Ok(crate::wbc::WbcStatus::Solved) => {}
             Ok(_) => {
                 s.wbc_fallbacks += 1;
@@ -640,7 +548,6 @@ pub fn run_server_with(
             && s.ticks.is_multiple_of(cc.c2_every as u64)
         {
             h.offer(|snap| core.snapshot(snap, seq));
-            c2_due = Some((seq, s.ticks + cc.c2_every as u64));
         }
         // Metrics of the measured ZMP and the hand.
         let rec = core.last;
@@ -691,10 +598,16 @@ pub fn run_server_with(
         s.deadline_misses = t.missed;
     }
     s.preview_fallbacks = core.preview_fallbacks;
-    s.forecasts_accepted = window.accepted;
-    s.forecasts_rejected = window.rejected;
-    s.forecasts_rejected_by = window.rejections;
-    s.forecaster_restarts = window.restarts;
+    s.forecasts_accepted = intake.window.accepted;
+    s.forecasts_rejected = intake.window.rejected;
+    s.forecasts_rejected_by = intake.window.rejections;
+    s.forecaster_restarts = intake.window.restarts;
+    s.reproducible = irreproducible.is_none();
+    s.reproducibility = irreproducible.unwrap_or_default().into();
+    s.plant_scenario = format!(
+        "{} ({plant_hash:016x})",
+        crate::channels::scenario_name(&plant_name)
+    );
     if let Some(h) = &c2 {
         s.c2_solves = h.stats.solves.load(Ordering::Relaxed);
         s.c2_failures = h.stats.failures.load(Ordering::Relaxed);

@@ -107,8 +107,8 @@ pub fn run(
     let mut last_index: Option<i64> = None;
     let mut session = 0u64;
     let mut scenario_start = 0.0;
-    let mut plant_hash = 0u64;
-    let mut warned_hash = 0u64;
+    // The plant hash the current scenario was chosen for (following), or checked against (fixed).
+    let mut seen_hash: Option<u64> = None;
     while !stop.load(Ordering::Relaxed) {
         wake.wait(Duration::from_millis(50))?;
         // A controller that subscribed after the last window gets it now, not at the next one
@@ -129,29 +129,32 @@ pub fn run(
             last_index = None;
         }
         // The plant started its scenario (or restarted it): windows shift with it.
-        let start = st.scenario_start.max(0.0);
-        if st.scenario_start >= 0.0 && start != scenario_start {
-            scenario_start = start;
+        if st.scenario_start >= 0.0 && st.scenario_start != scenario_start {
+            scenario_start = st.scenario_start;
             last_index = None;
         }
-        if st.scenario_hash != plant_hash || (current.is_none() && warned_hash != st.scenario_hash)
-        {
-            plant_hash = st.scenario_hash;
-            if let Source::FollowPlant = source {
-                current = follow(&st, &mut warned_hash);
-                last_index = None;
+        if seen_hash != Some(st.scenario_hash) {
+            seen_hash = Some(st.scenario_hash);
+            match (source, &current) {
+                (Source::FollowPlant, _) => {
+                    current = follow(&st);
+                    last_index = None;
+                }
+                (Source::Fixed(_), Some(cur))
+                    if st.scenario_hash != 0 && cur.hash != st.scenario_hash =>
+                {
+                    tracing::warn!(
+                        "forecasting `{}` (hash {:016x}) while the plant plays `{}` (hash {:016x})",
+                        cur.scenario.name,
+                        cur.hash,
+                        st.scenario_name(),
+                        st.scenario_hash
+                    );
+                }
+                _ => {}
             }
         }
         let Some(cur) = &current else { continue };
-        if plant_hash != 0 && cur.hash != plant_hash && warned_hash != plant_hash {
-            warned_hash = plant_hash;
-            tracing::warn!(
-                "forecasting `{}` (hash {:016x}) while the plant plays `{}` (hash {plant_hash:016x})",
-                cur.scenario.name,
-                cur.hash,
-                st.scenario_name()
-            );
-        }
         let now = st.time;
         let k = window_index(now, s.period);
         if last_index != Some(k) {
@@ -180,7 +183,7 @@ pub fn run(
 }
 
 /// Load the scenario a state announces (the default one when it announces none).
-fn follow(st: &StateMsg, warned: &mut u64) -> Option<Current> {
+fn follow(st: &StateMsg) -> Option<Current> {
     let name = match st.scenario_name() {
         "" => crate::scenario::DEFAULT,
         n => n,
@@ -198,16 +201,12 @@ fn follow(st: &StateMsg, warned: &mut u64) -> Option<Current> {
                     st.scenario_hash
                 );
             }
-            *warned = st.scenario_hash;
             Some(Current { scenario, hash })
         }
         Err(e) => {
-            if *warned != st.scenario_hash {
-                *warned = st.scenario_hash;
-                tracing::error!(
-                    "cannot load the plant's scenario `{name}`: {e}; publishing nothing (give --scenario)"
-                );
-            }
+            tracing::error!(
+                "cannot load the plant's scenario `{name}`: {e}; publishing nothing (give --scenario)"
+            );
             None
         }
     }

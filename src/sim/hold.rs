@@ -179,7 +179,7 @@ impl Supervisor {
             }
             Phase::Damping => {
                 self.stats.damping_steps += 1;
-                self.damping(v, out);
+                damping(self.safe_damping, v, out);
             }
         }
         (to != from).then_some(Transition { from, to })
@@ -198,9 +198,7 @@ impl Supervisor {
     /// The hold's torques at `t` into `self.hold_tau` (damping when there is no PD).
     fn hold(&mut self, t: f64, q: &DVector<f64>, v: &DVector<f64>) {
         let Some(pd) = &self.pd else {
-            let mut tau = std::mem::take(&mut self.hold_tau);
-            self.damping(v, &mut tau);
-            self.hold_tau = tau;
+            damping(self.safe_damping, v, &mut self.hold_tau);
             return;
         };
         pd.torques(q, v, &mut self.hold_tau);
@@ -214,12 +212,13 @@ impl Supervisor {
             self.hold_tau.axpy(fade, &self.feedforward, 1.0);
         }
     }
+}
 
-    fn damping(&self, v: &DVector<f64>, out: &mut DVector<f64>) {
-        let off = v.len() - out.len();
-        for i in 0..out.len() {
-            out[i] = -self.safe_damping * v[off + i];
-        }
+/// Joint damping `τ = −D q̇` (the actuated joints: the last `out.len()` entries of `v`).
+fn damping(d: f64, v: &DVector<f64>, out: &mut DVector<f64>) {
+    let off = v.len() - out.len();
+    for i in 0..out.len() {
+        out[i] = -d * v[off + i];
     }
 }
 
