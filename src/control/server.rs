@@ -250,8 +250,15 @@ pub fn run_server_with(
     let mut last_step: Option<u64> = None;
     let mut session = 0u64;
     // Why the run will not reproduce, if it will not (no allocation on the loop: set at the end).
-    let mut irreproducible: Option<&'static str> =
-        (!lockstep).then_some("real time: inputs arrive on wall-clock time");
+    let mut irreproducible: Option<&'static str> = if !lockstep {
+        Some("real time: inputs arrive on wall-clock time")
+    } else if cc.lockstep_forecast_wait == 0.0 {
+        Some("controller.lockstep_forecast_wait = 0: the window a tick sees depends on timing")
+    } else if kind == ControllerKind::C2 && cc.lockstep_c2_wait == 0.0 {
+        Some("controller.lockstep_c2_wait = 0: C2's schedules reach the loop on its own timing")
+    } else {
+        None
+    };
     // The plant's announced scenario: hash, and name for the summary.
     let mut plant_hash = 0u64;
     let mut plant_name = [0u8; crate::channels::SCENARIO_NAME_LEN];
