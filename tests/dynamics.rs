@@ -918,3 +918,86 @@ fn zero_mass_links() {
     // RNEA and CRBA are still fine (M = 0 for that joint).
     assert_eq!(crba(&model, &mut data, &z).expect("crba")[(0, 0)], 0.0);
 }
+
+/// What real robots ship: point masses and zero inertias (sensor and optical frames), inertias
+/// a rounding away from positive semi-definite, a tiny part's slightly invalid tensor, textures
+/// without a file, `<parent>` elements of sensors, mimic joints. Taken (repaired where needed,
+/// with a warning naming the link and the size of the repair); a tensor far from physical is
+/// refused.
+#[test]
+fn real_world_urdf_quirks_load_with_warnings_and_meaningless_inertias_are_refused() {
+    let inertial = |m: f64, d: [f64; 6]| {
+        format!(
+            r#"<inertial><mass value="{m}"/><inertia ixx="{}" ixy="{}" ixz="{}" iyy="{}" iyz="{}" izz="{}"/></inertial>"#,
+            d[0], d[1], d[2], d[3], d[4], d[5]
+        )
+    };
+    // A point mass on a fixed joint (an optical frame): loads, merged into its parent, no
+    // warning; its mass counts.
+    let fixed = r#"<joint name="j" type="fixed"><parent link="a"/><child link="b"/><origin xyz="0 0 1"/></joint>"#;
+    let m = Model::from_urdf_str(
+        &two_links(fixed, &inertial(0.01, [0.0; 6])),
+        BaseJoint::Floating,
+    )
+    .expect("point mass");
+    assert!(m.load_warnings.is_empty(), "{:?}", m.load_warnings);
+    assert!((m.total_mass() - 1.01).abs() < 1e-12);
+    assert!(m.frame_id("b").is_ok());
+    // Rounding: a product of inertia one part in 1e11 too large, one principal moment
+    // ≈ −1e-17 (ANYmal's base has −2.2e-22). Repaired, warned, naming the link.
+    let rounding = r#"<inertial><mass value="1"/><inertia ixx="1e-6" ixy="1.00000000001e-6" ixz="0" iyy="1e-6" iyz="0" izz="1e-6"/></inertial>"#;
+    let m = Model::from_urdf_str(&two_links(GOOD_JOINT, rounding), BaseJoint::Fixed)
+        .expect("rounding-level indefinite inertia");
+    assert_eq!(m.load_warnings.len(), 1, "{:?}", m.load_warnings);
+    assert!(
+        m.load_warnings[0].contains("link 'b': inertia tensor repaired"),
+        "{:?}",
+        m.load_warnings
+    );
+    // A tiny part's tensor, a principal moment 2e-8 kg·m² below zero (TIAGo's antenna has
+    // −3.5e-8): repaired to positive semi-definite.
+    let tiny = inertial(0.01, [6.0e-8, 8.0e-8, 0.0, 6.0e-8, 0.0, 3.5e-8]);
+    let m =
+        Model::from_urdf_str(&two_links(GOOD_JOINT, &tiny), BaseJoint::Fixed).expect("tiny part");
+    assert_eq!(m.load_warnings.len(), 1, "{:?}", m.load_warnings);
+    let w = &m.load_warnings[0];
+    assert!(
+        w.contains("link 'b'") && w.contains("largest change 2.0e-8"),
+        "{w}"
+    );
+    let i = m.joints[m.joint_id("j").unwrap()].inertia;
+    let eig = nalgebra::SymmetricEigen::new(i.inertia_com()).eigenvalues;
+    assert!(eig.min() >= -1e-20, "repaired tensor {eig:?}");
+    // Far from physical (eigenvalues 3, −1, 1): refused, naming the link.
+    let far = inertial(1.0, [1.0, 2.0, 0.0, 1.0, 0.0, 1.0]);
+    let e = err_of(&two_links(GOOD_JOINT, &far));
+    assert!(
+        matches!(&e, DynamicsError::InvalidInertia { link, reason } if link == "b" && reason.contains("more than a repair")),
+        "{e}"
+    );
+    // A texture without a file, a sensor's <parent joint=…>, a mimic joint.
+    let extras = format!(
+        r#"<robot name="r">{LINK_A}<link name="b"><visual><geometry><box size="1 1 1"/></geometry>
+        <material name="m"><texture /></material></visual></link>{GOOD_JOINT}
+        <link name="c"/>
+        <joint name="k" type="revolute"><parent link="b"/><child link="c"/><axis xyz="1 0 0"/>
+          <limit lower="-1" upper="1" effort="1" velocity="1"/><mimic joint="j" multiplier="2"/></joint>
+        <sensor name="ft" type="force_torque"><parent joint="j"/></sensor></robot>"#
+    );
+    let m = Model::from_urdf_str(&extras, BaseJoint::Fixed).expect("quirks");
+    assert_eq!(m.nv, 2);
+    assert!(
+        m.load_warnings.iter().any(|w| w.contains("'k' mimics 'j'")),
+        "{:?}",
+        m.load_warnings
+    );
+    // A mesh without a file is an error that says so, with its line.
+    let no_file = format!(
+        "<robot name=\"r\">{LINK_A}\n<link name=\"b\">\n<visual><geometry><mesh/></geometry></visual></link>{GOOD_JOINT}</robot>"
+    );
+    let e = err_of(&no_file).to_string();
+    assert!(
+        e.contains("line 3") && e.contains("<mesh> of link 'b' lacks the attribute `filename`"),
+        "{e}"
+    );
+}

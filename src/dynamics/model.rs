@@ -80,6 +80,8 @@ pub struct Model {
     pub gravity: Vector3<f64>,
     /// Joint of each velocity index (for walking a column back to its joint).
     pub dof_joint: Vec<usize>,
+    /// What the URDF loader repaired or took as is, one line each (also logged as warnings).
+    pub load_warnings: Vec<String>,
 }
 
 impl Model {
@@ -93,6 +95,7 @@ impl Model {
             nv: 0,
             gravity: Vector3::new(0.0, 0.0, -9.81),
             dof_joint: Vec::new(),
+            load_warnings: Vec::new(),
         }
     }
 

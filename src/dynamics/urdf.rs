@@ -9,7 +9,14 @@
 //!   the URDF root link is called `world`, a floating one otherwise.
 //! - Geometry (meshes included) is ignored: a missing mesh file is not an error.
 //! - A zero `velocity`/`effort` limit (URDF 1.0's value for a missing attribute) reads as
-//!   unbounded. Mimic tags are ignored (the joint stays independent).
+//!   unbounded. A mimic joint stays an independent joint, as Pinocchio's parser has it by
+//!   default (a load warning says so).
+//! - Inertias: positive semi-definite ones are taken (point masses, rods, massless sensor and
+//!   optical frames, as Pinocchio does). A tensor a little outside that cone (rounding, or the
+//!   CAD export of a tiny part: its most negative principal moment within [`REPAIR_LIMIT`]) is
+//!   repaired, its negative principal moments set to zero, with a load warning naming the link
+//!   and the size of the repair; beyond that, or a negative mass, the model is refused.
+//! - `<texture/>` without a file (visual only) is dropped before parsing.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -50,9 +57,43 @@ impl Model {
 
     /// Builds a model from URDF text.
     pub fn from_urdf_str(text: &str, base: BaseJoint) -> Result<Model, DynamicsError> {
-        let robot = urdf_rs::read_from_string(text).map_err(|e| diagnose(text, &e.to_string()))?;
-        build(&robot, base)
+        let text = without_empty_textures(text);
+        let robot =
+            urdf_rs::read_from_string(&text).map_err(|e| diagnose(&text, &e.to_string()))?;
+        let model = build(&robot, base)?;
+        for w in &model.load_warnings {
+            tracing::warn!("URDF `{}`: {w}", model.name);
+        }
+        Ok(model)
     }
+}
+
+/// Largest principal moment below zero (kg·m²) that a repair may remove: a gram at a
+/// centimetre. Beyond it the tensor is not a rounding or export slip.
+pub const REPAIR_LIMIT: f64 = 1e-6;
+
+/// Drop `<texture/>` elements that name no file: urdf-rs requires the attribute, the URDF
+/// files robots ship (iCub's) leave it out, and nothing here reads textures.
+fn without_empty_textures(text: &str) -> std::borrow::Cow<'_, str> {
+    if !text.contains("<texture") {
+        return text.into();
+    }
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(at) = rest.find("<texture") {
+        out.push_str(&rest[..at]);
+        let tail = &rest[at..];
+        let end = tail.find('>').map_or(tail.len(), |e| e + 1);
+        let tag = &tail[..end];
+        if tag.ends_with("/>") && attribute(tag, "filename").is_none() {
+            rest = &tail[end..];
+        } else {
+            out.push_str(tag);
+            rest = &tail[end..];
+        }
+    }
+    out.push_str(rest);
+    out.into()
 }
 
 const KNOWN_TYPES: [&str; 7] = [
@@ -112,13 +153,15 @@ const NUMERIC: [(&str, &[&str], usize); 14] = [
     ),
 ];
 
-/// Attributes without which urdf-rs refuses an element.
-const REQUIRED: [(&str, &[&str]); 5] = [
-    ("link", &["name"]),
-    ("joint", &["name", "type"]),
-    ("parent", &["link"]),
-    ("child", &["link"]),
-    ("mass", &["value"]),
+/// Attributes without which urdf-rs refuses an element, and the element it must sit in (`""`:
+/// anywhere). A `<parent>` of a `<sensor>` or a Gazebo tag is none of urdf-rs's business.
+const REQUIRED: [(&str, &str, &[&str]); 6] = [
+    ("link", "robot", &["name"]),
+    ("joint", "robot", &["name", "type"]),
+    ("parent", "joint", &["link"]),
+    ("child", "joint", &["link"]),
+    ("mass", "inertial", &["value"]),
+    ("mesh", "", &["filename"]),
 ];
 
 /// urdf-rs's parse errors name no element: find the first one at fault in the raw text (a
@@ -182,12 +225,15 @@ fn locate(text: &str) -> Option<String> {
         let id = attribute(tag, "name");
         let mut context = open.clone();
         context.push((name, id));
-        for (element, attrs) in REQUIRED {
+        let inside = open.last().map_or("", |(t, _)| *t);
+        for (element, within, attrs) in REQUIRED {
             if element == name
+                && (within.is_empty() || within == inside)
                 && let Some(a) = attrs.iter().find(|a| attribute(tag, a).is_none())
             {
                 return Some(format!(
-                    "<{name}>{} lacks the attribute `{a}`",
+                    "line {}: <{name}>{} lacks the attribute `{a}`",
+                    line_of(text, rest),
                     owner(&context)
                 ));
             }
@@ -202,13 +248,15 @@ fn locate(text: &str) -> Option<String> {
                 let bad = numbers.iter().find(|x| x.parse::<f64>().is_err());
                 if let Some(x) = bad {
                     return Some(format!(
-                        "<{name} {a}=\"{v}\">{}: `{x}` is not a number",
+                        "line {}: <{name} {a}=\"{v}\">{}: `{x}` is not a number",
+                        line_of(text, rest),
                         owner(&context)
                     ));
                 }
                 if numbers.len() != count {
                     return Some(format!(
-                        "<{name} {a}=\"{v}\">{}: expected {count} number(s), found {}",
+                        "line {}: <{name} {a}=\"{v}\">{}: expected {count} number(s), found {}",
+                        line_of(text, rest),
                         owner(&context),
                         numbers.len()
                     ));
@@ -226,6 +274,13 @@ fn locate(text: &str) -> Option<String> {
             owner(&open)
         )
     })
+}
+
+/// Line number (1-based) of the element that ends just before `rest` in `text`.
+fn line_of(text: &str, rest: &str) -> usize {
+    let consumed = text.len() - rest.len();
+    let start = text[..consumed].rfind('<').unwrap_or(0);
+    text[..start].matches('\n').count() + 1
 }
 
 fn attribute<'t>(tag: &'t str, key: &str) -> Option<&'t str> {
@@ -253,8 +308,12 @@ fn pose(p: &urdf_rs::Pose) -> SE3 {
     SE3::from_xyz_rpy(p.xyz.0, p.rpy.0)
 }
 
-/// Spatial inertia of a link in its own frame, after checking it is physical.
-fn link_inertia(link: &urdf_rs::Link) -> Result<Inertia, DynamicsError> {
+/// Spatial inertia of a link in its own frame, after checking it is physical (repaired if
+/// barely not: a note goes to `warnings`).
+fn link_inertia(
+    link: &urdf_rs::Link,
+    warnings: &mut Vec<String>,
+) -> Result<Inertia, DynamicsError> {
     let bad = |reason: String| DynamicsError::InvalidInertia {
         link: link.name.clone(),
         reason,
@@ -274,20 +333,34 @@ fn link_inertia(link: &urdf_rs::Link) -> Result<Inertia, DynamicsError> {
             "inertia tensor has a non-finite entry {vals:?}"
         )));
     }
-    let tensor = Matrix3::new(
+    let mut tensor = Matrix3::new(
         i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz,
     );
-    let eig = SymmetricEigen::new(tensor).eigenvalues;
-    let min = eig.min();
-    let scale = eig.amax().max(f64::MIN_POSITIVE);
-    if m > 0.0 && min <= 0.0 {
-        return Err(bad(format!(
-            "inertia tensor is not positive definite (eigenvalues {:.3e}, {:.3e}, {:.3e})",
-            eig[0], eig[1], eig[2]
-        )));
-    }
-    if m == 0.0 && min < -1e-9 * scale {
-        return Err(bad("massless link with a negative principal inertia".into()));
+    let eig = SymmetricEigen::new(tensor);
+    let min = eig.eigenvalues.min();
+    if min < 0.0 {
+        if -min > REPAIR_LIMIT {
+            return Err(bad(format!(
+                "inertia tensor is not positive definite, by more than a repair may change \
+                 ({REPAIR_LIMIT:e} kg·m²): eigenvalues {:.3e}, {:.3e}, {:.3e}",
+                eig.eigenvalues[0], eig.eigenvalues[1], eig.eigenvalues[2]
+            )));
+        }
+        // The nearest positive semi-definite tensor (Frobenius): negative moments to zero.
+        let clamped = eig.eigenvalues.map(|x| x.max(0.0));
+        tensor = eig.eigenvectors * Matrix3::from_diagonal(&clamped) * eig.eigenvectors.transpose();
+        warnings.push(format!(
+            "link '{}': inertia tensor repaired to positive semi-definite, principal moments \
+             {:.3e}, {:.3e}, {:.3e} → {:.3e}, {:.3e}, {:.3e} (largest change {:.1e} kg·m²)",
+            link.name,
+            eig.eigenvalues[0],
+            eig.eigenvalues[1],
+            eig.eigenvalues[2],
+            clamped[0],
+            clamped[1],
+            clamped[2],
+            -min
+        ));
     }
     let origin = pose(&inl.origin);
     let inertia_com = origin.rot * tensor * origin.rot.transpose();
@@ -361,11 +434,20 @@ fn build(robot: &urdf_rs::Robot, base: BaseJoint) -> Result<Model, DynamicsError
             });
         }
     }
+    let mut warnings = Vec::new();
     let inertias = robot
         .links
         .iter()
-        .map(link_inertia)
+        .map(|l| link_inertia(l, &mut warnings))
         .collect::<Result<Vec<_>, _>>()?;
+    for j in &robot.joints {
+        if let Some(m) = &j.mimic {
+            warnings.push(format!(
+                "joint '{}' mimics '{}': taken as an independent joint (as Pinocchio does by default)",
+                j.name, m.joint
+            ));
+        }
+    }
 
     // Parent joint of each link, children of each link (in listing order).
     let mut parent_joint: Vec<Option<usize>> = vec![None; robot.links.len()];
@@ -418,6 +500,7 @@ fn build(robot: &urdf_rs::Robot, base: BaseJoint) -> Result<Model, DynamicsError
     };
 
     let mut model = Model::new(robot.name.clone());
+    model.load_warnings = warnings;
     let root_name = robot.links[root].name.as_str();
     let floating = match base {
         BaseJoint::Auto => root_name != "world",
