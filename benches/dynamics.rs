@@ -112,7 +112,7 @@ fn bench_model(
 fn benches(c: &mut Criterion) {
     match icub_like::load() {
         Ok(model) => {
-            let home = icub_like::home_configuration(&model).unwrap_or_else(|_| model.neutral());
+            let home = upc::robot::Robot::embedded_default().expect("robot").home;
             bench_model(c, "icub_like_home", &model, home, Some(("chest", "r_hand")));
             let (q, _, _) = state(&model);
             bench_model(c, "icub_like_random", &model, q, Some(("chest", "r_hand")));

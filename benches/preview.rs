@@ -5,15 +5,13 @@ use std::hint::black_box;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use nalgebra::{Matrix3, Vector3};
-use upc::config::{Config, GainSolverKind, Layers, LqSolverKind};
+use upc::config::{Config, GainSolverKind, LqSolverKind};
 use upc::preview::gain_search::{GainSearch, GainSearchInputs};
 use upc::preview::{CartTable, GainSchedule, HandPreviewer, HandState, ZmpPreview};
 use upc::scenario::Scenario;
 
 fn config(sets: &[String]) -> Config {
-    let mut l = Layers::new();
-    l.push_str("defaults", upc::config::DEFAULT_TOML)
-        .expect("embedded defaults parse");
+    let mut l = upc::config::Config::default_layers().expect("embedded defaults parse");
     for s in sets {
         l.push_override(s).expect("override");
     }

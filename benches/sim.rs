@@ -13,7 +13,7 @@ fn bench_step(c: &mut Criterion) {
         config.door = door;
         let scene = humanoid_scene(&config, None).expect("scene");
         let mut w = scene.world;
-        let pd = PosturePd::standing(w.robot(), &scene.q_home).expect("pd");
+        let pd = PosturePd::standing(w.robot(), &scene.q_home, &scene.carrying).expect("pd");
         let mut tau = DVector::zeros(w.n_actuated());
         // Settle into steady contact first (warm start as in a running simulation).
         for _ in 0..500 {
@@ -35,7 +35,7 @@ fn bench_step(c: &mut Criterion) {
     let config = SimConfig::embedded().expect("embedded config");
     let scene = humanoid_scene(&config, None).expect("scene");
     let mut w = scene.world;
-    let pd = PosturePd::standing(w.robot(), &scene.q_home).expect("pd");
+    let pd = PosturePd::standing(w.robot(), &scene.q_home, &scene.carrying).expect("pd");
     let mut tau = DVector::zeros(w.n_actuated());
     let mut direct = 0;
     for _ in 0..500 {

@@ -46,7 +46,7 @@ fn tail_report(label: &str, reuse: bool, amp: f64) {
     let mut cfg = Config::embedded_default().unwrap().wbc;
     cfg.reuse_solver = reuse;
     let model = icub_like::load().unwrap();
-    let home = icub_like::home_configuration(&model).unwrap();
+    let home = upc::robot::Robot::embedded_default().expect("robot").home;
     let mut data = Data::new(&model);
     forward_kinematics(&model, &mut data, &home).unwrap();
     let hand = data.o_m_f[model.frame_id("r_hand").unwrap()].trans;
@@ -101,7 +101,7 @@ fn bench(c: &mut Criterion) {
 
     let cfg = Config::embedded_default().unwrap().wbc;
     let model = icub_like::load().unwrap();
-    let home = icub_like::home_configuration(&model).unwrap();
+    let home = upc::robot::Robot::embedded_default().expect("robot").home;
     let mut data = Data::new(&model);
     forward_kinematics(&model, &mut data, &home).unwrap();
     let hand = data.o_m_f[model.frame_id("r_hand").unwrap()].trans;

@@ -9,6 +9,7 @@
 //! - [`config`]: TOML configuration with errors that name the offending key.
 //! - [`wbc`]: the whole-body torque controller (LQP over q̈ and contact forces, clarabel).
 //! - [`forecast`]: the reference force forecaster process.
+//! - [`robot`]: robot descriptions: URDF, feet, hand, home posture, and what follows from them.
 //! - [`sim`]: the simulator process (humanoid on the ground, door on a spherical joint).
 //! - [`control`]: the control server's loop pieces (tick, C2 thread, timing, real-time setup).
 //! - [`shutdown`]: SIGINT/SIGTERM handling shared by the processes.
@@ -22,6 +23,7 @@ pub mod forecast;
 pub mod offline;
 pub mod preview;
 pub mod report;
+pub mod robot;
 pub mod scenario;
 pub mod shutdown;
 pub mod sim;

@@ -158,7 +158,7 @@ fn humanoid_masses_and_inertias_are_physical() {
 fn humanoid_home_posture_matches_spec_section_7() {
     let model = humanoid();
     let mut data = Data::new(&model);
-    let q = icub_like::home_configuration(&model).expect("home");
+    let q = upc::robot::Robot::embedded_default().expect("robot").home;
     for j in model.joints.iter().skip(1) {
         let x = q[j.idx_q];
         assert!(x >= j.limits.lower && x <= j.limits.upper, "{}", j.name);
@@ -578,7 +578,7 @@ fn operational_space_inertia_of_the_arm() {
     let mut data = Data::new(&model);
     let mut ws = OpSpaceWorkspace::new(&model, "chest", "r_hand").expect("chain");
     assert_eq!(ws.n(), 7);
-    let q = icub_like::home_configuration(&model).expect("home");
+    let q = upc::robot::Robot::embedded_default().expect("robot").home;
     for q in [q, rng.configuration(&model)] {
         let m_e = *ws.compute(&model, &mut data, &q).expect("M_e");
         // Independent recomputation from the full CRBA and the frame Jacobian.
@@ -636,7 +636,7 @@ fn operational_space_errors() {
     ));
     // One joint cannot span three directions: J H̃⁻¹ Jᵀ is rank one.
     let mut ws = OpSpaceWorkspace::new(&model, "r_wrist_2", "r_hand").expect("chain");
-    let q = icub_like::home_configuration(&model).expect("home");
+    let q = upc::robot::Robot::embedded_default().expect("robot").home;
     assert!(matches!(
         ws.compute(&model, &mut data, &q),
         Err(DynamicsError::Singular(_))

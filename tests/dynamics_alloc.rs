@@ -12,7 +12,7 @@ use support::counting_alloc::allocations;
 fn hot_path_does_not_allocate() {
     let model = icub_like::load().expect("humanoid");
     let mut data = Data::new(&model);
-    let q = icub_like::home_configuration(&model).expect("home");
+    let q = upc::robot::Robot::embedded_default().expect("robot").home;
     let v = DVector::from_fn(model.nv, |k, _| (k as f64 * 0.7).sin());
     let a = DVector::from_fn(model.nv, |k, _| (k as f64 * 0.3).cos());
     let tau = DVector::from_element(model.nv, 0.1);

@@ -19,7 +19,7 @@ fn list(v: &DVector<f64>) -> String {
 #[test]
 fn json_dump_matches_the_library() {
     let model = icub_like::load().expect("humanoid");
-    let mut q = icub_like::home_configuration(&model).expect("home");
+    let mut q = upc::robot::Robot::embedded_default().expect("robot").home;
     q[model.joints[model.joint_id("r_elbow").expect("joint")].idx_q] = 1.1;
     let v = DVector::from_fn(model.nv, |k, _| 0.1 * (k as f64).sin());
     let urdf = icub_like::urdf_path();

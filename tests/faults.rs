@@ -650,9 +650,23 @@ fn bad_config_urdf_and_scenario_name_the_culprit_on_the_command_line() {
         fails_with(&[sub, "--scenario", &gone], &[&gone]);
     }
 
-    // URDF: the error names the element at fault.
+    // URDF: the error names the element at fault. The controller reads it through a robot
+    // description (`--robot file.toml`), whose own errors name the key and the file.
+    let description = |urdf: &str| {
+        format!(
+            "name = \"bad\"\n[urdf]\npath = \"{urdf}\"\n[feet.left]\nframe = \"l\"\ncontacts = \"frames\"\n\
+             [feet.right]\nframe = \"r\"\ncontacts = \"frames\"\n[hand]\nframe = \"h\"\nchain_root = \"c\"\n"
+        )
+    };
     let missing_urdf = s.path("robot.urdf").display().to_string();
-    fails_with(&["controller", "--urdf", &missing_urdf], &[&missing_urdf]);
+    let d = write("missing.toml", &description(&missing_urdf));
+    fails_with(&["controller", "--robot", &d], &[&missing_urdf]);
+    let typo = write(
+        "typo.toml",
+        &description(&missing_urdf).replace("[hand]", "[hand]\nframes = 1"),
+    );
+    fails_with(&["controller", "--robot", &typo], &["hand.frames", &typo]);
+    fails_with(&["sim", "--robot", "nao"], &["no robot named `nao`"]);
     let inertial = r#"<inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial>"#;
     let robot = |body: &str| {
         format!(
@@ -699,6 +713,7 @@ fn bad_config_urdf_and_scenario_name_the_culprit_on_the_command_line() {
     for (file, text, wanted) in &cases {
         let p = write(file, text);
         fails_with(&["model", &p], wanted);
-        fails_with(&["controller", "--urdf", &p], wanted);
+        let d = write(&format!("{file}.toml"), &description(&p));
+        fails_with(&["controller", "--robot", &d], wanted);
     }
 }

@@ -269,6 +269,8 @@ fn run(
         startup_timeout: 40.0,
         csv: Some(csv.clone()),
         scenario_hash: None,
+        robot_hash: None,
+        robot_name: "icub_like".into(),
     };
     let model = icub_like::load().expect("model");
     let stop = Arc::new(AtomicBool::new(false));

@@ -2,7 +2,7 @@
 //! closed-loop eigenvalues, finite differences of eq. (26).
 
 use nalgebra::{Matrix3, Vector3};
-use upc::config::{Config, ControllerKind, GainSolverKind, Layers, LqSolverKind};
+use upc::config::{Config, ControllerKind, GainSolverKind, LqSolverKind};
 use upc::offline::ReducedLoop;
 use upc::preview::dense::CondensedHorizon;
 use upc::preview::gain_search::{GainSearch, GainSearchInputs};
@@ -13,8 +13,7 @@ use upc::preview::{
 use upc::scenario::{ForceProfile, Impact, Scenario};
 
 fn config_with(sets: &[&str]) -> Config {
-    let mut l = Layers::new();
-    l.push_str("defaults", upc::config::DEFAULT_TOML).unwrap();
+    let mut l = upc::config::Config::default_layers().unwrap();
     for s in sets {
         l.push_override(s).unwrap();
     }
@@ -219,6 +218,7 @@ fn constant_force_scenario(f: [f64; 3]) -> Scenario {
         force: ForceProfile::Samples(vec![(-1.0, f), (1e9, f)]),
         config: None,
         origin: "test".into(),
+        force_scale: 1.0,
     }
 }
 
@@ -684,16 +684,14 @@ fn zmp_constraints_keep_the_predicted_zmp_inside_where_c1_cannot() {
 
 #[test]
 fn config_errors_name_the_key_and_the_file() {
-    let mut l = Layers::new();
-    l.push_str("defaults", upc::config::DEFAULT_TOML).unwrap();
+    let mut l = upc::config::Config::default_layers().unwrap();
     l.push_str("my.toml", "[preview]\nhorizonn = 3\n").unwrap();
     let e = l.build().unwrap_err().to_string();
     assert!(
         e.contains("preview.horizonn") && e.contains("my.toml"),
         "{e}"
     );
-    let mut l = Layers::new();
-    l.push_str("defaults", upc::config::DEFAULT_TOML).unwrap();
+    let mut l = upc::config::Config::default_layers().unwrap();
     l.push_str("my.toml", "[preview]\nhorizon = \"long\"\n")
         .unwrap();
     let e = l.build().unwrap_err().to_string();
@@ -701,8 +699,7 @@ fn config_errors_name_the_key_and_the_file() {
         e.contains("preview.horizon") && e.contains("my.toml"),
         "{e}"
     );
-    let mut l = Layers::new();
-    l.push_str("defaults", upc::config::DEFAULT_TOML).unwrap();
+    let mut l = upc::config::Config::default_layers().unwrap();
     l.push_override("robot.mass=-3").unwrap();
     let e = l.build().unwrap_err().to_string();
     assert!(

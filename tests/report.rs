@@ -6,7 +6,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use upc::config::{ControllerKind, DEFAULT_TOML, Layers};
+use upc::config::ControllerKind;
 use upc::control::logger::CSV_HEADER;
 use upc::offline::ReducedLoop;
 use upc::report::{CompareOptions, ConfigLayers, ReportError, compare};
@@ -326,8 +326,7 @@ fn the_reduced_section_holds_the_metrics_of_reduced_loop() {
     let mut scenario =
         Scenario::load(&root.join("test_impact.toml").display().to_string()).expect("scenario");
     scenario.duration = DURATION;
-    let mut layers = Layers::new();
-    layers.push_str("defaults", DEFAULT_TOML).expect("defaults");
+    let mut layers = upc::config::Config::default_layers().expect("defaults");
     layers.push_table("scenario", scenario.config.clone().expect("[config]"));
     let config = layers.build().expect("config");
     assert_eq!(config.preview.horizon, 60);

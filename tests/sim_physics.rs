@@ -134,7 +134,7 @@ fn standing_params() -> PhysicsParams {
 fn pd_holds_the_humanoid_standing_for_10_s() {
     let scene = humanoid_scene_with(standing_params(), false, None).unwrap();
     let mut w = scene.world;
-    let pd = PosturePd::standing(w.robot(), &scene.q_home).unwrap();
+    let pd = PosturePd::standing(w.robot(), &scene.q_home, &scene.carrying).unwrap();
     let mut tau = DVector::zeros(w.n_actuated());
     let p0: Vec<Vector3<f64>> = w.contact_points().to_vec();
     let (mut max_pen, mut max_slip, mut max_iter, mut direct) = (0.0f64, 0.0f64, 0, 0);
@@ -183,7 +183,7 @@ fn the_door_loop_stays_closed_while_pushed() {
     }]);
     let scene = humanoid_scene(&config, Some(profile)).unwrap();
     let (mut w, drive) = (scene.world, scene.drive);
-    let pd = PosturePd::standing(w.robot(), &scene.q_home).unwrap();
+    let pd = PosturePd::standing(w.robot(), &scene.q_home, &scene.carrying).unwrap();
     let mut tau = DVector::zeros(w.n_actuated());
     let (mut max_err, mut max_hand) = (0.0f64, 0.0f64);
     let (mut direct, mut sweeps, mut max_sweeps) = (0, 0, 0);
@@ -380,7 +380,7 @@ fn a_tumbling_humanoid_does_not_gain_energy() {
     // start of the step, so the energy wanders by a few 1e-4 E0 at 1 ms: bounds 0.1 % above,
     // 1 % below (end-of-step h loses 6 % in 3 s), a slope of at most 1e-4 E0/s.
     let robot = upc::dynamics::icub_like::load().unwrap();
-    let q = upc::dynamics::icub_like::home_configuration(&robot).unwrap();
+    let q = upc::robot::Robot::embedded_default().expect("robot").home;
     let mut v = DVector::from_fn(robot.nv, |k, _| 1.5 * (1.7 * k as f64).sin());
     v.rows_mut(0, 6)
         .copy_from_slice(&[0.4, -0.3, 0.5, 1.5, -2.0, 3.0]);
@@ -399,7 +399,7 @@ fn run_bits(steps: usize) -> Vec<u64> {
     }]);
     let scene = humanoid_scene(&config, Some(profile)).unwrap();
     let (mut w, drive) = (scene.world, scene.drive);
-    let pd = PosturePd::standing(w.robot(), &scene.q_home).unwrap();
+    let pd = PosturePd::standing(w.robot(), &scene.q_home, &scene.carrying).unwrap();
     let mut tau = DVector::zeros(w.n_actuated());
     for _ in 0..steps {
         pd.torques(w.q(), w.v(), &mut tau);
@@ -429,7 +429,7 @@ fn a_step_does_not_allocate() {
     let config = SimConfig::embedded().unwrap();
     let scene = humanoid_scene(&config, None).unwrap();
     let mut w = scene.world;
-    let pd = PosturePd::standing(w.robot(), &scene.q_home).unwrap();
+    let pd = PosturePd::standing(w.robot(), &scene.q_home, &scene.carrying).unwrap();
     let mut tau = DVector::zeros(w.n_actuated());
     for _ in 0..50 {
         pd.torques(w.q(), w.v(), &mut tau);

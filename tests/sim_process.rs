@@ -96,6 +96,7 @@ fn lockstep_run(tag: &str, steps: u64, inject_bad: bool) -> (RunSummary, StateMs
     config.process.lockstep_timeout = 20.0;
     let opts = RunOptions {
         config,
+        robot: std::sync::Arc::new(upc::robot::Robot::embedded_default().unwrap()),
         rrd: None,
         recording_id: None,
         node_name: format!("sim_{tag}"),
@@ -113,9 +114,9 @@ fn lockstep_run(tag: &str, steps: u64, inject_bad: bool) -> (RunSummary, StateMs
         run(&opts, &stop)
     });
 
-    let model = upc::dynamics::icub_like::load().unwrap();
-    let q_home = upc::dynamics::icub_like::home_configuration(&model).unwrap();
-    let pd = PosturePd::standing(&model, &q_home).unwrap();
+    let robot = upc::robot::Robot::embedded_default().expect("robot");
+    let (model, q_home) = (&robot.model, &robot.home);
+    let pd = PosturePd::standing(model, q_home, &robot.carrying_frames()).unwrap();
     let n = model.nv - 6;
     let mut tau = DVector::zeros(n);
     let mut seq = 0u64;

@@ -3,7 +3,7 @@
 //! drifts, the URDF for the limits), not the controller's own matrices.
 
 use nalgebra::{DMatrix, DVector, Vector3};
-use upc::config::{Config, Layers, WbcConfig};
+use upc::config::{Config, WbcConfig};
 use upc::dynamics::spatial::Force;
 use upc::dynamics::{
     Data, Model, ReferenceFrame, aba_with_external_forces, center_of_mass_velocity, crba,
@@ -31,7 +31,7 @@ fn setup_with(cfg: &WbcConfig) -> Setup {
     let model = icub_like::load().unwrap();
     let data = Data::new(&model);
     let wbc = WholeBodyController::new(&model, cfg).unwrap();
-    let q = icub_like::home_configuration(&model).unwrap();
+    let q = upc::robot::Robot::embedded_default().expect("robot").home;
     let v = DVector::zeros(model.nv);
     Setup {
         model,
@@ -528,7 +528,10 @@ fn reused_solver_matches_a_fresh_solver_each_tick() {
 fn com_and_frame_drifts_match_finite_differences() {
     let model = icub_like::load().unwrap();
     let mut d = Data::new(&model);
-    let q = perturbed(&model, &icub_like::home_configuration(&model).unwrap());
+    let q = perturbed(
+        &model,
+        &upc::robot::Robot::embedded_default().expect("robot").home,
+    );
     // A full velocity, base included: the drift formula must hold for any motion.
     let v = DVector::from_fn(model.nv, |k, _| 0.5 * ((k as f64) * 0.9 + 0.3).cos());
     let c = com_drift(&model, &mut d, &q, &v).unwrap();
@@ -572,8 +575,7 @@ fn config_section_is_checked_by_key() {
         ("wbc.w_reg_force=0", "wbc.w_reg_force"),
         ("wbc.max_iterations=0", "wbc.max_iterations"),
     ] {
-        let mut l = Layers::new();
-        l.push_str("defaults", upc::config::DEFAULT_TOML).unwrap();
+        let mut l = upc::config::Config::default_layers().unwrap();
         l.push_override(set).unwrap();
         let e = l.build().unwrap_err().to_string();
         assert!(e.contains(key), "{set}: {e}");

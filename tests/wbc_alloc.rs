@@ -13,7 +13,7 @@ use upc::wbc::{WbcCommand, WbcStatus, WholeBodyController};
 fn wbc_tick_allocations_after_the_first() {
     let cfg = Config::embedded_default().unwrap().wbc;
     let model = icub_like::load().unwrap();
-    let q = icub_like::home_configuration(&model).unwrap();
+    let q = upc::robot::Robot::embedded_default().expect("robot").home;
     let mut data = Data::new(&model);
     forward_kinematics(&model, &mut data, &q).unwrap();
     let hand = data.o_m_f[model.frame_id("r_hand").unwrap()].trans;

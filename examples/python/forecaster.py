@@ -46,6 +46,8 @@ class StateMsg(ctypes.Structure):
         ("scenario_start", ctypes.c_double),
         ("flags", ctypes.c_uint32),
         ("_pad", ctypes.c_uint32),
+        ("force_scale", ctypes.c_double),
+        ("robot_hash", ctypes.c_uint64),
         ("scenario", ctypes.c_uint8 * SCENARIO_NAME_LEN),
     ]
 
@@ -137,7 +139,7 @@ def main() -> int:
     # Window k starts at k * period and is published once the plant's time reaches it: its
     # content depends on simulated time only, and with `period` set a lockstep controller waits
     # for it, so a lockstep run with this forecaster reproduces (services/CHANNELS.md).
-    seq, now, last_k, session, start = 0, None, None, 0, None
+    seq, now, last_k, session, start, scale = 0, None, None, 0, None, 1.0
     last_state = time.monotonic()
     while not stop["now"]:
         while True:
@@ -151,6 +153,8 @@ def main() -> int:
             s0 = st.scenario_start if st.scenario_start >= 0 else None
             if s0 != start:
                 start, last_k = s0, None
+            # The plant pushes its robot this much harder than the scenario's figures.
+            scale = st.force_scale if st.force_scale > 0 else 1.0
             now = st.time
             last_state = time.monotonic()
         k = None if now is None else math.floor(now / a.period + 1e-6)
@@ -163,7 +167,7 @@ def main() -> int:
             if start is not None:
                 for i in range(n):
                     t = t0 - start + i * a.dt
-                    msg.forces[i][0] = -impact(t, a.start, a.rise, a.hold, a.fall, a.peak)
+                    msg.forces[i][0] = -scale * impact(t, a.start, a.rise, a.hold, a.fall, a.peak)
             publisher.loan_uninit().write_payload(msg).send()
             notifier.notify()
         # Done at the end of the run, or when the simulator has gone quiet.

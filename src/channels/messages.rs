@@ -6,7 +6,8 @@
 
 use iceoryx2::prelude::*;
 
-/// Capacity of the q, v and τ arrays (the humanoid uses nq = 39, nv = 38, 32 torques).
+/// Capacity of the q, v and τ arrays (the iCub-like humanoid uses nq = 39, nv = 38, 32 torques;
+/// the official iCub and Talos the same, the G1 nq = 36).
 pub const MAX_DOF: usize = 48;
 /// Contact points: four sole corners per foot, order l_fl, l_fr, l_rl, l_rr, r_fl, r_fr, r_rl, r_rr.
 pub const N_CONTACTS: usize = 8;
@@ -50,6 +51,14 @@ pub struct StateMsg {
     /// `STATE_FLAG_*` bits.
     pub flags: u32,
     pub _pad: u32,
+    /// Factor the plant applies to the scenario's forces for its robot (the scenario's file
+    /// forces × this are what pushes: a forecaster following the plant scales by it too);
+    /// 0: none announced (read as 1).
+    pub force_scale: f64,
+    /// Content hash of the plant's robot description and URDF
+    /// ([`crate::robot::Robot::hash`]); a controller refuses states of another robot. 0: none
+    /// announced (a real robot: the controller checks dimensions only).
+    pub robot_hash: u64,
     /// Name (embedded) or path of the scenario the plant plays, UTF-8, NUL-padded.
     pub scenario: [u8; SCENARIO_NAME_LEN],
 }

@@ -2,7 +2,8 @@
 
 use std::path::PathBuf;
 
-use upc::config::{Config, ConfigError, Layers};
+use upc::config::{Config, ConfigError};
+use upc::robot::Robot;
 use upc::scenario::Scenario;
 
 /// `--config` files and `--set` overrides, layered over the embedded defaults.
@@ -17,14 +18,15 @@ pub struct ConfigArgs {
 }
 
 impl ConfigArgs {
-    /// Defaults ← config files ← the scenario's `[config]` ← `extra` ← `--set`.
+    /// Defaults ← the robot's (computed, then its `[config]`) ← config files ← the scenario's
+    /// `[config]` ← `extra` ← `--set`.
     pub fn load(
         &self,
+        robot: &Robot,
         scenario: Option<&Scenario>,
         extra: &[String],
     ) -> Result<Config, ConfigError> {
-        let mut layers = Layers::new();
-        layers.push_str("<embedded config/default.toml>", upc::config::DEFAULT_TOML)?;
+        let mut layers = Config::layers_for(robot)?;
         for path in &self.configs {
             layers.push_file(path)?;
         }
@@ -52,5 +54,20 @@ impl ConfigArgs {
             v.push(s.clone());
         }
         v
+    }
+}
+
+/// `--robot`: which robot (shared by the subcommands that build or control one).
+#[derive(clap::Args, Debug, Clone)]
+pub struct RobotArg {
+    /// Robot: embedded description name (icub_like, icub, talos, g1) or path to a description
+    /// TOML (config/robots/*.toml shows the format).
+    #[arg(long, default_value = upc::robot::DEFAULT)]
+    pub robot: String,
+}
+
+impl RobotArg {
+    pub fn load(&self) -> Result<Robot, upc::robot::RobotError> {
+        Robot::load(&self.robot)
     }
 }

@@ -5,12 +5,11 @@ use std::path::PathBuf;
 use upc::channels::DEFAULT_PREFIX;
 use upc::config::ControllerKind;
 use upc::control::server::{ServerOptions, run_server};
-use upc::dynamics::{BaseJoint, Model, icub_like};
 use upc::scenario::Scenario;
 use upc::shutdown::stop_flag;
 
 use super::CliResult;
-use super::common::ConfigArgs;
+use super::common::{ConfigArgs, RobotArg};
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct ControllerArgs {
@@ -23,9 +22,8 @@ pub struct ControllerArgs {
     /// Run at wall-clock rate instead of lockstep (overrides controller.mode).
     #[arg(long)]
     pub realtime: bool,
-    /// Robot URDF (default: the embedded iCub-like humanoid).
-    #[arg(long)]
-    pub urdf: Option<PathBuf>,
+    #[command(flatten)]
+    pub robot: RobotArg,
     /// Service prefix of the run.
     #[arg(long, default_value = DEFAULT_PREFIX)]
     pub prefix: String,
@@ -50,7 +48,9 @@ pub struct ControllerArgs {
 }
 
 pub fn run(args: ControllerArgs) -> CliResult {
-    let scenario = Scenario::load(&args.scenario)?;
+    let robot = args.robot.load()?;
+    // The forces the plant pushes this robot with (its hash is what the plant announces).
+    let scenario = Scenario::load(&args.scenario)?.with_force_scale(robot.force_scale()?);
     let mut extra = Vec::new();
     if let Some(k) = args.controller {
         extra.push(format!("controller.kind=\"{}\"", k.name()));
@@ -58,11 +58,7 @@ pub fn run(args: ControllerArgs) -> CliResult {
     if args.realtime {
         extra.push("controller.mode=\"realtime\"".into());
     }
-    let config = args.config.load(Some(&scenario), &extra)?;
-    let model = match &args.urdf {
-        Some(p) => Model::from_urdf_file(p, BaseJoint::Floating)?,
-        None => icub_like::load()?,
-    };
+    let config = args.config.load(&robot, Some(&scenario), &extra)?;
     let opts = ServerOptions {
         prefix: args.prefix.clone(),
         duration: match args.duration.unwrap_or(scenario.duration) {
@@ -75,15 +71,18 @@ pub fn run(args: ControllerArgs) -> CliResult {
         startup_timeout: 60.0,
         csv: args.csv.clone(),
         scenario_hash: Some(scenario.content_hash()),
+        robot_hash: Some(robot.hash),
+        robot_name: robot.name().to_string(),
     };
     tracing::info!(
-        "controller {} ({:?}) on {}/*, {} Hz",
+        "controller {} ({:?}) for robot `{}` on {}/*, {} Hz",
         config.controller.kind.name(),
         config.controller.mode,
+        robot.name(),
         args.prefix,
         config.controller.rate_hz
     );
-    let summary = run_server(&config, model, &opts, stop_flag())?;
+    let summary = run_server(&config, robot.model.clone(), &opts, stop_flag())?;
     tracing::info!(
         "controller stopped ({}): {} ticks, tick p50 {:.1} µs p99 {:.1} µs",
         summary.stopped_by,

@@ -1,5 +1,6 @@
 //! `upc model`: inspect a URDF (joints, DoF, mass, CoM) or dump M(q), h(q, v), the CoM and a
-//! frame Jacobian as JSON for debugging and cross-checking with other tools.
+//! frame Jacobian as JSON for debugging and cross-checking with other tools. With `--robot`, a
+//! robot description: its model at home and what upc computes from it.
 
 use std::path::PathBuf;
 
@@ -14,8 +15,13 @@ use super::CliResult;
 
 #[derive(clap::Args)]
 pub struct ModelArgs {
-    /// URDF file.
-    pub urdf: PathBuf,
+    /// URDF file (or give --robot).
+    #[arg(required_unless_present = "robot")]
+    pub urdf: Option<PathBuf>,
+    /// A robot description (embedded name or TOML path): its model with the sole and contact
+    /// frames, at its home configuration by default, and the values computed from it.
+    #[arg(long, conflicts_with = "urdf")]
+    pub robot: Option<String>,
     /// Add a free-flyer root (default when the URDF root link is not `world`).
     #[arg(long, conflicts_with = "fixed")]
     pub floating: bool,
@@ -56,7 +62,16 @@ pub fn run(args: ModelArgs) -> CliResult {
     } else {
         BaseJoint::Auto
     };
-    let model = Model::from_urdf_file(&args.urdf, base)?;
+    let robot = args
+        .robot
+        .as_deref()
+        .map(upc::robot::Robot::load)
+        .transpose()?;
+    let model = match (&robot, &args.urdf) {
+        (Some(r), _) => r.model.clone(),
+        (None, Some(path)) => Model::from_urdf_file(path, base)?,
+        (None, None) => return Err("give a URDF file or --robot".into()),
+    };
     let input = match &args.input {
         Some(path) => {
             let text = std::fs::read_to_string(path)
@@ -69,7 +84,9 @@ pub fn run(args: ModelArgs) -> CliResult {
     let q = match (&args.q, input.q) {
         (Some(s), _) => parse_list("--q", s)?,
         (None, Some(v)) => DVector::from_vec(v),
-        (None, None) => model.neutral(),
+        (None, None) => robot
+            .as_ref()
+            .map_or_else(|| model.neutral(), |r| r.home.clone()),
     };
     let v = match (&args.v, input.v) {
         (Some(s), _) => parse_list("--v", s)?,
@@ -77,11 +94,72 @@ pub fn run(args: ModelArgs) -> CliResult {
         (None, None) => DVector::zeros(model.nv),
     };
     let frame = args.frame.or(input.frame);
+    if let (Some(r), false) = (&robot, args.json) {
+        print_robot(r)?;
+    }
     if args.json {
         print_json(&model, &q, &v, frame.as_deref())
     } else {
         print_table(&model, &q, &v, frame.as_deref())
     }
+}
+
+/// What upc computes from a robot description.
+fn print_robot(r: &upc::robot::Robot) -> CliResult {
+    let d = &r.derived;
+    let m = &d.effective_mass;
+    println!("robot {} — {}", r.name(), r.description.description);
+    println!("  description: {}", r.origin);
+    match &r.urdf_path {
+        Some(p) => println!("  URDF: {}", p.display()),
+        None => println!("  URDF: embedded {}", r.description.urdf.path.display()),
+    }
+    println!(
+        "  mass {:.3} kg; CoM at home {:.4} m above the contacts, ({:+.4}, {:+.4}) m from the feet centre",
+        d.mass, d.com_height, d.com_offset[0], d.com_offset[1]
+    );
+    println!(
+        "  support x ∈ [{:+.4}, {:+.4}] m, y ∈ [{:+.4}, {:+.4}] m; feet {:.4} m apart; soles tilted ≤ {:.3}°",
+        d.support[0][0],
+        d.support[0][1],
+        d.support[1][0],
+        d.support[1][1],
+        d.feet_distance,
+        d.sole_tilt.to_degrees()
+    );
+    println!(
+        "  hand `{}` at ({:+.4}, {:+.4}, {:.4}) m; M_e ({} → hand, kg) = [[{:.3}, {:.3}, {:.3}], [{:.3}, {:.3}, {:.3}], [{:.3}, {:.3}, {:.3}]]",
+        r.description.hand.frame,
+        d.hand_position.x,
+        d.hand_position.y,
+        d.hand_position.z,
+        r.description.hand.chain_root,
+        m[(0, 0)],
+        m[(0, 1)],
+        m[(0, 2)],
+        m[(1, 0)],
+        m[(1, 1)],
+        m[(1, 2)],
+        m[(2, 0)],
+        m[(2, 1)],
+        m[(2, 2)]
+    );
+    println!(
+        "  the arm holds {:.1} N along x at home (effort limits); scenario forces × {:.4}",
+        d.hand_force_capacity,
+        r.force_scale()?
+    );
+    let mut data = Data::new(&r.model);
+    upc::dynamics::forward_kinematics(&r.model, &mut data, &r.home)?;
+    for c in &r.contacts {
+        let p = data.o_m_f[r.model.frame_id(c)?].trans;
+        println!(
+            "  contact {c:<22} ({:+.4}, {:+.4}, {:+.4}) m",
+            p.x, p.y, p.z
+        );
+    }
+    println!();
+    Ok(())
 }
 
 fn parse_list(flag: &str, s: &str) -> Result<DVector<f64>, String> {

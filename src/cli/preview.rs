@@ -19,7 +19,7 @@ pub enum ControllerChoice {
 
 #[derive(clap::Args)]
 pub struct PreviewArgs {
-    /// Scenario: an embedded name (single_impact, multiple_impacts) or a path to a TOML file.
+    /// Scenario: an embedded name (single_impact, multiple_impacts, standing) or a path to a TOML file.
     #[arg(long, default_value = upc::scenario::DEFAULT)]
     pub scenario: String,
     /// Controller to run; `all` runs C0, C1 and C2 and compares them.
@@ -30,6 +30,8 @@ pub struct PreviewArgs {
     pub out: Option<PathBuf>,
     #[command(flatten)]
     pub config: super::common::ConfigArgs,
+    #[command(flatten)]
+    pub robot: super::common::RobotArg,
     /// Shorthand for --set preview.horizon=N.
     #[arg(long)]
     pub horizon: Option<usize>,
@@ -47,6 +49,7 @@ pub struct PreviewArgs {
 /// The config of a preview run: the layers plus the shorthand flags.
 pub fn load_config(
     args: &PreviewArgs,
+    robot: &upc::robot::Robot,
     scenario: &Scenario,
 ) -> Result<Config, upc::config::ConfigError> {
     let mut sets = Vec::new();
@@ -62,12 +65,13 @@ pub fn load_config(
     if args.zmp_constraints {
         sets.push("preview.zmp_constraints=true".into());
     }
-    args.config.load(Some(scenario), &sets)
+    args.config.load(robot, Some(scenario), &sets)
 }
 
 pub fn run(args: PreviewArgs) -> CliResult {
-    let scenario = Scenario::load(&args.scenario)?;
-    let config = load_config(&args, &scenario)?;
+    let robot = args.robot.load()?;
+    let scenario = Scenario::load(&args.scenario)?.with_force_scale(robot.force_scale()?);
+    let config = load_config(&args, &robot, &scenario)?;
     let controllers: &[ControllerKind] = match args.controller {
         ControllerChoice::C0 => &[ControllerKind::C0],
         ControllerChoice::C1 => &[ControllerKind::C1],
@@ -75,7 +79,11 @@ pub fn run(args: PreviewArgs) -> CliResult {
         ControllerChoice::All => &[ControllerKind::C0, ControllerKind::C1, ControllerKind::C2],
     };
     println!(
-        "scenario {} — {} ({} s); T = {} s, N = {} ({:.2} s preview), R/Q_e = {:e}",
+        "robot {} (M = {:.2} kg, z_c = {:.3} m, forces × {:.3}); scenario {} — {} ({} s); T = {} s, N = {} ({:.2} s preview), R/Q_e = {:e}",
+        robot.name(),
+        config.robot.mass,
+        config.robot.com_height,
+        scenario.force_scale,
         scenario.name,
         scenario.description,
         scenario.duration,

@@ -15,7 +15,7 @@ use upc::control::server::ServerSummary;
 use upc::scenario::Scenario;
 
 use super::CliResult;
-use super::common::ConfigArgs;
+use super::common::{ConfigArgs, RobotArg};
 
 #[derive(Clone, Copy, PartialEq, Eq, Debug, clap::ValueEnum)]
 pub enum Which {
@@ -27,7 +27,7 @@ pub enum Which {
 
 #[derive(clap::Args, Debug)]
 pub struct RunArgs {
-    /// Scenario: embedded name (single_impact, multiple_impacts) or TOML path.
+    /// Scenario: embedded name (single_impact, multiple_impacts, standing) or TOML path.
     #[arg(long, default_value = upc::scenario::DEFAULT)]
     pub scenario: String,
     /// Controller(s) to run, one after the other.
@@ -55,6 +55,10 @@ pub struct RunArgs {
     /// Controller config (files and --set), passed to `upc controller`.
     #[command(flatten)]
     pub config: ConfigArgs,
+    /// The robot, given to the simulator and the controller (the scenario's forces are scaled
+    /// to its mass: `upc::robot::Robot::force_scale`).
+    #[command(flatten)]
+    pub robot: RobotArg,
 }
 
 /// One controller's run in the summary.
@@ -71,9 +75,10 @@ struct Entry {
 }
 
 pub fn run(args: RunArgs) -> CliResult {
-    let scenario = Scenario::load(&args.scenario)?;
+    let robot = args.robot.load()?;
+    let scenario = Scenario::load(&args.scenario)?.with_force_scale(robot.force_scale()?);
     // Fail early on a bad config, before starting processes.
-    args.config.load(Some(&scenario), &[])?;
+    args.config.load(&robot, Some(&scenario), &[])?;
     let duration = args.duration.unwrap_or(scenario.duration);
     let name = args.name.clone().unwrap_or_else(|| {
         let secs = std::time::SystemTime::now()
@@ -96,7 +101,11 @@ pub fn run(args: RunArgs) -> CliResult {
     }
     let summary = serde_json::json!({
         "scenario": scenario.name,
-        // What --scenario was given and the config layers: `upc compare` reloads both.
+        // What --robot and --scenario were given and the config layers: `upc compare` reloads
+        // them.
+        "robot": args.robot.robot,
+        "robot_mass": robot.derived.mass,
+        "force_scale": scenario.force_scale,
         "scenario_source": args.scenario,
         "config_files": args.config.configs,
         "config_sets": args.config.sets,
@@ -181,6 +190,8 @@ fn run_one(
             &args.scenario,
             "--prefix",
             &prefix,
+            "--robot",
+            &args.robot.robot,
         ])
         .args(["--recording-id", &recording, "--rrd"])
         .arg(dir.join("sim.rrd"))
@@ -231,6 +242,8 @@ fn run_one(
             kind.name(),
             "--prefix",
             &prefix,
+            "--robot",
+            &args.robot.robot,
         ])
         .args(["--duration", &dur, "--recording-id", &recording])
         .args(if args.realtime {

@@ -7,6 +7,7 @@ use upc::sim::SimConfig;
 use upc::sim::process::{RunOptions, run};
 
 use super::CliResult;
+use super::common::RobotArg;
 
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum ModeChoice {
@@ -14,8 +15,8 @@ pub enum ModeChoice {
     Realtime,
 }
 
-/// Start the simulator: `upc sim` runs the embedded default scene (the iCub-like humanoid at its
-/// home posture on flat ground, the door held by its right hand, the hinge torque profile of the
+/// Start the simulator: `upc sim` runs the embedded default scene (the robot, by default the
+/// iCub-like humanoid, at its home posture on flat ground, the door held by its right hand, the hinge torque profile of the
 /// default scenario, `multiple_impacts`) in lockstep with a controller on the `upc/*` services.
 /// In real time (`--mode realtime`) the robot is held at its start posture until a controller's
 /// torques arrive, and held again if they stop (`[sim.hold]`): start the processes in any order.
@@ -48,13 +49,15 @@ pub struct SimArgs {
     /// iceoryx2 service prefix (default sim.process.prefix, "upc").
     #[arg(long)]
     pub prefix: Option<String>,
-    /// Door torque profile: embedded scenario name (single_impact, multiple_impacts) or a path.
+    /// Door torque profile: embedded scenario name (single_impact, multiple_impacts, standing) or a path.
     #[arg(long)]
     pub scenario: Option<String>,
     /// Lockstep: write the ground truth (CoM, CoP, hand force, door, contact figures) every
     /// record period as CSV here: the same bytes on every rerun.
     #[arg(long)]
     pub truth_csv: Option<PathBuf>,
+    #[command(flatten)]
+    pub robot: RobotArg,
 }
 
 pub fn load_config(args: &SimArgs) -> Result<SimConfig, upc::config::ConfigError> {
@@ -83,6 +86,7 @@ pub fn run_cli(args: SimArgs) -> CliResult {
     let config = load_config(&args)?;
     let opts = RunOptions {
         node_name: format!("upc-sim-{}", std::process::id()),
+        robot: std::sync::Arc::new(args.robot.load()?),
         config,
         rrd: args.rrd.clone(),
         recording_id: args.recording_id.clone(),

@@ -23,6 +23,8 @@ pub enum ConfigError {
     },
     #[error("bad override `{text}`: expected key=value, e.g. preview.horizon=300")]
     Override { text: String },
+    #[error("robot: {message}")]
+    Robot { message: String },
 }
 
 /// Ordered TOML layers merged into one table; later layers win key by key.

@@ -132,6 +132,8 @@ pub struct WbcConfig {
     pub feet: [String; 2],
     /// Frame of the hand impedance task.
     pub hand_frame: String,
+    /// The body the hand's arm chain starts from (M_e of the chain root → hand, SPEC §4).
+    pub hand_chain_root: String,
     /// Coulomb friction coefficient μ of the friction cones.
     pub friction: f64,
     /// Fraction of the URDF effort limits the QP may use, in (0, 1].

@@ -40,6 +40,10 @@ pub enum TickError {
     },
     #[error("state is not finite")]
     NotFinite,
+    #[error(
+        "the plant runs another robot (robot hash {plant:016x}, this controller's {mine:016x}): start both with the same --robot"
+    )]
+    Robot { plant: u64, mine: u64 },
     #[error("dynamics: {0}")]
     Dynamics(#[from] DynamicsError),
 }
@@ -84,7 +88,8 @@ pub struct ControllerCore {
     previewer: HandPreviewer,
     pub kind: ControllerKind,
     hand_frame: usize,
-    sole_frames: [usize; 2],
+    /// Content hash of the robot this controller was built for (0: not checked).
+    robot_hash: u64,
     horizon: usize,
     period: f64,
     dt: f64,
@@ -136,10 +141,10 @@ impl ControllerCore {
             mass: model.total_mass(),
             gravity: config.robot.gravity,
         };
-        let op = OpSpaceWorkspace::new(&model, "chest", "r_hand")?;
-        let wbc = WholeBodyController::new(&model, &config.wbc)?;
-        let hand_frame = model.frame_id("r_hand")?;
-        let sole_frames = [model.frame_id("l_sole")?, model.frame_id("r_sole")?];
+        let w = &config.wbc;
+        let op = OpSpaceWorkspace::new(&model, &w.hand_chain_root, &w.hand_frame)?;
+        let wbc = WholeBodyController::new(&model, w)?;
+        let hand_frame = model.frame_id(&w.hand_frame)?;
         let nominal = GainSchedule::constant(n, config.hand.kp, config.nominal_kd(config.hand.kp));
         Ok(Self {
             data: Data::new(&model),
@@ -151,7 +156,7 @@ impl ControllerCore {
             previewer: HandPreviewer::new(p.period, Matrix3::identity(), n)?,
             kind,
             hand_frame,
-            sole_frames,
+            robot_hash: 0,
             horizon: n,
             period: p.period,
             dt: control_period,
@@ -172,6 +177,13 @@ impl ControllerCore {
             last: TickRecord::default(),
             model,
         })
+    }
+
+    /// Refuse states whose `robot_hash` announces another robot than `hash`
+    /// ([`crate::robot::Robot::hash`]).
+    pub fn with_robot_hash(mut self, hash: u64) -> Self {
+        self.robot_hash = hash;
+        self
     }
 
     pub fn horizon(&self) -> usize {
@@ -259,6 +271,12 @@ impl ControllerCore {
                 model_nv: nv,
             });
         }
+        if state.robot_hash != 0 && self.robot_hash != 0 && state.robot_hash != self.robot_hash {
+            return Err(TickError::Robot {
+                plant: state.robot_hash,
+                mine: self.robot_hash,
+            });
+        }
         if !state.q[..nq]
             .iter()
             .chain(&state.v[..nv])
@@ -275,19 +293,20 @@ impl ControllerCore {
         let hand_pos = self.data.o_m_f[self.hand_frame].trans;
         let hand_vel = self.hand_vel();
         let latched = *self.latched.get_or_insert_with(|| {
-            let (l, r) = (
-                self.data.o_m_f[self.sole_frames[0]].trans,
-                self.data.o_m_f[self.sole_frames[1]].trans,
-            );
+            // The ZMP reference's centre: the contact points' centroid (the feet centre; the
+            // sole frames' midpoint on robots whose sole frame is off the sole's centre).
             let mut support = [[f64::INFINITY, f64::NEG_INFINITY]; 2];
-            for f in self.wbc.contact_frames() {
+            let mut centre = [0.0; 2];
+            let corners = self.wbc.contact_frames();
+            for f in corners {
                 let p = self.data.o_m_f[f].trans;
                 for a in 0..2 {
                     support[a] = [support[a][0].min(p[a]), support[a][1].max(p[a])];
+                    centre[a] += p[a] / corners.len() as f64;
                 }
             }
             Latched {
-                zmp_center: [0.5 * (l.x + r.x), 0.5 * (l.y + r.y)],
+                zmp_center: centre,
                 support,
                 com_height: com.z,
                 hand_target: hand_pos,

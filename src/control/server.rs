@@ -58,6 +58,11 @@ pub struct ServerOptions {
     /// Content hash of the scenario this controller was configured with (its ZMP reference and
     /// config layer): a plant announcing another one is reported.
     pub scenario_hash: Option<u64>,
+    /// Content hash of the robot the model was built from ([`crate::robot::Robot::hash`]):
+    /// states of a plant announcing another robot are refused. `None`: not checked.
+    pub robot_hash: Option<u64>,
+    /// The robot's name, for the summary.
+    pub robot_name: String,
 }
 
 /// What a run measured; written as the controller's part of `summary.json`.
@@ -65,6 +70,9 @@ pub struct ServerOptions {
 #[serde(default)]
 pub struct ServerSummary {
     pub controller: String,
+    /// The robot's name (its description) and total mass (kg).
+    pub robot: String,
+    pub robot_mass: f64,
     pub mode: String,
     /// Lockstep with every input a function of simulated time (see the module doc): a rerun
     /// gives the same bytes. `reproducibility` says why not, when not.
@@ -187,7 +195,8 @@ pub fn run_server_with(
         dt,
         [cc.com_height_kp, cc.com_height_kd],
         opts.zmp_offset,
-    )?;
+    )?
+    .with_robot_hash(opts.robot_hash.unwrap_or(0));
     let n_tau = core.model.nv - 6;
     let horizon_time = config.preview.horizon as f64 * config.preview.period;
     let mut intake = ForecastIntake::new(
@@ -237,6 +246,8 @@ pub fn run_server_with(
 
     let mut s = ServerSummary {
         controller: kind.name().into(),
+        robot: opts.robot_name.clone(),
+        robot_mass: weight / config.robot.gravity,
         mode: format!("{:?}", cc.mode).to_lowercase(),
         min_zmp_margin: f64::INFINITY,
         realtime: rt,

@@ -57,15 +57,19 @@ impl Model {
 
     /// Builds a model from URDF text.
     pub fn from_urdf_str(text: &str, base: BaseJoint) -> Result<Model, DynamicsError> {
-        let text = without_empty_textures(text);
-        let robot =
-            urdf_rs::read_from_string(&text).map_err(|e| diagnose(&text, &e.to_string()))?;
-        let model = build(&robot, base)?;
+        let model = build(&parse_urdf(text)?, base)?;
         for w in &model.load_warnings {
             tracing::warn!("URDF `{}`: {w}", model.name);
         }
         Ok(model)
     }
+}
+
+/// Parses URDF text (urdf-rs) with the loader's leniency and error messages, for readers of
+/// what the model does not keep (collision geometry).
+pub fn parse_urdf(text: &str) -> Result<urdf_rs::Robot, DynamicsError> {
+    let text = without_empty_textures(text);
+    urdf_rs::read_from_string(&text).map_err(|e| diagnose(&text, &e.to_string()))
 }
 
 /// Largest principal moment below zero (kg·m²) that a repair may remove: a gram at a

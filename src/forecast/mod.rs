@@ -96,13 +96,8 @@ pub fn run(
     let notifier = bus.notifier(ServiceKind::Forecast)?;
     let states = bus.subscriber::<StateMsg>(ServiceKind::State)?;
     let wake = bus.listener(ServiceKind::State)?;
-    let mut current = match source {
-        Source::Fixed(sc) => Some(Current {
-            hash: sc.content_hash(),
-            scenario: sc.clone(),
-        }),
-        Source::FollowPlant => None,
-    };
+    // Chosen at the first state (the plant says how hard it pushes its robot).
+    let mut current: Option<Current> = None;
     let mut seq = 0u64;
     let mut last_index: Option<i64> = None;
     let mut session = 0u64;
@@ -135,24 +130,36 @@ pub fn run(
         }
         if seen_hash != Some(st.scenario_hash) {
             seen_hash = Some(st.scenario_hash);
-            match (source, &current) {
-                (Source::FollowPlant, _) => {
-                    current = follow(&st);
-                    last_index = None;
+            // The plant pushes its robot `force_scale` times the scenario's figures.
+            let scale = if st.force_scale > 0.0 {
+                st.force_scale
+            } else {
+                1.0
+            };
+            let chosen = match source {
+                Source::Fixed(sc) => Some(sc.clone()),
+                Source::FollowPlant => follow(&st),
+            };
+            current = chosen.map(|sc| {
+                let scenario = sc.with_force_scale(scale);
+                Current {
+                    hash: scenario.content_hash(),
+                    scenario,
                 }
-                (Source::Fixed(_), Some(cur))
-                    if st.scenario_hash != 0 && cur.hash != st.scenario_hash =>
-                {
-                    tracing::warn!(
-                        "forecasting `{}` (hash {:016x}) while the plant plays `{}` (hash {:016x})",
-                        cur.scenario.name,
-                        cur.hash,
-                        st.scenario_name(),
-                        st.scenario_hash
-                    );
-                }
-                _ => {}
+            });
+            if let Some(cur) = &current
+                && st.scenario_hash != 0
+                && cur.hash != st.scenario_hash
+            {
+                tracing::warn!(
+                    "forecasting `{}` × {scale} (hash {:016x}) while the plant plays `{}` (hash {:016x})",
+                    cur.scenario.name,
+                    cur.hash,
+                    st.scenario_name(),
+                    st.scenario_hash
+                );
             }
+            last_index = None;
         }
         let Some(cur) = &current else { continue };
         let now = st.time;
@@ -183,25 +190,23 @@ pub fn run(
 }
 
 /// Load the scenario a state announces (the default one when it announces none).
-fn follow(st: &StateMsg) -> Option<Current> {
+fn follow(st: &StateMsg) -> Option<Scenario> {
     let name = match st.scenario_name() {
         "" => crate::scenario::DEFAULT,
         n => n,
     };
     match Scenario::load(name) {
         Ok(scenario) => {
-            let hash = scenario.content_hash();
             tracing::info!(
-                "following the plant's scenario `{name}` ({}, hash {hash:016x})",
-                scenario.name
+                "following the plant's scenario `{name}` ({}, forces × {})",
+                scenario.name,
+                if st.force_scale > 0.0 {
+                    st.force_scale
+                } else {
+                    1.0
+                }
             );
-            if st.scenario_hash != 0 && hash != st.scenario_hash {
-                tracing::warn!(
-                    "`{name}` here hashes to {hash:016x}, the plant's to {:016x}: the files differ",
-                    st.scenario_hash
-                );
-            }
-            Some(Current { scenario, hash })
+            Some(scenario)
         }
         Err(e) => {
             tracing::error!(

@@ -45,12 +45,22 @@ pub fn scenario_block(run: &RunDir, scenario: Option<&Scenario>) -> String {
         .collect();
     let _ = writeln!(
         s,
-        "Run directory `{}`: {:.2} s simulated in {} mode; controllers {}.\n",
+        "Run directory `{}`: robot `{}`, {:.2} s simulated in {} mode; controllers {}.\n",
         run.path.display(),
+        run.robot,
         run.duration,
         run.mode,
         names.join(", ")
     );
+    if let Some(sc) = scenario.filter(|sc| sc.force_scale != 1.0) {
+        let _ = writeln!(
+            s,
+            "The scenario's forces are scaled by {:.3} for this robot (its mass over the \
+             iCub-like humanoid's, capped by its arm's force capacity over the iCub-like's: \
+             `upc model --robot`); the table shows the scaled forces.\n",
+            sc.force_scale
+        );
+    }
     match scenario.map(|sc| &sc.force) {
         Some(ForceProfile::Impacts(impacts)) => {
             s += "Hand force profile (raised-cosine impacts, feet frame):\n\n";
@@ -224,9 +234,9 @@ pub fn reduced_metrics_table(runs: &[ReducedRun]) -> String {
 pub fn reduced_config_line(config: &Config, scenario: &Scenario) -> String {
     let p = &config.preview;
     format!(
-        "Reduced models: cart-table CoM (M = {} kg, z_c = {} m) and hand impedance model, \
+        "Reduced models: cart-table CoM (M = {:.2} kg, z_c = {:.3} m) and hand impedance model, \
          {:.2} s of the scenario, T = {} s, N = {} ({:.2} s preview), R/Q_e = {:e}, nominal \
-         K_p = {}, support x ∈ [{}, {}] m, y ∈ [{}, {}] m.\n",
+         K_p = {}, support x ∈ [{:.3}, {:.3}] m, y ∈ [{:.3}, {:.3}] m.\n",
         config.robot.mass,
         config.robot.com_height,
         scenario.duration,

@@ -18,7 +18,8 @@ use std::path::PathBuf;
 
 use crate::config::ConfigError;
 use crate::preview::PreviewError;
-use crate::scenario::{Scenario, ScenarioError};
+use crate::robot::Robot;
+use crate::scenario::Scenario;
 pub use reduced::ConfigLayers;
 use rundir::RunDir;
 use series::SeriesSource;
@@ -50,6 +51,8 @@ pub enum ReportError {
     Config(#[from] ConfigError),
     #[error("no run directory given")]
     NoRuns,
+    #[error("robot of the run: {0}")]
+    Robot(#[from] crate::robot::RobotError),
 }
 
 /// What `compare` does beyond the run directories.
@@ -76,12 +79,15 @@ pub struct CompareOutput {
 }
 
 /// The scenario of a run, as the run loaded it (its recorded source first, then its name),
-/// cut to the simulated duration so that both test beds cover the same time.
-fn run_scenario(run: &RunDir) -> Result<Scenario, ScenarioError> {
+/// its forces scaled to the run's robot, cut to the simulated duration so that both test beds
+/// cover the same time.
+fn run_scenario(run: &RunDir, robot: &Robot) -> Result<Scenario, String> {
     let mut scenario = match &run.scenario_source {
-        Some(src) => Scenario::load(src).or_else(|_| Scenario::load(&run.scenario))?,
-        None => Scenario::load(&run.scenario)?,
-    };
+        Some(src) => Scenario::load(src).or_else(|_| Scenario::load(&run.scenario)),
+        None => Scenario::load(&run.scenario),
+    }
+    .map_err(|e| e.to_string())?
+    .with_force_scale(robot.force_scale().map_err(|e| e.to_string())?);
     scenario.duration = run.duration;
     Ok(scenario)
 }
@@ -159,7 +165,8 @@ pub fn compare(runs: &[PathBuf], opts: &CompareOptions) -> Result<CompareOutput,
             tag.push('_');
         }
         used_tags.push(tag.clone());
-        let scenario = run_scenario(run);
+        let robot = Robot::load(&run.robot)?;
+        let scenario = run_scenario(run, &robot);
         let _ = writeln!(md, "## {} — `{}`\n", run.scenario, run.path.display());
         md += &markdown::scenario_block(run, scenario.as_ref().ok());
 
@@ -212,7 +219,8 @@ pub fn compare(runs: &[PathBuf], opts: &CompareOptions) -> Result<CompareOutput,
                 .collect(),
         };
         let key = format!(
-            "{}|{}|{:?}|{:?}",
+            "{}|{}|{}|{:?}|{:?}",
+            run.robot,
             run.scenario_source.as_deref().unwrap_or(&run.scenario),
             run.duration,
             layers.files,
@@ -226,7 +234,7 @@ pub fn compare(runs: &[PathBuf], opts: &CompareOptions) -> Result<CompareOutput,
             continue;
         }
         reduced_done.push((key, run.path.display().to_string()));
-        let config = layers.load(&scenario)?;
+        let config = layers.load(&robot, &scenario)?;
         tracing::info!(
             "reduced models: {} for {:.2} s, C0, C1, C2",
             scenario.name,

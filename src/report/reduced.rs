@@ -5,10 +5,12 @@ use std::path::PathBuf;
 
 use super::ReportError;
 use super::series::ReducedRun;
-use crate::config::{Config, ControllerKind, DEFAULT_TOML, Layers};
+use crate::config::{Config, ControllerKind};
+use crate::robot::Robot;
 use crate::scenario::Scenario;
 
-/// Config layers as `upc` builds them: defaults ← files ← the scenario's `[config]` ← sets.
+/// Config layers as `upc` builds them: defaults ← the robot's ← files ← the scenario's
+/// `[config]` ← sets.
 #[derive(Debug, Clone, Default)]
 pub struct ConfigLayers {
     pub files: Vec<PathBuf>,
@@ -16,9 +18,8 @@ pub struct ConfigLayers {
 }
 
 impl ConfigLayers {
-    pub fn load(&self, scenario: &Scenario) -> Result<Config, ReportError> {
-        let mut layers = Layers::new();
-        layers.push_str("<embedded config/default.toml>", DEFAULT_TOML)?;
+    pub fn load(&self, robot: &Robot, scenario: &Scenario) -> Result<Config, ReportError> {
+        let mut layers = Config::layers_for(robot)?;
         for path in &self.files {
             layers.push_file(path)?;
         }

@@ -32,6 +32,8 @@ pub struct RunDir {
     /// The directory's own name, used to name its figures.
     pub name: String,
     pub scenario: String,
+    /// What `upc run --robot` was given (the default robot for runs that do not say).
+    pub robot: String,
     /// What `upc run --scenario` was given (an embedded name or a TOML path), if recorded.
     pub scenario_source: Option<String>,
     pub description: String,
@@ -111,6 +113,7 @@ impl RunDir {
                 .unwrap_or_else(|| "run".into()),
             path: path.to_path_buf(),
             scenario,
+            robot: str_of("robot").unwrap_or_else(|| crate::robot::DEFAULT.into()),
             scenario_source: str_of("scenario_source"),
             description: str_of("description").unwrap_or_default(),
             duration,

@@ -62,7 +62,7 @@ impl ContentHash {
 }
 
 /// The scenarios shipped with upc, embedded so they run without files: (name, TOML).
-pub const EMBEDDED: [(&str, &str); 2] = [
+pub const EMBEDDED: [(&str, &str); 3] = [
     (
         "single_impact",
         include_str!("../../config/scenarios/single_impact.toml"),
@@ -70,6 +70,10 @@ pub const EMBEDDED: [(&str, &str); 2] = [
     (
         "multiple_impacts",
         include_str!("../../config/scenarios/multiple_impacts.toml"),
+    ),
+    (
+        "standing",
+        include_str!("../../config/scenarios/standing.toml"),
     ),
 ];
 
@@ -105,6 +109,8 @@ pub struct Scenario {
     pub config: Option<toml::Table>,
     /// Where it came from, for messages.
     pub origin: String,
+    /// Factor the file's forces were multiplied by ([`Scenario::with_force_scale`]); 1 as written.
+    pub force_scale: f64,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -115,7 +121,7 @@ pub enum ScenarioError {
         source: std::io::Error,
     },
     #[error(
-        "no scenario named `{0}`: give a path to a .toml file, or one of: single_impact, multiple_impacts"
+        "no scenario named `{0}`: give a path to a .toml file, or one of: single_impact, multiple_impacts, standing"
     )]
     Unknown(String),
     #[error(transparent)]
@@ -135,6 +141,17 @@ impl Scenario {
         }
         h.f64(self.duration);
         h.finish()
+    }
+
+    /// The scenario with its forces multiplied by `s` (a robot heavier than the one the
+    /// scenarios were written for is pushed harder: [`crate::robot::Robot::force_scale`]).
+    /// The content hash follows the forces; `s = 1` leaves the scenario as it is.
+    pub fn with_force_scale(mut self, s: f64) -> Scenario {
+        if s != 1.0 {
+            self.force = self.force.scaled(s);
+            self.force_scale *= s;
+        }
+        self
     }
 
     /// Load by embedded name (`single_impact`) or by path to a TOML file.
@@ -205,6 +222,7 @@ impl Scenario {
             force,
             config: file.config,
             origin: origin.to_string(),
+            force_scale: 1.0,
         })
     }
 }

@@ -85,6 +85,27 @@ impl ForceProfile {
         }
     }
 
+    /// The profile with every force multiplied by `s`.
+    pub fn scaled(&self, s: f64) -> ForceProfile {
+        match self {
+            ForceProfile::Impacts(impacts) => ForceProfile::Impacts(
+                impacts
+                    .iter()
+                    .map(|i| Impact {
+                        force: i.force.map(|f| f * s),
+                        ..i.clone()
+                    })
+                    .collect(),
+            ),
+            ForceProfile::Samples(samples) => ForceProfile::Samples(
+                samples
+                    .iter()
+                    .map(|(t, f)| (*t, f.map(|x| x * s)))
+                    .collect(),
+            ),
+        }
+    }
+
     /// Feed the profile's defining numbers (bit patterns, in order) to `h`: equal profiles give
     /// equal hashes on every machine, so processes can tell whether they play the same one.
     pub fn hash_into(&self, h: &mut super::ContentHash) {

@@ -67,9 +67,12 @@ pub struct Supervisor {
 
 impl Supervisor {
     /// A supervisor that starts by holding `q_start`.
+    /// `carrying`: the frames whose supporting joints carry the body (legs, torso), which the
+    /// hold stiffens to `cfg.leg_kp`, `cfg.leg_kd` at least.
     pub fn new(
         model: &Model,
         q_start: &DVector<f64>,
+        carrying: &[usize],
         cfg: &HoldConfig,
         safe_damping: f64,
         dt: f64,
@@ -77,12 +80,7 @@ impl Supervisor {
         let pd = match cfg.kind {
             HoldKind::PosturePd => Some(
                 PosturePd::new(model, q_start, cfg.frequency, cfg.damping_ratio)?
-                    .with_floor(
-                        model,
-                        &["hip", "knee", "ankle", "torso"],
-                        cfg.leg_kp,
-                        cfg.leg_kd,
-                    )
+                    .with_floor(model, carrying, cfg.leg_kp, cfg.leg_kd)
                     .capped(dt),
             ),
             HoldKind::Damping => None,
@@ -225,7 +223,7 @@ fn damping(d: f64, v: &DVector<f64>, out: &mut DVector<f64>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::dynamics::icub_like;
+    use crate::robot::Robot;
 
     fn cfg() -> HoldConfig {
         HoldConfig {
@@ -242,10 +240,11 @@ mod tests {
 
     #[test]
     fn holds_hands_over_continuously_holds_again_then_damps() {
-        let model = icub_like::load().unwrap();
-        let q0 = icub_like::home_configuration(&model).unwrap();
+        let robot = Robot::embedded_default().unwrap();
+        let (model, q0) = (&robot.model, &robot.home);
         let dt = 1e-3;
-        let mut sup = Supervisor::new(&model, &q0, &cfg(), 5.0, dt).unwrap();
+        let mut sup =
+            Supervisor::new(model, q0, &robot.carrying_frames(), &cfg(), 5.0, dt).unwrap();
         let n = model.nv - 6;
         let mut q = q0.clone();
         // Knee bent 0.05 rad away from the hold's posture: the PD pushes back.
@@ -314,21 +313,22 @@ mod tests {
 
     #[test]
     fn start_up_hold_never_times_out_and_damping_kind_never_holds() {
-        let model = icub_like::load().unwrap();
-        let q0 = icub_like::home_configuration(&model).unwrap();
-        let mut sup = Supervisor::new(&model, &q0, &cfg(), 5.0, 1e-3).unwrap();
+        let robot = Robot::embedded_default().unwrap();
+        let (model, q0) = (&robot.model, &robot.home);
+        let carrying = robot.carrying_frames();
+        let mut sup = Supervisor::new(model, q0, &carrying, &cfg(), 5.0, 1e-3).unwrap();
         let v = DVector::zeros(model.nv);
         let mut out = DVector::zeros(model.nv - 6);
         for k in 0..3000 {
-            sup.torques(k as f64 * 1e-3, &q0, &v, None, &mut out);
+            sup.torques(k as f64 * 1e-3, q0, &v, None, &mut out);
         }
         assert_eq!(sup.phase(), Phase::Hold);
         let damping = HoldConfig {
             kind: HoldKind::Damping,
             ..cfg()
         };
-        let mut sup = Supervisor::new(&model, &q0, &damping, 5.0, 1e-3).unwrap();
-        sup.torques(0.0, &q0, &v, None, &mut out);
+        let mut sup = Supervisor::new(model, q0, &carrying, &damping, 5.0, 1e-3).unwrap();
+        sup.torques(0.0, q0, &v, None, &mut out);
         assert_eq!(sup.phase(), Phase::Damping);
         assert_eq!(sup.stats.hold_steps, 0);
     }

@@ -22,5 +22,5 @@ pub mod world;
 pub use command::{CommandGate, CommandOrigin, CommandStats, Rejection, validate_command};
 pub use config::{HoldConfig, HoldKind, Mode, SimConfig};
 pub use hold::{HoldStats, Phase, Supervisor};
-pub use scene::{CONTACT_FRAMES, DoorDrive, PosturePd, Scene, humanoid_scene};
+pub use scene::{DoorDrive, PosturePd, Scene, humanoid_scene, robot_scene};
 pub use world::{DoorSpec, PhysicsParams, Plane, SimError, StepReport, World, WorldSpec};

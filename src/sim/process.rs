@@ -57,6 +57,8 @@ pub enum ProcessError {
 #[derive(Debug, Clone)]
 pub struct RunOptions {
     pub config: SimConfig,
+    /// The robot in the scene (`--robot`; the embedded default when built by tests).
+    pub robot: std::sync::Arc<crate::robot::Robot>,
     /// Write the ground truth to this `.rrd`.
     pub rrd: Option<PathBuf>,
     pub recording_id: Option<String>,
@@ -82,6 +84,8 @@ pub struct RunSummary {
     /// The plant's own hold: steps per phase, hand-overs, controller losses (real time).
     pub hold: HoldStats,
     pub mode: String,
+    pub robot: String,
+    pub force_scale: f64,
     pub scenario: String,
     pub scenario_hash: String,
     pub session: String,
@@ -108,6 +112,9 @@ pub struct PlantInfo {
     /// Plant time of the scenario's time 0 (negative: not started).
     pub scenario_start: f64,
     pub flags: u32,
+    /// The scenario's force factor for the robot, and the robot's content hash.
+    pub force_scale: f64,
+    pub robot_hash: u64,
 }
 
 /// Fills a [`StateMsg`] from the world (allocation-free).
@@ -136,6 +143,8 @@ pub fn fill_state(
     m.scenario_hash = info.scenario_hash;
     m.scenario_start = info.scenario_start;
     m.flags = info.flags;
+    m.force_scale = info.force_scale;
+    m.robot_hash = info.robot_hash;
     m.set_scenario_name(&info.scenario);
 }
 
@@ -151,7 +160,10 @@ struct Endpoints {
 /// Runs `upc sim` until the configured duration elapses or `stop` is raised.
 pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessError> {
     let cfg = &opts.config;
-    let (scene, scenario) = default_scene(cfg).map_err(|e| ProcessError::Setup(e.to_string()))?;
+    let robot = &opts.robot;
+    let (scene, scenario) =
+        default_scene(cfg, robot).map_err(|e| ProcessError::Setup(e.to_string()))?;
+    let carrying = scene.carrying.clone();
     let (mut world, drive) = (scene.world, scene.drive);
     if world.q().len() > MAX_DOF || world.contact_forces().len() != N_CONTACTS {
         return Err(ProcessError::Contract(format!(
@@ -173,6 +185,8 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
             Mode::Lockstep => STATE_FLAG_LOCKSTEP,
             Mode::Realtime => STATE_FLAG_HOLD,
         },
+        force_scale: scenario.force_scale,
+        robot_hash: robot.hash,
     };
     if cfg.scenario.len() > crate::channels::SCENARIO_NAME_LEN {
         return Err(ProcessError::Setup(format!(
@@ -187,7 +201,10 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
         ));
     }
     tracing::info!(
-        "sim: {:?} mode, dt = {} s, duration = {} s, scenario `{}` ({}, hash {:016x}), prefix `{}`, door {}, session {:016x}, hold {:?}",
+        "sim: robot `{}` ({:.1} kg, forces × {:.3}), {:?} mode, dt = {} s, duration = {} s, scenario `{}` ({}, hash {:016x}), prefix `{}`, door {}, session {:016x}, hold {:?}",
+        robot.name(),
+        robot.derived.mass,
+        scenario.force_scale,
         cfg.mode,
         cfg.dt,
         cfg.duration,
@@ -210,7 +227,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
     };
     let mut recorder = match &opts.rrd {
         Some(path) => {
-            let spawn = || Recorder::spawn(path, opts.recording_id.as_deref(), &world);
+            let spawn = || Recorder::spawn(path, opts.recording_id.as_deref(), &world, robot);
             // Real time: its threads in the idle class, they must not delay the steps. Lockstep
             // must end on a loaded machine too, where idle-class threads hardly run.
             let rec = match cfg.mode {
@@ -238,6 +255,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
     let supervisor = Supervisor::new(
         world.robot(),
         world.q(),
+        &carrying,
         &cfg.hold,
         cfg.process.safe_damping,
         cfg.dt,
@@ -313,6 +331,8 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
         hold: looper.supervisor.stats,
         mode: format!("{:?}", cfg.mode).to_lowercase(),
         scenario: cfg.scenario.clone(),
+        robot: robot.name().to_string(),
+        force_scale: info.force_scale,
         scenario_hash: format!("{:016x}", info.scenario_hash),
         session: format!("{:016x}", info.session),
         scenario_start: looper.info.scenario_start,

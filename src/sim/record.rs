@@ -281,31 +281,32 @@ fn logger(
 }
 
 impl Recorder {
-    /// Opens the `.rrd`, logs the static geometry of the robot and the door (from their URDFs:
-    /// `assets/icub_like/icub_like.urdf`, `assets/door/door.urdf`) and starts the logger thread.
+    /// Opens the `.rrd`, logs the static geometry of the robot and the door (the primitives of
+    /// their URDFs' visuals; meshes are not drawn) and starts the logger thread.
     pub fn spawn(
         path: &Path,
         recording_id: Option<&str>,
         world: &World,
+        robot: &crate::robot::Robot,
     ) -> Result<Recorder, Box<dyn std::error::Error + Send + Sync>> {
         let mut b = rerun::RecordingStreamBuilder::new("upc");
         if let Some(id) = recording_id {
             b = b.recording_id(id);
         }
         let rec = b.save(path)?;
-        let robot_urdf = urdf_rs::read_file(crate::dynamics::icub_like::urdf_path())?;
+        let robot_urdf = crate::dynamics::parse_urdf(&robot.urdf)?;
         rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
         log_geometry(&rec, "world/robot", &robot_urdf)?;
         let robot_links = link_frames(world.robot(), &robot_urdf);
         let door_links = match world.door() {
             Some((model, _)) => {
-                let door_urdf = urdf_rs::read_file(crate::dynamics::icub_like::door_urdf_path())?;
+                let door_urdf = crate::dynamics::parse_urdf(crate::dynamics::icub_like::DOOR_URDF)?;
                 log_geometry(&rec, "world/door", &door_urdf)?;
                 link_frames(model, &door_urdf)
             }
             None => Vec::new(),
         };
-        let hand_frame = world.robot().frame_id(super::scene::HAND_FRAME).ok();
+        let hand_frame = world.robot().frame_id(&robot.description.hand.frame).ok();
         let (tx, rx) = sync_channel::<Frame>(64);
         let (rl, dl) = (robot_links.clone(), door_links.clone());
         let thread = std::thread::Builder::new()

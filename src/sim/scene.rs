@@ -1,10 +1,10 @@
-//! The default scene (SPEC §6): the iCub-like humanoid standing on flat ground on the four sole
-//! corners of each foot, its right hand holding the door's handle through a spherical joint,
-//! and the door's hinge driven by the scenario's torque profile.
+//! The scene (SPEC §6): a robot (the iCub-like humanoid by default, any [`Robot`]) standing on
+//! flat ground on the four contact points of each foot, its hand holding the door's handle
+//! through a spherical joint, and the door's hinge driven by the scenario's torque profile.
 //!
 //! Door placement: the door (`assets/door/door.urdf`) is turned by −90° about z so that its leaf
 //! faces the robot (its −y side, where the handle sticks out, points to world −x), and translated
-//! so that at hinge angle 0 the handle frame coincides with `r_hand` at the home configuration.
+//! so that at hinge angle 0 the handle frame coincides with the robot's hand at home.
 //! The hinge is then 0.72 m to the robot's left of the handle (+y) and its vertical axis passes
 //! 7 cm beyond the handle (+x); the door floats a little below the ground, which does not matter
 //! (it only touches the hand).
@@ -17,25 +17,13 @@
 use nalgebra::{DVector, Vector3};
 
 use crate::dynamics::{BaseJoint, Data, Model, SE3, forward_kinematics, icub_like};
+use crate::robot::Robot;
 use crate::scenario::{ForceProfile, Scenario};
 
 use super::config::SimConfig;
 use super::world::{DoorSpec, PhysicsParams, Plane, SimError, World, WorldSpec};
 
-/// The contact frames, in the channel contract's order.
-pub const CONTACT_FRAMES: [&str; 8] = [
-    "l_sole_fl",
-    "l_sole_fr",
-    "l_sole_rl",
-    "l_sole_rr",
-    "r_sole_fl",
-    "r_sole_fr",
-    "r_sole_rl",
-    "r_sole_rr",
-];
-
-/// The robot frame that holds the door, and the door frame it holds.
-pub const HAND_FRAME: &str = "r_hand";
+/// The door frame the robot's hand holds.
 pub const HANDLE_FRAME: &str = "handle";
 
 /// The hinge torque profile derived from the scenario's hand force.
@@ -72,12 +60,17 @@ impl DoorDrive {
     }
 }
 
-/// The default scene built: the world, its initial state and the door drive.
+/// A scene built: the world, its initial state and the door drive.
 pub struct Scene {
     pub world: World,
     pub drive: DoorDrive,
     /// Home configuration of the robot (also the initial state).
     pub q_home: DVector<f64>,
+    /// Frames whose supporting joints carry the body (the soles, the arm chain's root): a
+    /// posture hold stiffens those joints ([`PosturePd::with_floor`]).
+    pub carrying: Vec<usize>,
+    /// The robot's hand frame (held to the door's handle).
+    pub hand_frame: String,
 }
 
 /// World placement of the door's base that puts the handle on `hand` (hinge angle 0).
@@ -91,7 +84,7 @@ pub fn door_base_for(door: &Model, hand: &Vector3<f64>) -> Result<SE3, SimError>
     Ok(SE3::new(rot, hand - rot * h0))
 }
 
-/// Builds the humanoid (+ door if `config.door`) at its home configuration, at rest.
+/// Builds the default robot (+ door if `config.door`) at its home configuration, at rest.
 pub fn humanoid_scene(
     config: &SimConfig,
     profile: Option<ForceProfile>,
@@ -105,14 +98,27 @@ pub fn humanoid_scene_with(
     with_door: bool,
     profile: Option<ForceProfile>,
 ) -> Result<Scene, SimError> {
-    let robot = icub_like::load()?;
-    let q_home = icub_like::home_configuration(&robot)?;
+    let robot = Robot::embedded_default().map_err(|e| SimError::Scene(e.to_string()))?;
+    robot_scene(&robot, params, with_door, profile)
+}
+
+/// `robot` at its home configuration, at rest, on the ground; with the door at its hand when
+/// `with_door` (driven by `profile`).
+pub fn robot_scene(
+    robot: &Robot,
+    params: PhysicsParams,
+    with_door: bool,
+    profile: Option<ForceProfile>,
+) -> Result<Scene, SimError> {
+    let q_home = robot.home.clone();
+    let hand_frame = robot.description.hand.frame.clone();
+    let robot_model = robot.model.clone();
     let mut drive = DoorDrive::none();
     let door = if with_door {
-        let door = Model::from_urdf_file(icub_like::door_urdf_path(), BaseJoint::Fixed)?;
-        let mut data = Data::new(&robot);
-        forward_kinematics(&robot, &mut data, &q_home)?;
-        let hand = data.o_m_f[robot.frame_id(HAND_FRAME)?].trans;
+        let door = Model::from_urdf_str(icub_like::DOOR_URDF, BaseJoint::Fixed)?;
+        let mut data = Data::new(&robot_model);
+        forward_kinematics(&robot_model, &mut data, &q_home)?;
+        let hand = data.o_m_f[robot_model.frame_id(&hand_frame)?].trans;
         let base = door_base_for(&door, &hand)?;
         // Lever: from the hinge axis (through the hinge joint origin) to the handle.
         let hinge = door
@@ -143,14 +149,14 @@ pub fn humanoid_scene_with(
             model: door,
             base,
             handle_frame: HANDLE_FRAME.into(),
-            hand_frame: HAND_FRAME.into(),
+            hand_frame: hand_frame.clone(),
         })
     } else {
         None
     };
     let spec = WorldSpec {
-        robot,
-        contact_frames: CONTACT_FRAMES.iter().map(|s| s.to_string()).collect(),
+        robot: robot_model,
+        contact_frames: robot.contacts.to_vec(),
         ground: Plane::ground(),
         door,
         params,
@@ -161,15 +167,24 @@ pub fn humanoid_scene_with(
         world,
         drive,
         q_home,
+        carrying: robot.carrying_frames(),
+        hand_frame,
     })
 }
 
-/// Loads the scenario named in the config (embedded name or path) and builds the scene.
+/// Loads the scenario named in the config (embedded name or path), scales its forces to
+/// `robot` ([`Robot::force_scale`]) and builds the scene.
 pub fn default_scene(
     config: &SimConfig,
+    robot: &Robot,
 ) -> Result<(Scene, Scenario), Box<dyn std::error::Error + Send + Sync>> {
-    let scenario = Scenario::load(&config.scenario)?;
-    let scene = humanoid_scene(config, Some(scenario.force.clone()))?;
+    let scenario = Scenario::load(&config.scenario)?.with_force_scale(robot.force_scale()?);
+    let scene = robot_scene(
+        robot,
+        PhysicsParams::from_config(config),
+        config.door,
+        Some(scenario.force.clone()),
+    )?;
     Ok((scene, scenario))
 }
 
@@ -218,14 +233,22 @@ impl PosturePd {
         })
     }
 
-    /// Raises the gains of the joints whose name contains one of `patterns` to at least
-    /// (`kp`, `kd`). The inertia diagonal underestimates what a standing leg carries (the ankle's
-    /// subtree is the foot alone, but it holds the whole body up), so legs and torso need floors.
-    pub fn with_floor(mut self, model: &Model, patterns: &[&str], kp: f64, kd: f64) -> Self {
+    /// Raises the gains of the joints that support one of the frames `carrying` (the soles and
+    /// the arm chain's root: legs and torso) to at least (`kp`, `kd`). The inertia diagonal
+    /// underestimates what a standing leg carries (the ankle's subtree is the foot alone, but it
+    /// holds the whole body up), so legs and torso need floors.
+    pub fn with_floor(mut self, model: &Model, carrying: &[usize], kp: f64, kd: f64) -> Self {
         let start = if self.floating { 6 } else { 0 };
         for i in 0..self.kp.len() {
-            let name = &model.joints[model.dof_joint[start + i]].name;
-            if patterns.iter().any(|p| name.contains(p)) {
+            let joint = model.dof_joint[start + i];
+            let supports = |&f: &usize| {
+                model
+                    .frames
+                    .get(f)
+                    .and_then(|fr| fr.parent)
+                    .is_some_and(|p| model.is_ancestor(joint, p))
+            };
+            if carrying.iter().any(supports) {
                 self.kp[i] = self.kp[i].max(kp);
                 self.kd[i] = self.kd[i].max(kd);
             }
@@ -248,9 +271,13 @@ impl PosturePd {
     /// The posture PD the tests and the benchmark use for the humanoid: 6 Hz critically damped
     /// on the effective inertias, legs and torso raised to 800 N·m/rad and 10 N·m·s/rad, all
     /// capped for stability at the 1 ms step.
-    pub fn standing(model: &Model, q_ref: &DVector<f64>) -> Result<Self, SimError> {
+    pub fn standing(
+        model: &Model,
+        q_ref: &DVector<f64>,
+        carrying: &[usize],
+    ) -> Result<Self, SimError> {
         Ok(Self::new(model, q_ref, 6.0, 1.0)?
-            .with_floor(model, &["hip", "knee", "ankle", "torso"], 800.0, 10.0)
+            .with_floor(model, carrying, 800.0, 10.0)
             .capped(1e-3))
     }
 

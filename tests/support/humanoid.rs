@@ -16,7 +16,7 @@ pub struct Rig {
 
 pub fn rig(config: &Config, kind: ControllerKind) -> Rig {
     let model = icub_like::load().expect("model");
-    let q = icub_like::home_configuration(&model).expect("home");
+    let q = upc::robot::Robot::embedded_default().expect("robot").home;
     let mut state = StateMsg {
         nq: model.nq as u32,
         nv: model.nv as u32,

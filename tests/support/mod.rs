@@ -4,3 +4,4 @@
 pub mod counting_alloc;
 pub mod humanoid;
 pub mod procs;
+pub mod robots;

@@ -1,0 +1,99 @@
+//! The robot description file (`config/robots/<name>.toml`): what a user writes to bring a
+//! humanoid. Everything that follows from the model (mass, CoM height, support, M_e) is not in
+//! it: [`super::Robot`] computes it.
+//!
+//! ```toml
+//! name = "g1"
+//! description = "Unitree G1, 29 DoF (example-robot-data)"
+//! [urdf]
+//! package = "example-robot-data"           # a registry package (scripts/setup.sh), or none:
+//! path = "robots/g1_description/urdf/g1_29dof_rev_1_0.urdf"   # relative to the package / this file
+//! [feet.left]
+//! frame = "left_sole"                      # the sole frame (z: the ground's normal)
+//! link = "left_ankle_roll_link"            # created on this link when the URDF has no such frame
+//! contacts = "collision"                   # or "frames", or [[x, y, z], …] × 4 in the sole frame
+//! [hand]
+//! frame = "right_rubber_hand"              # holds the door
+//! chain_root = "torso_link"                # M_e is the chain root → hand's (SPEC §4)
+//! [home]                                   # joint = angle (rad); the others at 0
+//! left_knee_joint = 0.3
+//! [config]                                 # robot-dependent values of config/default.toml
+//! hand.kp = 400.0
+//! ```
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use serde::Deserialize;
+
+/// A robot description as written.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotDescription {
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    pub urdf: UrdfSource,
+    pub feet: Feet,
+    pub hand: HandSpec,
+    /// Joint angles of the standing posture (rad); unlisted joints are at 0.
+    #[serde(default)]
+    pub home: BTreeMap<String, f64>,
+    /// Config keys layered over `config/default.toml` for this robot (gains, torque scale).
+    #[serde(default)]
+    pub config: Option<toml::Table>,
+}
+
+/// Where the URDF is.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UrdfSource {
+    /// A registry package installed by `scripts/setup.sh` (`example-robot-data`,
+    /// `icub-models`); `path` is then inside it.
+    #[serde(default)]
+    pub package: Option<String>,
+    /// Path of the URDF: inside the package, or relative to the description file (then to the
+    /// repository root, where the embedded robot's assets are).
+    pub path: PathBuf,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Feet {
+    pub left: FootSpec,
+    pub right: FootSpec,
+}
+
+/// One foot: its sole frame and the four points that touch the ground.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FootSpec {
+    /// The sole frame: origin on the sole, z the outward normal of the ground (up when flat).
+    pub frame: String,
+    /// The link the sole belongs to, when `frame` is not in the URDF (it is then created on the
+    /// link, at the centroid of the contact points, with the link's orientation) or when the
+    /// contacts come from this link's collision geometry.
+    #[serde(default)]
+    pub link: Option<String>,
+    pub contacts: ContactSpec,
+}
+
+/// The four contact points of a sole.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+pub enum ContactSpec {
+    /// `"frames"`: the URDF has `<frame>_fl`, `_fr`, `_rl`, `_rr`; `"collision"`: from the
+    /// link's collision geometry (the bottom face of a box, or four spheres' lowest points).
+    Keyword(String),
+    /// Four points in the sole frame (m), any order.
+    Points(Vec<[f64; 3]>),
+}
+
+/// The hand that holds the door.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HandSpec {
+    pub frame: String,
+    /// The body the arm chain of M_e starts from (its joints are the chain's, exclusive).
+    pub chain_root: String,
+}

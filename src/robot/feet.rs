@@ -1,0 +1,200 @@
+//! The four contact points under each sole, as frames of the model named `<sole>_fl`, `_fr`,
+//! `_rl`, `_rr` (front/rear, left/right in the sole frame): the names the whole-body controller
+//! and the simulator look up. Given as frames of the URDF, as points, or derived from the foot's
+//! collision geometry.
+
+use nalgebra::{Matrix3, Vector3};
+
+use super::RobotError;
+use super::description::{ContactSpec, FootSpec};
+use crate::dynamics::{Model, SE3};
+
+/// Suffixes of the contact frames, in the channel contract's order.
+pub const CORNERS: [&str; 4] = ["fl", "fr", "rl", "rr"];
+
+/// Placement of link or frame `name` in its carrying body, and the body's joint.
+fn on_body(model: &Model, name: &str) -> Option<(Option<usize>, SE3)> {
+    let f = &model.frames[model.frame_id(name).ok()?];
+    Some((f.parent, f.placement))
+}
+
+/// Candidate points (link frame) from a link's collision geometry: a box's eight corners or
+/// spheres' centres with their radii.
+fn collision_points(
+    urdf: &urdf_rs::Robot,
+    link: &str,
+) -> Result<(Vec<Vector3<f64>>, Vec<f64>), RobotError> {
+    let l = urdf
+        .links
+        .iter()
+        .find(|l| l.name == link)
+        .ok_or_else(|| RobotError::Feet(format!("no link `{link}` in the URDF")))?;
+    let (mut pts, mut radii) = (Vec::new(), Vec::new());
+    for c in &l.collision {
+        let o = SE3::from_xyz_rpy(c.origin.xyz.0, c.origin.rpy.0);
+        match &c.geometry {
+            urdf_rs::Geometry::Box { size } => {
+                let h = Vector3::from(size.0) * 0.5;
+                for k in 0..8 {
+                    let s = |b: usize| if k & b == 0 { -1.0 } else { 1.0 };
+                    pts.push(o.act_point(&Vector3::new(s(1) * h.x, s(2) * h.y, s(4) * h.z)));
+                    radii.push(0.0);
+                }
+            }
+            urdf_rs::Geometry::Sphere { radius } => {
+                pts.push(o.trans);
+                radii.push(*radius);
+            }
+            other => {
+                return Err(RobotError::Feet(format!(
+                    "link `{link}`: a collision {} cannot give contact points: list them \
+                     (contacts = [[x, y, z], …] in the sole frame)",
+                    match other {
+                        urdf_rs::Geometry::Mesh { .. } => "mesh",
+                        urdf_rs::Geometry::Cylinder { .. } => "cylinder",
+                        _ => "capsule",
+                    }
+                )));
+            }
+        }
+    }
+    if pts.is_empty() {
+        return Err(RobotError::Feet(format!(
+            "link `{link}` has no collision geometry: list the contact points"
+        )));
+    }
+    Ok((pts, radii))
+}
+
+/// The four lowest points along `-z` of `frame` (placement `to_frame` from the link), each
+/// sphere lowered by its radius: the face that rests on the ground.
+fn lowest_four(
+    pts: &[Vector3<f64>],
+    radii: &[f64],
+    to_frame: &SE3,
+    link: &str,
+) -> Result<Vec<Vector3<f64>>, RobotError> {
+    let mut p: Vec<Vector3<f64>> = pts
+        .iter()
+        .zip(radii)
+        .map(|(x, r)| to_frame.act_point(x) - Vector3::z() * *r)
+        .collect();
+    p.sort_by(|a, b| a.z.total_cmp(&b.z));
+    if p.len() < 4 {
+        return Err(RobotError::Feet(format!(
+            "link `{link}`: {} collision points, four are needed",
+            p.len()
+        )));
+    }
+    let flat = p[3].z - p[0].z;
+    if flat > 1e-3 {
+        return Err(RobotError::Feet(format!(
+            "link `{link}`: the four lowest collision points are not in the sole plane \
+             ({:.1} mm apart along its normal): list the contact points",
+            flat * 1e3
+        )));
+    }
+    p.truncate(4);
+    Ok(p)
+}
+
+/// Front-left, front-right, rear-left, rear-right.
+fn ordered(mut p: Vec<Vector3<f64>>) -> [Vector3<f64>; 4] {
+    p.sort_by(|a, b| b.x.total_cmp(&a.x));
+    let (mut front, mut rear) = ([p[0], p[1]], [p[2], p[3]]);
+    front.sort_by(|a, b| b.y.total_cmp(&a.y));
+    rear.sort_by(|a, b| b.y.total_cmp(&a.y));
+    [front[0], front[1], rear[0], rear[1]]
+}
+
+/// Adds the foot's sole frame (if new) and contact frames to `model`; returns the contact
+/// frames' names in [`CORNERS`] order.
+pub fn attach(
+    model: &mut Model,
+    urdf: &urdf_rs::Robot,
+    spec: &FootSpec,
+) -> Result<[String; 4], RobotError> {
+    let names = CORNERS.map(|c| format!("{}_{c}", spec.frame));
+    let sole = on_body(model, &spec.frame);
+    let points: Vec<Vector3<f64>> = match &spec.contacts {
+        ContactSpec::Keyword(k) if k == "frames" => {
+            if sole.is_none() {
+                return Err(RobotError::Feet(format!(
+                    "contacts = \"frames\" but the URDF has no sole frame `{}`",
+                    spec.frame
+                )));
+            }
+            for n in &names {
+                model.frame_id(n).map_err(|_| {
+                    RobotError::Feet(format!(
+                        "contacts = \"frames\" but the URDF has no frame `{n}`"
+                    ))
+                })?;
+            }
+            return Ok(names);
+        }
+        ContactSpec::Keyword(k) if k == "collision" => {
+            let link = spec.link.as_deref().unwrap_or(&spec.frame);
+            let (body_joint, link_in_body) = on_body(model, link)
+                .ok_or_else(|| RobotError::Feet(format!("no link `{link}` in the model")))?;
+            let (pts, radii) = collision_points(urdf, link)?;
+            match sole {
+                Some((joint, sole_in_body)) => {
+                    if joint != body_joint {
+                        return Err(RobotError::Feet(format!(
+                            "sole `{}` and link `{link}` are on different bodies",
+                            spec.frame
+                        )));
+                    }
+                    let to_sole = sole_in_body.inverse().compose(&link_in_body);
+                    lowest_four(&pts, &radii, &to_sole, link)?
+                }
+                None => {
+                    // A new sole frame at the contact points' centroid, axes of the link.
+                    let p = lowest_four(&pts, &radii, &SE3::identity(), link)?;
+                    let c = p.iter().sum::<Vector3<f64>>() / 4.0;
+                    let sole_in_body = link_in_body.compose(&SE3::new(Matrix3::identity(), c));
+                    model.add_frame(spec.frame.clone(), body_joint, sole_in_body)?;
+                    p.iter().map(|x| x - c).collect()
+                }
+            }
+        }
+        ContactSpec::Keyword(k) => {
+            return Err(RobotError::Feet(format!(
+                "contacts = \"{k}\": expected \"frames\", \"collision\" or four [x, y, z] points"
+            )));
+        }
+        ContactSpec::Points(p) => {
+            if p.len() != 4 || p.iter().flatten().any(|x| !x.is_finite()) {
+                return Err(RobotError::Feet(format!(
+                    "sole `{}`: four finite [x, y, z] contact points are needed, got {}",
+                    spec.frame,
+                    p.len()
+                )));
+            }
+            if sole.is_none() {
+                let link = spec.link.as_deref().ok_or_else(|| {
+                    RobotError::Feet(format!(
+                        "no sole frame `{}` in the URDF: name its `link`",
+                        spec.frame
+                    ))
+                })?;
+                let (joint, at) = on_body(model, link)
+                    .ok_or_else(|| RobotError::Feet(format!("no link `{link}` in the model")))?;
+                model.add_frame(spec.frame.clone(), joint, at)?;
+            }
+            p.iter().map(|x| Vector3::from(*x)).collect()
+        }
+    };
+    let (joint, sole_in_body) = on_body(model, &spec.frame)
+        .ok_or_else(|| RobotError::Feet(format!("no sole frame `{}`", spec.frame)))?;
+    for (name, p) in names.iter().zip(ordered(points)) {
+        let at = sole_in_body.compose(&SE3::new(Matrix3::identity(), p));
+        model.add_frame(name.clone(), joint, at).map_err(|_| {
+            RobotError::Feet(format!(
+                "the URDF already has a frame `{name}`: use contacts = \"frames\""
+            ))
+        })?;
+    }
+    Ok(names)
+}

@@ -1,0 +1,427 @@
+//! Robots: a description ([`RobotDescription`], `config/robots/<name>.toml`) resolved into the
+//! model with its sole and contact frames, the home configuration, and what follows from them
+//! (mass, CoM height, support, M_e), which config, simulator and controller take from here.
+//! The iCub-like humanoid is the embedded default; the others name a registry package.
+
+pub mod description;
+pub mod feet;
+pub mod packages;
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{DVector, Matrix3, Vector3};
+
+pub use description::RobotDescription;
+
+use crate::config::{ConfigError, Layers};
+use crate::dynamics::{
+    BaseJoint, Data, DynamicsError, Model, OpSpaceWorkspace, center_of_mass, forward_kinematics,
+};
+use crate::scenario::ContentHash;
+
+/// The robot every process uses without `--robot`.
+pub const DEFAULT: &str = "icub_like";
+
+/// The descriptions shipped with upc (name, TOML): usable from any directory. Their URDFs are
+/// embedded (the iCub-like) or come from a registry package (`scripts/setup.sh`).
+pub const EMBEDDED: [(&str, &str); 4] = [
+    (
+        "icub_like",
+        include_str!("../../config/robots/icub_like.toml"),
+    ),
+    ("icub", include_str!("../../config/robots/icub.toml")),
+    ("talos", include_str!("../../config/robots/talos.toml")),
+    ("g1", include_str!("../../config/robots/g1.toml")),
+];
+
+/// Files the embedded descriptions name, embedded with them.
+const EMBEDDED_FILES: [(&str, &str); 1] = [(
+    crate::dynamics::icub_like::URDF_PATH,
+    crate::dynamics::icub_like::URDF,
+)];
+
+#[derive(Debug, thiserror::Error)]
+pub enum RobotError {
+    #[error(
+        "no robot named `{0}`: give a path to a .toml description, or one of: icub_like, icub, talos, g1"
+    )]
+    Unknown(String),
+    #[error("robot description {path} cannot be read: {reason}")]
+    Read { path: String, reason: String },
+    #[error(transparent)]
+    Description(#[from] ConfigError),
+    #[error("robot `{robot}`: its URDF: {reason}")]
+    Urdf { robot: String, reason: String },
+    #[error("feet: {0}")]
+    Feet(String),
+    #[error("{0}")]
+    Dynamics(#[from] DynamicsError),
+    #[error("robot `{robot}`: {reason}")]
+    Home { robot: String, reason: String },
+}
+
+/// What follows from the model at the home configuration (nothing here is typed by hand).
+#[derive(Debug, Clone, Copy)]
+pub struct Derived {
+    /// Total mass M (kg).
+    pub mass: f64,
+    /// CoM height above the contact points (m).
+    pub com_height: f64,
+    /// CoM ground projection relative to the feet centre (m).
+    pub com_offset: [f64; 2],
+    /// Axis-aligned bounds of the eight contact points about the feet centre,
+    /// [[x_min, x_max], [y_min, y_max]] (m).
+    pub support: [[f64; 2]; 2],
+    /// Operational-space inertia of the chain root → hand (kg).
+    pub effective_mass: Matrix3<f64>,
+    /// Hand position in the feet frame (origin: feet centre on the ground).
+    pub hand_position: Vector3<f64>,
+    /// Largest push along the world x axis (N, either sign) the arm holds at home within its
+    /// joints' effort limits: min over the chain joints of τ_max / |J_eᵀ x̂|.
+    pub hand_force_capacity: f64,
+    /// Largest angle between a sole's normal and the vertical (rad).
+    pub sole_tilt: f64,
+    /// Sole centres' distance (m).
+    pub feet_distance: f64,
+}
+
+/// A resolved robot: immutable after loading.
+#[derive(Debug, Clone)]
+pub struct Robot {
+    pub description: RobotDescription,
+    /// Where the description came from.
+    pub origin: String,
+    /// The URDF text and, when it is a file, its path (the recorder reads its geometry).
+    pub urdf: String,
+    pub urdf_path: Option<PathBuf>,
+    /// The model with the sole and contact frames added.
+    pub model: Model,
+    /// Left and right sole frames.
+    pub soles: [String; 2],
+    /// The eight contact frames, in the channel contract's order (left fl, fr, rl, rr, right …).
+    pub contacts: [String; 8],
+    /// Home configuration: [`RobotDescription::home`], the contact points on z = 0 centred on
+    /// the origin.
+    pub home: DVector<f64>,
+    pub derived: Derived,
+    /// Content hash of the description and the URDF: plant and controller must agree on it.
+    pub hash: u64,
+}
+
+impl Robot {
+    /// The embedded default robot (the iCub-like humanoid).
+    pub fn embedded_default() -> Result<Robot, RobotError> {
+        Self::load(DEFAULT)
+    }
+
+    /// Load by embedded name (`icub_like`, `icub`, `talos`, `g1`) or path to a description.
+    pub fn load(name_or_path: &str) -> Result<Robot, RobotError> {
+        if let Some((name, text)) = EMBEDDED.iter().find(|(n, _)| *n == name_or_path) {
+            return Self::parse(text, &format!("<embedded robot {name}>"), None);
+        }
+        let path = Path::new(name_or_path);
+        if !path.exists() && !name_or_path.ends_with(".toml") && !name_or_path.contains('/') {
+            return Err(RobotError::Unknown(name_or_path.into()));
+        }
+        let text = std::fs::read_to_string(path).map_err(|e| RobotError::Read {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })?;
+        Self::parse(&text, &path.display().to_string(), path.parent())
+    }
+
+    /// Parse a description; a relative URDF path resolves against `dir` (the description's
+    /// directory), then the repository root.
+    pub fn parse(text: &str, origin: &str, dir: Option<&Path>) -> Result<Robot, RobotError> {
+        let mut layers = Layers::new();
+        layers.push_str(origin, text)?;
+        let description: RobotDescription = layers.typed()?;
+        let name = description.name.clone();
+        let urdf_err = |reason: String| RobotError::Urdf {
+            robot: name.clone(),
+            reason,
+        };
+        let (urdf, urdf_path) = read_urdf(&description, dir).map_err(urdf_err)?;
+        let mut model = Model::from_urdf_str(&urdf, BaseJoint::Floating)?;
+        let parsed = crate::dynamics::parse_urdf(&urdf)?;
+        let f = &description.feet;
+        let left = feet::attach(&mut model, &parsed, &f.left)?;
+        let right = feet::attach(&mut model, &parsed, &f.right)?;
+        let contacts: [String; 8] = std::array::from_fn(|k| {
+            if k < 4 {
+                left[k].clone()
+            } else {
+                right[k - 4].clone()
+            }
+        });
+        let soles = [f.left.frame.clone(), f.right.frame.clone()];
+        let home = home_configuration(&model, &description, &soles, &contacts)?;
+        let derived = derive(&model, &description, &soles, &contacts, &home)?;
+        let mut h = ContentHash::default();
+        h.bytes(text.as_bytes());
+        h.bytes(urdf.as_bytes());
+        Ok(Robot {
+            hash: h.finish(),
+            origin: origin.into(),
+            urdf,
+            urdf_path,
+            model,
+            soles,
+            contacts,
+            home,
+            derived,
+            description,
+        })
+    }
+
+    /// The frames whose supporting joints carry the body: the soles (legs) and the arm chain's
+    /// root (torso).
+    pub fn carrying_frames(&self) -> Vec<usize> {
+        self.soles
+            .iter()
+            .chain(std::iter::once(&self.description.hand.chain_root))
+            .filter_map(|f| self.model.frame_id(f).ok())
+            .collect()
+    }
+
+    pub fn name(&self) -> &str {
+        &self.description.name
+    }
+
+    /// The config layer of this robot: what follows from its model, then its description's
+    /// `[config]` table (layered in that order over `config/default.toml`).
+    pub fn config_layers(&self) -> Vec<(String, toml::Table)> {
+        let d = &self.derived;
+        let arr =
+            |v: &[f64]| toml::Value::Array(v.iter().map(|x| toml::Value::Float(*x)).collect());
+        let mut robot = toml::Table::new();
+        robot.insert("mass".into(), toml::Value::Float(d.mass));
+        robot.insert("com_height".into(), toml::Value::Float(d.com_height));
+        let mut support = toml::Table::new();
+        support.insert("x".into(), arr(&d.support[0]));
+        support.insert("y".into(), arr(&d.support[1]));
+        let mut hand = toml::Table::new();
+        let m = &d.effective_mass;
+        hand.insert(
+            "effective_mass".into(),
+            toml::Value::Array(
+                (0..3)
+                    .map(|i| arr(&[m[(i, 0)], m[(i, 1)], m[(i, 2)]]))
+                    .collect(),
+            ),
+        );
+        hand.insert("desired_position".into(), arr(d.hand_position.as_slice()));
+        let mut wbc = toml::Table::new();
+        let text = |s: &str| toml::Value::String(s.into());
+        wbc.insert(
+            "feet".into(),
+            toml::Value::Array(self.soles.iter().map(|s| text(s)).collect()),
+        );
+        wbc.insert("hand_frame".into(), text(&self.description.hand.frame));
+        wbc.insert(
+            "hand_chain_root".into(),
+            text(&self.description.hand.chain_root),
+        );
+        let mut derived = toml::Table::new();
+        derived.insert("robot".into(), toml::Value::Table(robot));
+        derived.insert("support".into(), toml::Value::Table(support));
+        derived.insert("hand".into(), toml::Value::Table(hand));
+        derived.insert("wbc".into(), toml::Value::Table(wbc));
+        let mut out = vec![(format!("<robot {} (computed)>", self.name()), derived)];
+        if let Some(c) = &self.description.config {
+            out.push((format!("{} [config]", self.origin), c.clone()));
+        }
+        out
+    }
+
+    /// Push [`Robot::config_layers`] onto `layers`.
+    pub fn push_config(&self, layers: &mut Layers) {
+        for (origin, table) in self.config_layers() {
+            layers.push_table(&origin, table);
+        }
+    }
+
+    /// Factor applied to the scenarios' forces on this robot (they were written for the
+    /// embedded default): its mass over the default's, so that a push moves the CoM about as
+    /// much on every robot, but no more than its arm's force capacity over the default's
+    /// ([`Derived::hand_force_capacity`]), so that the arm holds the door as the default's does.
+    /// 1 on the default robot.
+    pub fn force_scale(&self) -> Result<f64, RobotError> {
+        if self.name() == DEFAULT {
+            return Ok(1.0);
+        }
+        let (mass, capacity) = reference()?;
+        Ok((self.derived.mass / mass).min(self.derived.hand_force_capacity / capacity))
+    }
+}
+
+/// Mass (kg) and arm force capacity (N) of the embedded default robot, computed once.
+pub fn reference() -> Result<(f64, f64), RobotError> {
+    static REF: std::sync::OnceLock<(f64, f64)> = std::sync::OnceLock::new();
+    if let Some(r) = REF.get() {
+        return Ok(*r);
+    }
+    let d = Robot::embedded_default()?.derived;
+    Ok(*REF.get_or_init(|| (d.mass, d.hand_force_capacity)))
+}
+
+fn read_urdf(
+    d: &RobotDescription,
+    dir: Option<&Path>,
+) -> Result<(String, Option<PathBuf>), String> {
+    let rel = &d.urdf.path;
+    let candidates: Vec<PathBuf> = match &d.urdf.package {
+        Some(p) => vec![packages::package_root(p)?.join(rel)],
+        None if rel.is_absolute() => vec![rel.clone()],
+        None => {
+            let mut c: Vec<PathBuf> = dir.map(|d| d.join(rel)).into_iter().collect();
+            c.push(Path::new(env!("CARGO_MANIFEST_DIR")).join(rel));
+            c
+        }
+    };
+    if let Some(p) = candidates.iter().find(|p| p.is_file()) {
+        let text = std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?;
+        return Ok((text, Some(p.clone())));
+    }
+    if d.urdf.package.is_none()
+        && let Some((_, text)) = EMBEDDED_FILES.iter().find(|(p, _)| Path::new(p) == rel)
+    {
+        return Ok((text.to_string(), None));
+    }
+    Err(format!(
+        "no file {} (looked in: {})",
+        rel.display(),
+        candidates
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    ))
+}
+
+/// The description's joint angles, the base turned so that the soles' x axes (toes) point
+/// along world +x (iCub's root link, for one, faces −x) and placed so that the contact points'
+/// centroid is at the origin (their mean height 0).
+fn home_configuration(
+    model: &Model,
+    d: &RobotDescription,
+    soles: &[String; 2],
+    contacts: &[String; 8],
+) -> Result<DVector<f64>, RobotError> {
+    let values: Vec<(&str, f64)> = d.home.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+    let mut q = model.configuration(&values)?;
+    let mut data = Data::new(model);
+    forward_kinematics(model, &mut data, &q)?;
+    let mut toes = Vector3::zeros();
+    for s in soles {
+        toes += data.o_m_f[model.frame_id(s)?].rot * Vector3::x();
+    }
+    let yaw = toes.y.atan2(toes.x);
+    if yaw.abs() > 1e-9 {
+        // The base is at the identity here: turn it by −yaw about the vertical.
+        let turn = nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), -yaw);
+        let p = turn * Vector3::new(q[0], q[1], q[2]);
+        let c = turn.coords;
+        for k in 0..3 {
+            q[k] = p[k];
+        }
+        q[3] = c.x;
+        q[4] = c.y;
+        q[5] = c.z;
+        q[6] = c.w;
+        forward_kinematics(model, &mut data, &q)?;
+    }
+    let mut c = Vector3::zeros();
+    for n in contacts {
+        c += data.o_m_f[model.frame_id(n)?].trans;
+    }
+    c /= 8.0;
+    for a in 0..3 {
+        q[a] -= c[a];
+    }
+    Ok(q)
+}
+
+fn derive(
+    model: &Model,
+    d: &RobotDescription,
+    soles: &[String; 2],
+    contacts: &[String; 8],
+    home: &DVector<f64>,
+) -> Result<Derived, RobotError> {
+    let home_err = |reason: String| RobotError::Home {
+        robot: d.name.clone(),
+        reason,
+    };
+    let mut data = Data::new(model);
+    let com = center_of_mass(model, &mut data, home)?;
+    forward_kinematics(model, &mut data, home)?;
+    let mut support = [[f64::INFINITY, f64::NEG_INFINITY]; 2];
+    let (mut zmin, mut zmax) = (f64::INFINITY, f64::NEG_INFINITY);
+    for n in contacts {
+        let p = data.o_m_f[model.frame_id(n)?].trans;
+        for a in 0..2 {
+            support[a] = [support[a][0].min(p[a]), support[a][1].max(p[a])];
+        }
+        zmin = zmin.min(p.z);
+        zmax = zmax.max(p.z);
+    }
+    let mut tilt: f64 = 0.0;
+    let mut centres = [Vector3::zeros(); 2];
+    for (k, s) in soles.iter().enumerate() {
+        let m = data.o_m_f[model.frame_id(s)?];
+        tilt = tilt.max((m.rot * Vector3::z()).z.clamp(-1.0, 1.0).acos());
+        for c in &contacts[4 * k..4 * k + 4] {
+            centres[k] += data.o_m_f[model.frame_id(c)?].trans / 4.0;
+        }
+    }
+    // A robot that does not stand flat on its eight points at home cannot be balanced by a
+    // controller that assumes it: refuse it with the figures.
+    if tilt > 2f64.to_radians() || zmax - zmin > 2e-3 {
+        return Err(home_err(format!(
+            "the soles are not flat on the ground at home (tilt {:.1}°, contact heights {:.1} mm \
+             apart): adjust [home] (hip, knee and ankle pitch)",
+            tilt.to_degrees(),
+            (zmax - zmin) * 1e3
+        )));
+    }
+    if !(support[0][0] < com.x
+        && com.x < support[0][1]
+        && support[1][0] < com.y
+        && com.y < support[1][1])
+    {
+        return Err(home_err(format!(
+            "the CoM at home ({:.3}, {:.3}) is outside the support [{:.3}, {:.3}] × [{:.3}, {:.3}]",
+            com.x, com.y, support[0][0], support[0][1], support[1][0], support[1][1]
+        )));
+    }
+    let mut op = OpSpaceWorkspace::new(model, &d.hand.chain_root, &d.hand.frame)?;
+    let effective_mass = *op.compute(model, &mut data, home)?;
+    let hand_force_capacity = op
+        .dofs
+        .iter()
+        .enumerate()
+        .map(|(k, &dof)| {
+            let lever = op.j_e[(0, k)].abs();
+            let effort = model.joints[model.dof_joint[dof]].limits.effort;
+            if lever > 1e-9 {
+                effort / lever
+            } else {
+                f64::INFINITY
+            }
+        })
+        .fold(f64::INFINITY, f64::min);
+    forward_kinematics(model, &mut data, home)?;
+    let hand_position = data.o_m_f[model.frame_id(&d.hand.frame)?].trans;
+    Ok(Derived {
+        mass: model.total_mass(),
+        com_height: com.z,
+        com_offset: [com.x, com.y],
+        support,
+        effective_mass,
+        hand_position,
+        hand_force_capacity,
+        sole_tilt: tilt,
+        feet_distance: (centres[0] - centres[1]).norm(),
+    })
+}

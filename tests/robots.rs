@@ -1,0 +1,261 @@
+//! Robot descriptions: what upc computes from a description (mass, CoM height, support, M_e,
+//! hand set-point) against independent computations, the contact points derived from collision
+//! geometry, the config layer, the force scaling, and the three robots of the registry packages
+//! (skipped, with the reason printed, when `scripts/setup.sh` could not install them).
+
+mod support;
+
+use nalgebra::Vector3;
+use support::robots::installed;
+use upc::config::Config;
+use upc::dynamics::{BaseJoint, Data, Model, OpSpaceWorkspace, center_of_mass, forward_kinematics};
+use upc::robot::description::{ContactSpec, FootSpec};
+use upc::robot::{Robot, RobotError, feet};
+use upc::scenario::Scenario;
+
+#[test]
+fn the_default_robot_computes_what_was_typed_before() {
+    let r = Robot::embedded_default().expect("default robot");
+    let d = &r.derived;
+    // Mass: the sum of the URDF's link masses (assets/README.md: 29.8 kg).
+    assert!((d.mass - 29.8).abs() < 1e-9, "mass {}", d.mass);
+    // Soles 0.14 × 0.065 m, 0.14 m apart (SPEC §7 facts the URDF was drawn from).
+    assert!((d.support[0][0] + 0.07).abs() < 1e-12 && (d.support[0][1] - 0.07).abs() < 1e-12);
+    assert!((d.support[1][1] - 0.1025).abs() < 1e-12, "{:?}", d.support);
+    assert!((d.feet_distance - 0.14).abs() < 1e-12);
+    assert!(d.sole_tilt < 1e-6, "{}", d.sole_tilt);
+    // CoM height with knees slightly bent: 0.50–0.54 m (SPEC §7).
+    assert!((0.50..0.54).contains(&d.com_height), "{}", d.com_height);
+    // Independent: the CoM of the home configuration, and M_e of the chest → hand chain there.
+    let model = upc::dynamics::icub_like::load().expect("model");
+    let mut data = Data::new(&model);
+    let com = center_of_mass(&model, &mut data, &r.home).expect("com");
+    assert!((com.z - d.com_height).abs() < 1e-12);
+    let mut op = OpSpaceWorkspace::new(&model, "chest", "r_hand").expect("chain");
+    let m_e = *op.compute(&model, &mut data, &r.home).expect("M_e");
+    assert!((m_e - d.effective_mass).norm() < 1e-12);
+    // The contacts lie on z = 0 around the origin.
+    forward_kinematics(&model, &mut data, &r.home).expect("fk");
+    let mut c = Vector3::zeros();
+    for n in &r.contacts {
+        let p = data.o_m_f[model.frame_id(n).expect("frame")].trans;
+        assert!(p.z.abs() < 1e-12, "{n} at {p:?}");
+        c += p / 8.0;
+    }
+    assert!(c.norm() < 1e-12);
+}
+
+#[test]
+fn config_takes_the_robot_values_and_set_still_overrides() {
+    let r = Robot::embedded_default().expect("robot");
+    let c = Config::embedded_default().expect("config");
+    assert_eq!(c.robot.mass, r.derived.mass);
+    assert_eq!(c.robot.com_height, r.derived.com_height);
+    assert_eq!(c.support.x, r.derived.support[0]);
+    assert_eq!(c.support.y, r.derived.support[1]);
+    assert_eq!(c.wbc.feet, ["l_sole".to_string(), "r_sole".to_string()]);
+    assert_eq!(c.wbc.hand_frame, "r_hand");
+    assert_eq!(c.wbc.hand_chain_root, "chest");
+    for i in 0..3 {
+        assert_eq!(c.hand.desired_position[i], r.derived.hand_position[i]);
+        for j in 0..3 {
+            assert_eq!(
+                c.hand.effective_mass[i][j],
+                r.derived.effective_mass[(i, j)]
+            );
+        }
+    }
+    let mut layers = Config::layers_for(&r).expect("layers");
+    layers.push_override("robot.mass=31.0").expect("override");
+    assert_eq!(layers.build().expect("config").robot.mass, 31.0);
+}
+
+#[test]
+fn forces_scale_with_the_robot_mass() {
+    let r = Robot::embedded_default().expect("robot");
+    assert_eq!(r.force_scale().expect("scale"), 1.0);
+    let s = Scenario::load("multiple_impacts").expect("scenario");
+    let same = s.clone().with_force_scale(1.0);
+    assert_eq!(same.content_hash(), s.content_hash());
+    let double = s.clone().with_force_scale(2.0);
+    assert_eq!(double.force_scale, 2.0);
+    assert_ne!(double.content_hash(), s.content_hash());
+    for k in 0..700 {
+        let t = k as f64 * 0.01;
+        let (a, b) = (s.force.at(t), double.force.at(t));
+        for i in 0..3 {
+            assert!((b[i] - 2.0 * a[i]).abs() <= 1e-12 * (1.0 + a[i].abs()));
+        }
+    }
+}
+
+/// A foot on a floating base, with the given collision elements on its link.
+fn foot_urdf(collision: &str) -> String {
+    format!(
+        r#"<robot name="foot">
+  <link name="base"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="ankle" type="revolute">
+    <parent link="base"/><child link="foot"/><origin xyz="0 0 -0.5" rpy="0 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-1" upper="1" effort="10" velocity="1"/>
+  </joint>
+  <link name="foot"><inertial><mass value="0.5"/><inertia ixx="0.001" iyy="0.001" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial>
+    {collision}
+  </link>
+</robot>"#
+    )
+}
+
+fn contact_points(urdf: &str, spec: &FootSpec) -> Result<Vec<Vector3<f64>>, RobotError> {
+    let mut model = Model::from_urdf_str(urdf, BaseJoint::Floating).expect("model");
+    let parsed = upc::dynamics::parse_urdf(urdf).expect("parse");
+    let names = feet::attach(&mut model, &parsed, spec)?;
+    let mut data = Data::new(&model);
+    forward_kinematics(&model, &mut data, &model.neutral()).expect("fk");
+    Ok(names
+        .iter()
+        .map(|n| data.o_m_f[model.frame_id(n).expect("contact frame")].trans)
+        .collect())
+}
+
+#[test]
+fn contact_points_come_from_a_box_or_spheres_and_a_mesh_is_refused() {
+    let spec = |contacts: ContactSpec| FootSpec {
+        frame: "sole".into(),
+        link: Some("foot".into()),
+        contacts,
+    };
+    // A 0.2 × 0.1 × 0.02 box 3 cm below the ankle, shifted 2 cm forward: its bottom corners,
+    // front-left first, at z = −0.5 − 0.03 − 0.01.
+    let boxed = foot_urdf(
+        r#"<collision><origin xyz="0.02 0 -0.03" rpy="0 0 0"/><geometry><box size="0.2 0.1 0.02"/></geometry></collision>"#,
+    );
+    let p = contact_points(&boxed, &spec(ContactSpec::Keyword("collision".into()))).expect("box");
+    let want = [[0.12, 0.05], [0.12, -0.05], [-0.08, 0.05], [-0.08, -0.05]];
+    for (q, w) in p.iter().zip(want) {
+        assert!(
+            (q - Vector3::new(w[0], w[1], -0.54)).norm() < 1e-12,
+            "{q:?} vs {w:?}"
+        );
+    }
+    // Four spheres of radius 1 cm: their lowest points.
+    let spheres: String = [[-0.05, 0.025], [-0.05, -0.025], [0.12, 0.03], [0.12, -0.03]]
+        .iter()
+        .map(|[x, y]| {
+            format!(r#"<collision><origin xyz="{x} {y} -0.03" rpy="0 0 0"/><geometry><sphere radius="0.01"/></geometry></collision>"#)
+        })
+        .collect();
+    let p = contact_points(
+        &foot_urdf(&spheres),
+        &spec(ContactSpec::Keyword("collision".into())),
+    )
+    .expect("spheres");
+    assert!(
+        (p[0] - Vector3::new(0.12, 0.03, -0.54)).norm() < 1e-12,
+        "{p:?}"
+    );
+    assert!(
+        (p[3] - Vector3::new(-0.05, -0.025, -0.54)).norm() < 1e-12,
+        "{p:?}"
+    );
+    // Points given in the sole frame (made at the link's origin), in any order.
+    let given = ContactSpec::Points(vec![
+        [-0.1, -0.04, 0.0],
+        [0.1, 0.04, 0.0],
+        [0.1, -0.04, 0.0],
+        [-0.1, 0.04, 0.0],
+    ]);
+    let p = contact_points(&boxed, &spec(given)).expect("points");
+    assert!(
+        (p[0] - Vector3::new(0.1, 0.04, -0.5)).norm() < 1e-12,
+        "{p:?}"
+    );
+    assert!(
+        (p[3] - Vector3::new(-0.1, -0.04, -0.5)).norm() < 1e-12,
+        "{p:?}"
+    );
+    // A mesh cannot give points: the error says what to do.
+    let mesh = foot_urdf(
+        r#"<collision><geometry><mesh filename="package://x/foot.stl"/></geometry></collision>"#,
+    );
+    let e = contact_points(&mesh, &spec(ContactSpec::Keyword("collision".into())))
+        .expect_err("mesh")
+        .to_string();
+    assert!(e.contains("mesh") && e.contains("contacts = [["), "{e}");
+    // Three points are not a sole.
+    let e = contact_points(&boxed, &spec(ContactSpec::Points(vec![[0.0; 3]; 3])))
+        .expect_err("three")
+        .to_string();
+    assert!(e.contains("four"), "{e}");
+}
+
+#[test]
+fn a_description_that_does_not_stand_is_refused_with_its_figures() {
+    let text = upc::robot::EMBEDDED[0]
+        .1
+        .replace("l_ankle_pitch = 0.25", "l_ankle_pitch = -0.25");
+    let e = Robot::parse(&text, "bent.toml", None)
+        .expect_err("tilted sole")
+        .to_string();
+    assert!(e.contains("not flat") && e.contains("28.6°"), "{e}");
+    let e = Robot::load("no_such_robot")
+        .expect_err("unknown")
+        .to_string();
+    assert!(e.contains("icub_like, icub, talos, g1"), "{e}");
+}
+
+#[test]
+fn the_package_robots_stand_flat_facing_x_with_their_published_mass() {
+    // (name, dof, mass range kg: iCub 2.5 ≈ 33 kg, TALOS ≈ 90–100 kg, G1 ≈ 33–35 kg)
+    for (name, nv, mass) in [
+        ("icub", 38, 30.0..36.0),
+        ("talos", 38, 85.0..100.0),
+        ("g1", 35, 30.0..37.0),
+    ] {
+        let Some(r) = installed(name) else {
+            continue;
+        };
+        let d = &r.derived;
+        assert_eq!(r.model.nv, nv, "{name}");
+        assert!(mass.contains(&d.mass), "{name}: {} kg", d.mass);
+        assert!(
+            d.sole_tilt < 0.5f64.to_radians(),
+            "{name}: tilt {}",
+            d.sole_tilt
+        );
+        // Toes along +x: every left contact is left of every right one, fronts ahead of rears.
+        let mut data = Data::new(&r.model);
+        forward_kinematics(&r.model, &mut data, &r.home).expect("fk");
+        let at = |k: usize| data.o_m_f[r.model.frame_id(&r.contacts[k]).expect("c")].trans;
+        for k in 0..4 {
+            assert!(at(k).y > at(4 + k).y, "{name}: left/right");
+        }
+        for foot in [0, 4] {
+            assert!(
+                at(foot).x > at(foot + 2).x && at(foot + 1).x > at(foot + 3).x,
+                "{name}"
+            );
+            assert!(at(foot).y > at(foot + 1).y, "{name}: fl left of fr");
+        }
+        // The hand in front of the body, the CoM over the support.
+        assert!(
+            d.hand_position.x > 0.1,
+            "{name}: hand {:?}",
+            d.hand_position
+        );
+        assert!(
+            d.com_offset[0].abs() < 0.05 && d.com_offset[1].abs() < 0.03,
+            "{name}"
+        );
+        let c = Config::for_robot(&r).expect("config");
+        assert_eq!(c.robot.mass, d.mass);
+        // Pushed by its mass, capped by what its arm holds, relative to the default robot.
+        let (m0, c0) = upc::robot::reference().expect("reference");
+        let scale = r.force_scale().expect("scale");
+        assert_eq!(
+            scale,
+            (d.mass / m0).min(d.hand_force_capacity / c0),
+            "{name}"
+        );
+        assert!(d.mass > m0, "{name} is heavier than the default");
+    }
+}
