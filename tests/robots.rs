@@ -259,3 +259,37 @@ fn the_package_robots_stand_flat_facing_x_with_their_published_mass() {
         assert!(d.mass > m0, "{name} is heavier than the default");
     }
 }
+
+#[test]
+fn mesh_files_resolve_in_the_packages_and_next_to_the_urdf() {
+    use upc::robot::packages::resolve_mesh;
+    let dir = std::env::temp_dir().join(format!("upc-mesh-{}", std::process::id()));
+    std::fs::create_dir_all(dir.join("meshes")).expect("dir");
+    std::fs::write(dir.join("meshes/foot.stl"), b"solid foot\nendsolid foot\n").expect("mesh");
+    assert_eq!(
+        resolve_mesh("meshes/foot.stl", Some(&dir)),
+        Some(dir.join("meshes/foot.stl"))
+    );
+    assert_eq!(resolve_mesh("meshes/hand.stl", Some(&dir)), None);
+    assert_eq!(resolve_mesh("package://no-such-package/a.stl", None), None);
+    let _ = std::fs::remove_dir_all(&dir);
+    // Every visual mesh of the package robots is found (the recorder draws them).
+    for name in ["icub", "talos", "g1"] {
+        let Some(r) = installed(name) else { continue };
+        let urdf = upc::dynamics::parse_urdf(&r.urdf).expect("parse");
+        let dir = r.urdf_path.as_deref().and_then(std::path::Path::parent);
+        let meshes: Vec<&str> = urdf
+            .links
+            .iter()
+            .flat_map(|l| &l.visual)
+            .filter_map(|v| match &v.geometry {
+                urdf_rs::Geometry::Mesh { filename, .. } => Some(filename.as_str()),
+                _ => None,
+            })
+            .collect();
+        assert!(meshes.len() > 20, "{name}: {} meshes", meshes.len());
+        for m in meshes {
+            assert!(resolve_mesh(m, dir).is_some(), "{name}: {m} not found");
+        }
+    }
+}

@@ -2,7 +2,7 @@
 //! `example-robot-data` and `icub-models` (PyPI) into a virtual environment outside the clone,
 //! `$UPC_ROBOT_VENV` or `~/.cache/upc/robot-venv`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// The packages a robot description may name, and where each puts its files inside the
 /// environment (`{site}`: the environment's `site-packages`).
@@ -57,4 +57,25 @@ pub fn package_root(package: &str) -> Result<PathBuf, String> {
             venv.display()
         )),
     }
+}
+
+/// The file a URDF mesh `filename` names: `package://<pkg>/<rest>` looked up in the robot-model
+/// environment (`share/<pkg>` of the environment or of its cmeel prefix), `file://` or a plain
+/// path (relative to `urdf_dir`). `None` when there is no such file.
+pub fn resolve_mesh(filename: &str, urdf_dir: Option<&Path>) -> Option<PathBuf> {
+    if let Some(rest) = filename.strip_prefix("package://") {
+        let (pkg, rel) = rest.split_once('/')?;
+        let venv = robot_venv()?;
+        let mut roots = vec![venv.join("share").join(pkg)];
+        if let Some(site) = site_packages(&venv) {
+            roots.push(site.join("cmeel.prefix/share").join(pkg));
+        }
+        return roots.into_iter().map(|r| r.join(rel)).find(|p| p.is_file());
+    }
+    let path = Path::new(filename.strip_prefix("file://").unwrap_or(filename));
+    let full = match urdf_dir {
+        Some(d) if path.is_relative() => d.join(path),
+        _ => path.to_path_buf(),
+    };
+    full.is_file().then_some(full)
 }

@@ -87,20 +87,27 @@ fn color_of(urdf: &urdf_rs::Robot, v: &urdf_rs::Visual) -> [u8; 4] {
     [180, 180, 190, 255]
 }
 
+/// Logs each link's visuals: primitives, and meshes whose file resolves
+/// ([`crate::robot::packages::resolve_mesh`], relative paths against `urdf_dir`; a URDF
+/// without its mesh files is drawn with what remains). Returns the meshes not found.
 fn log_geometry(
     rec: &rerun::RecordingStream,
     prefix: &str,
     urdf: &urdf_rs::Robot,
-) -> rerun::RecordingStreamResult<()> {
+    urdf_dir: Option<&Path>,
+) -> rerun::RecordingStreamResult<usize> {
+    let mut missing = 0;
     for link in &urdf.links {
         for (k, v) in link.visual.iter().enumerate() {
             let path = format!("{prefix}/{}/visual_{k}", link.name);
             let o = SE3::from_xyz_rpy(v.origin.xyz.0, v.origin.rpy.0);
             let (t, q) = pose(&o);
-            rec.log_static(
-                path.as_str(),
-                &rerun::Transform3D::from_translation_rotation(t, rerun::Quaternion::from_xyzw(q)),
-            )?;
+            let mut transform =
+                rerun::Transform3D::from_translation_rotation(t, rerun::Quaternion::from_xyzw(q));
+            if let urdf_rs::Geometry::Mesh { scale: Some(s), .. } = &v.geometry {
+                transform = transform.with_scale(s.0.map(|x| x as f32));
+            }
+            rec.log_static(path.as_str(), &transform)?;
             let [r, g, b, a] = color_of(urdf, v);
             let color = rerun::Color::from_unmultiplied_rgba(r, g, b, a);
             match &v.geometry {
@@ -144,11 +151,31 @@ fn log_geometry(
                             .with_fill_mode(rerun::FillMode::Solid),
                     )?;
                 }
-                urdf_rs::Geometry::Mesh { .. } => {}
+                urdf_rs::Geometry::Mesh { filename, .. } => {
+                    let file = crate::robot::packages::resolve_mesh(filename, urdf_dir);
+                    match file.map(std::fs::read) {
+                        Some(Ok(bytes)) => {
+                            let media = filename
+                                .to_ascii_lowercase()
+                                .ends_with(".stl")
+                                .then(rerun::MediaType::stl);
+                            rec.log_static(
+                                path.as_str(),
+                                &rerun::Asset3D::from_file_contents(bytes, media)
+                                    .with_albedo_factor(
+                                        rerun::datatypes::Rgba32::from_unmultiplied_rgba(
+                                            r, g, b, a,
+                                        ),
+                                    ),
+                            )?;
+                        }
+                        _ => missing += 1,
+                    }
+                }
             }
         }
     }
-    Ok(())
+    Ok(missing)
 }
 
 /// Convex hull (counter-clockwise, closed) of 2-D points, by monotone chain.
@@ -296,12 +323,19 @@ impl Recorder {
         let rec = b.save(path)?;
         let robot_urdf = crate::dynamics::parse_urdf(&robot.urdf)?;
         rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
-        log_geometry(&rec, "world/robot", &robot_urdf)?;
+        let urdf_dir = robot.urdf_path.as_deref().and_then(Path::parent);
+        let missing = log_geometry(&rec, "world/robot", &robot_urdf, urdf_dir)?;
+        if missing > 0 {
+            tracing::info!(
+                "rerun: {missing} mesh files of `{}` not found, not drawn",
+                robot.name()
+            );
+        }
         let robot_links = link_frames(world.robot(), &robot_urdf);
         let door_links = match world.door() {
             Some((model, _)) => {
                 let door_urdf = crate::dynamics::parse_urdf(crate::dynamics::icub_like::DOOR_URDF)?;
-                log_geometry(&rec, "world/door", &door_urdf)?;
+                log_geometry(&rec, "world/door", &door_urdf, None)?;
                 link_frames(model, &door_urdf)
             }
             None => Vec::new(),
