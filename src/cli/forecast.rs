@@ -1,7 +1,7 @@
 //! `upc forecast`: publish a scenario's hand force forecast.
 
 use upc::channels::{Bus, DEFAULT_PREFIX};
-use upc::forecast::{ForecastSettings, Source, run};
+use upc::forecast::{ForecastError, ForecastSettings, Source, run};
 use upc::scenario::Scenario;
 use upc::shutdown::stop_flag;
 
@@ -29,6 +29,12 @@ pub struct ForecastArgs {
     /// Service prefix of the run.
     #[arg(long, default_value = DEFAULT_PREFIX)]
     pub prefix: String,
+    /// Forecast error: publish this multiple of the scenario's force (1: exact).
+    #[arg(long, default_value_t = 1.0, allow_hyphen_values = true)]
+    pub error_scale: f64,
+    /// Forecast error: publish the force this many seconds late (negative: early).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub error_shift: f64,
 }
 
 pub fn run_cli(args: ForecastArgs) -> CliResult {
@@ -42,12 +48,26 @@ pub fn run_cli(args: ForecastArgs) -> CliResult {
             return Err(format!("{name} must be > 0, got {v}").into());
         }
     }
+    if !(args.error_scale.is_finite() && args.error_shift.is_finite()) {
+        return Err("--error-scale and --error-shift must be finite".into());
+    }
     let settings = ForecastSettings {
         dt: args.dt,
         window: args.window,
         period: args.period,
         until: args.until.or(scenario.as_ref().map(|s| s.duration)),
+        error: ForecastError {
+            scale: args.error_scale,
+            shift: args.error_shift,
+        },
     };
+    if settings.error != ForecastError::NONE {
+        tracing::warn!(
+            "forecast error on purpose: forces × {}, {} s late",
+            args.error_scale,
+            args.error_shift
+        );
+    }
     let bus = Bus::open(&args.prefix, "forecaster")?;
     tracing::info!(
         "forecasting {} on {}/forecast: {} samples every {} s of sim time",

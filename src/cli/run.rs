@@ -52,6 +52,12 @@ pub struct RunArgs {
     /// No progress bar (logs only).
     #[arg(long)]
     pub quiet: bool,
+    /// A wrong forecast on purpose (the built-in forecaster): forces × this.
+    #[arg(long, default_value_t = 1.0, allow_hyphen_values = true)]
+    pub forecast_error_scale: f64,
+    /// A wrong forecast on purpose: the force forecast this many seconds late (negative: early).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub forecast_error_shift: f64,
     /// Controller config (files and --set), passed to `upc controller`.
     #[command(flatten)]
     pub config: ConfigArgs,
@@ -106,6 +112,7 @@ pub fn run(args: RunArgs) -> CliResult {
         "robot": args.robot.robot,
         "robot_mass": robot.derived.mass,
         "force_scale": scenario.force_scale,
+        "forecast_error": { "scale": args.forecast_error_scale, "shift": args.forecast_error_shift },
         "scenario_source": args.scenario,
         "config_files": args.config.configs,
         "config_sets": args.config.sets,
@@ -225,6 +232,10 @@ fn run_one(
                 &prefix,
                 "--until",
                 &dur,
+                "--error-scale",
+                &args.forecast_error_scale.to_string(),
+                "--error-shift",
+                &args.forecast_error_shift.to_string(),
             ]);
             c
         }

@@ -21,6 +21,24 @@ pub struct ForecastSettings {
     pub period: f64,
     /// Stop after this simulated time (s); `None` runs until asked to stop.
     pub until: Option<f64>,
+    /// A deliberately wrong forecast, for experiments on forecast errors.
+    pub error: ForecastError,
+}
+
+/// How the published forecast departs from the scenario: the force forecast for time t is
+/// `scale × F(t − shift)` (a push forecast `shift` s late, `scale` times as strong).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ForecastError {
+    pub scale: f64,
+    pub shift: f64,
+}
+
+impl ForecastError {
+    /// The exact forecast.
+    pub const NONE: ForecastError = ForecastError {
+        scale: 1.0,
+        shift: 0.0,
+    };
 }
 
 impl ForecastSettings {
@@ -44,7 +62,7 @@ pub fn window_covers(t0: f64, period: f64, t: f64) -> bool {
 }
 
 /// Fill `msg` with the window starting at plant time `t0` of `profile` played from plant time
-/// `scenario_start` (infinite: not started, all zeros).
+/// `scenario_start` (infinite: not started, all zeros), with `s.error` applied.
 pub fn fill_window(
     msg: &mut ForecastMsg,
     profile: &ForceProfile,
@@ -60,7 +78,13 @@ pub fn fill_window(
     msg.len = len as u32;
     msg.period = s.period;
     if scenario_start.is_finite() {
-        profile.sample_into(t0 - scenario_start, s.dt, &mut msg.forces[..len]);
+        let out = &mut msg.forces[..len];
+        profile.sample_into(t0 - scenario_start - s.error.shift, s.dt, out);
+        if s.error.scale != 1.0 {
+            for f in out.iter_mut() {
+                *f = f.map(|x| x * s.error.scale);
+            }
+        }
     } else {
         msg.forces[..len].fill([0.0; 3]);
     }
@@ -214,5 +238,44 @@ fn follow(st: &StateMsg) -> Option<Scenario> {
             );
             None
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_forecast_error_scales_and_delays_the_scenario_force() {
+        let profile = Scenario::load("single_impact").expect("scenario").force;
+        let exact = ForecastSettings {
+            dt: 0.005,
+            window: 2.5,
+            period: 0.01,
+            until: None,
+            error: ForecastError::NONE,
+        };
+        let wrong = ForecastSettings {
+            error: ForecastError {
+                scale: 1.5,
+                shift: 0.1,
+            },
+            ..exact
+        };
+        let (mut a, mut b): (Box<ForecastMsg>, Box<ForecastMsg>) = Default::default();
+        fill_window(&mut a, &profile, 1, 0.5, 0.2, &exact);
+        fill_window(&mut b, &profile, 1, 0.5, 0.2, &wrong);
+        let mut peak: f64 = 0.0;
+        for i in 0..exact.samples() {
+            let t = 0.5 + i as f64 * 0.005;
+            let want = profile.at(t - 0.2);
+            let late = profile.at(t - 0.2 - 0.1);
+            for c in 0..3 {
+                assert!((a.forces[i][c] - want[c]).abs() < 1e-12);
+                assert!((b.forces[i][c] - 1.5 * late[c]).abs() < 1e-12);
+            }
+            peak = peak.max(want[0].abs());
+        }
+        assert!(peak > 10.0, "the window covers the impact ({peak} N)");
     }
 }
