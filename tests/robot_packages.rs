@@ -21,11 +21,7 @@ const REFUSED: [(&str, &str); 2] = [
 ];
 
 fn python() -> Option<PathBuf> {
-    let venv = std::env::var_os("UPC_ROBOT_VENV")
-        .map(PathBuf::from)
-        .or_else(|| {
-            std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache/upc/robot-venv"))
-        })?;
+    let venv = upc::robot::packages::robot_venv()?;
     let py = venv.join("bin/python");
     let ok = Command::new(&py)
         .args(["-c", "import pinocchio, icub_models"])

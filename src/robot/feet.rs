@@ -1,6 +1,6 @@
 //! The four contact points under each sole, as frames of the model named `<sole>_fl`, `_fr`,
-//! `_rl`, `_rr` (front/rear, left/right in the sole frame): the names the whole-body controller
-//! and the simulator look up. Given as frames of the URDF, as points, or derived from the foot's
+//! `_rl`, `_rr` (front/rear, left/right in the sole frame: the whole-body controller's
+//! [`CORNERS`], which it and the simulator look up). Given as frames of the URDF, as points, or derived from the foot's
 //! collision geometry.
 
 use nalgebra::{Matrix3, Vector3};
@@ -8,9 +8,7 @@ use nalgebra::{Matrix3, Vector3};
 use super::RobotError;
 use super::description::{ContactSpec, FootSpec};
 use crate::dynamics::{Model, SE3};
-
-/// Suffixes of the contact frames, in the channel contract's order.
-pub const CORNERS: [&str; 4] = ["fl", "fr", "rl", "rr"];
+use crate::wbc::CORNERS;
 
 /// Placement of link or frame `name` in its carrying body, and the body's joint.
 fn on_body(model: &Model, name: &str) -> Option<(Option<usize>, SE3)> {

@@ -395,6 +395,7 @@ fn derive(
             com.x, com.y, support[0][0], support[0][1], support[1][0], support[1][1]
         )));
     }
+    let hand_position = data.o_m_f[model.frame_id(&d.hand.frame)?].trans;
     let mut op = OpSpaceWorkspace::new(model, &d.hand.chain_root, &d.hand.frame)?;
     let effective_mass = *op.compute(model, &mut data, home)?;
     let hand_force_capacity = op
@@ -411,8 +412,6 @@ fn derive(
             }
         })
         .fold(f64::INFINITY, f64::min);
-    forward_kinematics(model, &mut data, home)?;
-    let hand_position = data.o_m_f[model.frame_id(&d.hand.frame)?].trans;
     Ok(Derived {
         mass: model.total_mass(),
         com_height: com.z,

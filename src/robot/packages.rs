@@ -4,14 +4,11 @@
 
 use std::path::{Path, PathBuf};
 
-/// The packages a robot description may name, and where each puts its files inside the
-/// environment (`{site}`: the environment's `site-packages`).
-const LAYOUT: [(&str, &str); 2] = [
-    (
-        "example-robot-data",
-        "{site}/cmeel.prefix/share/example-robot-data",
-    ),
-    ("icub-models", "share/iCub"),
+/// The registry packages a robot description may name, and the directory under a `share`
+/// prefix of the environment where each puts its files (what their URDFs call `package://…`).
+const PACKAGES: [(&str, &str); 2] = [
+    ("example-robot-data", "example-robot-data"),
+    ("icub-models", "iCub"),
 ];
 
 /// The robot-model environment (it may not exist).
@@ -34,29 +31,41 @@ fn site_packages(venv: &std::path::Path) -> Option<PathBuf> {
     found.pop()
 }
 
+/// The `share` directories of the environment: its own, and that of its cmeel prefix (where
+/// `example-robot-data` installs).
+fn share_dirs(venv: &Path) -> Vec<PathBuf> {
+    let mut dirs = vec![venv.join("share")];
+    if let Some(site) = site_packages(venv) {
+        dirs.push(site.join("cmeel.prefix/share"));
+    }
+    dirs
+}
+
+/// The directory `share/<name>` of the environment, if it exists.
+fn shared(name: &str) -> Option<PathBuf> {
+    let venv = robot_venv()?;
+    share_dirs(&venv)
+        .into_iter()
+        .map(|d| d.join(name))
+        .find(|p| p.is_dir())
+}
+
 /// The root directory of `package`'s files, or why there is none.
 pub fn package_root(package: &str) -> Result<PathBuf, String> {
-    let Some((_, layout)) = LAYOUT.iter().find(|(p, _)| *p == package) else {
-        let known: Vec<&str> = LAYOUT.iter().map(|(p, _)| *p).collect();
+    let Some((_, dir)) = PACKAGES.iter().find(|(p, _)| *p == package) else {
+        let known: Vec<&str> = PACKAGES.iter().map(|(p, _)| *p).collect();
         return Err(format!(
             "unknown robot package `{package}` (known: {})",
             known.join(", ")
         ));
     };
-    let venv = robot_venv().ok_or("neither UPC_ROBOT_VENV nor HOME is set")?;
-    let root = if let Some(rest) = layout.strip_prefix("{site}/") {
-        site_packages(&venv).map(|s| s.join(rest))
-    } else {
-        Some(venv.join(layout))
-    };
-    match root {
-        Some(r) if r.is_dir() => Ok(r),
-        _ => Err(format!(
+    shared(dir).ok_or_else(|| {
+        format!(
             "the package `{package}` is not installed in {} (scripts/setup.sh installs it; \
              UPC_ROBOT_VENV points elsewhere)",
-            venv.display()
-        )),
-    }
+            robot_venv().map_or("<no HOME>".into(), |v| v.display().to_string())
+        )
+    })
 }
 
 /// The file a URDF mesh `filename` names: `package://<pkg>/<rest>` looked up in the robot-model
@@ -65,12 +74,7 @@ pub fn package_root(package: &str) -> Result<PathBuf, String> {
 pub fn resolve_mesh(filename: &str, urdf_dir: Option<&Path>) -> Option<PathBuf> {
     if let Some(rest) = filename.strip_prefix("package://") {
         let (pkg, rel) = rest.split_once('/')?;
-        let venv = robot_venv()?;
-        let mut roots = vec![venv.join("share").join(pkg)];
-        if let Some(site) = site_packages(&venv) {
-            roots.push(site.join("cmeel.prefix/share").join(pkg));
-        }
-        return roots.into_iter().map(|r| r.join(rel)).find(|p| p.is_file());
+        return Some(shared(pkg)?.join(rel)).filter(|p| p.is_file());
     }
     let path = Path::new(filename.strip_prefix("file://").unwrap_or(filename));
     let full = match urdf_dir {

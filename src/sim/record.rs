@@ -308,8 +308,8 @@ fn logger(
 }
 
 impl Recorder {
-    /// Opens the `.rrd`, logs the static geometry of the robot and the door (the primitives of
-    /// their URDFs' visuals; meshes are not drawn) and starts the logger thread.
+    /// Opens the `.rrd`, logs the static geometry of the robot and the door (their URDFs'
+    /// visuals: primitives, and the meshes whose files resolve) and starts the logger thread.
     pub fn spawn(
         path: &Path,
         recording_id: Option<&str>,

@@ -69,8 +69,6 @@ pub struct Scene {
     /// Frames whose supporting joints carry the body (the soles, the arm chain's root): a
     /// posture hold stiffens those joints ([`PosturePd::with_floor`]).
     pub carrying: Vec<usize>,
-    /// The robot's hand frame (held to the door's handle).
-    pub hand_frame: String,
 }
 
 /// World placement of the door's base that puts the handle on `hand` (hinge angle 0).
@@ -149,7 +147,7 @@ pub fn robot_scene(
             model: door,
             base,
             handle_frame: HANDLE_FRAME.into(),
-            hand_frame: hand_frame.clone(),
+            hand_frame,
         })
     } else {
         None
@@ -168,7 +166,6 @@ pub fn robot_scene(
         drive,
         q_home,
         carrying: robot.carrying_frames(),
-        hand_frame,
     })
 }
 
