@@ -2,13 +2,14 @@
 //! with posture-PD torques; malformed commands are rejected and counted; reruns are
 //! bit-identical. Also the pure validation of torque commands.
 
-use std::sync::atomic::AtomicBool;
-use std::time::Duration;
+mod support;
 
-use nalgebra::DVector;
-use upc::channels::{Bus, MAX_DOF, ServiceKind, StateMsg, TorqueMsg};
+use std::sync::atomic::AtomicBool;
+
+use support::pd_driver::{drive, state_bits};
+use upc::channels::{MAX_DOF, StateMsg};
 use upc::sim::process::{RunOptions, RunSummary, run};
-use upc::sim::{CommandGate, CommandOrigin, PosturePd, Rejection, SimConfig, validate_command};
+use upc::sim::{CommandGate, CommandOrigin, Rejection, SimConfig, validate_command};
 
 #[test]
 fn commands_with_wrong_length_nan_or_old_seq_are_rejected() {
@@ -103,62 +104,11 @@ fn lockstep_run(tag: &str, steps: u64, inject_bad: bool) -> (RunSummary, StateMs
         truth_csv: None,
     };
 
-    let bus = Bus::open(&prefix, &format!("ctrl_{tag}")).unwrap();
-    let states = bus.subscriber::<StateMsg>(ServiceKind::State).unwrap();
-    let torques = bus.publisher::<TorqueMsg>(ServiceKind::Torques).unwrap();
-    let wake_sim = bus.notifier(ServiceKind::Torques).unwrap();
-    let wake_me = bus.listener(ServiceKind::State).unwrap();
-
     let sim = std::thread::spawn(move || {
         let stop = AtomicBool::new(false);
         run(&opts, &stop)
     });
-
-    let robot = upc::robot::Robot::embedded_default().expect("robot");
-    let (model, q_home) = (&robot.model, &robot.home);
-    let pd = PosturePd::standing(model, q_home, &robot.carrying_frames()).unwrap();
-    let n = model.nv - 6;
-    let mut tau = DVector::zeros(n);
-    let mut seq = 0u64;
-    let mut last = StateMsg::default();
-    let send = |seq: u64, st: &StateMsg, n: u32, tau: &[f64]| {
-        torques
-            .send_with(|m| {
-                m.seq = seq;
-                m.state_step = st.step;
-                m.session = st.session;
-                m.n = n;
-                m.tau[..tau.len()].copy_from_slice(tau);
-            })
-            .unwrap();
-        wake_sim.notify().unwrap();
-    };
-    'outer: loop {
-        wake_me.wait(Duration::from_millis(100)).unwrap();
-        while let Some(s) = states.receive().unwrap() {
-            last = s;
-            if s.step >= steps {
-                break 'outer;
-            }
-            let q = DVector::from_column_slice(&s.q[..s.nq as usize]);
-            let v = DVector::from_column_slice(&s.v[..s.nv as usize]);
-            pd.torques(&q, &v, &mut tau);
-            if inject_bad && s.step == 5 {
-                send(seq + 1, &s, n as u32 - 1, tau.as_slice()); // wrong length
-                let mut nan = tau.clone();
-                nan[3] = f64::NAN;
-                send(seq + 1, &s, n as u32, nan.as_slice()); // NaN
-            }
-            if inject_bad && s.step == 7 {
-                send(seq, &s, n as u32, tau.as_slice()); // seq not increasing
-            }
-            seq += 1;
-            send(seq, &s, n as u32, tau.as_slice());
-        }
-        if sim.is_finished() {
-            break;
-        }
-    }
+    let last = drive(&prefix, tag, steps, inject_bad, || sim.is_finished());
     let summary = sim.join().unwrap().unwrap();
     (summary, last)
 }
@@ -175,13 +125,5 @@ fn lockstep_over_iceoryx2_rejects_bad_commands_and_reruns_identically() {
     let (b, sb) = lockstep_run("b", 300, false);
     assert_eq!(b.commands.rejected(), 0);
     assert_eq!(sa.step, 300);
-    let bits = |s: &StateMsg| -> Vec<u64> {
-        s.q.iter()
-            .chain(s.v.iter())
-            .chain(s.contact_forces.iter().flatten())
-            .chain(s.hand_force.iter())
-            .map(|x| x.to_bits())
-            .collect()
-    };
-    assert_eq!(bits(&sa), bits(&sb), "lockstep reruns differ");
+    assert_eq!(state_bits(&sa), state_bits(&sb), "lockstep reruns differ");
 }

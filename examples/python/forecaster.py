@@ -13,64 +13,18 @@ built-in forecaster, with UPC_PREFIX and UPC_DURATION set.
 """
 
 import argparse
-import ctypes
 import math
 import os
 import signal
 import sys
 import time
+from pathlib import Path
 
 import iceoryx2 as iox2
 
-MAX_DOF = 48
-N_CONTACTS = 8
-MAX_FORECAST = 2048
-SCENARIO_NAME_LEN = 128
-
-
-class StateMsg(ctypes.Structure):
-    _fields_ = [
-        ("step", ctypes.c_uint64),
-        ("time", ctypes.c_double),
-        ("nq", ctypes.c_uint32),
-        ("nv", ctypes.c_uint32),
-        ("q", ctypes.c_double * MAX_DOF),
-        ("v", ctypes.c_double * MAX_DOF),
-        ("contact_forces", (ctypes.c_double * 3) * N_CONTACTS),
-        ("zmp", ctypes.c_double * 2),
-        ("door_angle", ctypes.c_double),
-        ("door_velocity", ctypes.c_double),
-        ("hand_force", ctypes.c_double * 3),
-        ("session", ctypes.c_uint64),
-        ("scenario_hash", ctypes.c_uint64),
-        ("scenario_start", ctypes.c_double),
-        ("flags", ctypes.c_uint32),
-        ("_pad", ctypes.c_uint32),
-        ("force_scale", ctypes.c_double),
-        ("robot_hash", ctypes.c_uint64),
-        ("scenario", ctypes.c_uint8 * SCENARIO_NAME_LEN),
-    ]
-
-    @staticmethod
-    def type_name() -> str:
-        return "upc::StateMsg"
-
-
-class ForecastMsg(ctypes.Structure):
-    _fields_ = [
-        ("seq", ctypes.c_uint64),
-        ("t0", ctypes.c_double),
-        ("dt", ctypes.c_double),
-        ("len", ctypes.c_uint32),
-        ("_pad", ctypes.c_uint32),
-        ("period", ctypes.c_double),
-        ("scenario_hash", ctypes.c_uint64),
-        ("forces", (ctypes.c_double * 3) * MAX_FORECAST),
-    ]
-
-    @staticmethod
-    def type_name() -> str:
-        return "upc::ForecastMsg"
+# The contract's payloads and service settings (services/python/upc_channels.py).
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "services" / "python"))
+from upc_channels import MAX_FORECAST, ForecastMsg, StateMsg, event, pubsub  # noqa: E402
 
 
 def impact(t: float, start: float, rise: float, hold: float, fall: float, peak: float) -> float:
@@ -83,32 +37,6 @@ def impact(t: float, start: float, rise: float, hold: float, fall: float, peak: 
     if tau <= rise + hold:
         return peak
     return peak * 0.5 * (1 + math.cos(math.pi * (tau - rise - hold) / fall))
-
-
-def pubsub(node, name, payload):
-    # The same service settings as every upc process (services/CHANNELS.md).
-    return (
-        node.service_builder(iox2.ServiceName.new(name))
-        .publish_subscribe(payload)
-        .history_size(1)
-        .subscriber_max_buffer_size(4)
-        .enable_safe_overflow(True)
-        .max_publishers(4)
-        .max_subscribers(8)
-        .max_nodes(16)
-        .open_or_create()
-    )
-
-
-def event(node, name):
-    return (
-        node.service_builder(iox2.ServiceName.new(name + "/event"))
-        .event()
-        .max_notifiers(4)
-        .max_listeners(8)
-        .max_nodes(16)
-        .open_or_create()
-    )
 
 
 def main() -> int:
@@ -131,9 +59,9 @@ def main() -> int:
 
     iox2.set_log_level_from_env_or(iox2.LogLevel.Error)
     node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
-    publisher = pubsub(node, f"{a.prefix}/forecast", ForecastMsg).publisher_builder().create()
-    notifier = event(node, f"{a.prefix}/forecast").notifier_builder().create()
-    states = pubsub(node, f"{a.prefix}/state", StateMsg).subscriber_builder().create()
+    publisher = pubsub(node, a.prefix, "forecast", ForecastMsg).publisher_builder().create()
+    notifier = event(node, a.prefix, "forecast").notifier_builder().create()
+    states = pubsub(node, a.prefix, "state", StateMsg).subscriber_builder().create()
     n = min(MAX_FORECAST, int(math.ceil(a.window / a.dt)))
 
     # Window k starts at k * period and is published once the plant's time reaches it: its

@@ -16,6 +16,7 @@ use upc::scenario::Scenario;
 
 use super::CliResult;
 use super::common::{ConfigArgs, RobotArg};
+use super::sim::PlantChoice;
 
 #[derive(Clone, Copy, PartialEq, Eq, Debug, clap::ValueEnum)]
 pub enum Which {
@@ -61,6 +62,12 @@ pub struct RunArgs {
     /// Controller config (files and --set), passed to `upc controller`.
     #[command(flatten)]
     pub config: ConfigArgs,
+    /// Simulator config overrides (`upc sim --set`), e.g. --sim-set sim.friction=0.5.
+    #[arg(long = "sim-set", value_name = "KEY=VALUE")]
+    pub sim_sets: Vec<String>,
+    /// The plant: upc's own simulator or MuJoCo (`upc sim --plant`), on the same channels.
+    #[arg(long, value_enum, default_value = "upc")]
+    pub plant: PlantChoice,
     /// The robot, given to the simulator and the controller (the scenario's forces are scaled
     /// to its mass: `upc::robot::Robot::force_scale`).
     #[command(flatten)]
@@ -85,6 +92,7 @@ pub fn run(args: RunArgs) -> CliResult {
     let scenario = Scenario::load(&args.scenario)?.with_force_scale(robot.force_scale()?);
     // Fail early on a bad config, before starting processes.
     args.config.load(&robot, Some(&scenario), &[])?;
+    upc::sim::SimConfig::load(&[], &args.sim_sets)?;
     let duration = args.duration.unwrap_or(scenario.duration);
     let name = args.name.clone().unwrap_or_else(|| {
         let secs = std::time::SystemTime::now()
@@ -110,12 +118,14 @@ pub fn run(args: RunArgs) -> CliResult {
         // What --robot and --scenario were given and the config layers: `upc compare` reloads
         // them.
         "robot": args.robot.robot,
+        "plant": args.plant.name(),
         "robot_mass": robot.derived.mass,
         "force_scale": scenario.force_scale,
         "forecast_error": { "scale": args.forecast_error_scale, "shift": args.forecast_error_shift },
         "scenario_source": args.scenario,
         "config_files": args.config.configs,
         "config_sets": args.config.sets,
+        "sim_sets": args.sim_sets,
         "description": scenario.description,
         "duration": duration,
         "mode": if args.realtime { "realtime" } else { "lockstep" },
@@ -200,8 +210,22 @@ fn run_one(
             "--robot",
             &args.robot.robot,
         ])
-        .args(["--recording-id", &recording, "--rrd"])
-        .arg(dir.join("sim.rrd"))
+        .args(match args.plant {
+            // The MuJoCo plant records no .rrd; its generated scene is kept with the run.
+            PlantChoice::Mujoco => vec![
+                "--plant".into(),
+                "mujoco".into(),
+                "--bundle".into(),
+                dir.join("mujoco"),
+            ],
+            PlantChoice::Upc => vec![
+                "--recording-id".into(),
+                recording.clone().into(),
+                "--rrd".into(),
+                dir.join("sim.rrd"),
+            ],
+        })
+        .args(args.sim_sets.iter().flat_map(|s| ["--set", s.as_str()]))
         .arg("--summary")
         .arg(dir.join("sim.json"))
         .args(if args.realtime {

@@ -1,7 +1,8 @@
 //! `upc sim`: the simulator process (humanoid on the ground, door at the right hand).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
+use upc::scenario::Scenario;
 use upc::shutdown::stop_flag;
 use upc::sim::SimConfig;
 use upc::sim::process::{RunOptions, run};
@@ -9,7 +10,7 @@ use upc::sim::process::{RunOptions, run};
 use super::CliResult;
 use super::common::RobotArg;
 
-#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, PartialEq, Eq, Debug, clap::ValueEnum)]
 pub enum ModeChoice {
     Lockstep,
     Realtime,
@@ -20,26 +21,36 @@ pub enum ModeChoice {
 /// default scenario, `multiple_impacts`) in lockstep with a controller on the `upc/*` services.
 /// In real time (`--mode realtime`) the robot is held at its start posture until a controller's
 /// torques arrive, and held again if they stop (`[sim.hold]`): start the processes in any order.
-#[derive(clap::Args)]
-#[command(
-    after_help = "Examples:\n  upc sim                                   # lockstep, 10 s, waits for a controller\n  upc sim --mode realtime --duration 5 --rrd sim.rrd\n  upc sim --set sim.friction=0.5 --scenario multiple_impacts --prefix test1"
-)]
-pub struct SimArgs {
+/// Which simulator plays the plant.
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default, clap::ValueEnum)]
+pub enum PlantChoice {
+    /// upc's own simulator (this process).
+    #[default]
+    Upc,
+    /// MuJoCo, through its Python bindings (`services/python/mujoco_plant.py`, run with the
+    /// Python of `scripts/setup.sh`'s `.venv`): the scene generated from the same robot
+    /// description and scenario (`upc mjcf`).
+    Mujoco,
+}
+
+impl PlantChoice {
+    pub fn name(self) -> &'static str {
+        match self {
+            PlantChoice::Upc => "upc",
+            PlantChoice::Mujoco => "mujoco",
+        }
+    }
+}
+
+/// What a plant simulates and how it steps: shared by `upc sim` and `upc mjcf`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct PlantArgs {
     /// Lockstep (wait for each answer; deterministic) or real-time (wall-clock rate).
     #[arg(long, value_enum)]
     pub mode: Option<ModeChoice>,
     /// Simulated seconds to run (0: until Ctrl-C). Default from sim.duration.
     #[arg(long)]
     pub duration: Option<f64>,
-    /// Write the ground truth to this rerun recording.
-    #[arg(long)]
-    pub rrd: Option<PathBuf>,
-    /// Rerun recording id (give the controller the same one to merge recordings).
-    #[arg(long)]
-    pub recording_id: Option<String>,
-    /// Write the run's figures (step time, contacts, IPC overhead) as JSON here.
-    #[arg(long)]
-    pub summary: Option<PathBuf>,
     /// Extra config files (layout of config/sim.toml) over the embedded defaults, in order.
     #[arg(long = "config")]
     pub configs: Vec<PathBuf>,
@@ -52,15 +63,62 @@ pub struct SimArgs {
     /// Door torque profile: embedded scenario name (single_impact, multiple_impacts, standing) or a path.
     #[arg(long)]
     pub scenario: Option<String>,
-    /// Lockstep: write the ground truth (CoM, CoP, hand force, door, contact figures) every
-    /// record period as CSV here: the same bytes on every rerun.
-    #[arg(long)]
-    pub truth_csv: Option<PathBuf>,
     #[command(flatten)]
     pub robot: RobotArg,
 }
 
-pub fn load_config(args: &SimArgs) -> Result<SimConfig, upc::config::ConfigError> {
+/// Start the simulator: `upc sim` runs the embedded default scene (the robot, by default the
+/// iCub-like humanoid, at its home posture on flat ground, the door held by its right hand, the hinge torque profile of the
+/// default scenario, `multiple_impacts`) in lockstep with a controller on the `upc/*` services.
+/// In real time (`--mode realtime`) the robot is held at its start posture until a controller's
+/// torques arrive, and held again if they stop (`[sim.hold]`): start the processes in any order.
+/// `--plant mujoco` runs the same scene in MuJoCo instead, on the same channels.
+#[derive(clap::Args)]
+#[command(
+    after_help = "Examples:\n  upc sim                                   # lockstep, 10 s, waits for a controller\n  upc sim --mode realtime --duration 5 --rrd sim.rrd\n  upc sim --set sim.friction=0.5 --scenario multiple_impacts --prefix test1\n  upc sim --plant mujoco --robot icub      # MuJoCo as the plant (scripts/setup.sh installs it)"
+)]
+pub struct SimArgs {
+    #[command(flatten)]
+    pub plant: PlantArgs,
+    /// The simulator: upc's own, or MuJoCo.
+    #[arg(long = "plant", value_enum, default_value = "upc")]
+    pub simulator: PlantChoice,
+    /// MuJoCo: write the generated scene here (default: a directory under the system's temp).
+    #[arg(long)]
+    pub bundle: Option<PathBuf>,
+    /// MuJoCo: the Python with `mujoco` and `iceoryx2` (default: $UPC_PYTHON, else
+    /// `.venv/bin/python` of the working directory or of the source tree, else `python3`).
+    #[arg(long)]
+    pub python: Option<PathBuf>,
+    /// Write the ground truth to this rerun recording (upc's simulator only).
+    #[arg(long)]
+    pub rrd: Option<PathBuf>,
+    /// Rerun recording id (give the controller the same one to merge recordings).
+    #[arg(long)]
+    pub recording_id: Option<String>,
+    /// Write the run's figures (step time, contacts, IPC overhead) as JSON here.
+    #[arg(long)]
+    pub summary: Option<PathBuf>,
+    /// Lockstep: write the ground truth (CoM, CoP, hand force, door, contact figures) every
+    /// record period as CSV here: the same bytes on every rerun.
+    #[arg(long)]
+    pub truth_csv: Option<PathBuf>,
+}
+
+/// Write the MuJoCo scene of a plant: `upc mjcf --out DIR` writes `DIR/scene.xml` (open it in
+/// MuJoCo's viewer: `python -m mujoco.viewer --mjcf DIR/scene.xml`), `DIR/plant.json` and the
+/// plant process `DIR/mujoco_plant.py`, generated from the robot description, the scenario and
+/// the simulator's config, as `upc sim --plant mujoco` does at its start.
+#[derive(clap::Args)]
+pub struct MjcfArgs {
+    #[command(flatten)]
+    pub plant: PlantArgs,
+    /// Directory to write into (created).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+pub fn load_config(args: &PlantArgs) -> Result<SimConfig, upc::config::ConfigError> {
     let mut sets = args.sets.clone();
     let toml_str = |s: &str| format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\""));
     if let Some(m) = args.mode {
@@ -82,11 +140,99 @@ pub fn load_config(args: &SimArgs) -> Result<SimConfig, upc::config::ConfigError
     SimConfig::load(&args.configs, &sets)
 }
 
+/// The plant process, written beside the scene it runs.
+const MUJOCO_PLANT_PY: &str = include_str!("../../services/python/mujoco_plant.py");
+const CHANNELS_PY: &str = include_str!("../../services/python/upc_channels.py");
+
+/// Writes the MuJoCo bundle of `args` into `dir`; returns the path of its `plant.json`.
+fn write_bundle(
+    args: &PlantArgs,
+    dir: &Path,
+) -> Result<PathBuf, Box<dyn std::error::Error + Send + Sync>> {
+    let config = load_config(args)?;
+    let robot = args.robot.load()?;
+    let scenario = Scenario::load(&config.scenario)?.with_force_scale(robot.force_scale()?);
+    let scene = upc::sim::mujoco::build(&robot, &config, &scenario)?;
+    std::fs::create_dir_all(dir).map_err(|e| format!("bundle directory {}: {e}", dir.display()))?;
+    let write = |name: &str, text: &str| {
+        std::fs::write(dir.join(name), text)
+            .map_err(|e| format!("writing {}: {e}", dir.join(name).display()))
+    };
+    write("scene.xml", &scene.mjcf)?;
+    write("plant.json", &serde_json::to_string_pretty(&scene.plant)?)?;
+    write("mujoco_plant.py", MUJOCO_PLANT_PY)?;
+    write("upc_channels.py", CHANNELS_PY)?;
+    Ok(dir.join("plant.json"))
+}
+
+pub fn mjcf_cli(args: MjcfArgs) -> CliResult {
+    let plant = write_bundle(&args.plant, &args.out)?;
+    println!(
+        "wrote {}/scene.xml and {} (run it: python {}/mujoco_plant.py {})",
+        args.out.display(),
+        plant.display(),
+        args.out.display(),
+        plant.display()
+    );
+    Ok(())
+}
+
+/// The Python that runs the MuJoCo plant.
+fn python(arg: &Option<PathBuf>) -> PathBuf {
+    if let Some(p) = arg {
+        return p.clone();
+    }
+    if let Some(p) = std::env::var_os("UPC_PYTHON") {
+        return PathBuf::from(p);
+    }
+    // The working directory's venv, then the one of the source tree this binary was built from.
+    [".", env!("CARGO_MANIFEST_DIR")]
+        .iter()
+        .map(|root| Path::new(root).join(".venv/bin/python"))
+        .find(|p| p.exists())
+        .unwrap_or_else(|| PathBuf::from("python3"))
+}
+
+/// `upc sim --plant mujoco`: generate the scene, then become the MuJoCo plant process (exec, so
+/// that signals and the exit status are the plant's own).
+fn run_mujoco(args: &SimArgs) -> CliResult {
+    if args.rrd.is_some() {
+        return Err(
+            "--rrd: the MuJoCo plant writes no recording (the controller's .rrd has the states)"
+                .into(),
+        );
+    }
+    let dir = args
+        .bundle
+        .clone()
+        .unwrap_or_else(|| std::env::temp_dir().join(format!("upc-mujoco-{}", std::process::id())));
+    let plant = write_bundle(&args.plant, &dir)?;
+    let py = python(&args.python);
+    let mut cmd = std::process::Command::new(&py);
+    cmd.arg(dir.join("mujoco_plant.py")).arg(&plant);
+    if let Some(s) = &args.summary {
+        cmd.arg("--summary").arg(s);
+    }
+    if let Some(t) = &args.truth_csv {
+        cmd.arg("--truth-csv").arg(t);
+    }
+    use std::os::unix::process::CommandExt;
+    let e = cmd.exec();
+    Err(format!(
+        "could not start the MuJoCo plant with {}: {e} (run scripts/setup.sh, or give --python)",
+        py.display()
+    )
+    .into())
+}
+
 pub fn run_cli(args: SimArgs) -> CliResult {
-    let config = load_config(&args)?;
+    if args.simulator == PlantChoice::Mujoco {
+        return run_mujoco(&args);
+    }
+    let config = load_config(&args.plant)?;
     let opts = RunOptions {
         node_name: format!("upc-sim-{}", std::process::id()),
-        robot: std::sync::Arc::new(args.robot.load()?),
+        robot: std::sync::Arc::new(args.plant.robot.load()?),
         config,
         rrd: args.rrd.clone(),
         recording_id: args.recording_id.clone(),

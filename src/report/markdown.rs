@@ -45,9 +45,10 @@ pub fn scenario_block(run: &RunDir, scenario: Option<&Scenario>) -> String {
         .collect();
     let _ = writeln!(
         s,
-        "Run directory `{}`: robot `{}`, {:.2} s simulated in {} mode; controllers {}.\n",
+        "Run directory `{}`: robot `{}` on the `{}` plant, {:.2} s simulated in {} mode; controllers {}.\n",
         run.path.display(),
         run.robot,
+        run.plant,
         run.duration,
         run.mode,
         names.join(", ")
@@ -178,6 +179,63 @@ pub fn full_metrics_table(run: &RunDir) -> String {
           ahead, from `controller.csv` (10 ms samples). Tick: controller compute time per 1 ms \
           tick. WBC fallbacks: ticks where the whole-body QP had no solution and gravity \
           compensation was sent. A dash: not recorded (or not applicable).\n";
+    s
+}
+
+/// The same controllers on several plants, one row per controller and plant (runs of one
+/// scenario and robot on `upc` and `mujoco`, say).
+pub fn plants_table(runs: &[&RunDir]) -> String {
+    let mut s = header(&[
+        "controller",
+        "plant",
+        "min ZMP margin (mm)",
+        "time at support edge (s)",
+        "hand RMS error (mm)",
+        "hand peak error (mm)",
+        "CoM height drop (mm)",
+        "tick p50 (µs)",
+        "tick p99 (µs)",
+        "plant step p50 (µs)",
+        "wall time (s)",
+    ]);
+    let mut names: Vec<&str> = Vec::new();
+    for r in runs {
+        for c in &r.controllers {
+            if !names.contains(&c.name.as_str()) {
+                names.push(&c.name);
+            }
+        }
+    }
+    for name in names {
+        for r in runs {
+            let Some(c) = r.controllers.iter().find(|c| c.name == name) else {
+                continue;
+            };
+            let mm = |key: &str| c.stat(key).map(|v| v * 1e3);
+            let step = c
+                .sim_summary
+                .as_ref()
+                .and_then(|j| j.get("step_time_p50"))
+                .and_then(serde_json::Value::as_f64);
+            s += &row(&[
+                name.to_uppercase(),
+                r.plant.clone(),
+                num(mm("min_zmp_margin"), 2),
+                num(c.stat("time_at_support_edge"), 3),
+                num(mm("hand_rms_error"), 2),
+                num(mm("hand_peak_error"), 2),
+                num(mm("com_height_drop"), 1),
+                num(c.stat("tick_p50_us"), 0),
+                num(c.stat("tick_p99_us"), 0),
+                num(step.map(|v| v * 1e6), 0),
+                num(c.wall_time, 1),
+            ]);
+        }
+    }
+    s += "\nThe metrics are the controller's own (from the states each plant published), as in \
+          the per-run tables. Plant step: wall time of one physics step (upc: the Rust \
+          simulator; mujoco: `mj_step` alone). Wall time: the whole lockstep run of that \
+          controller, processes started and stopped.\n";
     s
 }
 

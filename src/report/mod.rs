@@ -22,7 +22,7 @@ use crate::robot::Robot;
 use crate::scenario::Scenario;
 pub use reduced::ConfigLayers;
 use rundir::RunDir;
-use series::SeriesSource;
+use series::{Series, SeriesSource};
 
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {
@@ -157,6 +157,36 @@ pub fn compare(runs: &[PathBuf], opts: &CompareOptions) -> Result<CompareOutput,
            controller process and whole-body QP, as run by `upc run`. Reduced models: the \
            controllers' own cart-table and hand impedance models as plants (`upc preview`).\n\n";
     let mut used_tags = Vec::<String>::new();
+    let mut plants: Vec<&str> = Vec::new();
+    for d in &dirs {
+        if !plants.contains(&d.plant.as_str()) {
+            plants.push(&d.plant);
+        }
+    }
+    if plants.len() > 1 {
+        // One scenario and robot on several plants: the comparison the runs were made for.
+        let _ = writeln!(md, "## The plants side by side: {}\n", plants.join(", "));
+        let all: Vec<&RunDir> = dirs.iter().collect();
+        md += &markdown::plants_table(&all);
+        md += "\n";
+        let relabelled: Vec<Series> = dirs
+            .iter()
+            .flat_map(|d| {
+                d.controllers.iter().map(|c| {
+                    let mut s = c.csv.series.clone();
+                    s.label = format!("{} ({})", c.name.to_uppercase(), d.plant);
+                    s
+                })
+            })
+            .collect();
+        let sources: Vec<&dyn SeriesSource> =
+            relabelled.iter().map(|s| s as &dyn SeriesSource).collect();
+        md += &write_figures(
+            "plants",
+            &format!("{}, every plant", scenarios.join(", ")),
+            &sources,
+        )?;
+    }
     // Reduced sections already written, by (scenario, duration, config layers).
     let mut reduced_done: Vec<(String, String)> = Vec::new();
     for run in &dirs {

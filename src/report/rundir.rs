@@ -34,6 +34,8 @@ pub struct RunDir {
     pub scenario: String,
     /// What `upc run --robot` was given (the default robot for runs that do not say).
     pub robot: String,
+    /// The plant that ran it: `upc` (upc's own simulator, runs that do not say) or `mujoco`.
+    pub plant: String,
     /// What `upc run --scenario` was given (an embedded name or a TOML path), if recorded.
     pub scenario_source: Option<String>,
     pub description: String,
@@ -114,6 +116,7 @@ impl RunDir {
             path: path.to_path_buf(),
             scenario,
             robot: str_of("robot").unwrap_or_else(|| crate::robot::DEFAULT.into()),
+            plant: str_of("plant").unwrap_or_else(|| "upc".into()),
             scenario_source: str_of("scenario_source"),
             description: str_of("description").unwrap_or_default(),
             duration,

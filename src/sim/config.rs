@@ -43,6 +43,24 @@ pub struct SimConfig {
     pub solver: SolverConfig,
     pub process: ProcessConfig,
     pub hold: HoldConfig,
+    pub mujoco: MujocoConfig,
+}
+
+/// MuJoCo's friction cone.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Cone {
+    Pyramidal,
+    Elliptic,
+}
+
+/// The MuJoCo plant's solver settings (`[sim.mujoco]`; the rest of the scene follows the
+/// simulator's own keys).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MujocoConfig {
+    pub cone: Cone,
+    pub impratio: f64,
 }
 
 /// What holds the robot when no controller does (`[sim.hold]`).
@@ -176,6 +194,12 @@ impl SimConfig {
         nonneg("sim.hold.handover", self.hold.handover)?;
         nonneg("sim.hold.feedforward_fade", self.hold.feedforward_fade)?;
         nonneg("sim.hold.lost_timeout", self.hold.lost_timeout)?;
+        if !(self.mujoco.impratio.is_finite() && self.mujoco.impratio >= 1.0) {
+            return Err(l.range_error(
+                "sim.mujoco.impratio",
+                format!("must be finite and ≥ 1, got {}", self.mujoco.impratio),
+            ));
+        }
         Ok(())
     }
 }

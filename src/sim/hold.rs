@@ -78,11 +78,7 @@ impl Supervisor {
         dt: f64,
     ) -> Result<Self, SimError> {
         let pd = match cfg.kind {
-            HoldKind::PosturePd => Some(
-                PosturePd::new(model, q_start, cfg.frequency, cfg.damping_ratio)?
-                    .with_floor(model, carrying, cfg.leg_kp, cfg.leg_kd)
-                    .capped(dt),
-            ),
+            HoldKind::PosturePd => Some(PosturePd::hold(model, q_start, carrying, cfg, dt)?),
             HoldKind::Damping => None,
         };
         let n = model.nv - if model.has_floating_base() { 6 } else { 0 };

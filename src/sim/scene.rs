@@ -100,6 +100,47 @@ pub fn humanoid_scene_with(
     robot_scene(&robot, params, with_door, profile)
 }
 
+/// The door placed at `robot`'s hand at home: its model, the world placement of its base, and
+/// the hinge's lever to the handle and axis (world), which turn the scenario's hand force into
+/// the hinge torque ([`DoorDrive`]). Every plant builds its door from this.
+pub struct PlacedDoor {
+    pub model: Model,
+    pub base: SE3,
+    pub lever: Vector3<f64>,
+    pub axis: Vector3<f64>,
+}
+
+/// Places the door (`assets/door/door.urdf`) so that its handle is on `robot`'s hand at home.
+pub fn place_door(robot: &Robot) -> Result<PlacedDoor, SimError> {
+    let door = Model::from_urdf_str(icub_like::DOOR_URDF, BaseJoint::Fixed)?;
+    let mut data = Data::new(&robot.model);
+    forward_kinematics(&robot.model, &mut data, &robot.home)?;
+    let hand = data.o_m_f[robot.model.frame_id(&robot.description.hand.frame)?].trans;
+    let base = door_base_for(&door, &hand)?;
+    // Lever: from the hinge axis (through the hinge joint origin) to the handle.
+    let hinge = door
+        .joints
+        .first()
+        .ok_or_else(|| SimError::Scene("the door has no joint".into()))?;
+    let hinge_origin = base.compose(&hinge.placement).trans;
+    let axis = match hinge.kind {
+        crate::dynamics::JointKind::Revolute { axis } => base.compose(&hinge.placement).rot * axis,
+        _ => {
+            return Err(SimError::Scene(
+                "the door's first joint must be revolute".into(),
+            ));
+        }
+    };
+    let mut lever = hand - hinge_origin;
+    lever -= axis * axis.dot(&lever);
+    Ok(PlacedDoor {
+        model: door,
+        base,
+        lever,
+        axis,
+    })
+}
+
 /// `robot` at its home configuration, at rest, on the ground; with the door at its hand when
 /// `with_door` (driven by `profile`).
 pub fn robot_scene(
@@ -113,39 +154,17 @@ pub fn robot_scene(
     let robot_model = robot.model.clone();
     let mut drive = DoorDrive::none();
     let door = if with_door {
-        let door = Model::from_urdf_str(icub_like::DOOR_URDF, BaseJoint::Fixed)?;
-        let mut data = Data::new(&robot_model);
-        forward_kinematics(&robot_model, &mut data, &q_home)?;
-        let hand = data.o_m_f[robot_model.frame_id(&hand_frame)?].trans;
-        let base = door_base_for(&door, &hand)?;
-        // Lever: from the hinge axis (through the hinge joint origin) to the handle.
-        let hinge = door
-            .joints
-            .first()
-            .ok_or_else(|| SimError::Scene("the door has no joint".into()))?;
-        let hinge_origin = base.compose(&hinge.placement).trans;
-        let axis = match hinge.kind {
-            crate::dynamics::JointKind::Revolute { axis } => {
-                base.compose(&hinge.placement).rot * axis
-            }
-            _ => {
-                return Err(SimError::Scene(
-                    "the door's first joint must be revolute".into(),
-                ));
-            }
-        };
-        let mut lever = hand - hinge_origin;
-        lever -= axis * axis.dot(&lever);
+        let placed = place_door(robot)?;
         if let Some(p) = profile {
             drive = DoorDrive {
                 profile: p,
-                lever,
-                axis,
+                lever: placed.lever,
+                axis: placed.axis,
             };
         }
         Some(DoorSpec {
-            model: door,
-            base,
+            model: placed.model,
+            base: placed.base,
             handle_frame: HANDLE_FRAME.into(),
             hand_frame,
         })
@@ -276,6 +295,21 @@ impl PosturePd {
         Ok(Self::new(model, q_ref, 6.0, 1.0)?
             .with_floor(model, carrying, 800.0, 10.0)
             .capped(1e-3))
+    }
+
+    /// The plant's hold (`[sim.hold]`): `cfg.frequency` and `cfg.damping_ratio` on the
+    /// effective inertias at `q_ref`, legs and torso floored to `cfg.leg_kp`/`leg_kd`, capped for
+    /// the step `dt`.
+    pub fn hold(
+        model: &Model,
+        q_ref: &DVector<f64>,
+        carrying: &[usize],
+        cfg: &super::config::HoldConfig,
+        dt: f64,
+    ) -> Result<Self, SimError> {
+        Ok(Self::new(model, q_ref, cfg.frequency, cfg.damping_ratio)?
+            .with_floor(model, carrying, cfg.leg_kp, cfg.leg_kd)
+            .capped(dt))
     }
 
     /// Torques into `out` (length nv − 6 or nv).

@@ -3,5 +3,6 @@
 
 pub mod counting_alloc;
 pub mod humanoid;
+pub mod pd_driver;
 pub mod procs;
 pub mod robots;
