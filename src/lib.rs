@@ -15,6 +15,7 @@
 //! - [`shutdown`]: SIGINT/SIGTERM handling shared by the processes.
 //! - [`channels`]: the iceoryx2 channel contract shared by every process.
 
+pub mod capability;
 pub mod channels;
 pub mod config;
 pub mod control;

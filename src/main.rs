@@ -32,6 +32,8 @@ enum Command {
     Model(cli::model::ModelArgs),
     /// Run the simulator: the humanoid on the ground and the door, over iceoryx2 (see --help).
     Sim(cli::sim::SimArgs),
+    /// Largest impact each controller survives, by bisection, on the reduced models and the full simulation.
+    Capability(cli::capability::CapabilityArgs),
     /// Write the MuJoCo scene (MJCF, plant description, plant process) of a robot and scenario.
     Mjcf(cli::sim::MjcfArgs),
 }
@@ -51,6 +53,7 @@ fn main() -> std::process::ExitCode {
         Command::Model(args) => cli::model::run(args),
         Command::Sim(args) => cli::sim::run_cli(args),
         Command::Mjcf(args) => cli::sim::mjcf_cli(args),
+        Command::Capability(args) => cli::capability::run(args),
         Command::Forecast(args) => cli::forecast::run_cli(args),
         Command::Controller(args) => cli::controller::run(args),
     };

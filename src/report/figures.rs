@@ -78,6 +78,8 @@ pub struct Figure {
     /// File stem under `figures/`.
     pub name: String,
     pub title: String,
+    /// What the sources' "time" axis holds (most figures: "t (s)").
+    pub x_label: &'static str,
     pub panels: Vec<Panel>,
 }
 
@@ -94,6 +96,7 @@ pub fn standard_figures(prefix: &str, what: &str) -> Vec<Figure> {
     let fig = |name: &str, title: String, panels| Figure {
         name: format!("{prefix}_{name}"),
         title,
+        x_label: "t (s)",
         panels,
     };
     vec![
@@ -384,7 +387,7 @@ pub fn write_figure(
     };
     {
         let root = SvgText(SVGBackend::new(&svg_path, size)).into_drawing_area();
-        draw(&root, &fig.title, &panels, x_range).map_err(|e| plot_err(&svg_path, e))?;
+        draw(&root, fig, &panels, x_range).map_err(|e| plot_err(&svg_path, e))?;
         root.present()
             .map_err(|e| plot_err(&svg_path, e.to_string()))?;
     }
@@ -392,7 +395,7 @@ pub fn write_figure(
         let name = format!("{}.png", fig.name);
         let path = dir.join(&name);
         let root = BitMapBackend::new(&path, size).into_drawing_area();
-        draw(&root, &fig.title, &panels, x_range).map_err(|e| plot_err(&path, e))?;
+        draw(&root, fig, &panels, x_range).map_err(|e| plot_err(&path, e))?;
         root.present().map_err(|e| plot_err(&path, e.to_string()))?;
         Some(name)
     } else {
@@ -407,7 +410,7 @@ pub fn write_figure(
 
 fn draw<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
-    title: &str,
+    fig: &Figure,
     panels: &[(&Panel, Vec<Trace>)],
     x_range: (f64, f64),
 ) -> Result<(), String> {
@@ -415,7 +418,7 @@ fn draw<DB: DrawingBackend>(
     root.fill(&WHITE).map_err(e)?;
     let (top, rest) = root.split_vertically(TITLE_HEIGHT);
     top.draw(&Text::new(
-        title.to_string(),
+        fig.title.clone(),
         (12, TITLE_HEIGHT as i32 / 2),
         (FONT_FAMILY, 18)
             .into_font()
@@ -449,7 +452,7 @@ fn draw<DB: DrawingBackend>(
             .map_err(e)?;
         chart
             .configure_mesh()
-            .x_desc("t (s)")
+            .x_desc(fig.x_label)
             .y_desc(panel.y_label)
             .label_style((FONT_FAMILY, 12))
             .axis_desc_style((FONT_FAMILY, 13))

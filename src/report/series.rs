@@ -31,6 +31,8 @@ pub enum Quantity {
     FDisX,
     FDisY,
     FDisZ,
+    /// Largest impact survived (N), against the impact's duration (`upc capability`).
+    MaxForce,
 }
 
 /// One controller's time series.
@@ -52,6 +54,19 @@ pub struct Series {
     t: Vec<f64>,
     columns: HashMap<Quantity, Vec<f64>>,
     support: Option<[[f64; 2]; 2]>,
+}
+
+impl Series {
+    /// A series of given columns over `t` (which need not be time: a capability curve's is
+    /// the impact duration).
+    pub fn from_columns(label: &str, t: Vec<f64>, columns: Vec<(Quantity, Vec<f64>)>) -> Series {
+        Series {
+            label: label.to_string(),
+            t,
+            columns: columns.into_iter().collect(),
+            support: None,
+        }
+    }
 }
 
 impl SeriesSource for Series {

@@ -1,0 +1,71 @@
+//! Balance capability (`upc capability`): the bisection on the reduced models against the
+//! reduced loop itself, and the command end to end on the full simulation, where C1's
+//! forecast must let the robot take a larger push than C0.
+
+mod support;
+
+use std::process::Command;
+
+use support::procs::*;
+use upc::capability::{Direction, Variant, bisect, survives_reduced};
+use upc::config::Config;
+
+/// On the reduced models the bracket is tight and true: the amplitude found is survived, the
+/// one above it is not, and C1 takes a push several times larger than C0 (its forecast cancels
+/// what C0 only reacts to).
+#[test]
+fn reduced_capability_brackets_the_threshold_and_c1_exceeds_c0() {
+    let config = Config::embedded_default().expect("config");
+    let cap = |v: Variant| {
+        bisect(300.0, 1.0, |a| {
+            survives_reduced(&config, v, a, 0.3, Direction::X)
+        })
+        .expect("run")
+    };
+    let c0 = cap(Variant::C0);
+    let failed = c0.failed.expect("C0 falls below 300 N");
+    assert!(survives_reduced(&config, Variant::C0, c0.survived, 0.3, Direction::X).unwrap());
+    assert!(!survives_reduced(&config, Variant::C0, failed, 0.3, Direction::X).unwrap());
+    assert!(failed - c0.survived <= 1.0);
+    let c1 = cap(Variant::C1);
+    assert!(c1.survived > 3.0 * c0.survived, "C0 {c0:?}, C1 {c1:?}");
+}
+
+#[test]
+fn full_simulation_capability_of_c1_exceeds_c0() {
+    let _one = serial();
+    let s = Scratch::new("capability");
+    let out = Command::new(env!("CARGO_BIN_EXE_upc"))
+        .args(["capability", "--models", "full", "--controllers", "c0,c1"])
+        .args([
+            "--durations",
+            "0.3",
+            "--directions",
+            "x",
+            "--max",
+            "160",
+            "--tol",
+            "10",
+        ])
+        .args(["--quiet", "--out"])
+        .arg(&s.dir)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("upc capability");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j = json(&s.path("capability.json"));
+    let rows = j["rows"].as_array().expect("rows");
+    let survived = |c: &str| {
+        rows.iter()
+            .find(|r| r["controller"] == c)
+            .and_then(|r| r["survived"].as_f64())
+            .unwrap_or_else(|| panic!("no {c} in {j}"))
+    };
+    assert!(survived("C1") > survived("C0") + 10.0, "{j}");
+    assert!(s.path("capability.md").exists() && s.path("capability.csv").exists());
+    assert!(s.path("figures/capability_full_x.svg").exists());
+}
