@@ -147,6 +147,7 @@ fn options(out: &Path, reduced: bool) -> CompareOptions {
         config: ConfigLayers::default(),
         reduced,
         png: true,
+        overlay: false,
     }
 }
 

@@ -23,6 +23,10 @@ pub struct CompareArgs {
     /// SVG figures only.
     #[arg(long)]
     pub no_png: bool,
+    /// Overlay every run's controllers in one section besides each run's own (conditions of
+    /// one experiment; runs on different plants are overlaid anyway).
+    #[arg(long)]
+    pub overlay: bool,
     /// Config layered over each run's own for the reduced models (files, then --set).
     #[command(flatten)]
     pub config: ConfigArgs,
@@ -39,6 +43,7 @@ pub fn run(args: CompareArgs) -> CliResult {
         &args.config,
         !args.no_reduced,
         !args.no_png,
+        args.overlay,
     )?;
     println!("wrote {}", written.display());
     Ok(())
@@ -51,6 +56,7 @@ pub fn compare(
     config: &ConfigArgs,
     reduced: bool,
     png: bool,
+    overlay: bool,
 ) -> Result<PathBuf, upc::report::ReportError> {
     let opts = CompareOptions {
         out,
@@ -60,6 +66,7 @@ pub fn compare(
         },
         reduced,
         png,
+        overlay,
     };
     Ok(upc::report::compare(runs, &opts)?.report)
 }

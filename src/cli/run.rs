@@ -155,6 +155,7 @@ pub fn run(args: RunArgs) -> CliResult {
             &super::common::ConfigArgs::default(),
             true,
             true,
+            false,
         );
         match report {
             Ok(path) => println!(

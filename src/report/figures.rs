@@ -224,7 +224,11 @@ pub fn color_of(label: &str, index: usize) -> RGBColor {
             RGBColor(255, 127, 14),
             RGBColor(140, 86, 75),
             RGBColor(227, 119, 194),
-        ][index % 4],
+            RGBColor(23, 190, 207),
+            RGBColor(188, 189, 34),
+            RGBColor(127, 127, 127),
+            RGBColor(31, 119, 180),
+        ][index % 8],
     }
 }
 
@@ -443,9 +447,32 @@ fn draw<DB: DrawingBackend>(
                 (y0, y1) = (y0.max(a), y1.min(b));
             }
         }
+        // The legend: one line beside the title when it fits, else lines of its own below it
+        // (right-aligned), the plot moved down to make room.
+        let entries: Vec<&Trace> = traces.iter().filter(|t| !t.label.is_empty()).collect();
+        let widths: Vec<i32> = entries
+            .iter()
+            .map(|t| 30 + 8 * t.label.chars().count() as i32 + 14)
+            .collect();
+        let full = area.dim_in_pixel().0 as i32 - 24;
+        let beside = widths.iter().sum::<i32>() + 80 + 8 * panel.title.chars().count() as i32;
+        let mut lines: Vec<Vec<usize>> = Vec::new();
+        if beside > full {
+            let mut used = full;
+            for (i, w) in widths.iter().enumerate() {
+                if used + w > full {
+                    lines.push(Vec::new());
+                    used = 0;
+                }
+                used += w;
+                if let Some(l) = lines.last_mut() {
+                    l.push(i);
+                }
+            }
+        }
         let mut chart = ChartBuilder::on(area)
             .margin(8)
-            .margin_top(26)
+            .margin_top(26 + 16 * lines.len() as u32)
             .x_label_area_size(34)
             .y_label_area_size(72)
             .build_cartesian_2d(x_range.0..x_range.1, y0..y1)
@@ -475,10 +502,10 @@ fn draw<DB: DrawingBackend>(
         }
         // Title and legend in the strip above the plot, drawn as plain text: plotters' own
         // legend measures text with the font, which the SVG must not need.
-        let text = |s: &str, x: i32, color: &RGBColor| {
+        let text = |s: &str, x: i32, y: i32, color: &RGBColor| {
             Text::new(
                 s.to_string(),
-                (x, 12),
+                (x, y),
                 (FONT_FAMILY, 13)
                     .into_font()
                     .color(color)
@@ -494,26 +521,31 @@ fn draw<DB: DrawingBackend>(
                 cut.join(", ")
             )
         };
-        area.draw(&text(&title, 80, &BLACK)).map_err(e)?;
-        let entries: Vec<&Trace> = traces.iter().filter(|t| !t.label.is_empty()).collect();
-        let widths: Vec<i32> = entries
-            .iter()
-            .map(|t| 30 + 8 * t.label.chars().count() as i32 + 14)
-            .collect();
-        let mut x = area.dim_in_pixel().0 as i32 - 12 - widths.iter().sum::<i32>();
-        for (t, w) in entries.iter().zip(&widths) {
-            let style = t.color.stroke_width(2);
-            if t.dashed {
-                area.draw(&PathElement::new(vec![(x, 12), (x + 9, 12)], style))
-                    .map_err(e)?;
-                area.draw(&PathElement::new(vec![(x + 15, 12), (x + 24, 12)], style))
-                    .map_err(e)?;
+        area.draw(&text(&title, 80, 12, &BLACK)).map_err(e)?;
+        let one_line = [(0..entries.len()).collect::<Vec<usize>>()];
+        let rows: &[Vec<usize>] = if lines.is_empty() { &one_line } else { &lines };
+        for (r, row) in rows.iter().enumerate() {
+            let y = if lines.is_empty() {
+                12
             } else {
-                area.draw(&PathElement::new(vec![(x, 12), (x + 24, 12)], style))
-                    .map_err(e)?;
+                28 + 16 * r as i32
+            };
+            let mut x = full + 12 - row.iter().map(|&i| widths[i]).sum::<i32>();
+            for &i in row {
+                let t = entries[i];
+                let style = t.color.stroke_width(2);
+                if t.dashed {
+                    area.draw(&PathElement::new(vec![(x, y), (x + 9, y)], style))
+                        .map_err(e)?;
+                    area.draw(&PathElement::new(vec![(x + 15, y), (x + 24, y)], style))
+                        .map_err(e)?;
+                } else {
+                    area.draw(&PathElement::new(vec![(x, y), (x + 24, y)], style))
+                        .map_err(e)?;
+                }
+                area.draw(&text(&t.label, x + 30, y, &BLACK)).map_err(e)?;
+                x += widths[i];
             }
-            area.draw(&text(&t.label, x + 30, &BLACK)).map_err(e)?;
-            x += w;
         }
     }
     Ok(())

@@ -182,12 +182,12 @@ pub fn full_metrics_table(run: &RunDir) -> String {
     s
 }
 
-/// The same controllers on several plants, one row per controller and plant (runs of one
-/// scenario and robot on `upc` and `mujoco`, say).
-pub fn plants_table(runs: &[&RunDir]) -> String {
+/// The same controllers in several runs, one row per controller and run, each run named by
+/// `label` (its plant, or its name) in a column headed `what`.
+pub fn side_by_side_table(runs: &[&RunDir], what: &str, label: fn(&RunDir) -> String) -> String {
     let mut s = header(&[
         "controller",
-        "plant",
+        what,
         "min ZMP margin (mm)",
         "time at support edge (s)",
         "hand RMS error (mm)",
@@ -219,7 +219,7 @@ pub fn plants_table(runs: &[&RunDir]) -> String {
                 .and_then(serde_json::Value::as_f64);
             s += &row(&[
                 name.to_uppercase(),
-                r.plant.clone(),
+                label(r),
                 num(mm("min_zmp_margin"), 2),
                 num(c.stat("time_at_support_edge"), 3),
                 num(mm("hand_rms_error"), 2),

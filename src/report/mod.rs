@@ -66,6 +66,8 @@ pub struct CompareOptions {
     pub reduced: bool,
     /// Write PNGs besides the SVGs (when the font loads).
     pub png: bool,
+    /// Overlay every run's controllers in one section (the conditions of one experiment).
+    pub overlay: bool,
 }
 
 /// What `compare` wrote.
@@ -91,6 +93,9 @@ fn run_scenario(run: &RunDir, robot: &Robot) -> Result<Scenario, String> {
     scenario.duration = run.duration;
     Ok(scenario)
 }
+
+/// How a section with several runs names each: by its plant, or by its name.
+type RunLabel = fn(&RunDir) -> String;
 
 /// A file-name-safe tag.
 fn slug(s: &str) -> String {
@@ -163,18 +168,27 @@ pub fn compare(runs: &[PathBuf], opts: &CompareOptions) -> Result<CompareOutput,
             plants.push(&d.plant);
         }
     }
-    if plants.len() > 1 {
-        // One scenario and robot on several plants: the comparison the runs were made for.
-        let _ = writeln!(md, "## The plants side by side: {}\n", plants.join(", "));
+    // One scenario and robot on several plants: the comparison the runs were made for; or
+    // any runs overlaid when asked (the conditions of one experiment).
+    let side_by_side: Option<(&str, RunLabel)> = if plants.len() > 1 {
+        Some(("plant", |d| d.plant.clone()))
+    } else if opts.overlay && dirs.len() > 1 {
+        Some(("run", |d| d.name.clone()))
+    } else {
+        None
+    };
+    if let Some((what, label)) = side_by_side {
+        let labels: Vec<String> = dirs.iter().map(label).collect();
+        let _ = writeln!(md, "## Side by side, by {what}: {}\n", labels.join(", "));
         let all: Vec<&RunDir> = dirs.iter().collect();
-        md += &markdown::plants_table(&all);
+        md += &markdown::side_by_side_table(&all, what, label);
         md += "\n";
         let relabelled: Vec<Series> = dirs
             .iter()
             .flat_map(|d| {
-                d.controllers.iter().map(|c| {
+                d.controllers.iter().map(move |c| {
                     let mut s = c.csv.series.clone();
-                    s.label = format!("{} ({})", c.name.to_uppercase(), d.plant);
+                    s.label = format!("{} ({})", c.name.to_uppercase(), label(d));
                     s
                 })
             })
@@ -182,8 +196,8 @@ pub fn compare(runs: &[PathBuf], opts: &CompareOptions) -> Result<CompareOutput,
         let sources: Vec<&dyn SeriesSource> =
             relabelled.iter().map(|s| s as &dyn SeriesSource).collect();
         md += &write_figures(
-            "plants",
-            &format!("{}, every plant", scenarios.join(", ")),
+            "side_by_side",
+            &format!("{}, every {what}", scenarios.join(", ")),
             &sources,
         )?;
     }
