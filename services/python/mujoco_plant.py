@@ -18,10 +18,17 @@ simulator's config) and runs this script beside it. It behaves as src/sim/proces
 - real time: steps on absolute deadlines under the supervisor of src/sim/hold.rs (hold until the
   first torques, hand over, hold again when they stop, damping after the lost timeout).
 
+As upc's World reports a step, forces (contacts, CoP, hand) are those of the step's constraint
+solve, at the configuration it started from; geometry (CoM, penetration, loop error) and slip
+are those after it, with the state's q and v.
+
 plant.json (format 1) is written by src/sim/mujoco.rs (`PlantFile`): robot and scenario
 identifiers, `sim` (step, mode, duration, prefix, timeouts), `hold` (gains per joint), the MJCF
 names of the base, actuated joints (contract order), contact spheres (contract order), sites and
 door hinge, the home configuration and the hinge torque sampled at the step.
+
+Exit status: 0 done (duration reached or SIGINT/SIGTERM), 1 the run failed (lockstep timeout,
+MuJoCo diverged, channels), 2 it could not start (bundle, Python packages).
 """
 
 import argparse
@@ -34,6 +41,7 @@ import sys
 import time
 from pathlib import Path
 
+# upc_channels.py sits beside this script, in services/python and in a bundle alike.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 try:
@@ -65,31 +73,51 @@ class BundleError(Exception):
 # Simulated time the robot settles onto its soft contacts before a run starts (s).
 SETTLE_TIME = 0.5
 
+# The connect equality joining the hand to the door's handle (src/sim/mujoco.rs, CONNECT).
+CONNECT = "hand_handle"
+
 # Columns of the ground-truth CSV: those of upc sim (TRUTH_CSV_HEADER in src/sim/process.rs).
 TRUTH_CSV_HEADER = (
     "t,com_x,com_y,com_z,zmp_x,zmp_y,hand_fx,hand_fy,hand_fz,door_angle,door_torque,"
     "loop_error,max_penetration,max_slip_speed,solver_iterations"
 )
 
+# What iceoryx2 raises when the channels cannot be opened or used (a prefix that is not a valid
+# service name, services of another layout or settings, shared memory exhausted).
+CHANNEL_ERRORS = (
+    iox2.SemanticStringError, iox2.NodeCreationFailure, iox2.PublishSubscribeOpenOrCreateError,
+    iox2.EventOpenOrCreateError, iox2.PublisherCreateError, iox2.SubscriberCreateError,
+    iox2.NotifierCreateError, iox2.ListenerCreateError, iox2.LoanError, iox2.SendError,
+    iox2.ReceiveError, iox2.NotifierNotifyError, iox2.ListenerWaitError,
+)
+
+# MuJoCo resets its data when one of these is raised in a step.
+_INSTABILITY = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQVEL,
+                mujoco.mjtWarning.mjWARN_BADQPOS)
+
 
 class Histogram:
-    """Durations in 1 µs bins up to 20 ms (as upc's LatencyHistogram): fixed memory."""
+    """Durations in 1 µs bins up to 20 ms, quantiles at the upper bin edge: upc's
+    LatencyHistogram (src/control/timing.rs)."""
+
+    BINS = 20000
 
     def __init__(self):
-        self.bins = np.zeros(20001, dtype=np.int64)
+        self.bins = np.zeros(self.BINS, dtype=np.int64)
         self.n = 0
         self.max = 0.0
 
     def record(self, seconds: float):
-        self.bins[min(20000, max(0, int(seconds * 1e6)))] += 1
+        self.bins[min(self.BINS - 1, int(seconds * 1e6))] += 1
         self.n += 1
-        self.max = max(self.max, seconds)
+        if seconds > self.max:
+            self.max = seconds
 
     def quantile(self, p: float) -> float:
         if self.n == 0:
             return 0.0
-        k = int(np.searchsorted(np.cumsum(self.bins), math.ceil(p * self.n)))
-        return k * 1e-6
+        target = max(1, math.ceil(p * self.n))
+        return (int(np.searchsorted(np.cumsum(self.bins), target)) + 1) * 1e-6
 
 
 class Gate:
@@ -100,7 +128,7 @@ class Gate:
         self.last_seq, self.controller = None, 0
         self.stats = dict(accepted=0, wrong_length=0, non_finite=0, out_of_order=0,
                           foreign=0, controller_changes=0, stale=0)
-        self.last_log = 0.0
+        self.last_log = None
 
     def rejected(self) -> int:
         s = self.stats
@@ -108,21 +136,22 @@ class Gate:
 
     def check(self, msg, tau_out) -> bool:
         """Validates `msg`; on acceptance copies its torques into `tau_out`."""
-        reason = None
         if self.session != 0 and msg.session != self.session:
             self.stats["foreign"] += 1
             reason = (f"torque command answers plant session {msg.session:#x}, this plant run is "
                       f"{self.session:#x} (a controller still on a previous run)")
+        elif msg.n != self.n:
+            self.stats["wrong_length"] += 1
+            reason = f"torque command has n = {msg.n}, the robot has {self.n} actuated joints"
         else:
+            tau = np.ctypeslib.as_array(msg.tau)[: self.n]
+            # Another controller's seq counts from its own start.
             last = self.last_seq if msg.controller == self.controller else None
-            tau = np.ctypeslib.as_array(msg.tau)
-            if msg.n != self.n:
-                self.stats["wrong_length"] += 1
-                reason = f"torque command has n = {msg.n}, the robot has {self.n} actuated joints"
-            elif not np.all(np.isfinite(tau[: self.n])):
+            # One sum, rather than a test per torque, unless it overflows or is NaN.
+            bad = () if math.isfinite(tau.sum()) else np.flatnonzero(~np.isfinite(tau))
+            if len(bad):
                 self.stats["non_finite"] += 1
-                index = int(np.flatnonzero(~np.isfinite(tau[: self.n]))[0])
-                reason = f"torque command has a non-finite torque at index {index}"
+                reason = f"torque command has a non-finite torque at index {bad[0]}"
             elif last is not None and msg.seq <= last:
                 self.stats["out_of_order"] += 1
                 reason = f"torque command seq {msg.seq} does not follow the last accepted seq {last}"
@@ -132,10 +161,10 @@ class Gate:
                     self.controller = msg.controller
                 self.last_seq = msg.seq
                 self.stats["accepted"] += 1
-                tau_out[:] = tau[: self.n]
+                tau_out[:] = tau
                 return True
         now = time.monotonic()
-        if now - self.last_log > 1.0:
+        if self.last_log is None or now - self.last_log > 1.0:
             print(f"mujoco plant: rejected torque command: {reason} "
                   f"({self.rejected()} rejected so far)", file=sys.stderr)
             self.last_log = now
@@ -144,11 +173,11 @@ class Gate:
 
 class Supervisor:
     """Who drives the robot in real time: the port of src/sim/hold.rs (same phases, same
-    torques; the gains are upc's, from plant.json)."""
+    torques; the posture PD's gains are upc's, from plant.json)."""
 
     def __init__(self, hold: dict, safe_damping: float, q_start):
         self.pd = hold["kind"] == "posture_pd"
-        self.kp, self.kd = np.array(hold["kp"]), np.array(hold["kd"])
+        self.kp, self.kd = np.array(hold["kp"], dtype=float), np.array(hold["kd"], dtype=float)
         self.handover, self.fade = hold["handover"], hold["feedforward_fade"]
         self.lost_timeout, self.safe_damping = hold["lost_timeout"], safe_damping
         self.q_ref = np.array(q_start, dtype=float)
@@ -159,17 +188,17 @@ class Supervisor:
         self.stats = dict(hold_steps=0, handover_steps=0, damping_steps=0, handovers=0, losses=0)
 
     def torques(self, t, q, v, command, out):
-        """Torques at `t` into `out`; `command`: current commanded torques or None. Returns
-        (from, to) on a phase change."""
-        frm = self.phase
-        to = frm
+        """Torques at simulated time `t` into `out`; `command`: the controller's current
+        torques, None while there are none. Returns (from, to) on a phase change."""
+        frm = to = self.phase
         if frm in ("hold", "damping") and command is not None:
             to = "handover"
         elif frm == "handover" and command is not None and t - self.since >= self.handover:
             to = "control"
         elif frm in ("handover", "control") and command is None:
             self.stats["losses"] += int(frm == "control")
-            self.after_loss = True  # hold the posture of now, the last torques fading out
+            # Hold the posture of now, the last commanded torques fading out as feed-forward.
+            self.after_loss = True
             self.q_ref[:] = q
             self.feedforward[:] = self.last_cmd
             to = "hold"
@@ -177,7 +206,7 @@ class Supervisor:
               and t - self.since > self.lost_timeout):
             to = "damping"
         if to == "hold" and not self.pd:
-            to = "damping"
+            to = "damping"  # without a PD, a hold is bare damping
         if to != frm:
             self.phase, self.since = to, t
             self.stats["handovers"] += int(to == "handover")
@@ -201,32 +230,40 @@ class Supervisor:
         if not self.pd:
             return -self.safe_damping * v
         tau = self.kp * (self.q_ref - q) - self.kd * v
+        # The fade counts from this phase's start: the loss (a hand-over's hold has none).
         if self.fade > 0 and self.after_loss:
             f = max(0.0, 1.0 - (t - self.since) / self.fade)
             if f > 0:
-                tau = tau + f * self.feedforward
+                tau += f * self.feedforward
         return tau
 
 
 class Plant:
-    """The MuJoCo world of a bundle and its state in the contract's conventions."""
+    """The MuJoCo world of a bundle and its state in the contract's conventions
+    (`self.state`, a StateMsg whose plant-run fields the Process fills)."""
 
     def __init__(self, plant_path: Path):
         try:
             cfg = json.loads(plant_path.read_text())
         except (OSError, ValueError) as e:
             raise BundleError(f"{plant_path}: {e}") from e
-        if cfg.get("format") != 1:
-            raise BundleError(f"{plant_path}: format {cfg.get('format')}, this plant reads 1")
+        if not isinstance(cfg, dict) or cfg.get("format") != 1:
+            raise BundleError(f"{plant_path}: not a plant description of format 1")
         self.cfg = cfg
-        scene = plant_path.parent / cfg["scene"]
         try:
-            self.m = mujoco.MjModel.from_xml_path(str(scene))
-        except ValueError as e:
+            self._load(plant_path.parent / cfg["scene"])
+        except KeyError as e:
+            raise BundleError(f"{plant_path}: no `{e.args[0]}`") from e
+        except (TypeError, ValueError) as e:
+            raise BundleError(f"{plant_path}: {e}") from e
+
+    def _load(self, scene: Path):
+        cfg, sim = self.cfg, self.cfg["sim"]
+        try:
+            self.m = m = mujoco.MjModel.from_xml_path(str(scene))
+        except ValueError as e:  # MuJoCo's compiler errors, a missing file
             raise BundleError(f"{scene}: {e}") from e
-        m = self.m
-        self.d = mujoco.MjData(m)
-        sim = cfg["sim"]
+        self.d = d = mujoco.MjData(m)
         if abs(m.opt.timestep - sim["dt"]) > 1e-15:
             raise BundleError(f"{scene}: timestep {m.opt.timestep} ≠ sim.dt {sim['dt']}")
         self.dt = sim["dt"]
@@ -238,70 +275,109 @@ class Plant:
             return i
 
         base = ident(mujoco.mjtObj.mjOBJ_JOINT, cfg["base_joint"])
+        if m.jnt_type[base] != mujoco.mjtJoint.mjJNT_FREE:
+            raise BundleError(f"{scene}: base joint `{cfg['base_joint']}` is not a free joint")
         self.bq, self.bv = int(m.jnt_qposadr[base]), int(m.jnt_dofadr[base])
         self.base_body = ident(mujoco.mjtObj.mjOBJ_BODY, cfg["base_body"])
         joints = [ident(mujoco.mjtObj.mjOBJ_JOINT, j) for j in cfg["joints"]]
-        self.qadr = np.array([m.jnt_qposadr[j] for j in joints])
-        self.dadr = np.array([m.jnt_dofadr[j] for j in joints])
+        self.qadr = np.array([m.jnt_qposadr[j] for j in joints], dtype=int)
+        self.dadr = np.array([m.jnt_dofadr[j] for j in joints], dtype=int)
         self.n = len(joints)
         self.nq, self.nv = 7 + self.n, 6 + self.n
         if self.nq > ch.MAX_DOF:
             raise BundleError(f"nq = {self.nq}: the contract carries at most {ch.MAX_DOF}")
-        self.effort = np.array([math.inf if e is None else e for e in cfg["effort"]])
+        # The contract's q from MuJoCo's qpos in one gather: base position, quaternion x y z w
+        # (MuJoCo's is w x y z), joints. v: the base's angular velocity (MuJoCo's is in the
+        # body frame already) and the joint rates; the linear one is rotated in `fill_state`.
+        b = self.bq
+        self.q_from = np.concatenate([[b, b + 1, b + 2, b + 4, b + 5, b + 6, b + 3], self.qadr])
+        self.v_from = np.concatenate([[self.bv + 3, self.bv + 4, self.bv + 5], self.dadr])
+        effort = cfg["effort"]
+        if len(effort) != self.n:
+            raise BundleError(f"{len(effort)} effort limits for {self.n} joints")
+        self.effort = np.array([math.inf if e is None else e for e in effort], dtype=float)
         self.clamp = bool(sim["effort_limits"])
         if len(cfg["contacts"]) != ch.N_CONTACTS:
             raise BundleError(f"{len(cfg['contacts'])} contacts, the contract has {ch.N_CONTACTS}")
-        self.spheres = [ident(mujoco.mjtObj.mjOBJ_GEOM, g) for g in cfg["contacts"]]
+        self.spheres = np.array([ident(mujoco.mjtObj.mjOBJ_GEOM, g) for g in cfg["contacts"]])
         self.slot_of = np.full(m.ngeom, -1)
         self.slot_of[self.spheres] = np.arange(ch.N_CONTACTS)
-        self.radius = cfg["contact_radius"]
+        self.radius = float(cfg["contact_radius"])
         self.hand = ident(mujoco.mjtObj.mjOBJ_SITE, cfg["hand_site"])
         self.door = cfg["door_joint"] is not None
         if self.door:
             self.handle = ident(mujoco.mjtObj.mjOBJ_SITE, cfg["handle_site"])
             hinge = ident(mujoco.mjtObj.mjOBJ_JOINT, cfg["door_joint"])
             self.hq, self.hv = int(m.jnt_qposadr[hinge]), int(m.jnt_dofadr[hinge])
-            self.connect = ident(mujoco.mjtObj.mjOBJ_EQUALITY, "hand_handle")
-        self.hinge = np.array(cfg["hinge_torque"]["values"])
+            self.connect = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, CONNECT)
+            if self.connect < 0:
+                if m.neq != 1:
+                    raise BundleError(f"{scene}: no equality `{CONNECT}` joining hand and handle")
+                self.connect = 0
+        self.hinge = np.array(cfg["hinge_torque"]["values"], dtype=float)
+        if cfg["hinge_torque"]["dt"] != self.dt:
+            raise BundleError(f"hinge torque sampled at {cfg['hinge_torque']['dt']} s, "
+                              f"the step is {self.dt} s")
+        self._instability = [d.warning[w] for w in _INSTABILITY]  # live views of the counters
 
         home = np.array(cfg["home"], dtype=float)
         if len(home) != self.nq:
             raise BundleError(f"home has {len(home)} values, the robot nq = {self.nq}")
-        d = self.d
-        d.qpos[self.bq:self.bq + 3] = home[0:3]
-        d.qpos[self.bq + 3:self.bq + 7] = [home[6], home[3], home[4], home[5]]  # xyzw → wxyz
-        d.qpos[self.qadr] = home[7:]
+        d.qpos[self.q_from] = home
+        if self.door:
+            d.qpos[self.hq] = 0.0
         mujoco.mj_forward(m, d)
+        kp, kd = np.array(cfg["hold"]["kp"], dtype=float), np.array(cfg["hold"]["kd"], dtype=float)
+        if len(kp) != self.n or len(kd) != self.n:
+            raise BundleError(f"hold gains for {len(kp)}, {len(kd)} joints, the robot has {self.n}")
 
-        self.settled = self.settle(cfg["hold"], SETTLE_TIME)
-        self.tau = np.zeros(self.n)
+        # Buffers of the per-step figures (allocation-free steps).
+        self.applied = np.zeros(self.n)
         self.contact = np.zeros((ch.N_CONTACTS, 3))
         self.zmp = np.zeros(2)
         self.hand_force = np.zeros(3)
+        self._force6 = np.zeros((ch.N_CONTACTS, 6))
+        self._vel6 = np.zeros((ch.N_CONTACTS, 6))
         self.door_torque = 0.0
-        self.penetration = self.slip = 0.0
+        self.penetration = self.slip = self.loop_error = 0.0
         self.step_time = 0.0
-        self._f6 = np.zeros(6)
-        self._vel6 = np.zeros(6)
-        self.measure()
+        self.state = ch.StateMsg()
+        s = self.state
+        s.nq, s.nv = self.nq, self.nv
+        self._q, self._v = np.ctypeslib.as_array(s.q), np.ctypeslib.as_array(s.v)
+        self._contact_out = np.ctypeslib.as_array(s.contact_forces)
+        self._zmp_out = np.ctypeslib.as_array(s.zmp)
+        self._hand_out = np.ctypeslib.as_array(s.hand_force)
 
-    def settle(self, hold: dict, seconds: float) -> float:
+        self.settled = self._settle(kp, kd)
+        self._after_step()
+        self.fill_state()
+
+    def _settle(self, kp, kd) -> float:
         """Lets the robot settle onto its contacts under the hold's posture PD, then starts the
         run from there at rest, time 0. MuJoCo's contacts are soft: a robot placed with its
         contact points on the ground (as upc's hard contacts hold it) first sinks into them,
         which shakes the CoP at the start of a run. Returns how far the base sank (m)."""
         d = self.d
         z0 = float(d.qpos[self.bq + 2])
-        kp, kd = np.array(hold["kp"]), np.array(hold["kd"])
-        q_ref = self.joint_q().copy()
-        for _ in range(round(seconds / self.dt)):
+        q_ref = self.joint_q()
+        for _ in range(round(SETTLE_TIME / self.dt)):
             d.qfrc_applied[self.dadr] = kp * (q_ref - self.joint_q()) - kd * self.joint_v()
             mujoco.mj_step(self.m, d)
-        d.qfrc_applied[:] = 0.0
+        if self._unstable():
+            raise BundleError("the robot does not stand in the scene: MuJoCo diverged while it "
+                              "settled onto its contacts under the hold's posture PD")
+        # At rest where it settled, time 0. The forward pass has the PD's static torques, so that
+        # the forces of state 0 are those of the robot held up, not collapsing.
         d.qvel[:] = 0.0
         d.time = 0.0
+        d.qfrc_applied[self.dadr] = kp * (q_ref - self.joint_q())
         mujoco.mj_forward(self.m, d)
+        d.qfrc_applied[:] = 0.0
         return z0 - float(d.qpos[self.bq + 2])
+
+    def _unstable(self) -> bool:
+        return any(w.number for w in self._instability)
 
     def joint_q(self):
         return self.d.qpos[self.qadr]
@@ -312,96 +388,106 @@ class Plant:
     def hinge_torque(self, t_scenario: float) -> float:
         if t_scenario < 0:
             return 0.0
-        k = int(round(t_scenario / self.dt))
+        k = round(t_scenario / self.dt)
         return float(self.hinge[k]) if k < len(self.hinge) else 0.0
 
     def step(self, tau, door_torque: float):
         d = self.d
-        applied = np.clip(tau, -self.effort, self.effort) if self.clamp else tau
-        d.qfrc_applied[self.dadr] = applied
+        if self.clamp:
+            np.clip(tau, -self.effort, self.effort, out=self.applied)
+            d.qfrc_applied[self.dadr] = self.applied
+        else:
+            d.qfrc_applied[self.dadr] = tau
         if self.door:
             d.qfrc_applied[self.hv] = door_torque
         self.door_torque = door_torque
         t_before, t0 = d.time, time.perf_counter()
         mujoco.mj_step(self.m, d)
         self.step_time = time.perf_counter() - t0
-        if d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0:
+        if self._unstable():
             # MuJoCo has reset the state to the model's zero pose: stop rather than publish it.
             raise Diverged(f"the simulation diverged at t = {t_before:.3f} s (MuJoCo: bad "
                            "accelerations; typically a fall under torques the effort limits allow)")
-        self.measure()
+        self._after_step()
+        self.fill_state()
 
-    def measure(self):
-        """Contact forces on the soles' corners, CoP, the door's force on the hand, contact
-        figures: what the state and the ground truth report after a step."""
+    def _after_step(self):
+        """The figures of the step just made (or of the forward pass of state 0)."""
         m, d = self.m, self.d
+        # Forces: MuJoCo's constraint solve of the step, at the configuration it started from
+        # (d.contact, d.efc_force and the geometry in d are still those of that forward pass).
         self.contact[:] = 0.0
-        self.penetration = 0.0
-        self.slip = 0.0
         ncon = d.ncon
         if ncon:
-            con = d.contact
-            geoms, frames, dists = con.geom[:ncon], con.frame[:ncon], con.dist[:ncon]
+            geoms = d.contact.geom[:ncon]
             slots = self.slot_of[geoms]  # (ncon, 2): contact slot of each geom, −1 if none
-            for i in np.flatnonzero((slots >= 0).any(axis=1)):
-                mujoco.mj_contactForce(m, d, int(i), self._f6)
-                # The contact frame's rows are the normal (geom1 → geom2) and two tangents; the
-                # force acts on geom2.
-                f = frames[i].reshape(3, 3).T @ self._f6[:3]
-                if slots[i, 1] >= 0:
-                    self.contact[slots[i, 1]] += f
-                else:
-                    self.contact[slots[i, 0]] -= f
-                self.penetration = max(self.penetration, -float(dists[i]))
+            ours = np.flatnonzero((slots >= 0).any(axis=1))
+            if len(ours) > len(self._force6):
+                self._force6 = np.zeros((len(ours), 6))
+            f6 = self._force6[: len(ours)]
+            for j, i in enumerate(ours):
+                mujoco.mj_contactForce(m, d, int(i), f6[j])
+            # The contact frame's rows are the normal (geom1 → geom2) and two tangents; the
+            # force in it acts on geom2, its opposite on geom1.
+            frames = d.contact.frame[ours].reshape(-1, 3, 3)
+            world = np.einsum("kij,ki->kj", frames, f6[:, :3])
+            on2 = slots[ours, 1] >= 0
+            world[~on2] *= -1.0
+            np.add.at(self.contact, np.where(on2, slots[ours, 1], slots[ours, 0]), world)
         fz = self.contact[:, 2]
-        touching = np.flatnonzero(fz > 0)
-        if len(touching):
-            bottoms = d.geom_xpos[self.spheres][:, :2]
-            self.zmp[:] = (bottoms[touching] * fz[touching, None]).sum(axis=0) / fz[touching].sum()
-        for k in touching:
-            mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_GEOM, self.spheres[k],
-                                     self._vel6, 0)
-            w, v = self._vel6[:3], self._vel6[3:]
-            # The velocity of the sphere's lowest point: v + ω × (−r ẑ).
-            vx, vy = v[0] - w[1] * self.radius, v[1] + w[0] * self.radius
-            self.slip = max(self.slip, math.hypot(vx, vy))
+        loaded = np.flatnonzero(fz > 0)
+        if len(loaded):
+            # The CoP of the forces at the spheres' lowest points: their centres in x, y.
+            xy = d.geom_xpos[self.spheres[loaded], :2]
+            self.zmp[:] = fz[loaded] @ xy / fz[loaded].sum()
+        # else: the previous CoP stays, as in upc sim.
         if self.door:
-            rows = np.flatnonzero((d.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
-                                  & (d.efc_id == self.connect))
-            # connect: residual p_hand − p_handle (world), so its force acts on the hand.
+            # Equality rows come first in efc; the connect's residual is p_hand − p_handle, so
+            # its force acts on the hand (the reaction on the handle).
+            rows = np.flatnonzero(d.efc_id[: d.ne] == self.connect)
             self.hand_force[:] = d.efc_force[rows] if len(rows) == 3 else 0.0
 
-    def loop_error(self) -> float:
-        if not self.door:
-            return 0.0
-        return float(np.linalg.norm(self.d.site_xpos[self.hand] - self.d.site_xpos[self.handle]))
+        # Geometry and velocities after the step: MuJoCo's step integrated q and v without
+        # updating what depends on them.
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        mujoco.mj_comVel(m, d)
+        # The ground is the plane z = 0.
+        self.penetration = max(0.0, self.radius - float(d.geom_xpos[self.spheres, 2].min()))
+        self.slip = 0.0
+        if len(loaded):
+            vel = self._vel6
+            for k in loaded:
+                mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_GEOM, int(self.spheres[k]),
+                                         vel[k], 0)
+            w, v = vel[loaded, :3], vel[loaded, 3:]
+            # The velocity of a sphere's lowest point: v + ω × (−r ẑ).
+            vx = v[:, 0] - w[:, 1] * self.radius
+            vy = v[:, 1] + w[:, 0] * self.radius
+            self.slip = float(np.sqrt((vx * vx + vy * vy).max()))
+        if self.door:
+            self.loop_error = math.dist(d.site_xpos[self.hand], d.site_xpos[self.handle])
+
+    def com(self):
+        return self.d.subtree_com[self.base_body]
 
     def door_state(self):
         if not self.door:
             return 0.0, 0.0
         return float(self.d.qpos[self.hq]), float(self.d.qvel[self.hv])
 
-    def fill(self, msg):
-        """The contract's state: q (base quaternion x y z w), v (base velocities in the base
-        frame), contact forces, CoP, door, hand force."""
-        d = self.d
-        q = np.ctypeslib.as_array(msg.q)
-        v = np.ctypeslib.as_array(msg.v)
-        q[0:3] = d.qpos[self.bq:self.bq + 3]
-        w, x, y, z = d.qpos[self.bq + 3:self.bq + 7]
-        q[3:7] = (x, y, z, w)
-        q[7:self.nq] = d.qpos[self.qadr]
-        rot = d.xmat[self.base_body].reshape(3, 3)
+    def fill_state(self):
+        """The world's part of the state: q, v, contact forces, CoP, door, hand force."""
+        d, s = self.d, self.state
+        s.time = d.time
+        self._q[: self.nq] = d.qpos[self.q_from]
         # MuJoCo's free joint: linear velocity in the world frame, angular in the body's.
-        v[0:3] = rot.T @ d.qvel[self.bv:self.bv + 3]
-        v[3:6] = d.qvel[self.bv + 3:self.bv + 6]
-        v[6:self.nv] = d.qvel[self.dadr]
-        msg.time = d.time
-        msg.nq, msg.nv = self.nq, self.nv
-        np.ctypeslib.as_array(msg.contact_forces)[:] = self.contact
-        msg.zmp[0], msg.zmp[1] = self.zmp
-        msg.door_angle, msg.door_velocity = self.door_state()
-        msg.hand_force[0], msg.hand_force[1], msg.hand_force[2] = self.hand_force
+        self._v[0:3] = d.qvel[self.bv:self.bv + 3] @ d.xmat[self.base_body].reshape(3, 3)
+        self._v[3:self.nv] = d.qvel[self.v_from]
+        self._contact_out[:] = self.contact
+        self._zmp_out[:] = self.zmp
+        s.door_angle, s.door_velocity = self.door_state()
+        self._hand_out[:] = self.hand_force
 
 
 class Process:
@@ -413,19 +499,40 @@ class Process:
         self.sim = sim
         self.lockstep = sim["mode"] == "lockstep"
         self.session = secrets.randbits(64) or 1
+        # Lockstep plays the scenario from 0; real time once a controller drives the robot.
         self.scenario_start = 0.0 if self.lockstep else -1.0
         self.flags = ch.STATE_FLAG_LOCKSTEP if self.lockstep else ch.STATE_FLAG_HOLD
         self.gate = Gate(self.session, plant.n)
-        self.supervisor = Supervisor(cfg["hold"], sim["safe_damping"], plant.joint_q().copy())
+        self.supervisor = Supervisor(cfg["hold"], sim["safe_damping"], plant.joint_q())
         self.steps = 0
         self.timing, self.ipc = Histogram(), Histogram()
         self.max_pen = self.max_slip = self.max_loop = 0.0
         self.overruns = 0
         self.record_every = max(1, round(sim["record_period"] / sim["dt"]))
         self.truth = truth_csv
+        self.error = None  # what ended the run early
+
+        s = plant.state
+        name = cfg["scenario"].encode()
+        if len(name) > ch.SCENARIO_NAME_LEN:
+            raise BundleError(f"scenario `{cfg['scenario']}` is longer than the "
+                              f"{ch.SCENARIO_NAME_LEN} bytes a state announces")
+        s.scenario[: len(name)] = name
+        s.session = self.session
+        s.scenario_hash = int(cfg["scenario_hash"], 16)
+        s.force_scale = cfg["force_scale"]
+        s.robot_hash = int(cfg["robot_hash"], 16)
+        self.gt = ch.GroundTruthMsg()
+        self._gt_com = np.ctypeslib.as_array(self.gt.com)
 
         iox2.set_log_level_from_env_or(iox2.LogLevel.Error)
-        node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
+        node = (iox2.NodeBuilder.new()
+                .name(iox2.NodeName.new(f"upc-mujoco-plant-{os.getpid()}"))
+                # SIGINT/SIGTERM are this process's own (a clean stop, complete outputs).
+                .signal_handling_mode(iox2.SignalHandlingMode.Disabled)
+                .create(iox2.ServiceType.Ipc))
+        # Resources of dead nodes (a process killed with SIGKILL) would hold their ports.
+        node.try_cleanup_dead_nodes()
         self.node = node
         prefix = sim["prefix"]
         self.state_pub = ch.pubsub(node, prefix, "state", ch.StateMsg).publisher_builder().create()
@@ -436,32 +543,21 @@ class Process:
         self.state_ev = ch.event(node, prefix, "state").notifier_builder().create()
         self.truth_ev = ch.event(node, prefix, "ground_truth").notifier_builder().create()
         self.torque_ev = ch.event(node, prefix, "torques").listener_builder().create()
-
-        self.msg = ch.StateMsg()
-        name = cfg["scenario"].encode()[: ch.SCENARIO_NAME_LEN]
-        self.msg.scenario[: len(name)] = name
-        self.msg.session = self.session
-        self.msg.scenario_hash = int(cfg["scenario_hash"], 16)
-        self.msg.force_scale = cfg["force_scale"]
-        self.msg.robot_hash = int(cfg["robot_hash"], 16)
-        self.gt = ch.GroundTruthMsg()
         self.published_at = time.monotonic()
-        self.error = None  # what ended the run early
 
     def publish(self, step_time: float):
-        p, msg = self.p, self.msg
+        p, s, gt = self.p, self.p.state, self.gt
+        # Lockstep never holds: it does not step without torques.
         if not self.lockstep:
             self.flags = {"hold": ch.STATE_FLAG_HOLD, "handover": ch.STATE_FLAG_HOLD,
                           "damping": ch.STATE_FLAG_DAMPING}.get(self.supervisor.phase, 0)
-        p.fill(msg)
-        msg.step = self.steps
-        msg.scenario_start = self.scenario_start
-        msg.flags = self.flags
-        self.state_pub.loan_uninit().write_payload(msg).send()
-        gt = self.gt
-        gt.step, gt.time = self.steps, p.d.time
-        gt.com[0], gt.com[1], gt.com[2] = p.d.subtree_com[p.base_body]
-        gt.loop_error = p.loop_error()
+        s.step = self.steps
+        s.scenario_start = self.scenario_start
+        s.flags = self.flags
+        self.state_pub.loan_uninit().write_payload(s).send()
+        gt.step, gt.time = self.steps, s.time
+        self._gt_com[:] = p.com()
+        gt.loop_error = p.loop_error
         gt.max_penetration, gt.max_slip_speed = p.penetration, p.slip
         gt.door_torque, gt.step_time = p.door_torque, step_time
         gt.solver_iterations = int(p.d.solver_niter[0])
@@ -477,27 +573,26 @@ class Process:
         p = self.p
         door = p.hinge_torque(p.d.time - self.scenario_start) if self.scenario_start >= 0 else 0.0
         p.step(tau, door)
-        dt_step = p.step_time  # MuJoCo's step alone, as upc sim times its World::step
         self.steps += 1
-        self.timing.record(dt_step)
-        self.max_pen = max(self.max_pen, p.penetration)
-        self.max_slip = max(self.max_slip, p.slip)
-        loop = p.loop_error()
-        self.max_loop = max(self.max_loop, loop)
-        self.publish(dt_step)
+        self.timing.record(p.step_time)  # MuJoCo's step alone
+        if p.penetration > self.max_pen:
+            self.max_pen = p.penetration
+        if p.slip > self.max_slip:
+            self.max_slip = p.slip
+        if p.loop_error > self.max_loop:
+            self.max_loop = p.loop_error
+        self.publish(p.step_time)
         if self.truth is not None and self.steps % self.record_every == 0:
-            d = p.d
-            c = d.subtree_com[p.base_body]
-            h = p.hand_force
+            c, z, h = p.com(), p.zmp, p.hand_force
             angle, _ = p.door_state()
             self.truth.write(
-                f"{d.time:.4f},{c[0]:.6f},{c[1]:.6f},{c[2]:.6f},{p.zmp[0]:.6f},{p.zmp[1]:.6f},"
+                f"{p.d.time:.4f},{c[0]:.6f},{c[1]:.6f},{c[2]:.6f},{z[0]:.6f},{z[1]:.6f},"
                 f"{h[0]:.4f},{h[1]:.4f},{h[2]:.4f},{angle:.6f},{p.door_torque:.4f},"
-                f"{rust_exp(loop)},{rust_exp(p.penetration)},{rust_exp(p.slip)},"
-                f"{int(d.solver_niter[0])}\n")
+                f"{rust_exp(p.loop_error)},{rust_exp(p.penetration)},{rust_exp(p.slip)},"
+                f"{int(p.d.solver_niter[0])}\n")
 
     def receive(self):
-        """The next torque message (copied out), or None."""
+        """The next torque message (copied out of shared memory), or None."""
         sample = self.torques.receive()
         if sample is None:
             return None
@@ -517,7 +612,7 @@ class Process:
                     if not self.gate.check(msg, cmd):
                         continue
                     if msg.state_step == want:
-                        if want > 0:  # state 0 waits for the controller to start
+                        if want > 0:  # state 0 waits for the controller to start: not IPC
                             rt = time.monotonic() - self.published_at
                             self.ipc.record(max(0.0, rt - msg.compute_ns * 1e-9))
                         answered = True
@@ -531,13 +626,17 @@ class Process:
                         f"lockstep: no torques answering state {want} within {timeout:.3f} s")
                 if stop["now"]:
                     return
+                # The wake-ups of the samples received above, then a sample that came since
+                # (its wake-up just consumed) or a wait for the next one.
+                self.torque_ev.try_wait()
+                if self.torques.has_samples():
+                    continue
                 woken = self.torque_ev.timed_wait(
                     iox2.Duration.from_secs_f64(min(deadline - now, 0.02)))
                 if not woken and not self.torques.has_samples():
                     # A controller that connected after this state was sent has neither the
                     # sample nor its wake-up: send the same state again (it skips duplicates).
-                    self.p.fill(self.msg)
-                    self.state_pub.loan_uninit().write_payload(self.msg).send()
+                    self.state_pub.loan_uninit().write_payload(self.p.state).send()
                     self.state_ev.notify()
             self.step(cmd)
 
@@ -550,9 +649,11 @@ class Process:
         while self.steps < total and not stop["now"]:
             fresh = False
             while (msg := self.receive()) is not None:
+                # A controller's own fallback (it has no state to control from) does not take
+                # the robot from the hold; once it drives the robot, its fallbacks apply.
                 holding = self.supervisor.phase in ("hold", "damping")
                 if holding and msg.flags & ch.TORQUE_FLAG_FALLBACK:
-                    continue  # a controller's fallback does not take the robot from the hold
+                    continue
                 if self.gate.check(msg, commanded):
                     fresh = True
             now = time.monotonic()
@@ -565,7 +666,7 @@ class Process:
             tr = self.supervisor.torques(t, p.joint_q(), p.joint_v(),
                                          commanded if current else None, applied)
             if tr is not None:
-                print(f"mujoco plant: t = {t:.3f} s: {tr[0]} → {tr[1]}", file=sys.stderr)
+                self.log_transition(*tr, t)
                 if tr[1] == "control" and self.scenario_start < 0:
                     self.scenario_start = t
                     print(f"mujoco plant: t = {t:.3f} s: scenario `{p.cfg['scenario']}` starts",
@@ -580,15 +681,28 @@ class Process:
                 time.sleep(nxt - now)
             nxt += period
 
+    def log_transition(self, frm: str, to: str, t: float):
+        """The words of upc sim (log_transition in src/sim/process.rs)."""
+        hold, sim = self.p.cfg["hold"], self.sim
+        text = {
+            "handover": f"the controller's torques arrived; handing over from {frm} in "
+                        f"{hold['handover']} s",
+            "control": "the controller drives the robot",
+            "hold": f"no torques for {sim['command_timeout']} s: holding the robot "
+                    f"({hold['kind']}; bare damping after {hold['lost_timeout']} s)",
+            "damping": f"safe behaviour, joint damping {sim['safe_damping']} N·m·s/rad (no hold)",
+        }[to]
+        print(f"mujoco plant: t = {t:.3f} s: {text}", file=sys.stderr)
+
     def summary(self, wall: float) -> dict:
-        p, cfg = self.p, self.p.cfg
+        cfg = self.p.cfg
         return {
             "plant": "mujoco",
             "mujoco_version": mujoco.__version__,
-            "settle_sink": p.settled,
+            "settle_sink": self.p.settled,
             "error": self.error,
             "steps": self.steps,
-            "sim_time": self.steps * p.dt,  # MuJoCo resets d.time when it diverges
+            "sim_time": self.steps * self.p.dt,  # MuJoCo resets d.time when it diverges
             "wall_time": wall,
             "step_time_p50": self.timing.quantile(0.5),
             "step_time_p99": self.timing.quantile(0.99),
@@ -620,6 +734,24 @@ def rust_exp(x: float) -> str:
     return f"{mantissa}e{int(exponent)}"
 
 
+def print_summary(s: dict, rejected: int):
+    """The lines `upc sim` prints at its end (run_cli in src/cli/sim.rs)."""
+    c, h = s["commands"], s["hold"]
+    print(f"sim: {s['steps']} steps, {s['sim_time']:.3f} s simulated in {s['wall_time']:.3f} s; "
+          f"step time p50 {s['step_time_p50'] * 1e6:.1f} µs, p99 {s['step_time_p99'] * 1e6:.1f} "
+          f"µs, max {s['step_time_max'] * 1e6:.1f} µs; overruns {s['overruns']}; commands "
+          f"accepted {c['accepted']}, rejected {rejected} (length {c['wrong_length']}, non-finite "
+          f"{c['non_finite']}, order {c['out_of_order']}, foreign {c['foreign']}), stale "
+          f"{c['stale']}; hold steps {h['hold_steps']}, hand-overs {h['handovers']}, controller "
+          f"losses {h['losses']}, safe-mode steps {s['safe_mode_steps']}; max penetration "
+          f"{s['max_penetration']:.2e} m, max slip {s['max_slip_speed']:.2e} m/s, max loop error "
+          f"{s['max_loop_error']:.2e} m; rerun frames 0 written, 0 dropped", flush=True)
+    if s["ipc_overhead_p50"] > 0:
+        print(f"sim: IPC round-trip overhead (excluding controller compute) p50 "
+              f"{s['ipc_overhead_p50'] * 1e6:.1f} µs, p99 {s['ipc_overhead_p99'] * 1e6:.1f} µs, "
+              f"max {s['ipc_overhead_max'] * 1e6:.1f} µs", flush=True)
+
+
 def main() -> int:
     a = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -631,52 +763,58 @@ def main() -> int:
     stop = {"now": False}
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.update(now=True))
-    truth = None
     try:
         plant = Plant(args.plant)
         sim = plant.cfg["sim"]
+        if args.truth_csv is not None and sim["mode"] != "lockstep":
+            raise BundleError("--truth-csv is written from the stepping loop: lockstep only")
+        if sim["mode"] not in ("lockstep", "realtime"):
+            raise BundleError(f"{args.plant}: sim.mode `{sim['mode']}`")
+        total = round(sim["duration"] / sim["dt"]) if sim["duration"] > 0 else sys.maxsize
+        truth = None
         if args.truth_csv is not None:
-            if sim["mode"] != "lockstep":
-                raise BundleError("--truth-csv is written from the stepping loop: lockstep only")
             truth = open(args.truth_csv, "w", buffering=1 << 20)
             truth.write(TRUTH_CSV_HEADER + "\n")
         proc = Process(plant, truth)
     except (BundleError, OSError) as e:
         print(f"mujoco plant: {e}", file=sys.stderr)
         return 2
-    total = round(sim["duration"] / sim["dt"]) if sim["duration"] > 0 else sys.maxsize
+    except KeyError as e:
+        print(f"mujoco plant: {args.plant}: no `{e.args[0]}`", file=sys.stderr)
+        return 2
+    except CHANNEL_ERRORS as e:
+        print(f"mujoco plant: cannot open the channels of prefix `{sim['prefix']}`: "
+              f"{type(e).__name__}: {e}", file=sys.stderr)
+        return 1
     print(f"mujoco plant: MuJoCo {mujoco.__version__}, robot `{plant.cfg['robot']}` "
           f"(forces × {plant.cfg['force_scale']:.3f}), {sim['mode']} mode, dt = {sim['dt']} s, "
-          f"duration = {sim['duration']} s, scenario `{plant.cfg['scenario']}`, prefix "
-          f"`{sim['prefix']}`, session {proc.session:016x}", file=sys.stderr)
+          f"duration = {sim['duration']} s, scenario `{plant.cfg['scenario']}` (hash "
+          f"{plant.cfg['scenario_hash']}), prefix `{sim['prefix']}`, door "
+          f"{'on' if plant.door else 'off'}, session {proc.session:016x}, hold "
+          f"{plant.cfg['hold']['kind']}; settled {plant.settled * 1e3:.2f} mm onto the contacts",
+          file=sys.stderr)
     start = time.monotonic()
-    proc.publish(0.0)  # state 0 before any step
     status = 0
     try:
+        proc.publish(0.0)  # state 0 before any step
         if proc.lockstep:
             proc.lockstep_loop(total, stop)
         else:
             proc.realtime_loop(total, stop)
     except (TimeoutError, Diverged) as e:
-        print(f"mujoco plant: {e}", file=sys.stderr)
         proc.error = str(e)
+    except CHANNEL_ERRORS as e:
+        proc.error = f"channels: {type(e).__name__}: {e}"
+    if proc.error is not None:
+        print(f"mujoco plant: {proc.error}", file=sys.stderr)
         status = 1
     wall = time.monotonic() - start
     if truth is not None:
         truth.close()
     s = proc.summary(wall)
     if args.summary is not None:
-        args.summary.write_text(json.dumps(s, indent=2))
-    c = s["commands"]
-    print(f"mujoco plant: {s['steps']} steps, {s['sim_time']:.3f} s simulated in {wall:.3f} s; "
-          f"step time p50 {s['step_time_p50'] * 1e6:.1f} µs, p99 {s['step_time_p99'] * 1e6:.1f} µs; "
-          f"overruns {s['overruns']}; commands accepted {c['accepted']}, rejected "
-          f"{proc.gate.rejected()} (length {c['wrong_length']}, non-finite {c['non_finite']}, "
-          f"order {c['out_of_order']}, foreign {c['foreign']}), stale {c['stale']}; hold steps "
-          f"{s['hold']['hold_steps']}, hand-overs {s['hold']['handovers']}, controller losses "
-          f"{s['hold']['losses']}; max penetration {s['max_penetration']:.2e} m, max slip "
-          f"{s['max_slip_speed']:.2e} m/s, max loop error {s['max_loop_error']:.2e} m",
-          file=sys.stderr)
+        args.summary.write_text(json.dumps(s, indent=2) + "\n")
+    print_summary(s, proc.gate.rejected())
     return status
 
 
