@@ -22,8 +22,10 @@ from pathlib import Path
 
 import iceoryx2 as iox2
 
-# The contract's payloads and service settings (services/python/upc_channels.py).
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "services" / "python"))
+# The contract's payloads and service settings: services/python/upc_channels.py of the source
+# tree, or a copy beside this script (as a MuJoCo plant bundle has one).
+_HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(_HERE), str(_HERE.parent.parent / "services" / "python")]
 from upc_channels import MAX_FORECAST, ForecastMsg, StateMsg, event, pubsub  # noqa: E402
 
 

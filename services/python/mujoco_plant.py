@@ -279,6 +279,9 @@ class Plant:
             raise BundleError(f"{scene}: base joint `{cfg['base_joint']}` is not a free joint")
         self.bq, self.bv = int(m.jnt_qposadr[base]), int(m.jnt_dofadr[base])
         self.base_body = ident(mujoco.mjtObj.mjOBJ_BODY, cfg["base_body"])
+        if m.jnt_bodyid[base] != self.base_body:
+            raise BundleError(f"{scene}: base joint `{cfg['base_joint']}` does not move body "
+                              f"`{cfg['base_body']}`")
         joints = [ident(mujoco.mjtObj.mjOBJ_JOINT, j) for j in cfg["joints"]]
         self.qadr = np.array([m.jnt_qposadr[j] for j in joints], dtype=int)
         self.dadr = np.array([m.jnt_dofadr[j] for j in joints], dtype=int)
@@ -288,7 +291,7 @@ class Plant:
             raise BundleError(f"nq = {self.nq}: the contract carries at most {ch.MAX_DOF}")
         # The contract's q from MuJoCo's qpos in one gather: base position, quaternion x y z w
         # (MuJoCo's is w x y z), joints. v: the base's angular velocity (MuJoCo's is in the
-        # body frame already) and the joint rates; the linear one is rotated in `fill_state`.
+        # body frame already) and the joint rates; the linear one is rotated in `_after_step`.
         b = self.bq
         self.q_from = np.concatenate([[b, b + 1, b + 2, b + 4, b + 5, b + 6, b + 3], self.qadr])
         self.v_from = np.concatenate([[self.bv + 3, self.bv + 4, self.bv + 5], self.dadr])
@@ -331,27 +334,25 @@ class Plant:
         if len(kp) != self.n or len(kd) != self.n:
             raise BundleError(f"hold gains for {len(kp)}, {len(kd)} joints, the robot has {self.n}")
 
-        # Buffers of the per-step figures (allocation-free steps).
+        # Per-step figures. The eight spheres' are handled as Python floats: for so few
+        # values a scalar loop costs half of numpy's per-call overhead.
+        self.slot_list = self.slot_of.tolist()
+        self.sphere_list = self.spheres.tolist()
         self.applied = np.zeros(self.n)
-        self.contact = np.zeros((ch.N_CONTACTS, 3))
-        self.zmp = np.zeros(2)
-        self.hand_force = np.zeros(3)
-        self._force6 = np.zeros((ch.N_CONTACTS, 6))
-        self._vel6 = np.zeros((ch.N_CONTACTS, 6))
+        self._f6 = np.zeros(6)
+        self.zmp = (0.0, 0.0)
         self.door_torque = 0.0
         self.penetration = self.slip = self.loop_error = 0.0
         self.step_time = 0.0
         self.state = ch.StateMsg()
-        s = self.state
-        s.nq, s.nv = self.nq, self.nv
-        self._q, self._v = np.ctypeslib.as_array(s.q), np.ctypeslib.as_array(s.v)
-        self._contact_out = np.ctypeslib.as_array(s.contact_forces)
-        self._zmp_out = np.ctypeslib.as_array(s.zmp)
-        self._hand_out = np.ctypeslib.as_array(s.hand_force)
+        st = self.state
+        st.nq, st.nv = self.nq, self.nv
+        self._q, self._v = np.ctypeslib.as_array(st.q), np.ctypeslib.as_array(st.v)
+        self._contact_out = np.ctypeslib.as_array(st.contact_forces).reshape(-1)
+        self.hand_force = np.ctypeslib.as_array(st.hand_force)
 
         self.settled = self._settle(kp, kd)
         self._after_step()
-        self.fill_state()
 
     def _settle(self, kp, kd) -> float:
         """Lets the robot settle onto its contacts under the hold's posture PD, then starts the
@@ -377,7 +378,8 @@ class Plant:
         return z0 - float(d.qpos[self.bq + 2])
 
     def _unstable(self) -> bool:
-        return any(w.number for w in self._instability)
+        acc, vel, pos = self._instability
+        return acc.number > 0 or vel.number > 0 or pos.number > 0
 
     def joint_q(self):
         return self.d.qpos[self.qadr]
@@ -392,12 +394,12 @@ class Plant:
         return float(self.hinge[k]) if k < len(self.hinge) else 0.0
 
     def step(self, tau, door_torque: float):
+        """One MuJoCo step under joint torques `tau` (clamped to the effort limits when the
+        bundle says so) and the hinge torque; then the state of its end."""
         d = self.d
         if self.clamp:
-            np.clip(tau, -self.effort, self.effort, out=self.applied)
-            d.qfrc_applied[self.dadr] = self.applied
-        else:
-            d.qfrc_applied[self.dadr] = tau
+            tau = np.clip(tau, -self.effort, self.effort, out=self.applied)
+        d.qfrc_applied[self.dadr] = tau
         if self.door:
             d.qfrc_applied[self.hv] = door_torque
         self.door_torque = door_torque
@@ -409,43 +411,52 @@ class Plant:
             raise Diverged(f"the simulation diverged at t = {t_before:.3f} s (MuJoCo: bad "
                            "accelerations; typically a fall under torques the effort limits allow)")
         self._after_step()
-        self.fill_state()
 
     def _after_step(self):
-        """The figures of the step just made (or of the forward pass of state 0)."""
-        m, d = self.m, self.d
+        """The figures and the state (`self.state`, its world part) of the step just made, or
+        of the forward pass of state 0."""
+        m, d, st = self.m, self.d, self.state
         # Forces: MuJoCo's constraint solve of the step, at the configuration it started from
         # (d.contact, d.efc_force and the geometry in d are still those of that forward pass).
-        self.contact[:] = 0.0
+        forces = [0.0] * (3 * ch.N_CONTACTS)  # x y z of each contact point, contract order
         ncon = d.ncon
         if ncon:
-            geoms = d.contact.geom[:ncon]
-            slots = self.slot_of[geoms]  # (ncon, 2): contact slot of each geom, −1 if none
-            ours = np.flatnonzero((slots >= 0).any(axis=1))
-            if len(ours) > len(self._force6):
-                self._force6 = np.zeros((len(ours), 6))
-            f6 = self._force6[: len(ours)]
-            for j, i in enumerate(ours):
-                mujoco.mj_contactForce(m, d, int(i), f6[j])
-            # The contact frame's rows are the normal (geom1 → geom2) and two tangents; the
-            # force in it acts on geom2, its opposite on geom1.
-            frames = d.contact.frame[ours].reshape(-1, 3, 3)
-            world = np.einsum("kij,ki->kj", frames, f6[:, :3])
-            on2 = slots[ours, 1] >= 0
-            world[~on2] *= -1.0
-            np.add.at(self.contact, np.where(on2, slots[ours, 1], slots[ours, 0]), world)
-        fz = self.contact[:, 2]
-        loaded = np.flatnonzero(fz > 0)
-        if len(loaded):
-            # The CoP of the forces at the spheres' lowest points: their centres in x, y.
-            xy = d.geom_xpos[self.spheres[loaded], :2]
-            self.zmp[:] = fz[loaded] @ xy / fz[loaded].sum()
+            con, f, slot = d.contact, self._f6, self.slot_list
+            frames = con.frame.tolist()
+            for i, (g1, g2) in enumerate(con.geom.tolist()):
+                # The contact frame's rows are the normal (geom1 → geom2) and two tangents; the
+                # force in it acts on geom2, its opposite on geom1.
+                k, sign = slot[g2], 1.0
+                if k < 0:
+                    k, sign = slot[g1], -1.0
+                    if k < 0:
+                        continue
+                mujoco.mj_contactForce(m, d, i, f)
+                fn, f1, f2 = f[:3].tolist()
+                a, c = frames[i], 3 * k
+                forces[c] += sign * (a[0] * fn + a[3] * f1 + a[6] * f2)
+                forces[c + 1] += sign * (a[1] * fn + a[4] * f1 + a[7] * f2)
+                forces[c + 2] += sign * (a[2] * fn + a[5] * f1 + a[8] * f2)
+        self._contact_out[:] = forces
+        # The CoP of the loaded points, at the spheres' lowest points: their centres in x, y.
+        loaded = [k for k in range(ch.N_CONTACTS) if forces[3 * k + 2] > 0]
+        if loaded:
+            xy = d.geom_xpos[self.spheres, :2].tolist()
+            fz = [forces[3 * k + 2] for k in loaded]
+            total = sum(fz)
+            self.zmp = (sum(w * xy[k][0] for w, k in zip(fz, loaded)) / total,
+                        sum(w * xy[k][1] for w, k in zip(fz, loaded)) / total)
+            st.zmp[0], st.zmp[1] = self.zmp
         # else: the previous CoP stays, as in upc sim.
         if self.door:
             # Equality rows come first in efc; the connect's residual is p_hand − p_handle, so
-            # its force acts on the hand (the reaction on the handle).
-            rows = np.flatnonzero(d.efc_id[: d.ne] == self.connect)
-            self.hand_force[:] = d.efc_force[rows] if len(rows) == 3 else 0.0
+            # its force (3 rows, world frame) acts on the hand: the reaction on the handle.
+            ids = d.efc_id[: d.ne].tolist()
+            if self.connect in ids:
+                r = ids.index(self.connect)
+                self.hand_force[:] = d.efc_force[r:r + 3]
+            else:
+                self.hand_force[:] = 0.0
 
         # Geometry and velocities after the step: MuJoCo's step integrated q and v without
         # updating what depends on them.
@@ -454,40 +465,26 @@ class Plant:
         mujoco.mj_comVel(m, d)
         # The ground is the plane z = 0.
         self.penetration = max(0.0, self.radius - float(d.geom_xpos[self.spheres, 2].min()))
-        self.slip = 0.0
-        if len(loaded):
-            vel = self._vel6
-            for k in loaded:
-                mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_GEOM, int(self.spheres[k]),
-                                         vel[k], 0)
-            w, v = vel[loaded, :3], vel[loaded, 3:]
-            # The velocity of a sphere's lowest point: v + ω × (−r ẑ).
-            vx = v[:, 0] - w[:, 1] * self.radius
-            vy = v[:, 1] + w[:, 0] * self.radius
-            self.slip = float(np.sqrt((vx * vx + vy * vy).max()))
+        # The fastest loaded point: the velocity of a sphere's lowest point, v + ω × (−r ẑ).
+        fastest, r, vel = 0.0, self.radius, self._f6
+        for k in loaded:
+            mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_GEOM, self.sphere_list[k], vel, 0)
+            w0, w1, _, v0, v1, _ = vel.tolist()
+            vx, vy = v0 - w1 * r, v1 + w0 * r
+            fastest = max(fastest, vx * vx + vy * vy)
+        self.slip = math.sqrt(fastest)
         if self.door:
             self.loop_error = math.dist(d.site_xpos[self.hand], d.site_xpos[self.handle])
+            st.door_angle, st.door_velocity = float(d.qpos[self.hq]), float(d.qvel[self.hv])
 
-    def com(self):
-        return self.d.subtree_com[self.base_body]
-
-    def door_state(self):
-        if not self.door:
-            return 0.0, 0.0
-        return float(self.d.qpos[self.hq]), float(self.d.qvel[self.hv])
-
-    def fill_state(self):
-        """The world's part of the state: q, v, contact forces, CoP, door, hand force."""
-        d, s = self.d, self.state
-        s.time = d.time
+        st.time = d.time
         self._q[: self.nq] = d.qpos[self.q_from]
         # MuJoCo's free joint: linear velocity in the world frame, angular in the body's.
         self._v[0:3] = d.qvel[self.bv:self.bv + 3] @ d.xmat[self.base_body].reshape(3, 3)
         self._v[3:self.nv] = d.qvel[self.v_from]
-        self._contact_out[:] = self.contact
-        self._zmp_out[:] = self.zmp
-        s.door_angle, s.door_velocity = self.door_state()
-        self._hand_out[:] = self.hand_force
+
+    def com(self):
+        return self.d.subtree_com[self.base_body]
 
 
 class Process:
@@ -584,7 +581,7 @@ class Process:
         self.publish(p.step_time)
         if self.truth is not None and self.steps % self.record_every == 0:
             c, z, h = p.com(), p.zmp, p.hand_force
-            angle, _ = p.door_state()
+            angle = p.state.door_angle
             self.truth.write(
                 f"{p.d.time:.4f},{c[0]:.6f},{c[1]:.6f},{c[2]:.6f},{z[0]:.6f},{z[1]:.6f},"
                 f"{h[0]:.4f},{h[1]:.4f},{h[2]:.4f},{angle:.6f},{p.door_torque:.4f},"
