@@ -1,6 +1,7 @@
 //! Balance capability (`upc capability`): the bisection on the reduced models against the
 //! reduced loop itself, and the command end to end on the full simulation, where C1's
-//! forecast must let the robot take a larger push than C0.
+//! forecast must let the robot take a larger push than C0, along x (through the door) and y
+//! (at the hand).
 
 mod support;
 
@@ -41,7 +42,7 @@ fn full_simulation_capability_of_c1_exceeds_c0() {
             "--durations",
             "0.3",
             "--directions",
-            "x",
+            "x,y",
             "--max",
             "160",
             "--tol",
@@ -59,13 +60,17 @@ fn full_simulation_capability_of_c1_exceeds_c0() {
     );
     let j = json(&s.path("capability.json"));
     let rows = j["rows"].as_array().expect("rows");
-    let survived = |c: &str| {
+    let survived = |c: &str, d: &str| {
         rows.iter()
-            .find(|r| r["controller"] == c)
+            .find(|r| r["controller"] == c && r["direction"] == d)
             .and_then(|r| r["survived"].as_f64())
-            .unwrap_or_else(|| panic!("no {c} in {j}"))
+            .unwrap_or_else(|| panic!("no {c} along {d} in {j}"))
     };
-    assert!(survived("C1") > survived("C0") + 10.0, "{j}");
+    // Along x through the door; along y at the hand (`sim.push = "hand"`).
+    for d in ["x", "y"] {
+        assert!(survived("C1", d) > survived("C0", d) + 10.0, "{d}: {j}");
+    }
     assert!(s.path("capability.md").exists() && s.path("capability.csv").exists());
     assert!(s.path("figures/capability_full_x.svg").exists());
+    assert!(s.path("figures/capability_full_y.svg").exists());
 }

@@ -4,7 +4,7 @@
 mod support;
 
 use nalgebra::{DVector, UnitQuaternion, Vector3};
-use upc::dynamics::{BaseJoint, Model};
+use upc::dynamics::{BaseJoint, Data, Model};
 use upc::scenario::{ForceProfile, Impact};
 use upc::sim::{PhysicsParams, Plane, PosturePd, SimError, World, WorldSpec, humanoid_scene};
 use upc::sim::{SimConfig, scene::humanoid_scene_with};
@@ -464,4 +464,34 @@ fn bad_torques_are_errors_and_change_nothing() {
     ));
     assert_eq!(w.q(), &q0);
     assert_eq!(w.steps(), 0);
+}
+
+/// A push at a body point (`sim.push = "hand"`) obeys Newton: in the air, it changes the CoM
+/// velocity by F·t/m, against the same steps without it (up to the integrator's error, second
+/// order in the step: the push also spins the box).
+#[test]
+fn a_push_changes_the_momentum_by_its_impulse() {
+    let q = box_q(
+        Vector3::new(0.0, 0.0, 5.0),
+        UnitQuaternion::from_euler_angles(0.2, 0.4, -0.3),
+    );
+    let com_velocity = |push: Option<Vector3<f64>>| {
+        let mut w = box_world(Plane::ground(), 0.8, q.clone());
+        if let Some(f) = push {
+            let frame = w.robot().frame_id("c0").unwrap();
+            w.set_push(frame, f).unwrap();
+        }
+        for _ in 0..10 {
+            w.step(&DVector::zeros(0), 0.0).unwrap();
+        }
+        let model = w.robot().clone();
+        let mut data = Data::new(&model);
+        upc::dynamics::center_of_mass_velocity(&model, &mut data, w.q(), w.v())
+            .unwrap()
+            .1
+    };
+    let f = Vector3::new(3.0, -2.0, 1.5);
+    let dv = com_velocity(Some(f)) - com_velocity(None);
+    let want = f * (10.0 * 1e-3) / 2.0; // 10 steps of 1 ms, a 2 kg box
+    assert!((dv - want).norm() < 2e-3 * want.norm(), "{dv} vs {want}");
 }

@@ -355,25 +355,41 @@ class Plant:
         self._after_step()
 
     def _settle(self, kp, kd) -> float:
-        """Lets the robot settle onto its contacts under the hold's posture PD, then starts the
+        """Lets the robot settle onto its contacts, held at its home posture, then starts the
         run from there at rest, time 0. MuJoCo's contacts are soft: a robot placed with its
         contact points on the ground (as upc's hard contacts hold it) first sinks into them,
-        which shakes the CoP at the start of a run. Returns how far the base sank (m)."""
-        d = self.d
+        which shakes the CoP at the start of a run. The hold is the posture PD of plant.json,
+        plus gravity compensation on the joints with no contact point below them (torso, arms,
+        head: what hangs on them is exactly MuJoCo's bias force); the PD alone, its gains scaled
+        to each joint's inertia, lets the arms sag by up to 0.3 rad. The legs carry the body
+        through the ground, which the bias force does not know: there the PD alone. Returns how
+        far the base sank (m)."""
+        m, d = self.m, self.d
         z0 = float(d.qpos[self.bq + 2])
-        q_ref = self.joint_q()
+        q_home = self.joint_q()
+        carrying = set()  # bodies with a contact sphere on them or below them
+        for g in self.sphere_list:
+            b = int(m.geom_bodyid[g])
+            while b > 0:
+                carrying.add(b)
+                b = int(m.body_parentid[b])
+        hanging = np.array([m.dof_bodyid[a] not in carrying for a in self.dadr], dtype=float)
         for _ in range(round(SETTLE_TIME / self.dt)):
-            d.qfrc_applied[self.dadr] = kp * (q_ref - self.joint_q()) - kd * self.joint_v()
-            mujoco.mj_step(self.m, d)
+            mujoco.mj_forward(m, d)  # qfrc_bias (gravity, Coriolis) of this state
+            d.qfrc_applied[self.dadr] = (kp * (q_home - self.joint_q()) - kd * self.joint_v()
+                                         + hanging * d.qfrc_bias[self.dadr])
+            mujoco.mj_step(m, d)
         if self._unstable():
             raise BundleError("the robot does not stand in the scene: MuJoCo diverged while it "
-                              "settled onto its contacts under the hold's posture PD")
-        # At rest where it settled, time 0. The forward pass has the PD's static torques, so that
-        # the forces of state 0 are those of the robot held up, not collapsing.
+                              "settled onto its contacts, held at its home posture")
+        # At rest where it settled, time 0. The forward pass has the hold's static torques, so
+        # that the forces of state 0 are those of the robot held up, not collapsing.
         d.qvel[:] = 0.0
         d.time = 0.0
-        d.qfrc_applied[self.dadr] = kp * (q_ref - self.joint_q())
-        mujoco.mj_forward(self.m, d)
+        mujoco.mj_forward(m, d)
+        d.qfrc_applied[self.dadr] = (kp * (q_home - self.joint_q())
+                                     + hanging * d.qfrc_bias[self.dadr])
+        mujoco.mj_forward(m, d)
         d.qfrc_applied[:] = 0.0
         return z0 - float(d.qpos[self.bq + 2])
 
@@ -628,8 +644,13 @@ class Process:
                 self.torque_ev.try_wait()
                 if self.torques.has_samples():
                     continue
-                woken = self.torque_ev.timed_wait(
-                    iox2.Duration.from_secs_f64(min(deadline - now, 0.02)))
+                try:
+                    woken = self.torque_ev.timed_wait(
+                        iox2.Duration.from_secs_f64(min(deadline - now, 0.02)))
+                except iox2.ListenerWaitError as e:
+                    if "Interrupt" not in str(e):
+                        raise
+                    continue  # a signal (SIGINT, SIGTERM): the loop checks the stop flag
                 if not woken and not self.torques.has_samples():
                     # A controller that connected after this state was sent has neither the
                     # sample nor its wake-up: send the same state again (it skips duplicates).

@@ -146,13 +146,12 @@ pub fn run(args: CapabilityArgs) -> CliResult {
     let mut cases = Vec::new();
     for &model in models {
         for &variant in &variants {
-            // The door pushes the hand through its hinge: only along the tangent of the hinge's
-            // circle (x at the handle). A y force on the hand is along the lever and reaches the
-            // hand as a tenth of itself along x: the full simulation cannot play it.
-            for &direction in directions
-                .iter()
-                .filter(|&&d| model == Model::Reduced || d == Direction::X)
-            {
+            // The door pushes the hand through its hinge, along the tangent of the hinge's
+            // circle (x at the handle); pushes along y are applied at the hand instead
+            // (`sim.push = "hand"`), which only upc's own simulator does.
+            for &direction in directions.iter().filter(|&&d| {
+                model == Model::Reduced || d == Direction::X || args.plant == PlantChoice::Upc
+            }) {
                 for &duration in &args.durations {
                     cases.push(Case {
                         model,
@@ -296,6 +295,9 @@ fn full_case(
     if let Some(set) = case.variant.config_set() {
         cmd.args(["--set", set]);
     }
+    if case.direction == Direction::Y {
+        cmd.args(["--sim-set", "sim.push=\"hand\""]);
+    }
     let status = cmd.output()?;
     let summary = std::fs::read_to_string(dir.join(&name).join(kind).join("controller.json"));
     let survived = match summary {
@@ -387,11 +389,11 @@ fn write_outputs(
         };
         md += &format!("## {title}\n\n");
         if model == Model::Full && directions.contains(&Direction::Y) {
-            md += "Along x only: the door pushes the hand through its hinge, along the tangent \
-                   of the hinge's circle (x at the handle). A force along y is along the lever: \
-                   its hinge torque is 0.07 m × F, which reaches the hand as a tenth of F along x. \
-                   The full simulation cannot push along y, and a forecast of a y push is then a \
-                   forecast of a force that does not come.\n\n";
+            md += "Along x the door pushes, as in the paper's scenarios. It pushes the hand \
+                   through its hinge, along the tangent of the hinge's circle (x at the handle): \
+                   a force along y is along the lever and would reach the hand as a tenth of \
+                   itself. Along y the force is applied at the hand itself, without the door \
+                   (`sim.push = \"hand\"`, upc's simulator only).\n\n";
         }
         let mut durations: Vec<f64> = of_model.iter().map(|r| r.duration).collect();
         durations.sort_by(f64::total_cmp);

@@ -38,12 +38,24 @@ pub struct SimConfig {
     pub joint_limits: bool,
     pub effort_limits: bool,
     pub door: bool,
+    pub push: Push,
     pub scenario: String,
     pub record_period: f64,
     pub solver: SolverConfig,
     pub process: ProcessConfig,
     pub hold: HoldConfig,
     pub mujoco: MujocoConfig,
+}
+
+/// How the scenario's force reaches the hand (`sim.push`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Push {
+    /// Through the door: its hinge torque, so only the component along the tangent of the
+    /// hinge's circle (x at the handle) pushes the hand.
+    Door,
+    /// No door: the force applied at the hand frame as it is, in any direction.
+    Hand,
 }
 
 /// MuJoCo's friction cone.

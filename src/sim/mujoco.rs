@@ -30,7 +30,7 @@ use crate::dynamics::{Data, JointKind, Model, SE3, forward_kinematics};
 use crate::robot::Robot;
 use crate::scenario::Scenario;
 
-use super::config::{Cone, HoldKind, SimConfig};
+use super::config::{Cone, HoldKind, Push, SimConfig};
 use super::scene::{DoorDrive, HANDLE_FRAME, PosturePd, place_door};
 use super::world::SimError;
 
@@ -122,6 +122,11 @@ pub fn build(robot: &Robot, cfg: &SimConfig, scenario: &Scenario) -> Result<Mujo
     if !matches!(joint0.kind, JointKind::FreeFlyer) {
         return Err(SimError::Scene(
             "the MuJoCo scene needs a floating-base robot".into(),
+        ));
+    }
+    if cfg.push != Push::Door {
+        return Err(SimError::Scene(
+            "sim.push = \"hand\": the MuJoCo plant pushes through the door only (upc's own simulator applies hand pushes)".into(),
         ));
     }
     let mut data = Data::new(model);

@@ -32,7 +32,7 @@ use crate::channels::{
 };
 
 use super::command::{CommandGate, CommandOrigin, CommandStats};
-use super::config::{Mode, SimConfig};
+use super::config::{Mode, Push, SimConfig};
 use super::hold::{HoldStats, Phase, Supervisor};
 use super::record::{Recorder, RecorderStats};
 use super::scene::{DoorDrive, default_scene};
@@ -277,6 +277,15 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
         overruns: 0,
         last_reject_log: None,
         record_every: (cfg.record_period / cfg.dt).round().max(1.0) as u64,
+        push_frame: match cfg.push {
+            Push::Hand => Some(
+                robot
+                    .model
+                    .frame_id(&robot.description.hand.frame)
+                    .map_err(SimError::from)?,
+            ),
+            Push::Door => None,
+        },
     };
     // State 0 before any step.
     looper.publish(&ep, &world, &StepReport::default(), 0.0)?;
@@ -368,6 +377,8 @@ struct Looper {
     overruns: u64,
     last_reject_log: Option<Instant>,
     record_every: u64,
+    /// `sim.push = "hand"`: the robot frame the scenario's force is applied at.
+    push_frame: Option<usize>,
 }
 
 fn log_transition(from: Phase, to: Phase, t: f64, cfg: &SimConfig) {
@@ -460,6 +471,14 @@ impl Looper {
         } else {
             0.0
         };
+        if let Some(frame) = self.push_frame {
+            let f = if self.info.scenario_start >= 0.0 {
+                drive.hand_force(world.time() - self.info.scenario_start)
+            } else {
+                [0.0; 3]
+            };
+            world.set_push(frame, nalgebra::Vector3::from(f))?;
+        }
         let rep = world.step(&self.tau, door_torque)?;
         let dt_step = t0.elapsed().as_secs_f64();
         self.timing.record(Duration::from_secs_f64(dt_step));

@@ -169,6 +169,10 @@ pub fn robot_scene(
             hand_frame,
         })
     } else {
+        // No door: the profile is the hand push's (`DoorDrive::hand_force`), no hinge torque.
+        if let Some(p) = profile {
+            drive.profile = p;
+        }
         None
     };
     let spec = WorldSpec {
@@ -198,7 +202,7 @@ pub fn default_scene(
     let scene = robot_scene(
         robot,
         PhysicsParams::from_config(config),
-        config.door,
+        config.door && config.push == super::config::Push::Door,
         Some(scenario.force.clone()),
     )?;
     Ok((scene, scenario))

@@ -208,7 +208,7 @@ pub struct StepReport {
     pub zmp: Option<[f64; 2]>,
     /// Sum of the normal contact forces (N).
     pub total_normal_force: f64,
-    /// Force of the door on the hand (N, world).
+    /// Force of the door (or of the push) on the hand (N, world).
     pub hand_force: [f64; 3],
     /// Hinge torque applied (N·m).
     pub door_torque: f64,
@@ -279,6 +279,9 @@ pub struct World {
     time: f64,
     steps: u64,
     last: StepReport,
+    /// An external force on a robot point for the next steps (`sim.push = "hand"`): the point
+    /// and the force (N, world).
+    push: Option<(ContactPoint, Vector3<f64>)>,
 }
 
 fn dof_parents(model: &Model, offset: usize, out: &mut Vec<Option<usize>>) {
@@ -498,6 +501,7 @@ impl World {
             time: 0.0,
             steps: 0,
             last: StepReport::default(),
+            push: None,
         };
         w.refresh_points();
         Ok(w)
@@ -511,6 +515,31 @@ impl World {
         if let Some(d) = &mut self.door {
             kinematics::placements_unchecked(&d.model, &mut d.data, d.q.as_slice());
         }
+    }
+
+    /// Applies `force` (N, world) at the origin of the robot frame `frame` from the next step
+    /// on, until changed: the scenario's hand force without a door (`sim.push = "hand"`).
+    pub fn set_push(&mut self, frame: usize, force: Vector3<f64>) -> Result<(), SimError> {
+        let f = self
+            .robot
+            .frames
+            .get(frame)
+            .ok_or_else(|| SimError::Scene(format!("no robot frame #{frame} to push")))?;
+        let joint = f
+            .parent
+            .ok_or_else(|| SimError::Scene(format!("frame `{}` is not on a body", f.name)))?;
+        if force.iter().any(|v| !v.is_finite()) {
+            return Err(SimError::NonFinite {
+                what: "hand push",
+                index: 0,
+            });
+        }
+        let point = ContactPoint {
+            joint,
+            local: f.placement.trans,
+        };
+        self.push = Some((point, force));
+        Ok(())
     }
 
     /// Advances one step under joint torques `tau` (length [`World::n_actuated`]) and the
@@ -574,6 +603,21 @@ impl World {
                 *t
             };
             self.force[start + i] += t;
+        }
+        // The push: τ += Jᵀ f at the point (CRBA left the world Jacobian columns in data.j).
+        if let Some((c, f)) = &self.push {
+            let p = world_point(&self.data, c);
+            let mut cur = Some(c.joint);
+            while let Some(a) = cur {
+                let ja = &self.robot.joints[a];
+                for col in ja.idx_v..ja.idx_v + ja.nv() {
+                    let s = self.data.j.fixed_view::<6, 1>(0, col);
+                    let lin = Vector3::new(s[0], s[1], s[2]);
+                    let ang = Vector3::new(s[3], s[4], s[5]);
+                    self.force[col] += (lin + ang.cross(&p)).dot(f);
+                }
+                cur = ja.parent;
+            }
         }
         if let Some(d) = &self.door {
             let nd = d.model.nv;
@@ -797,6 +841,11 @@ impl World {
             for k in 0..3 {
                 self.warm[3 * nc + k] = self.sys.lambda[r + k];
                 report.hand_force[k] = self.sys.lambda[r + k] / dt;
+            }
+        }
+        if let Some((_, f)) = &self.push {
+            for k in 0..3 {
+                report.hand_force[k] += f[k];
             }
         }
         self.refresh_points_after(&mut report);
