@@ -18,6 +18,10 @@ simulator's config) and runs this script beside it. It behaves as src/sim/proces
 - real time: steps on absolute deadlines under the supervisor of src/sim/hold.rs (hold until the
   first torques, hand over, hold again when they stop, damping after the lost timeout).
 
+Before time 0 the robot settles for SETTLE_TIME onto MuJoCo's soft contacts, held at its home
+posture (`Plant._settle`): upc's contacts are hard, a robot placed on MuJoCo's first sinks about
+a millimetre into them.
+
 As upc's World reports a step, forces (contacts, CoP, hand) are those of the step's constraint
 solve, at the configuration it started from; geometry (CoM, penetration, loop error) and slip
 are those after it, with the state's q and v.
@@ -154,7 +158,8 @@ class Gate:
                 reason = f"torque command has a non-finite torque at index {bad[0]}"
             elif last is not None and msg.seq <= last:
                 self.stats["out_of_order"] += 1
-                reason = f"torque command seq {msg.seq} does not follow the last accepted seq {last}"
+                reason = (f"torque command seq {msg.seq} does not follow the last accepted seq "
+                          f"{last}")
             else:
                 if msg.controller != self.controller:
                     self.stats["controller_changes"] += int(self.last_seq is not None)
@@ -329,7 +334,6 @@ class Plant:
         d.qpos[self.q_from] = home
         if self.door:
             d.qpos[self.hq] = 0.0
-        mujoco.mj_forward(m, d)
         kp, kd = np.array(cfg["hold"]["kp"], dtype=float), np.array(cfg["hold"]["kd"], dtype=float)
         if len(kp) != self.n or len(kd) != self.n:
             raise BundleError(f"hold gains for {len(kp)}, {len(kd)} joints, the robot has {self.n}")
