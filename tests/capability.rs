@@ -5,8 +5,6 @@
 
 mod support;
 
-use std::process::Command;
-
 use support::procs::*;
 use upc::capability::{Direction, Variant, bisect, survives_reduced};
 use upc::config::Config;
@@ -36,28 +34,25 @@ fn reduced_capability_brackets_the_threshold_and_c1_exceeds_c0() {
 fn full_simulation_capability_of_c1_exceeds_c0() {
     let _one = serial();
     let s = Scratch::new("capability");
-    let out = Command::new(env!("CARGO_BIN_EXE_upc"))
-        .args(["capability", "--models", "full", "--controllers", "c0,c1"])
-        .args([
-            "--durations",
-            "0.3",
-            "--directions",
-            "x,y",
-            "--max",
-            "160",
-            "--tol",
-            "10",
-        ])
-        .args(["--quiet", "--out"])
-        .arg(&s.dir)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("upc capability");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = s.dir.to_str().expect("utf-8");
+    upc_ok([
+        "capability",
+        "--models",
+        "full",
+        "--controllers",
+        "c0,c1",
+        "--durations",
+        "0.3",
+        "--directions",
+        "x,y",
+        "--max",
+        "160",
+        "--tol",
+        "10",
+        "--quiet",
+        "--out",
+        out,
+    ]);
     let j = json(&s.path("capability.json"));
     let rows = j["rows"].as_array().expect("rows");
     let survived = |c: &str, d: &str| {

@@ -55,14 +55,6 @@ out = {
 print(json.dumps(out))
 "#;
 
-fn upc(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_upc"))
-        .args(args)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("upc starts")
-}
-
 fn probe(py: &Path, dir: &Path) -> Value {
     let out = Command::new(py)
         .args(["-c", PROBE])
@@ -84,18 +76,13 @@ fn probe(py: &Path, dir: &Path) -> Value {
 /// T = diag(R, I)), the contact spheres touching the ground, the hand on the handle.
 fn check_scene(py: &Path, robot: &Robot, tag: &str) {
     let s = Scratch::new(&format!("mjcf_{tag}"));
-    let out = upc(&[
+    upc_ok([
         "mjcf",
         "--robot",
         robot.name(),
         "--out",
         s.dir.to_str().expect("utf-8"),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let mj = probe(py, &s.dir);
     let model = &robot.model;
     let mut data = Data::new(model);
@@ -320,26 +307,23 @@ fn run_on_mujoco(
     scenario: &str,
     duration: &str,
 ) -> Value {
-    let out = Command::new(env!("CARGO_BIN_EXE_upc"))
-        .args([
-            "run",
-            "--plant",
-            "mujoco",
-            "--controller",
-            controller,
-            "--scenario",
-            scenario,
-        ])
-        .args(["--duration", duration, "--quiet", "--name", name, "--out"])
-        .arg(&s.dir)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("upc run");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = s.dir.to_str().expect("utf-8");
+    upc_ok([
+        "run",
+        "--plant",
+        "mujoco",
+        "--controller",
+        controller,
+        "--scenario",
+        scenario,
+        "--duration",
+        duration,
+        "--quiet",
+        "--name",
+        name,
+        "--out",
+        out,
+    ]);
     let dir = s.dir.join(name);
     assert_eq!(json(&dir.join("summary.json"))["plant"], "mujoco");
     let sim = json(&dir.join(controller).join("sim.json"));

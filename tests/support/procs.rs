@@ -136,6 +136,21 @@ impl Drop for Procs {
     }
 }
 
+/// Runs `upc args…` to completion (logs at warn) and asserts that it succeeded, with its
+/// stderr in the message.
+pub fn upc_ok<S: AsRef<std::ffi::OsStr>>(args: impl IntoIterator<Item = S>) {
+    let out = Command::new(env!("CARGO_BIN_EXE_upc"))
+        .args(args)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("upc starts");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 pub fn log(s: &Scratch, name: &str) -> String {
     std::fs::read_to_string(s.path(&format!("{name}.log"))).unwrap_or_default()
 }
