@@ -2,16 +2,17 @@
 //! recovery) on the humanoid, at home and at perturbed configurations, for the fast path (one
 //! solver updated in place) and the slow path (a new solver each tick).
 //!
-//! Run: `cargo bench --bench wbc`. Besides criterion's mean / median, the setup runs 2000 ticks
-//! of each case and prints p50 / p99 / max of the tick time and the interior-point iterations
-//! (criterion reports neither tail). Target: p99 ≤ 0.5 ms.
+//! Run: `cargo bench --bench wbc`. Besides criterion's mean / median, the setup runs 1000 ticks
+//! of each formulation (full, condensed) and tolerance and prints p50 / p99 / max of the tick
+//! time, the interior-point iterations and the torques' distance to a tight reference solve
+//! (criterion reports neither tail nor accuracy).
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::{DVector, Vector3};
-use upc::config::Config;
+use upc::config::{Config, WbcConfig, WbcFormulation};
 use upc::dynamics::{Data, Model, forward_kinematics, icub_like};
 use upc::wbc::{WbcCommand, WbcStatus, WholeBodyController};
 
@@ -42,19 +43,25 @@ fn percentiles(mut t: Vec<Duration>) -> (Duration, Duration, Duration) {
     (p(0.5), p(0.99), t[t.len() - 1])
 }
 
-fn tail_report(label: &str, reuse: bool, amp: f64) {
-    let mut cfg = Config::embedded_default().unwrap().wbc;
-    cfg.reuse_solver = reuse;
+/// The QP at perturbed states (amplitude `amp`): tick-time percentiles, iterations, and the
+/// torques' distance to a reference solve (the full formulation at tolerance 1e-9), so that a
+/// formulation or a tolerance is judged on speed and accuracy together.
+fn tail_report(label: &str, cfg: &WbcConfig, amp: f64, n: usize) {
     let model = icub_like::load().unwrap();
     let home = upc::robot::Robot::embedded_default().expect("robot").home;
     let mut data = Data::new(&model);
     forward_kinematics(&model, &mut data, &home).unwrap();
     let hand = data.o_m_f[model.frame_id("r_hand").unwrap()].trans;
-    let mut wbc = WholeBodyController::new(&model, &cfg).unwrap();
+    let mut wbc = WholeBodyController::new(&model, cfg).unwrap();
     wbc.set_posture_reference(&model, &home).unwrap();
-    let n = if reuse { 2000 } else { 300 };
+    let mut ref_cfg = cfg.clone();
+    ref_cfg.formulation = WbcFormulation::Full;
+    ref_cfg.tolerance = 1e-9;
+    let mut reference = WholeBodyController::new(&model, &ref_cfg).unwrap();
+    reference.set_posture_reference(&model, &home).unwrap();
     let mut times = Vec::with_capacity(n);
     let mut iters = Vec::with_capacity(n);
+    let mut dtau: f64 = 0.0;
     for k in 0..n + 20 {
         let (q, v, com) = state(&model, &home, k, amp);
         let cmd = WbcCommand {
@@ -69,21 +76,24 @@ fn tail_report(label: &str, reuse: bool, amp: f64) {
         let dt = t0.elapsed();
         let ok = out.status == WbcStatus::Solved;
         let it = out.iterations;
-        black_box(&out.tau);
+        let tau = out.tau.clone();
         if k >= 20 {
             // First ticks excluded: the solver build and cache warm-up.
             times.push(dt);
             iters.push(it);
             assert!(ok, "{label}: tick {k} fell back");
+            if k % 10 == 0 {
+                let r = reference.solve(&model, &mut data, &q, &v, &cmd);
+                dtau = dtau.max((r.tau - &tau).amax());
+            }
         }
     }
     let (p50, p99, max) = percentiles(times);
     iters.sort();
     let c = wbc.counters();
-    let (nz, rows, nnz_p, nnz_a) = wbc.problem_size();
     eprintln!(
         "wbc {label}: {n} ticks  p50 {:.1} µs  p99 {:.1} µs  max {:.1} µs  | iterations p50 {} max {}  | \
-         fallbacks {}  solver builds {}  | QP {nz} vars, {rows} rows, nnz P {nnz_p}, A {nnz_a}",
+         max |τ − τ_ref| {dtau:.1e} N·m  | fallbacks {}  solver builds {}",
         p50.as_secs_f64() * 1e6,
         p99.as_secs_f64() * 1e6,
         max.as_secs_f64() * 1e6,
@@ -95,12 +105,35 @@ fn tail_report(label: &str, reuse: bool, amp: f64) {
 }
 
 fn bench(c: &mut Criterion) {
-    tail_report("home±0.02 rad, reused solver", true, 0.02);
-    tail_report("home±0.10 rad, reused solver", true, 0.10);
-    tail_report("home±0.02 rad, new solver each tick", false, 0.02);
-
     let cfg = Config::embedded_default().unwrap().wbc;
+    let with = |f: WbcFormulation, tol: f64, reuse: bool| WbcConfig {
+        formulation: f,
+        tolerance: tol,
+        reuse_solver: reuse,
+        ..cfg.clone()
+    };
+    let (full, condensed) = (WbcFormulation::Full, WbcFormulation::Condensed);
+    for amp in [0.02, 0.10] {
+        for tol in [1e-8, 1e-6, 1e-4] {
+            for f in [full, condensed] {
+                let label = format!("{f:?} tol {tol:.0e}, home±{amp} rad, reused solver");
+                tail_report(&label, &with(f, tol, true), amp, 1000);
+            }
+        }
+    }
+    for f in [full, condensed] {
+        let label = format!("{f:?}, home±0.02 rad, new solver each tick");
+        tail_report(&label, &with(f, cfg.tolerance, false), 0.02, 300);
+    }
     let model = icub_like::load().unwrap();
+    let size = WholeBodyController::new(&model, &with(full, 1e-6, true))
+        .unwrap()
+        .problem_size();
+    eprintln!(
+        "full QP: {} vars, {} rows, nnz P {}, A {}",
+        size.0, size.1, size.2, size.3
+    );
+
     let home = upc::robot::Robot::embedded_default().expect("robot").home;
     let mut data = Data::new(&model);
     forward_kinematics(&model, &mut data, &home).unwrap();
@@ -116,32 +149,33 @@ fn bench(c: &mut Criterion) {
     g.warm_up_time(Duration::from_millis(500))
         .measurement_time(Duration::from_secs(3))
         .sample_size(50);
-    let mut wbc = WholeBodyController::new(&model, &cfg).unwrap();
-    wbc.set_posture_reference(&model, &home).unwrap();
     let zero = DVector::zeros(model.nv);
-    g.bench_function("tick_home", |b| {
-        b.iter(|| {
-            let out = wbc.solve(&model, &mut data, &home, &zero, &cmd);
-            black_box(out.tau[0]);
-        })
-    });
     let states: Vec<_> = (0..64).map(|k| state(&model, &home, k, 0.05)).collect();
-    let mut k = 0;
-    g.bench_function("tick_perturbed", |b| {
-        b.iter(|| {
-            let (q, v, com) = &states[k % states.len()];
-            k += 1;
-            let cmd = WbcCommand {
-                com_acc: *com,
-                ..cmd
-            };
-            let out = wbc.solve(&model, &mut data, q, v, &cmd);
-            black_box(out.tau[0]);
-        })
-    });
-    let mut cold_cfg = cfg.clone();
-    cold_cfg.reuse_solver = false;
-    let mut cold = WholeBodyController::new(&model, &cold_cfg).unwrap();
+    for (name, f) in [("", condensed), ("_full", full)] {
+        let mut wbc = WholeBodyController::new(&model, &with(f, cfg.tolerance, true)).unwrap();
+        wbc.set_posture_reference(&model, &home).unwrap();
+        g.bench_function(format!("tick_home{name}"), |b| {
+            b.iter(|| {
+                let out = wbc.solve(&model, &mut data, &home, &zero, &cmd);
+                black_box(out.tau[0]);
+            })
+        });
+        let mut k = 0;
+        g.bench_function(format!("tick_perturbed{name}"), |b| {
+            b.iter(|| {
+                let (q, v, com) = &states[k % states.len()];
+                k += 1;
+                let cmd = WbcCommand {
+                    com_acc: *com,
+                    ..cmd
+                };
+                let out = wbc.solve(&model, &mut data, q, v, &cmd);
+                black_box(out.tau[0]);
+            })
+        });
+    }
+    let mut cold =
+        WholeBodyController::new(&model, &with(condensed, cfg.tolerance, false)).unwrap();
     cold.set_posture_reference(&model, &home).unwrap();
     g.bench_function("tick_home_new_solver", |b| {
         b.iter(|| {

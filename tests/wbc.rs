@@ -3,7 +3,7 @@
 //! drifts, the URDF for the limits), not the controller's own matrices.
 
 use nalgebra::{DMatrix, DVector, Vector3};
-use upc::config::{Config, WbcConfig};
+use upc::config::{Config, WbcConfig, WbcFormulation};
 use upc::dynamics::spatial::Force;
 use upc::dynamics::{
     Data, Model, ReferenceFrame, aba_with_external_forces, center_of_mass_velocity, crba,
@@ -588,4 +588,87 @@ fn config_section_is_checked_by_key() {
         .unwrap()
         .to_string();
     assert!(e.contains("no_such_frame"), "{e}");
+}
+
+/// Every joint (legs too) moved by up to `amp` and given a velocity: the soles tilt and move,
+/// so the sole rows' drift and damping terms are exercised.
+fn whole_body_state(
+    model: &Model,
+    home: &DVector<f64>,
+    k: usize,
+    amp: f64,
+) -> (DVector<f64>, DVector<f64>) {
+    let mut q = home.clone();
+    let mut v = DVector::zeros(model.nv);
+    let s = k as f64;
+    for j in &model.joints[1..] {
+        let i = j.idx_v as f64;
+        q[j.idx_q] += amp * (0.37 * s + 1.7 * i).sin();
+        v[j.idx_v] = 2.0 * amp * (0.23 * s + 0.9 * i).cos();
+    }
+    (q, v)
+}
+
+/// The condensed problem (q̈ eliminated, a QP in the contact forces) and the full one have the
+/// same optimum: with and without active torque limits, soles flat and tilted.
+#[test]
+fn condensed_and_full_formulations_give_the_same_optimum() {
+    for (limit_scale, amp) in [(1.0, 0.0), (1.0, 0.1), (0.2, 0.05)] {
+        let tight = |f: WbcFormulation| WbcConfig {
+            formulation: f,
+            tolerance: 1e-9,
+            torque_limit_scale: limit_scale,
+            ..config()
+        };
+        let mut full = setup_with(&tight(WbcFormulation::Full));
+        let mut cond = setup_with(&tight(WbcFormulation::Condensed));
+        let home = full.q.clone();
+        let mut at_limit = 0;
+        for k in 0..6 {
+            let t = k as f64 * 0.25;
+            let (q, v) = if amp > 0.0 {
+                whole_body_state(&full.model, &home, k, amp)
+            } else {
+                let q = perturbed(&full.model, &home);
+                (
+                    &home + (q - &home) * t,
+                    upper_body_velocity(&full.model) * t,
+                )
+            };
+            for s in [&mut full, &mut cond] {
+                s.q = q.clone();
+                s.v = v.clone();
+            }
+            let cmd = WbcCommand {
+                com_acc: Vector3::new(0.3 * t, -0.2, 0.1),
+                ..hold(&full)
+            };
+            let a = solve(&mut full, &cmd);
+            let b = solve(&mut cond, &cmd);
+            assert_eq!(a.status, WbcStatus::Solved);
+            assert_eq!(b.status, WbcStatus::Solved);
+            let dq = (a.ddq.clone() - &b.ddq).amax();
+            let dt = (a.tau.clone() - &b.tau).amax();
+            let df = (0..N_CONTACTS)
+                .map(|c| (a.forces[c] - b.forces[c]).amax())
+                .fold(0.0, f64::max);
+            let lim = full.wbc.torque_limits();
+            at_limit += (0..lim.len())
+                .filter(|&i| a.tau[i].abs() > 0.999 * lim[i])
+                .count();
+            eprintln!(
+                "limits ×{limit_scale}, amp {amp}, state {k}: |Δq̈| {dq:.2e}  |Δτ| {dt:.2e}  |Δf| {df:.2e}"
+            );
+            assert!(
+                dq < 1e-4 && dt < 2e-2 && df < 5e-2,
+                "state {k}: {dq} {dt} {df}"
+            );
+        }
+        if limit_scale < 1.0 {
+            assert!(
+                at_limit > 0,
+                "no torque limit was active: the case tests nothing"
+            );
+        }
+    }
 }

@@ -161,6 +161,21 @@ pub struct WbcConfig {
     /// Keep one clarabel solver and update its data every tick (fast path); `false` builds a
     /// new solver each tick (slow path, kept for comparison).
     pub reuse_solver: bool,
+    /// Which form of the QP clarabel solves (same optimum): `condensed` onto the contact forces
+    /// (fast; the full one decides a tick whose condensation fails), or `full`.
+    #[serde(default)]
+    pub formulation: WbcFormulation,
+}
+
+/// Form of the whole-body QP handed to clarabel (`src/wbc/`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WbcFormulation {
+    /// 24 contact-force variables; q̈ eliminated through the equality constraints.
+    #[default]
+    Condensed,
+    /// z = [q̈, f, e_com, e_hand] with every constraint (the reference).
+    Full,
 }
 
 impl Layers {

@@ -32,6 +32,12 @@
 //!   `ẍ_cmd = K_p (x_des − x) + K_d (ẋ_des − ẋ) + ẍ_des`, base orientation PD towards the posture
 //!   reference's root orientation, joint posture PD, and regularisation of q̈ and f (strictly
 //!   convex: the solution is unique).
+//! - Formulation handed to clarabel (`wbc.formulation`): by default the problem **condensed**
+//!   onto the 24 contact forces (`condensed.rs`: q̈ and the task residuals eliminated in
+//!   closed form through the equality rows; 30 variables and 30 rows, one 38 × 38 and one
+//!   18 × 18 Cholesky per tick), which has the same optimum and takes about half the time; the
+//!   **full** problem below stays as the reference (tests compare the two) and decides any tick
+//!   whose condensation fails (H or S not positive definite).
 //! - Reuse between ticks: the sparsity pattern is fixed from the model's structure (structural
 //!   zeros included), presolve is off and zeros are not dropped, so after the first tick only the
 //!   values are pushed with `update_P/q/A/b` and the symbolic LDLᵀ analysis and the equilibration
@@ -45,15 +51,16 @@
 //!
 //! Units: SI (m, s, N, N·m, rad). Forces and CoM / hand quantities are in world axes.
 
-use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::time::{Duration, Instant};
 
-use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
+use clarabel::solver::{DefaultSettings, SolverStatus, SupportedConeT};
 use nalgebra::{DMatrix, DVector, Matrix6, Quaternion, UnitQuaternion, Vector3, Vector6};
 
 use super::com_bias::{com_drift_from_pass, drift_pass, frame_drift_from_pass};
+use super::condensed::{CondensedError, CondensedQp, Problem};
 use super::pattern::Pattern;
-use crate::config::WbcConfig;
+use super::qp::QpInstance;
+use crate::config::{WbcConfig, WbcFormulation};
 use crate::dynamics::spatial::log3;
 use crate::dynamics::{
     Data, DynamicsError, JointKind, Model, ReferenceFrame, compute_joint_jacobians, crba,
@@ -179,6 +186,7 @@ struct Params {
     posture_kd: f64,
     fallback_damping: f64,
     reuse_solver: bool,
+    formulation: WbcFormulation,
 }
 
 /// The whole-body torque controller. See the module documentation for the problem.
@@ -220,6 +228,12 @@ pub struct WholeBodyController {
     /// The full QP, and the same QP without the torque rows (tried first, see `solve_qp`).
     full: QpInstance,
     relaxed: Option<QpInstance>,
+    /// The same QP condensed onto the contact forces (see `condensed`).
+    condensed: CondensedQp,
+    /// Diagonal Hessian and linear term of the q̈ cost terms; right-hand side of the sole rows.
+    diag: Vec<f64>,
+    lin: Vec<f64>,
+    b_feet: [f64; 12],
     /// Copy of the accepted solution.
     x: Vec<f64>,
     posture_ref: Option<DVector<f64>>,
@@ -357,6 +371,8 @@ impl WholeBodyController {
             ..DefaultSettings::default()
         };
 
+        let condensed =
+            CondensedQp::new(nv, limited.len(), model.total_mass() * model.gravity.norm());
         Ok(Self {
             p: Params {
                 friction: config.friction,
@@ -373,6 +389,7 @@ impl WholeBodyController {
                 posture_kd: config.posture_kd,
                 fallback_damping: config.fallback_damping,
                 reuse_solver: config.reuse_solver,
+                formulation: config.formulation,
             },
             settings,
             nv,
@@ -403,6 +420,10 @@ impl WholeBodyController {
             p_pattern,
             full,
             relaxed,
+            condensed,
+            diag: vec![0.0; nv],
+            lin: vec![0.0; nv],
+            b_feet: [0.0; 12],
             x: vec![0.0; nz],
             posture_ref: None,
             tau: DVector::zeros(na),
@@ -612,23 +633,18 @@ impl WholeBodyController {
                 .sum::<f64>();
         }
 
-        // ---- Objective (dense scratch; only the upper triangle is gathered). ----
+        // ---- Objective terms in q̈: diagonal Hessian `diag`, linear term `lin`; the CoM and
+        // hand tasks as least squares `½ w ‖J q̈ − r‖²`. ----
         let nv = self.nv;
         let p = self.p.clone();
-        self.pd.fill(0.0);
-        self.qd.fill(0.0);
-        // CoM and hand tasks: weights on their residual variables (rows below).
-        let e0 = nv + 3 * N_CONTACTS;
         let r_com = cmd.com_acc - com_drift;
         let hand_vel = mat3_mul_v(&self.jh, v);
         let x_cmd = cmd.kp * (cmd.hand_pos_des - hand_pos)
             + cmd.kd * (cmd.hand_vel_des - hand_vel)
             + cmd.hand_acc_des;
         let r_hand = x_cmd - hand_drift;
-        for k in 0..3 {
-            self.pd[(e0 + k, e0 + k)] = p.w_com;
-            self.pd[(e0 + 3 + k, e0 + 3 + k)] = p.w_hand;
-        }
+        self.diag.fill(p.w_reg_acc);
+        self.lin.fill(0.0);
         // Base orientation: world angular acceleration R ω̇_b (= R q̈[3..6] since d/dt(R ω_b) =
         // R ω̇_b) towards α = K_p log(R_ref Rᵀ) − K_d ω; in body axes the target is Rᵀ α.
         let q_ref = cmd
@@ -643,23 +659,120 @@ impl WholeBodyController {
         let e_world = log3(&(r_ref * root_rot.transpose()));
         let target_b = p.base_kp * (root_rot.transpose() * e_world) - p.base_kd * omega_b;
         for k in 0..3 {
-            self.pd[(3 + k, 3 + k)] += p.w_base;
-            self.qd[3 + k] -= p.w_base * target_b[k];
+            self.diag[3 + k] += p.w_base;
+            self.lin[3 + k] -= p.w_base * target_b[k];
         }
         // Posture PD on the joints.
         for (a, &qi) in self.q_index.iter().enumerate() {
             let d = 6 + a;
             let target = p.posture_kp * (q_ref[qi] - q[qi]) - p.posture_kd * v[d];
-            self.pd[(d, d)] += p.w_posture;
-            self.qd[d] -= p.w_posture * target;
+            self.diag[d] += p.w_posture;
+            self.lin[d] -= p.w_posture * target;
         }
-        // Regularisation.
-        for d in 0..e0 {
-            self.pd[(d, d)] += if d < nv { p.w_reg_acc } else { p.w_reg_force };
+        // Soles at rest: J_s q̈ = −J̇_s v − k J_s v.
+        for foot in 0..2 {
+            for i in 0..6 {
+                let jr = 6 * foot + i;
+                let jv: f64 = (0..nv).map(|c| self.jfeet[(jr, c)] * v[c]).sum();
+                self.b_feet[jr] = -feet_drift[foot][i] - p.contact_damping * jv;
+            }
+        }
+        let finite = |s: &[f64]| s.iter().all(|x| x.is_finite());
+        if !(finite(&self.diag) && finite(&self.lin) && finite(&self.b_feet)) {
+            return Err(NonFiniteProblem);
+        }
+
+        let condensed = if p.formulation == WbcFormulation::Condensed {
+            let pb = Problem {
+                m: &data.m,
+                h: &self.h,
+                jc: &self.jc,
+                jfeet: &self.jfeet,
+                b_feet: &self.b_feet,
+                diag: &self.diag,
+                lin: &self.lin,
+                tasks: [(&self.jcom, r_com, p.w_com), (&self.jh, r_hand, p.w_hand)],
+                w_force: p.w_reg_force,
+                friction: p.friction,
+                foot_rot,
+                limited: &self.limited,
+            };
+            match self.condensed.solve(
+                &pb,
+                &self.settings,
+                p.reuse_solver,
+                &mut self.counters,
+                iterations,
+                solve_time,
+            ) {
+                Ok(almost) => Some(almost),
+                // H or S not positive definite (e.g. a singular leg): the full problem, whose
+                // interior-point KKT system is regularised, decides this tick.
+                Err(CondensedError::Factorisation) => None,
+                Err(CondensedError::Solver(r)) => return Err(r),
+            }
+        } else {
+            None
+        };
+        let almost = match condensed {
+            Some(almost) => {
+                let x = self.condensed.x();
+                if !finite(x) {
+                    return Err(NonFiniteSolution);
+                }
+                self.x[..x.len()].copy_from_slice(x);
+                almost
+            }
+            None => self.solve_full(&data.m, r_com, r_hand, &foot_rot, solve_time, iterations)?,
+        };
+        let m = &data.m;
+        let x = &self.x;
+
+        // ---- Outputs: q̈, f, τ = M_a q̈ + h_a − J_c,aᵀ f. ----
+        self.ddq.copy_from_slice(&x[..nv]);
+        for c in 0..N_CONTACTS {
+            self.forces[c] = Vector3::new(x[nv + 3 * c], x[nv + 3 * c + 1], x[nv + 3 * c + 2]);
+        }
+        for a in 0..nv - 6 {
+            self.tau[a] = torque(m, &self.h, &self.jc, x, 6 + a);
+        }
+        if !finite(self.tau.as_slice()) {
+            return Err(NonFiniteSolution);
+        }
+        Ok(almost)
+    }
+
+    /// The full problem (the reference formulation): assembles the dense P, q, A, b over
+    /// `z = [q̈, f, e_com, e_hand]` and solves it. `Ok(almost_solved)` leaves z in `self.x`.
+    fn solve_full(
+        &mut self,
+        m: &DMatrix<f64>,
+        r_com: Vector3<f64>,
+        r_hand: Vector3<f64>,
+        foot_rot: &[nalgebra::Matrix3<f64>; 2],
+        solve_time: &mut Duration,
+        iterations: &mut u32,
+    ) -> Result<bool, FallbackReason> {
+        use FallbackReason::*;
+        let nv = self.nv;
+        let p = self.p.clone();
+        let e0 = nv + 3 * N_CONTACTS;
+        self.pd.fill(0.0);
+        self.qd.fill(0.0);
+        for d in 0..nv {
+            self.pd[(d, d)] = self.diag[d];
+            self.qd[d] = self.lin[d];
+        }
+        for d in nv..e0 {
+            self.pd[(d, d)] = p.w_reg_force;
+        }
+        // CoM and hand tasks: weights on their residual variables (rows below).
+        for k in 0..3 {
+            self.pd[(e0 + k, e0 + k)] = p.w_com;
+            self.pd[(e0 + 3 + k, e0 + 3 + k)] = p.w_hand;
         }
 
         // ---- Constraints A z + s = b, s ∈ K. ----
-        let m = &data.m;
         let ad = &mut self.ad;
         ad.fill(0.0);
         // Floating-base EoM rows: M_u q̈ − J_c,uᵀ f = −h_u.
@@ -672,19 +785,13 @@ impl WholeBodyController {
             }
             self.bd[r] = -self.h[r];
         }
-        // Soles at rest: J_s q̈ = −J̇_s v − k J_s v.
-        for foot in 0..2 {
-            for i in 0..6 {
-                let row = self.row_feet + 6 * foot + i;
-                let jr = 6 * foot + i;
-                let mut jv = 0.0;
-                for c in 0..nv {
-                    let x = self.jfeet[(jr, c)];
-                    ad[(row, c)] = x;
-                    jv += x * v[c];
-                }
-                self.bd[row] = -feet_drift[foot][i] - p.contact_damping * jv;
+        // Soles at rest: J_s q̈ = b_s.
+        for jr in 0..12 {
+            let row = self.row_feet + jr;
+            for c in 0..nv {
+                ad[(row, c)] = self.jfeet[(jr, c)];
             }
+            self.bd[row] = self.b_feet[jr];
         }
         // Task residuals: J_com q̈ − e_com = a_com − J̇_com v, J_h q̈ − e_h = ẍ_cmd − J̇_h v.
         for k in 0..3 {
@@ -790,23 +897,11 @@ impl WholeBodyController {
             }
             self.x.copy_from_slice(x);
         }
-        let x = &self.x;
-
-        // ---- Outputs: q̈, f, τ = M_a q̈ + h_a − J_c,aᵀ f. ----
-        self.ddq.copy_from_slice(&x[..nv]);
-        for c in 0..N_CONTACTS {
-            self.forces[c] = Vector3::new(x[nv + 3 * c], x[nv + 3 * c + 1], x[nv + 3 * c + 2]);
-        }
-        for a in 0..nv - 6 {
-            self.tau[a] = torque(m, &self.h, &self.jc, x, 6 + a);
-        }
-        if !finite(self.tau.as_slice()) {
-            return Err(NonFiniteSolution);
-        }
         Ok(almost)
     }
 
     fn drop_solvers(&mut self) {
+        self.condensed.drop_solvers();
         self.full.solver = None;
         if let Some(r) = self.relaxed.as_mut() {
             r.solver = None;
@@ -928,93 +1023,6 @@ fn torque(m: &DMatrix<f64>, h: &DVector<f64>, jc: &DMatrix<f64>, x: &[f64], d: u
         t -= jc[(j, d)] * x[nv + j];
     }
     t
-}
-
-/// One clarabel problem over the shared dense scratch: its rows, pattern, cones and solver.
-struct QpInstance {
-    rows: Vec<usize>,
-    pattern: Pattern,
-    a_val: Vec<f64>,
-    b_val: Vec<f64>,
-    cones: Vec<SupportedConeT<f64>>,
-    solver: Option<DefaultSolver<f64>>,
-}
-
-impl QpInstance {
-    fn new(pattern: Pattern, rows: Vec<usize>, cones: Vec<SupportedConeT<f64>>) -> Self {
-        Self {
-            a_val: vec![0.0; pattern.nnz()],
-            b_val: vec![0.0; rows.len()],
-            rows,
-            pattern,
-            cones,
-            solver: None,
-        }
-    }
-
-    /// Gathers A and b, updates the solver in place (or builds one), solves.
-    /// `Ok(almost_solved)` on Solved / AlmostSolved.
-    #[allow(clippy::too_many_arguments)]
-    fn run(
-        &mut self,
-        p_pattern: &Pattern,
-        p_val: &Vec<f64>,
-        q: &Vec<f64>,
-        ad: &DMatrix<f64>,
-        bd: &[f64],
-        settings: &DefaultSettings<f64>,
-        reuse: bool,
-        counters: &mut WbcCounters,
-    ) -> Result<bool, FallbackReason> {
-        use FallbackReason::*;
-        self.pattern.gather(ad, &mut self.a_val);
-        for (b, &r) in self.b_val.iter_mut().zip(&self.rows) {
-            *b = bd[r];
-        }
-        match self.solver.as_mut() {
-            Some(s) if reuse => {
-                let updated = s
-                    .update_P(p_val)
-                    .and_then(|_| s.update_A(&self.a_val))
-                    .and_then(|_| s.update_q(q))
-                    .and_then(|_| s.update_b(&self.b_val));
-                if updated.is_err() {
-                    self.solver = None;
-                    return Err(SolverSetup);
-                }
-            }
-            _ => {
-                let pm = p_pattern.to_csc(p_val);
-                let am = self.pattern.to_csc(&self.a_val);
-                let s = DefaultSolver::new(&pm, q, &am, &self.b_val, &self.cones, settings.clone())
-                    .map_err(|_| SolverSetup)?;
-                counters.solver_builds += 1;
-                self.solver = Some(s);
-            }
-        }
-        let solver = self.solver.as_mut().ok_or(SolverSetup)?;
-        if catch_unwind(AssertUnwindSafe(|| solver.solve())).is_err() {
-            self.solver = None;
-            return Err(SolverPanic);
-        }
-        match solver.solution.status {
-            SolverStatus::Solved => Ok(false),
-            SolverStatus::AlmostSolved => Ok(true),
-            s => Err(Solver(s)),
-        }
-    }
-
-    fn x(&self) -> &[f64] {
-        self.solver.as_ref().map_or(&[], |s| &s.solution.x)
-    }
-    fn iterations(&self) -> u32 {
-        self.solver.as_ref().map_or(0, |s| s.solution.iterations)
-    }
-    fn solve_time(&self) -> Duration {
-        self.solver.as_ref().map_or(Duration::ZERO, |s| {
-            Duration::from_secs_f64(s.solution.solve_time.max(0.0))
-        })
-    }
 }
 
 fn mat3_mul_v(j: &DMatrix<f64>, v: &DVector<f64>) -> Vector3<f64> {

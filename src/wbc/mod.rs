@@ -6,11 +6,16 @@
 //! with clarabel. See [`controller`] for the problem, its constraints and the choices made.
 //!
 //! - [`controller`]: [`WholeBodyController`], its command / output / status types, the fallback.
+//! - `condensed`: the same QP condensed onto the 24 contact forces (the default; the full one
+//!   stays as the reference and the fallback).
+//! - `qp`: one clarabel problem with a fixed sparsity pattern, updated in place each tick.
 //! - [`com_bias`]: `J̇ v` drift of the CoM and of several frames from one forward pass.
 
 pub mod com_bias;
+mod condensed;
 pub mod controller;
 mod pattern;
+mod qp;
 
 pub use controller::{
     CORNERS, FallbackReason, N_CONTACTS, WbcCommand, WbcCounters, WbcError, WbcOutput, WbcStatus,

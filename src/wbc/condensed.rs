@@ -1,0 +1,520 @@
+//! The whole-body QP condensed onto the contact forces: the same optimum as the full problem of
+//! [`super::controller`], from a QP in the 24 corner forces alone.
+//!
+//! In the full problem every constraint but the friction cones and the torque limits is an
+//! equality, and every cost term but the forces' regularisation is a quadratic in q̈:
+//!
+//! ```text
+//! min_{q̈, f}  ½ q̈ᵀ H q̈ + gᵀ q̈ + ½ w_f ‖f‖²
+//! s.t.        C q̈ = d₀ + E f,   C = [M_u; J_s],  d₀ = [−h_u; b_s],  E f = [J_c,uᵀ f; 0]
+//!             f ∈ friction cones,  |τ(q̈, f)| ≤ τ_max
+//! H = D + w_com J_comᵀ J_com + w_h J_hᵀ J_h,  g = d − w_com J_comᵀ r_com − w_h J_hᵀ r_h
+//! ```
+//!
+//! (D, d: the diagonal posture / base-orientation / regularisation terms; the task residual
+//! variables of the full problem are eliminated exactly.) For a fixed f the inner problem in q̈
+//! is an equality-constrained least squares with the closed-form solution
+//! `q̈(f) = u + H⁻¹Cᵀ S⁻¹ (ρ + E f)`, `u = −H⁻¹ g`, `S = C H⁻¹ Cᵀ`, `ρ = d₀ − C u`, and value
+//! `½ (ρ + E f)ᵀ S⁻¹ (ρ + E f)` + const. Only the 6 floating-base rows of E are non-zero, so
+//! with `B = J_c,u` (24 × 6, the corners' Jacobian columns of the base) and `X = S⁻¹[:, 0..6]`:
+//!
+//! ```text
+//! min_f  ½ fᵀ (B X_u Bᵀ + w_f I) f + (B (S⁻¹ρ)_u)ᵀ f    s.t. f ∈ cones,  |T f + t₀| ≤ τ_max
+//! ```
+//!
+//! a QP in the 24 forces, given to clarabel with `y = Bᵀ f` as 6 more variables (so P is
+//! diagonal but for X_u, and the KKT factor stays sparse): 30 variables, 30 rows, against 68
+//! variables and 112 rows with the dense M_u and torque rows in the full problem, whose
+//! factorisation took most of the tick. H and S are
+//! factored by Cholesky (both are symmetric positive definite when the regularisation is
+//! positive and the two soles' constraints are independent of the floating-base rows); a
+//! failed factorisation is reported and the caller solves the full problem instead.
+//!
+//! The same screening as the full problem: the QP without the torque rows first, the torque
+//! rows `T = M_a G − J_c,aᵀ`, `G = ∂q̈/∂f = H⁻¹Cᵀ X Bᵀ`, `t₀ = M_a q̈(0) + h_a`, only when
+//! its optimum violates a limit.
+
+use std::time::Duration;
+
+use clarabel::solver::{DefaultSettings, SupportedConeT};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Vector3, Vector6};
+
+use super::controller::{FallbackReason, N_CONTACTS, WbcCounters};
+use super::pattern::Pattern;
+use super::qp::QpInstance;
+
+/// Number of contact force variables.
+const NF: usize = 3 * N_CONTACTS;
+/// Rows of C: 6 floating-base rows of the equations of motion, 6 per sole.
+const NC: usize = 18;
+/// Variables of the reduced QP: the forces and the base wrench error δ (6, see `reduce`).
+const NY: usize = NF + 6;
+/// Rows of the reduced QP: `Bᵀ f − δ = y*` (6), the cones (24), then 2 per torque limit.
+const ROW_SOC: usize = 6;
+const ROW_TAU: usize = ROW_SOC + NF;
+
+/// The data of one tick, as the controller assembled it (world axes, SI).
+pub(crate) struct Problem<'a> {
+    /// Joint-space mass matrix (full, symmetric) and bias `h` (hand force included).
+    pub m: &'a DMatrix<f64>,
+    pub h: &'a DVector<f64>,
+    /// Corner Jacobians (24 × nv, linear rows, world-aligned) and sole Jacobians (12 × nv).
+    pub jc: &'a DMatrix<f64>,
+    pub jfeet: &'a DMatrix<f64>,
+    /// Right-hand side of the sole rows `J_s q̈ = b_s`.
+    pub b_feet: &'a [f64; 12],
+    /// Diagonal Hessian and linear term of the q̈ cost terms (posture, base, regularisation).
+    pub diag: &'a [f64],
+    pub lin: &'a [f64],
+    /// Least-squares tasks `½ w ‖J q̈ − r‖²` (CoM, hand): Jacobian (3 × nv), target, weight.
+    pub tasks: [(&'a DMatrix<f64>, Vector3<f64>, f64); 2],
+    pub w_force: f64,
+    pub friction: f64,
+    /// Rotation of each sole (its z axis is the contact normal).
+    pub foot_rot: [Matrix3<f64>; 2],
+    /// Torque-limited dofs (velocity index) and their limits.
+    pub limited: &'a [(usize, f64)],
+}
+
+/// Why the condensed problem could not be solved (the caller then solves the full problem,
+/// except for solver failures, which it reports as they are).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum CondensedError {
+    /// H or S is not numerically positive definite.
+    Factorisation,
+    Solver(FallbackReason),
+}
+
+pub(crate) struct CondensedQp {
+    nv: usize,
+    /// Unit of the force variables handed to clarabel (N): a corner's share of the weight. In
+    /// newtons the forces are 10–100× the other variables and clarabel needed 9 iterations
+    /// (p50, perturbed states) instead of 7.
+    force_unit: f64,
+    /// H, then its Cholesky factor L (lower triangle).
+    l_h: DMatrix<f64>,
+    /// Cᵀ, then W = L⁻¹ Cᵀ (nv × 18).
+    w: DMatrix<f64>,
+    /// S = Wᵀ W, then its Cholesky factor (18 × 18).
+    l_s: DMatrix<f64>,
+    /// X = S⁻¹[:, 0..6] (18 × 6).
+    x6: DMatrix<f64>,
+    /// B = J_c,u (24 × 6) and Bᵀ.
+    b: DMatrix<f64>,
+    bt: DMatrix<f64>,
+    /// u = −H⁻¹ g, then q̈.
+    u: DVector<f64>,
+    /// ρ, then S⁻¹ ρ; and the 18-vector combining it with the forces.
+    rho: DVector<f64>,
+    z: DVector<f64>,
+    /// W z, then H⁻¹ Cᵀ z (nv).
+    tmp: DVector<f64>,
+    /// G = ∂q̈/∂f (nv × 24) via H⁻¹Cᵀ X (nv × 6), for the torque rows.
+    hcx: DMatrix<f64>,
+    g_f: DMatrix<f64>,
+    /// Dense scratch of the reduced QP: P (24 × 24), q, A (cone rows, then 2 per limit), b.
+    pd: DMatrix<f64>,
+    qd: Vec<f64>,
+    ad: DMatrix<f64>,
+    bd: Vec<f64>,
+    p_pattern: Pattern,
+    p_val: Vec<f64>,
+    relaxed: QpInstance,
+    full: Option<QpInstance>,
+    /// Solution [q̈; f].
+    x: Vec<f64>,
+}
+
+impl CondensedQp {
+    /// `weight`: the robot's weight (N), which sets the forces' unit.
+    pub(crate) fn new(nv: usize, n_limited: usize, weight: f64) -> Self {
+        let n_rows = ROW_TAU + 2 * n_limited;
+        // P: w_f I on f, X_u (dense 6 × 6) on δ. With B X_u Bᵀ on f directly P would be a dense
+        // 24 × 24 block: the auxiliary δ keeps clarabel's KKT factor sparse.
+        let p_pattern = Pattern::from_mask(NY, NY, |r, c| r == c || (r >= NF && r <= c));
+        let entry = |r: usize, c: usize| {
+            if r < ROW_SOC {
+                c < NF || c == NF + r
+            } else if r < ROW_TAU {
+                c < NF && (r - ROW_SOC) / 3 == c / 3
+            } else {
+                c < NF
+            }
+        };
+        let cones = |limits: bool| {
+            let mut k = vec![SupportedConeT::ZeroConeT(ROW_SOC)];
+            k.extend((0..N_CONTACTS).map(|_| SupportedConeT::SecondOrderConeT(3)));
+            if limits {
+                k.push(SupportedConeT::NonnegativeConeT(2 * n_limited));
+            }
+            k
+        };
+        let relaxed_rows: Vec<usize> = (0..ROW_TAU).collect();
+        let relaxed = QpInstance::new(
+            Pattern::from_mask_rows(n_rows, &relaxed_rows, NY, entry),
+            relaxed_rows,
+            cones(false),
+        );
+        let full = (n_limited > 0).then(|| {
+            QpInstance::new(
+                Pattern::from_mask(n_rows, NY, entry),
+                (0..n_rows).collect(),
+                cones(true),
+            )
+        });
+        Self {
+            nv,
+            force_unit: if weight > 0.0 && weight.is_finite() {
+                weight / N_CONTACTS as f64
+            } else {
+                1.0
+            },
+            l_h: DMatrix::zeros(nv, nv),
+            w: DMatrix::zeros(nv, NC),
+            l_s: DMatrix::zeros(NC, NC),
+            x6: DMatrix::zeros(NC, 6),
+            b: DMatrix::zeros(NF, 6),
+            bt: DMatrix::zeros(6, NF),
+            u: DVector::zeros(nv),
+            rho: DVector::zeros(NC),
+            z: DVector::zeros(NC),
+            tmp: DVector::zeros(nv),
+            hcx: DMatrix::zeros(nv, 6),
+            g_f: DMatrix::zeros(nv, NF),
+            pd: DMatrix::zeros(NY, NY),
+            qd: vec![0.0; NY],
+            ad: DMatrix::zeros(n_rows, NY),
+            bd: vec![0.0; n_rows],
+            p_val: vec![0.0; p_pattern.nnz()],
+            p_pattern,
+            relaxed,
+            full,
+            x: vec![0.0; nv + NF],
+        }
+    }
+
+    /// Drops the clarabel solvers (the next solve builds fresh ones).
+    pub(crate) fn drop_solvers(&mut self) {
+        self.relaxed.solver = None;
+        if let Some(f) = self.full.as_mut() {
+            f.solver = None;
+        }
+    }
+
+    /// The solution `[q̈ (nv); f (24)]` of the last successful [`Self::solve`].
+    pub(crate) fn x(&self) -> &[f64] {
+        &self.x
+    }
+
+    /// Solves the tick's problem. `Ok(almost_solved)` leaves `[q̈; f]` in [`Self::x`].
+    pub(crate) fn solve(
+        &mut self,
+        pb: &Problem,
+        settings: &DefaultSettings<f64>,
+        reuse: bool,
+        counters: &mut WbcCounters,
+        iterations: &mut u32,
+        solve_time: &mut Duration,
+    ) -> Result<bool, CondensedError> {
+        self.reduce(pb)?;
+        let run = self.relaxed.run(
+            &self.p_pattern,
+            &self.p_val,
+            &self.qd,
+            &self.ad,
+            &self.bd,
+            settings,
+            reuse,
+            counters,
+        );
+        *iterations += self.relaxed.iterations();
+        *solve_time += self.relaxed.solve_time();
+        let almost = run.map_err(CondensedError::Solver)?;
+        self.recover(self.relaxed_forces());
+        if self.within_limits(pb) {
+            return Ok(almost);
+        }
+        // Torque rows: τ_d = T_d f + t₀_d with T = M_a G − J_c,aᵀ.
+        let Some(full) = self.full.as_mut() else {
+            return Ok(almost);
+        };
+        // G = H⁻¹Cᵀ X Bᵀ and q̈(0) = u + H⁻¹Cᵀ S⁻¹ρ (u still holds q̈(f*); recompute q̈(0)).
+        self.hcx.gemm(1.0, &self.w, &self.x6, 0.0);
+        self.l_h
+            .tr_solve_lower_triangular_unchecked_mut(&mut self.hcx);
+        self.g_f.gemm(1.0, &self.hcx, &self.bt, 0.0);
+        let q0 = &mut self.tmp;
+        for i in 0..self.nv {
+            q0[i] = self.x[i];
+        }
+        // q̈(0) = q̈(f*) − G f*.
+        for k in 0..NF {
+            let fk = self.x[self.nv + k];
+            for i in 0..self.nv {
+                q0[i] -= self.g_f[(i, k)] * fk;
+            }
+        }
+        for (k, &(dof, tmax)) in pb.limited.iter().enumerate() {
+            let row = ROW_TAU + 2 * k;
+            let mut t0 = pb.h[dof];
+            for c in 0..self.nv {
+                t0 += pb.m[(dof, c)] * q0[c];
+            }
+            for j in 0..NF {
+                let mut t = -pb.jc[(j, dof)];
+                for c in 0..self.nv {
+                    t += pb.m[(dof, c)] * self.g_f[(c, j)];
+                }
+                self.ad[(row, j)] = t * self.force_unit;
+                self.ad[(row + 1, j)] = -t * self.force_unit;
+            }
+            self.bd[row] = tmax - t0;
+            self.bd[row + 1] = tmax + t0;
+        }
+        let run = full.run(
+            &self.p_pattern,
+            &self.p_val,
+            &self.qd,
+            &self.ad,
+            &self.bd,
+            settings,
+            reuse,
+            counters,
+        );
+        *iterations += full.iterations();
+        *solve_time += full.solve_time();
+        let almost = run.map_err(CondensedError::Solver)?;
+        let mut f = [0.0; NF];
+        let x = full.x();
+        if x.len() != NY {
+            return Err(CondensedError::Solver(FallbackReason::NonFiniteSolution));
+        }
+        for (fk, xk) in f.iter_mut().zip(x) {
+            *fk = xk * self.force_unit;
+        }
+        self.recover(f);
+        Ok(almost)
+    }
+
+    fn relaxed_forces(&self) -> [f64; NF] {
+        let mut f = [0.0; NF];
+        let x = self.relaxed.x();
+        if x.len() == NY {
+            for (fk, xk) in f.iter_mut().zip(x) {
+                *fk = xk * self.force_unit;
+            }
+        } else {
+            f.fill(f64::NAN);
+        }
+        f
+    }
+
+    /// Builds the reduced QP's P, q, cone rows from the tick's data (see the module docs).
+    fn reduce(&mut self, pb: &Problem) -> Result<(), CondensedError> {
+        let nv = self.nv;
+        // H = D + Σ w JᵀJ.
+        self.l_h.fill(0.0);
+        for (j, _, w) in &pb.tasks {
+            self.l_h.gemm_tr(*w, j, j, 1.0);
+        }
+        for i in 0..nv {
+            self.l_h[(i, i)] += pb.diag[i];
+        }
+        // g = d − Σ w Jᵀ r, u = −H⁻¹ g.
+        for i in 0..nv {
+            self.u[i] = -pb.lin[i];
+        }
+        for (j, r, w) in &pb.tasks {
+            for c in 0..nv {
+                self.u[c] += w * (j[(0, c)] * r[0] + j[(1, c)] * r[1] + j[(2, c)] * r[2]);
+            }
+        }
+        if !cholesky_in_place(&mut self.l_h) {
+            return Err(CondensedError::Factorisation);
+        }
+        self.l_h.solve_lower_triangular_unchecked_mut(&mut self.u);
+        self.l_h
+            .tr_solve_lower_triangular_unchecked_mut(&mut self.u);
+        // Cᵀ = [M[:, 0..6], J_sᵀ] (M symmetric), d₀ = [−h_u; b_s].
+        for c in 0..6 {
+            for i in 0..nv {
+                self.w[(i, c)] = pb.m[(i, c)];
+            }
+            self.rho[c] = -pb.h[c];
+        }
+        for r in 0..12 {
+            for i in 0..nv {
+                self.w[(i, 6 + r)] = pb.jfeet[(r, i)];
+            }
+            self.rho[6 + r] = pb.b_feet[r];
+        }
+        // ρ = d₀ − C u.
+        self.rho.gemv_tr(-1.0, &self.w, &self.u, 1.0);
+        // W = L⁻¹ Cᵀ, S = Wᵀ W = C H⁻¹ Cᵀ.
+        self.l_h.solve_lower_triangular_unchecked_mut(&mut self.w);
+        self.l_s.gemm_tr(1.0, &self.w, &self.w, 0.0);
+        if !cholesky_in_place(&mut self.l_s) {
+            return Err(CondensedError::Factorisation);
+        }
+        // S⁻¹ ρ and X = S⁻¹[:, 0..6].
+        self.l_s.solve_lower_triangular_unchecked_mut(&mut self.rho);
+        self.l_s
+            .tr_solve_lower_triangular_unchecked_mut(&mut self.rho);
+        self.x6.fill(0.0);
+        for k in 0..6 {
+            self.x6[(k, k)] = 1.0;
+        }
+        self.l_s.solve_lower_triangular_unchecked_mut(&mut self.x6);
+        self.l_s
+            .tr_solve_lower_triangular_unchecked_mut(&mut self.x6);
+        // B = J_c,u. The cost ½ fᵀ (B X_u Bᵀ + w_f I) f + ((S⁻¹ρ)_u)ᵀ Bᵀ f is, up to a
+        // constant, ½ δᵀ X_u δ + ½ w_f ‖f‖² with δ = Bᵀ f − y*, y* = −X_u⁻¹ (S⁻¹ρ)_u: the
+        // contacts' wrench on the base against the one the tasks ask for. Written so (δ as 6
+        // more variables, rows Bᵀ f − δ = y*), P is diagonal but for X_u, the KKT factor stays
+        // sparse, and the objective is on the scale of the task errors: with the linear term
+        // instead, its value (≈ 10⁵ here) made clarabel's relative gap tolerance 10⁵× looser
+        // on the forces than in the full problem.
+        let fu = self.force_unit;
+        let mut xu = Matrix6::zeros();
+        for r in 0..6 {
+            for c in 0..6 {
+                xu[(r, c)] = self.x6[(r, c)];
+            }
+        }
+        let rho_u = Vector6::new(
+            self.rho[0],
+            self.rho[1],
+            self.rho[2],
+            self.rho[3],
+            self.rho[4],
+            self.rho[5],
+        );
+        let y_star = -xu
+            .cholesky()
+            .ok_or(CondensedError::Factorisation)?
+            .solve(&rho_u);
+        for k in 0..NF {
+            for c in 0..6 {
+                self.b[(k, c)] = pb.jc[(k, c)];
+                self.bt[(c, k)] = pb.jc[(k, c)];
+                self.ad[(c, k)] = pb.jc[(k, c)] * fu;
+            }
+            self.pd[(k, k)] = pb.w_force * fu * fu;
+        }
+        for r in 0..6 {
+            for c in 0..6 {
+                self.pd[(NF + r, NF + c)] = xu[(r, c)];
+            }
+            self.ad[(r, NF + r)] = -1.0;
+            self.bd[r] = y_star[r];
+        }
+        self.p_pattern.gather(&self.pd, &mut self.p_val);
+        // Friction cones: s = (μ nᵀf, t₁ᵀf, t₂ᵀf) ∈ SOC(3), b = 0.
+        for c in 0..N_CONTACTS {
+            let rot = &pb.foot_rot[c / 4];
+            let row = ROW_SOC + 3 * c;
+            for a in 0..3 {
+                self.ad[(row, 3 * c + a)] = -pb.friction * rot[(a, 2)] * fu;
+                self.ad[(row + 1, 3 * c + a)] = -rot[(a, 0)] * fu;
+                self.ad[(row + 2, 3 * c + a)] = -rot[(a, 1)] * fu;
+            }
+        }
+        let finite = |s: &[f64]| s.iter().all(|x| x.is_finite());
+        if !(finite(&self.p_val) && finite(&self.bd) && finite(self.ad.as_slice())) {
+            return Err(CondensedError::Solver(FallbackReason::NonFiniteProblem));
+        }
+        Ok(())
+    }
+
+    /// `x = [q̈(f); f]` with `q̈(f) = u + H⁻¹Cᵀ (S⁻¹ρ + X Bᵀ f)`.
+    fn recover(&mut self, f: [f64; NF]) {
+        let nv = self.nv;
+        self.z.copy_from(&self.rho);
+        for c in 0..6 {
+            let btf: f64 = (0..NF).map(|k| self.b[(k, c)] * f[k]).sum();
+            for r in 0..NC {
+                self.z[r] += self.x6[(r, c)] * btf;
+            }
+        }
+        self.tmp.gemv(1.0, &self.w, &self.z, 0.0);
+        self.l_h
+            .tr_solve_lower_triangular_unchecked_mut(&mut self.tmp);
+        for i in 0..nv {
+            self.x[i] = self.u[i] + self.tmp[i];
+        }
+        self.x[nv..].copy_from_slice(&f);
+    }
+
+    fn within_limits(&self, pb: &Problem) -> bool {
+        let x = &self.x;
+        x.iter().all(|v| v.is_finite())
+            && pb.limited.iter().all(|&(dof, tmax)| {
+                let mut t = pb.h[dof];
+                for c in 0..self.nv {
+                    t += pb.m[(dof, c)] * x[c];
+                }
+                for j in 0..NF {
+                    t -= pb.jc[(j, dof)] * x[self.nv + j];
+                }
+                t.abs() <= tmax
+            })
+    }
+}
+
+/// In-place Cholesky `A = L Lᵀ` of a symmetric matrix (lower triangle read, L left there, the
+/// strict upper triangle is zeroed so the triangular solves see L alone). `false` when a pivot
+/// is not positive and finite. Left-looking by columns: contiguous column updates.
+fn cholesky_in_place(a: &mut DMatrix<f64>) -> bool {
+    let n = a.nrows();
+    let s = a.as_mut_slice();
+    for j in 0..n {
+        for k in 0..j {
+            let ljk = s[j + k * n];
+            if ljk != 0.0 {
+                let (left, right) = s.split_at_mut(j * n);
+                let col_k = &left[k * n + j..k * n + n];
+                for (x, y) in right[j..n].iter_mut().zip(col_k) {
+                    *x -= ljk * y;
+                }
+            }
+        }
+        let d = s[j + j * n];
+        if !(d > 0.0 && d.is_finite()) {
+            return false;
+        }
+        let d = d.sqrt();
+        s[j + j * n] = d;
+        let inv = 1.0 / d;
+        for x in &mut s[j * n + j + 1..j * n + n] {
+            *x *= inv;
+        }
+        for x in &mut s[j * n..j * n + j] {
+            *x = 0.0;
+        }
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cholesky_reproduces_a_spd_matrix_and_refuses_an_indefinite_one() {
+        let n = 7;
+        let r = DMatrix::from_fn(n, n, |i, j| ((i * 7 + j * 3) as f64).sin());
+        let a = &r * r.transpose() + DMatrix::identity(n, n) * 0.1;
+        let mut l = a.clone();
+        assert!(cholesky_in_place(&mut l));
+        let back = &l * l.transpose();
+        assert!((back - &a).amax() < 1e-12);
+        for i in 0..n {
+            for j in i + 1..n {
+                assert_eq!(l[(i, j)], 0.0);
+            }
+        }
+        let mut b = a.clone();
+        b[(3, 3)] = -10.0;
+        assert!(!cholesky_in_place(&mut b));
+    }
+}
