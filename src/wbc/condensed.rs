@@ -312,13 +312,20 @@ impl CondensedQp {
     /// Builds the reduced QP's P, q, cone rows from the tick's data (see the module docs).
     fn reduce(&mut self, pb: &Problem) -> Result<(), CondensedError> {
         let nv = self.nv;
-        // H = D + Σ w JᵀJ.
-        self.l_h.fill(0.0);
-        for (j, _, w) in &pb.tasks {
-            self.l_h.gemm_tr(*w, j, j, 1.0);
-        }
-        for i in 0..nv {
-            self.l_h[(i, i)] += pb.diag[i];
+        // H = D + Σ w JᵀJ, lower triangle (all the Cholesky reads).
+        {
+            let [(j1, _, w1), (j2, _, w2)] = &pb.tasks;
+            let h = self.l_h.as_mut_slice();
+            for c in 0..nv {
+                for r in c..nv {
+                    let mut x = 0.0;
+                    for k in 0..3 {
+                        x += w1 * j1[(k, r)] * j1[(k, c)] + w2 * j2[(k, r)] * j2[(k, c)];
+                    }
+                    h[r + c * nv] = x;
+                }
+                h[c + c * nv] += pb.diag[c];
+            }
         }
         // g = d − Σ w Jᵀ r, u = −H⁻¹ g.
         for i in 0..nv {
@@ -351,8 +358,15 @@ impl CondensedQp {
         // ρ = d₀ − C u.
         self.rho.gemv_tr(-1.0, &self.w, &self.u, 1.0);
         // W = L⁻¹ Cᵀ, S = Wᵀ W = C H⁻¹ Cᵀ.
-        self.l_h.solve_lower_triangular_unchecked_mut(&mut self.w);
-        self.l_s.gemm_tr(1.0, &self.w, &self.w, 0.0);
+        forward_substitution(&self.l_h, &mut self.w);
+        // S = Wᵀ W, lower triangle.
+        for c in 0..NC {
+            let wc = &self.w.as_slice()[c * nv..(c + 1) * nv];
+            for r in c..NC {
+                let wr = &self.w.as_slice()[r * nv..(r + 1) * nv];
+                self.l_s[(r, c)] = wr.iter().zip(wc).map(|(a, b)| a * b).sum();
+            }
+        }
         if !cholesky_in_place(&mut self.l_s) {
             return Err(CondensedError::Factorisation);
         }
@@ -458,6 +472,25 @@ impl CondensedQp {
                 }
                 t.abs() <= tmax
             })
+    }
+}
+
+/// `B ← L⁻¹ B` for a lower-triangular L (n × n) and B (n × k), column-major slices: per
+/// column of B, axpys down contiguous columns of L.
+fn forward_substitution(l: &DMatrix<f64>, b: &mut DMatrix<f64>) {
+    let n = l.nrows();
+    let l = l.as_slice();
+    for col in b.as_mut_slice().chunks_exact_mut(n) {
+        for j in 0..n {
+            let x = col[j] / l[j + j * n];
+            col[j] = x;
+            if x != 0.0 {
+                let lj = &l[j * n + j + 1..(j + 1) * n];
+                for (y, a) in col[j + 1..].iter_mut().zip(lj) {
+                    *y -= a * x;
+                }
+            }
+        }
     }
 }
 

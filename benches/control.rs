@@ -1,0 +1,44 @@
+//! The controller's compute per tick without IPC (`ControllerCore::tick`): kinematics, M_e,
+//! the hand previewer, the ZMP preview, the whole-body QP; C0 and C1 at home with a forecast
+//! push arriving over the horizon (so C1's disturbance and α0 vary every tick, as in a run).
+//! Profile it with `perf record` on this bench to see where a tick's time goes.
+//!
+//! Run: `cargo bench --bench control`.
+
+use std::hint::black_box;
+use std::time::Duration;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use upc::config::{Config, ControllerKind};
+
+#[path = "../tests/support/humanoid.rs"]
+mod humanoid;
+
+fn bench(c: &mut Criterion) {
+    let config = Config::embedded_default().expect("defaults");
+    let mut g = c.benchmark_group("control");
+    g.warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(3))
+        .sample_size(50);
+    for (name, kind) in [("c0_tick", ControllerKind::C0), ("c1_tick", ControllerKind::C1)] {
+        let mut r = humanoid::rig(&config, kind);
+        r.window
+            .offer(&humanoid::push_forecast(0.0, -40.0), 0.0)
+            .expect("forecast");
+        // Walk time through the first second of the forecast (the push enters the horizon at
+        // 0.5 s), then start over: every tick sees a different horizon.
+        let mut k = 0u64;
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                r.state.time = (k % 1000) as f64 * 0.001;
+                k += 1;
+                let out = r.core.tick(&r.state, &r.window, None, &mut r.tau);
+                black_box((out.is_ok(), r.tau[0]));
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
