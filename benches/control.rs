@@ -20,7 +20,10 @@ fn bench(c: &mut Criterion) {
     g.warm_up_time(Duration::from_millis(500))
         .measurement_time(Duration::from_secs(3))
         .sample_size(50);
-    for (name, kind) in [("c0_tick", ControllerKind::C0), ("c1_tick", ControllerKind::C1)] {
+    for (name, kind) in [
+        ("c0_tick", ControllerKind::C0),
+        ("c1_tick", ControllerKind::C1),
+    ] {
         let mut r = humanoid::rig(&config, kind);
         r.window
             .offer(&humanoid::push_forecast(0.0, -40.0), 0.0)

@@ -191,6 +191,11 @@ impl ControllerCore {
     }
 
     /// The support rectangle latched at the first tick, [[x_min, x_max], [y_min, y_max]].
+    /// The whole-body controller's counters (solves, torque-limited ticks, fallbacks).
+    pub fn wbc_counters(&self) -> crate::wbc::WbcCounters {
+        self.wbc.counters()
+    }
+
     pub fn support(&self) -> Option<[[f64; 2]; 2]> {
         self.latched.map(|l| l.support)
     }

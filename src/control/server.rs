@@ -99,6 +99,12 @@ pub struct ServerSummary {
     pub ticks_since_reconnect: u64,
     pub tick_errors: u64,
     pub wbc_fallbacks: u64,
+    /// Ticks whose whole-body QP had a torque limit active, and ticks the condensed QP could
+    /// not be formed (decided by the full one).
+    #[serde(default)]
+    pub wbc_torque_limited_ticks: u64,
+    #[serde(default)]
+    pub wbc_condensation_failures: u64,
     pub preview_fallbacks: u64,
     pub forecasts_accepted: u64,
     pub forecasts_rejected: u64,
@@ -616,6 +622,9 @@ pub fn run_server_with(
         s.deadline_misses = t.missed;
     }
     s.preview_fallbacks = core.preview_fallbacks;
+    let wc = core.wbc_counters();
+    s.wbc_torque_limited_ticks = wc.torque_limited;
+    s.wbc_condensation_failures = wc.condensation_failures;
     s.forecasts_accepted = intake.window.accepted;
     s.forecasts_rejected = intake.window.rejected;
     s.forecasts_rejected_by = intake.window.rejections;

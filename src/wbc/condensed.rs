@@ -123,6 +123,8 @@ pub(crate) struct CondensedQp {
     full: Option<QpInstance>,
     /// Solution [q̈; f].
     x: Vec<f64>,
+    /// The last tick's optimum had a torque limit active (see `solve`).
+    limits_active: bool,
 }
 
 impl CondensedQp {
@@ -190,6 +192,7 @@ impl CondensedQp {
             relaxed,
             full,
             x: vec![0.0; nv + NF],
+            limits_active: false,
         }
     }
 
@@ -207,6 +210,12 @@ impl CondensedQp {
     }
 
     /// Solves the tick's problem. `Ok(almost_solved)` leaves `[q̈; f]` in [`Self::x`].
+    ///
+    /// Screening: the QP without the torque rows first; its optimum is the full QP's when it
+    /// satisfies every limit (dropping inactive constraints does not move a convex optimum).
+    /// After a tick whose optimum had a limit active, the next tick goes straight to the QP
+    /// with the torque rows (a robot at its limits, e.g. falling, stays there for a while: the
+    /// screening solve would be wasted), until its optimum has no limit active again.
     pub(crate) fn solve(
         &mut self,
         pb: &Problem,
@@ -217,52 +226,59 @@ impl CondensedQp {
         solve_time: &mut Duration,
     ) -> Result<bool, CondensedError> {
         self.reduce(pb)?;
-        let run = self.relaxed.run(
-            &self.p_pattern,
-            &self.p_val,
-            &self.qd,
-            &self.ad,
-            &self.bd,
-            settings,
-            reuse,
-            counters,
-        );
-        *iterations += self.relaxed.iterations();
-        *solve_time += self.relaxed.solve_time();
-        let almost = run.map_err(CondensedError::Solver)?;
-        self.recover(self.relaxed_forces());
-        if self.within_limits(pb) {
-            return Ok(almost);
+        if !self.limits_active || self.full.is_none() {
+            let run = self.relaxed.run(
+                &self.p_pattern,
+                &self.p_val,
+                &self.qd,
+                &self.ad,
+                &self.bd,
+                settings,
+                reuse,
+                counters,
+            );
+            *iterations += self.relaxed.iterations();
+            *solve_time += self.relaxed.solve_time();
+            let almost = run.map_err(CondensedError::Solver)?;
+            self.recover(&self.relaxed_forces());
+            if self.full.is_none() || self.within_limits(pb) {
+                self.limits_active = false;
+                return Ok(almost);
+            }
         }
-        // Torque rows: τ_d = T_d f + t₀_d with T = M_a G − J_c,aᵀ.
         let Some(full) = self.full.as_mut() else {
-            return Ok(almost);
+            return Err(CondensedError::Solver(FallbackReason::SolverSetup));
         };
-        // G = H⁻¹Cᵀ X Bᵀ and q̈(0) = u + H⁻¹Cᵀ S⁻¹ρ (u still holds q̈(f*); recompute q̈(0)).
+        counters.torque_limited += 1;
+        // Torque rows: τ = T f + t₀, T = M_a G − J_c,aᵀ, G = ∂q̈/∂f = H⁻¹Cᵀ X Bᵀ,
+        // t₀ = M_a q̈(0) + h_a.
         self.hcx.gemm(1.0, &self.w, &self.x6, 0.0);
         self.l_h
             .tr_solve_lower_triangular_unchecked_mut(&mut self.hcx);
         self.g_f.gemm(1.0, &self.hcx, &self.bt, 0.0);
-        let q0 = &mut self.tmp;
-        for i in 0..self.nv {
-            q0[i] = self.x[i];
-        }
-        // q̈(0) = q̈(f*) − G f*.
-        for k in 0..NF {
-            let fk = self.x[self.nv + k];
-            for i in 0..self.nv {
-                q0[i] -= self.g_f[(i, k)] * fk;
-            }
-        }
+        // q̈(0) = u + H⁻¹Cᵀ S⁻¹ρ, into x[..nv] (overwritten by the solution below).
+        Self::recover_into(
+            &mut self.x,
+            &mut self.z,
+            &mut self.tmp,
+            &self.rho,
+            &self.x6,
+            &self.b,
+            &self.w,
+            &self.l_h,
+            &self.u,
+            &[0.0; NF],
+        );
+        let nv = self.nv;
         for (k, &(dof, tmax)) in pb.limited.iter().enumerate() {
             let row = ROW_TAU + 2 * k;
             let mut t0 = pb.h[dof];
-            for c in 0..self.nv {
-                t0 += pb.m[(dof, c)] * q0[c];
+            for c in 0..nv {
+                t0 += pb.m[(dof, c)] * self.x[c];
             }
             for j in 0..NF {
                 let mut t = -pb.jc[(j, dof)];
-                for c in 0..self.nv {
+                for c in 0..nv {
                     t += pb.m[(dof, c)] * self.g_f[(c, j)];
                 }
                 self.ad[(row, j)] = t * self.force_unit;
@@ -292,7 +308,12 @@ impl CondensedQp {
         for (fk, xk) in f.iter_mut().zip(x) {
             *fk = xk * self.force_unit;
         }
-        self.recover(f);
+        self.recover(&f);
+        // A limit counts as active within 0.1 % of it.
+        self.limits_active = pb
+            .limited
+            .iter()
+            .any(|&(dof, tmax)| self.torque(pb, dof).abs() >= (1.0 - 1e-3) * tmax);
         Ok(almost)
     }
 
@@ -441,37 +462,69 @@ impl CondensedQp {
     }
 
     /// `x = [q̈(f); f]` with `q̈(f) = u + H⁻¹Cᵀ (S⁻¹ρ + X Bᵀ f)`.
-    fn recover(&mut self, f: [f64; NF]) {
-        let nv = self.nv;
-        self.z.copy_from(&self.rho);
+    fn recover(&mut self, f: &[f64; NF]) {
+        Self::recover_into(
+            &mut self.x,
+            &mut self.z,
+            &mut self.tmp,
+            &self.rho,
+            &self.x6,
+            &self.b,
+            &self.w,
+            &self.l_h,
+            &self.u,
+            f,
+        );
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn recover_into(
+        x: &mut [f64],
+        z: &mut DVector<f64>,
+        tmp: &mut DVector<f64>,
+        rho: &DVector<f64>,
+        x6: &DMatrix<f64>,
+        b: &DMatrix<f64>,
+        w: &DMatrix<f64>,
+        l_h: &DMatrix<f64>,
+        u: &DVector<f64>,
+        f: &[f64; NF],
+    ) {
+        let nv = u.len();
+        z.copy_from(rho);
         for c in 0..6 {
-            let btf: f64 = (0..NF).map(|k| self.b[(k, c)] * f[k]).sum();
+            let btf: f64 = (0..NF).map(|k| b[(k, c)] * f[k]).sum();
             for r in 0..NC {
-                self.z[r] += self.x6[(r, c)] * btf;
+                z[r] += x6[(r, c)] * btf;
             }
         }
-        self.tmp.gemv(1.0, &self.w, &self.z, 0.0);
-        self.l_h
-            .tr_solve_lower_triangular_unchecked_mut(&mut self.tmp);
+        tmp.gemv(1.0, w, z, 0.0);
+        l_h.tr_solve_lower_triangular_unchecked_mut(tmp);
         for i in 0..nv {
-            self.x[i] = self.u[i] + self.tmp[i];
+            x[i] = u[i] + tmp[i];
         }
-        self.x[nv..].copy_from_slice(&f);
+        x[nv..].copy_from_slice(f);
+    }
+
+    /// `τ_d = M[d, :] q̈ + h_d − Σ J_c[:, d]ᵀ f` at the current `x`.
+    fn torque(&self, pb: &Problem, dof: usize) -> f64 {
+        let (x, nv) = (&self.x, self.nv);
+        let mut t = pb.h[dof];
+        for c in 0..nv {
+            t += pb.m[(dof, c)] * x[c];
+        }
+        for j in 0..NF {
+            t -= pb.jc[(j, dof)] * x[nv + j];
+        }
+        t
     }
 
     fn within_limits(&self, pb: &Problem) -> bool {
-        let x = &self.x;
-        x.iter().all(|v| v.is_finite())
-            && pb.limited.iter().all(|&(dof, tmax)| {
-                let mut t = pb.h[dof];
-                for c in 0..self.nv {
-                    t += pb.m[(dof, c)] * x[c];
-                }
-                for j in 0..NF {
-                    t -= pb.jc[(j, dof)] * x[self.nv + j];
-                }
-                t.abs() <= tmax
-            })
+        self.x.iter().all(|v| v.is_finite())
+            && pb
+                .limited
+                .iter()
+                .all(|&(dof, tmax)| self.torque(pb, dof).abs() <= tmax)
     }
 }
 

@@ -149,6 +149,11 @@ pub struct WbcCounters {
     pub consecutive_fallbacks: u64,
     /// Clarabel solvers built (1 after the first tick on the fast path).
     pub solver_builds: u64,
+    /// Ticks whose QP needed the torque-limit rows (a limit active at the optimum).
+    pub torque_limited: u64,
+    /// Ticks the condensed problem could not be formed (H or S not positive definite), decided
+    /// by the full problem instead.
+    pub condensation_failures: u64,
 }
 
 /// One tick's result. `tau` and `ddq` borrow the controller's buffers.
@@ -708,7 +713,10 @@ impl WholeBodyController {
                 Ok(almost) => Some(almost),
                 // H or S not positive definite (e.g. a singular leg): the full problem, whose
                 // interior-point KKT system is regularised, decides this tick.
-                Err(CondensedError::Factorisation) => None,
+                Err(CondensedError::Factorisation) => {
+                    self.counters.condensation_failures += 1;
+                    None
+                }
                 Err(CondensedError::Solver(r)) => return Err(r),
             }
         } else {
@@ -878,6 +886,7 @@ impl WholeBodyController {
             }
         }
         if !accepted {
+            self.counters.torque_limited += u64::from(self.relaxed.is_some());
             let run = self.full.run(
                 &self.p_pattern,
                 &self.p_val,
