@@ -19,7 +19,7 @@
 //! with `B = J_c,u` (24 × 6, the corners' Jacobian columns of the base) and `X = S⁻¹[:, 0..6]`:
 //!
 //! ```text
-//! min_f  ½ fᵀ (B X_u Bᵀ + w_f I) f + (B (S⁻¹ρ)_u)ᵀ f    s.t. f ∈ cones,  |T f + t₀| ≤ τ_max
+//! min_f  ½ fᵀ (B X_u Bᵀ + w_f I) f + (B (S⁻¹ρ)_u)ᵀ f    s.t. f ∈ cones
 //! ```
 //!
 //! a QP in the 24 forces, given to clarabel with `y = Bᵀ f` as 6 more variables (so P is
@@ -30,9 +30,11 @@
 //! positive and the two soles' constraints are independent of the floating-base rows); a
 //! failed factorisation is reported and the caller solves the full problem instead.
 //!
-//! The same screening as the full problem: the QP without the torque rows first, the torque
-//! rows `T = M_a G − J_c,aᵀ`, `G = ∂q̈/∂f = H⁻¹Cᵀ X Bᵀ`, `t₀ = M_a q̈(0) + h_a`, only when
-//! its optimum violates a limit.
+//! Torque limits are not condensed: they bound `M_a q̈ + h_a − J_c,aᵀ f`, q̈ and f together,
+//! and fixing q̈ to the inner optimum `q̈(f)` would shrink the feasible set (a tick at its limits
+//! then came out infeasible where the full problem is not). The caller checks the limits at
+//! this problem's optimum, which is the full problem's when none is violated (dropping
+//! inactive constraints does not move a convex optimum), and otherwise solves the full one.
 
 use std::time::Duration;
 
@@ -49,9 +51,9 @@ const NF: usize = 3 * N_CONTACTS;
 const NC: usize = 18;
 /// Variables of the reduced QP: the forces and the base wrench error δ (6, see `reduce`).
 const NY: usize = NF + 6;
-/// Rows of the reduced QP: `Bᵀ f − δ = y*` (6), the cones (24), then 2 per torque limit.
+/// Rows of the reduced QP: `Bᵀ f − δ = y*` (6), then the cones (24).
 const ROW_SOC: usize = 6;
-const ROW_TAU: usize = ROW_SOC + NF;
+const N_ROWS: usize = ROW_SOC + NF;
 
 /// The data of one tick, as the controller assembled it (world axes, SI).
 pub(crate) struct Problem<'a> {
@@ -72,8 +74,6 @@ pub(crate) struct Problem<'a> {
     pub friction: f64,
     /// Rotation of each sole (its z axis is the contact normal).
     pub foot_rot: [Matrix3<f64>; 2],
-    /// Torque-limited dofs (velocity index) and their limits.
-    pub limited: &'a [(usize, f64)],
 }
 
 /// Why the condensed problem could not be solved (the caller then solves the full problem,
@@ -99,9 +99,8 @@ pub(crate) struct CondensedQp {
     l_s: DMatrix<f64>,
     /// X = S⁻¹[:, 0..6] (18 × 6).
     x6: DMatrix<f64>,
-    /// B = J_c,u (24 × 6) and Bᵀ.
+    /// B = J_c,u (24 × 6).
     b: DMatrix<f64>,
-    bt: DMatrix<f64>,
     /// u = −H⁻¹ g, then q̈.
     u: DVector<f64>,
     /// ρ, then S⁻¹ ρ; and the 18-vector combining it with the forces.
@@ -109,61 +108,38 @@ pub(crate) struct CondensedQp {
     z: DVector<f64>,
     /// W z, then H⁻¹ Cᵀ z (nv).
     tmp: DVector<f64>,
-    /// G = ∂q̈/∂f (nv × 24) via H⁻¹Cᵀ X (nv × 6), for the torque rows.
-    hcx: DMatrix<f64>,
-    g_f: DMatrix<f64>,
-    /// Dense scratch of the reduced QP: P (24 × 24), q, A (cone rows, then 2 per limit), b.
+    /// Dense scratch of the reduced QP: P, q, A, b.
     pd: DMatrix<f64>,
     qd: Vec<f64>,
     ad: DMatrix<f64>,
     bd: Vec<f64>,
     p_pattern: Pattern,
     p_val: Vec<f64>,
-    relaxed: QpInstance,
-    full: Option<QpInstance>,
+    qp: QpInstance,
     /// Solution [q̈; f].
     x: Vec<f64>,
-    /// The last tick's optimum had a torque limit active (see `solve`).
-    limits_active: bool,
 }
 
 impl CondensedQp {
     /// `weight`: the robot's weight (N), which sets the forces' unit.
-    pub(crate) fn new(nv: usize, n_limited: usize, weight: f64) -> Self {
-        let n_rows = ROW_TAU + 2 * n_limited;
+    pub(crate) fn new(nv: usize, weight: f64) -> Self {
         // P: w_f I on f, X_u (dense 6 × 6) on δ. With B X_u Bᵀ on f directly P would be a dense
         // 24 × 24 block: the auxiliary δ keeps clarabel's KKT factor sparse.
         let p_pattern = Pattern::from_mask(NY, NY, |r, c| r == c || (r >= NF && r <= c));
         let entry = |r: usize, c: usize| {
             if r < ROW_SOC {
                 c < NF || c == NF + r
-            } else if r < ROW_TAU {
-                c < NF && (r - ROW_SOC) / 3 == c / 3
             } else {
-                c < NF
+                c < NF && (r - ROW_SOC) / 3 == c / 3
             }
         };
-        let cones = |limits: bool| {
-            let mut k = vec![SupportedConeT::ZeroConeT(ROW_SOC)];
-            k.extend((0..N_CONTACTS).map(|_| SupportedConeT::SecondOrderConeT(3)));
-            if limits {
-                k.push(SupportedConeT::NonnegativeConeT(2 * n_limited));
-            }
-            k
-        };
-        let relaxed_rows: Vec<usize> = (0..ROW_TAU).collect();
-        let relaxed = QpInstance::new(
-            Pattern::from_mask_rows(n_rows, &relaxed_rows, NY, entry),
-            relaxed_rows,
-            cones(false),
+        let mut cones = vec![SupportedConeT::ZeroConeT(ROW_SOC)];
+        cones.extend((0..N_CONTACTS).map(|_| SupportedConeT::SecondOrderConeT(3)));
+        let qp = QpInstance::new(
+            Pattern::from_mask(N_ROWS, NY, entry),
+            (0..N_ROWS).collect(),
+            cones,
         );
-        let full = (n_limited > 0).then(|| {
-            QpInstance::new(
-                Pattern::from_mask(n_rows, NY, entry),
-                (0..n_rows).collect(),
-                cones(true),
-            )
-        });
         Self {
             nv,
             force_unit: if weight > 0.0 && weight.is_finite() {
@@ -176,32 +152,24 @@ impl CondensedQp {
             l_s: DMatrix::zeros(NC, NC),
             x6: DMatrix::zeros(NC, 6),
             b: DMatrix::zeros(NF, 6),
-            bt: DMatrix::zeros(6, NF),
             u: DVector::zeros(nv),
             rho: DVector::zeros(NC),
             z: DVector::zeros(NC),
             tmp: DVector::zeros(nv),
-            hcx: DMatrix::zeros(nv, 6),
-            g_f: DMatrix::zeros(nv, NF),
             pd: DMatrix::zeros(NY, NY),
             qd: vec![0.0; NY],
-            ad: DMatrix::zeros(n_rows, NY),
-            bd: vec![0.0; n_rows],
+            ad: DMatrix::zeros(N_ROWS, NY),
+            bd: vec![0.0; N_ROWS],
             p_val: vec![0.0; p_pattern.nnz()],
             p_pattern,
-            relaxed,
-            full,
+            qp,
             x: vec![0.0; nv + NF],
-            limits_active: false,
         }
     }
 
-    /// Drops the clarabel solvers (the next solve builds fresh ones).
-    pub(crate) fn drop_solvers(&mut self) {
-        self.relaxed.solver = None;
-        if let Some(f) = self.full.as_mut() {
-            f.solver = None;
-        }
+    /// Drops the clarabel solver (the next solve builds a fresh one).
+    pub(crate) fn drop_solver(&mut self) {
+        self.qp.solver = None;
     }
 
     /// The solution `[q̈ (nv); f (24)]` of the last successful [`Self::solve`].
@@ -209,13 +177,8 @@ impl CondensedQp {
         &self.x
     }
 
-    /// Solves the tick's problem. `Ok(almost_solved)` leaves `[q̈; f]` in [`Self::x`].
-    ///
-    /// Screening: the QP without the torque rows first; its optimum is the full QP's when it
-    /// satisfies every limit (dropping inactive constraints does not move a convex optimum).
-    /// After a tick whose optimum had a limit active, the next tick goes straight to the QP
-    /// with the torque rows (a robot at its limits, e.g. falling, stays there for a while: the
-    /// screening solve would be wasted), until its optimum has no limit active again.
+    /// Solves the tick's problem without the torque limits. `Ok(almost_solved)` leaves
+    /// `[q̈; f]` in [`Self::x`].
     pub(crate) fn solve(
         &mut self,
         pb: &Problem,
@@ -226,68 +189,7 @@ impl CondensedQp {
         solve_time: &mut Duration,
     ) -> Result<bool, CondensedError> {
         self.reduce(pb)?;
-        if !self.limits_active || self.full.is_none() {
-            let run = self.relaxed.run(
-                &self.p_pattern,
-                &self.p_val,
-                &self.qd,
-                &self.ad,
-                &self.bd,
-                settings,
-                reuse,
-                counters,
-            );
-            *iterations += self.relaxed.iterations();
-            *solve_time += self.relaxed.solve_time();
-            let almost = run.map_err(CondensedError::Solver)?;
-            self.recover(&self.relaxed_forces());
-            if self.full.is_none() || self.within_limits(pb) {
-                self.limits_active = false;
-                return Ok(almost);
-            }
-        }
-        let Some(full) = self.full.as_mut() else {
-            return Err(CondensedError::Solver(FallbackReason::SolverSetup));
-        };
-        counters.torque_limited += 1;
-        // Torque rows: τ = T f + t₀, T = M_a G − J_c,aᵀ, G = ∂q̈/∂f = H⁻¹Cᵀ X Bᵀ,
-        // t₀ = M_a q̈(0) + h_a.
-        self.hcx.gemm(1.0, &self.w, &self.x6, 0.0);
-        self.l_h
-            .tr_solve_lower_triangular_unchecked_mut(&mut self.hcx);
-        self.g_f.gemm(1.0, &self.hcx, &self.bt, 0.0);
-        // q̈(0) = u + H⁻¹Cᵀ S⁻¹ρ, into x[..nv] (overwritten by the solution below).
-        Self::recover_into(
-            &mut self.x,
-            &mut self.z,
-            &mut self.tmp,
-            &self.rho,
-            &self.x6,
-            &self.b,
-            &self.w,
-            &self.l_h,
-            &self.u,
-            &[0.0; NF],
-        );
-        let nv = self.nv;
-        for (k, &(dof, tmax)) in pb.limited.iter().enumerate() {
-            let row = ROW_TAU + 2 * k;
-            let mut t0 = pb.h[dof];
-            for c in 0..nv {
-                t0 += pb.m[(dof, c)] * self.x[c];
-            }
-            for j in 0..NF {
-                let mut t = -pb.jc[(j, dof)];
-                for c in 0..nv {
-                    t += pb.m[(dof, c)] * self.g_f[(c, j)];
-                }
-                self.ad[(row, j)] = t * self.force_unit;
-                self.ad[(row + 1, j)] = -t * self.force_unit;
-            }
-            self.bd[row] = tmax - t0;
-            self.bd[row + 1] = tmax + t0;
-        }
-        let run = full.run(
+        let run = self.qp.run(
             &self.p_pattern,
             &self.p_val,
             &self.qd,
@@ -297,37 +199,19 @@ impl CondensedQp {
             reuse,
             counters,
         );
-        *iterations += full.iterations();
-        *solve_time += full.solve_time();
+        *iterations += self.qp.iterations();
+        *solve_time += self.qp.solve_time();
         let almost = run.map_err(CondensedError::Solver)?;
-        let mut f = [0.0; NF];
-        let x = full.x();
+        let x = self.qp.x();
         if x.len() != NY {
             return Err(CondensedError::Solver(FallbackReason::NonFiniteSolution));
         }
+        let mut f = [0.0; NF];
         for (fk, xk) in f.iter_mut().zip(x) {
             *fk = xk * self.force_unit;
         }
         self.recover(&f);
-        // A limit counts as active within 0.1 % of it.
-        self.limits_active = pb
-            .limited
-            .iter()
-            .any(|&(dof, tmax)| self.torque(pb, dof).abs() >= (1.0 - 1e-3) * tmax);
         Ok(almost)
-    }
-
-    fn relaxed_forces(&self) -> [f64; NF] {
-        let mut f = [0.0; NF];
-        let x = self.relaxed.x();
-        if x.len() == NY {
-            for (fk, xk) in f.iter_mut().zip(x) {
-                *fk = xk * self.force_unit;
-            }
-        } else {
-            f.fill(f64::NAN);
-        }
-        f
     }
 
     /// Builds the reduced QP's P, q, cone rows from the tick's data (see the module docs).
@@ -431,7 +315,6 @@ impl CondensedQp {
         for k in 0..NF {
             for c in 0..6 {
                 self.b[(k, c)] = pb.jc[(k, c)];
-                self.bt[(c, k)] = pb.jc[(k, c)];
                 self.ad[(c, k)] = pb.jc[(k, c)] * fu;
             }
             self.pd[(k, k)] = pb.w_force * fu * fu;
@@ -463,68 +346,21 @@ impl CondensedQp {
 
     /// `x = [q̈(f); f]` with `q̈(f) = u + H⁻¹Cᵀ (S⁻¹ρ + X Bᵀ f)`.
     fn recover(&mut self, f: &[f64; NF]) {
-        Self::recover_into(
-            &mut self.x,
-            &mut self.z,
-            &mut self.tmp,
-            &self.rho,
-            &self.x6,
-            &self.b,
-            &self.w,
-            &self.l_h,
-            &self.u,
-            f,
-        );
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn recover_into(
-        x: &mut [f64],
-        z: &mut DVector<f64>,
-        tmp: &mut DVector<f64>,
-        rho: &DVector<f64>,
-        x6: &DMatrix<f64>,
-        b: &DMatrix<f64>,
-        w: &DMatrix<f64>,
-        l_h: &DMatrix<f64>,
-        u: &DVector<f64>,
-        f: &[f64; NF],
-    ) {
-        let nv = u.len();
-        z.copy_from(rho);
+        let nv = self.nv;
+        self.z.copy_from(&self.rho);
         for c in 0..6 {
-            let btf: f64 = (0..NF).map(|k| b[(k, c)] * f[k]).sum();
+            let btf: f64 = (0..NF).map(|k| self.b[(k, c)] * f[k]).sum();
             for r in 0..NC {
-                z[r] += x6[(r, c)] * btf;
+                self.z[r] += self.x6[(r, c)] * btf;
             }
         }
-        tmp.gemv(1.0, w, z, 0.0);
-        l_h.tr_solve_lower_triangular_unchecked_mut(tmp);
+        self.tmp.gemv(1.0, &self.w, &self.z, 0.0);
+        self.l_h
+            .tr_solve_lower_triangular_unchecked_mut(&mut self.tmp);
         for i in 0..nv {
-            x[i] = u[i] + tmp[i];
+            self.x[i] = self.u[i] + self.tmp[i];
         }
-        x[nv..].copy_from_slice(f);
-    }
-
-    /// `τ_d = M[d, :] q̈ + h_d − Σ J_c[:, d]ᵀ f` at the current `x`.
-    fn torque(&self, pb: &Problem, dof: usize) -> f64 {
-        let (x, nv) = (&self.x, self.nv);
-        let mut t = pb.h[dof];
-        for c in 0..nv {
-            t += pb.m[(dof, c)] * x[c];
-        }
-        for j in 0..NF {
-            t -= pb.jc[(j, dof)] * x[nv + j];
-        }
-        t
-    }
-
-    fn within_limits(&self, pb: &Problem) -> bool {
-        self.x.iter().all(|v| v.is_finite())
-            && pb
-                .limited
-                .iter()
-                .all(|&(dof, tmax)| self.torque(pb, dof).abs() <= tmax)
+        self.x[nv..].copy_from_slice(f);
     }
 }
 

@@ -241,6 +241,8 @@ pub struct WholeBodyController {
     b_feet: [f64; 12],
     /// Copy of the accepted solution.
     x: Vec<f64>,
+    /// The last tick's optimum had a torque limit active (condensed formulation: see `solve`).
+    limits_active: bool,
     posture_ref: Option<DVector<f64>>,
     // Outputs.
     tau: DVector<f64>,
@@ -376,8 +378,7 @@ impl WholeBodyController {
             ..DefaultSettings::default()
         };
 
-        let condensed =
-            CondensedQp::new(nv, limited.len(), model.total_mass() * model.gravity.norm());
+        let condensed = CondensedQp::new(nv, model.total_mass() * model.gravity.norm());
         Ok(Self {
             p: Params {
                 friction: config.friction,
@@ -430,6 +431,7 @@ impl WholeBodyController {
             lin: vec![0.0; nv],
             b_feet: [0.0; 12],
             x: vec![0.0; nz],
+            limits_active: false,
             posture_ref: None,
             tau: DVector::zeros(na),
             last_tau: DVector::zeros(na),
@@ -687,7 +689,12 @@ impl WholeBodyController {
             return Err(NonFiniteProblem);
         }
 
-        let condensed = if p.formulation == WbcFormulation::Condensed {
+        // The condensed problem (no torque rows), unless the last tick had a torque limit
+        // active: a robot at its limits (pushed hard, falling) stays there for a while, and the
+        // screening solve would be wasted. Its optimum is the tick's when it respects every
+        // limit; otherwise the full problem with its torque rows decides.
+        let mut screen = true;
+        let condensed = if p.formulation == WbcFormulation::Condensed && !self.limits_active {
             let pb = Problem {
                 m: &data.m,
                 h: &self.h,
@@ -700,7 +707,6 @@ impl WholeBodyController {
                 w_force: p.w_reg_force,
                 friction: p.friction,
                 foot_rot,
-                limited: &self.limited,
             };
             match self.condensed.solve(
                 &pb,
@@ -710,7 +716,14 @@ impl WholeBodyController {
                 iterations,
                 solve_time,
             ) {
-                Ok(almost) => Some(almost),
+                Ok(almost) => {
+                    let x = self.condensed.x();
+                    let within = self.limited.iter().all(|&(dof, tmax)| {
+                        torque(&data.m, &self.h, &self.jc, x, dof).abs() <= tmax
+                    });
+                    screen = false;
+                    (within && finite(x)).then_some(almost)
+                }
                 // H or S not positive definite (e.g. a singular leg): the full problem, whose
                 // interior-point KKT system is regularised, decides this tick.
                 Err(CondensedError::Factorisation) => {
@@ -720,18 +733,26 @@ impl WholeBodyController {
                 Err(CondensedError::Solver(r)) => return Err(r),
             }
         } else {
+            screen = p.formulation == WbcFormulation::Full;
             None
         };
         let almost = match condensed {
             Some(almost) => {
                 let x = self.condensed.x();
-                if !finite(x) {
-                    return Err(NonFiniteSolution);
-                }
                 self.x[..x.len()].copy_from_slice(x);
+                self.limits_active = false;
                 almost
             }
-            None => self.solve_full(&data.m, r_com, r_hand, &foot_rot, solve_time, iterations)?,
+            None => {
+                let almost = self.solve_full(
+                    &data.m, r_com, r_hand, &foot_rot, screen, solve_time, iterations,
+                )?;
+                // A limit counts as active within 0.1 % of it.
+                self.limits_active = self.limited.iter().any(|&(dof, tmax)| {
+                    torque(&data.m, &self.h, &self.jc, &self.x, dof).abs() >= (1.0 - 1e-3) * tmax
+                });
+                almost
+            }
         };
         let m = &data.m;
         let x = &self.x;
@@ -751,13 +772,16 @@ impl WholeBodyController {
     }
 
     /// The full problem (the reference formulation): assembles the dense P, q, A, b over
-    /// `z = [q̈, f, e_com, e_hand]` and solves it. `Ok(almost_solved)` leaves z in `self.x`.
+    /// `z = [q̈, f, e_com, e_hand]` and solves it, first without the torque rows when `screen`.
+    /// `Ok(almost_solved)` leaves z in `self.x`.
+    #[allow(clippy::too_many_arguments)]
     fn solve_full(
         &mut self,
         m: &DMatrix<f64>,
         r_com: Vector3<f64>,
         r_hand: Vector3<f64>,
         foot_rot: &[nalgebra::Matrix3<f64>; 2],
+        screen: bool,
         solve_time: &mut Duration,
         iterations: &mut u32,
     ) -> Result<bool, FallbackReason> {
@@ -859,7 +883,7 @@ impl WholeBodyController {
         // optimum of a convex problem). Otherwise the full QP is solved. ----
         let mut almost = false;
         let mut accepted = false;
-        if let Some(relaxed) = self.relaxed.as_mut() {
+        if let Some(relaxed) = self.relaxed.as_mut().filter(|_| screen) {
             let run = relaxed.run(
                 &self.p_pattern,
                 &self.p_val,
@@ -910,7 +934,7 @@ impl WholeBodyController {
     }
 
     fn drop_solvers(&mut self) {
-        self.condensed.drop_solvers();
+        self.condensed.drop_solver();
         self.full.solver = None;
         if let Some(r) = self.relaxed.as_mut() {
             r.solver = None;
