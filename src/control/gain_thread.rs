@@ -190,7 +190,7 @@ impl GainHandoff {
         let worker = std::thread::Builder::new()
             .name("upc-c2".into())
             .spawn(move || {
-                super::realtime::idle_class();
+                super::realtime::lower_priority(10);
                 let mut last_time: Option<f64> = None;
                 while !stop_w.load(Ordering::Relaxed) {
                     if !snap_out.update() {

@@ -123,18 +123,6 @@ pub fn drain_periodically<T>(
     }
 }
 
-/// Put the calling thread in the SCHED_IDLE class for good (the C2 worker): it then runs only
-/// on a core neither the loop nor the simulator wants, and never preempts them. A nice value
-/// (10) still let it take the loop's core at wake-ups: C2 runs' tick p99 was 1.5–2× C1's.
-/// Where the class cannot be changed, falls back to nice 19.
-pub fn idle_class() {
-    let idle = libc::sched_param { sched_priority: 0 };
-    // SAFETY: sched_setscheduler on the calling thread (pid 0) with a valid sched_param.
-    if unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &idle) } != 0 {
-        lower_priority(19);
-    }
-}
-
 /// Lower the calling thread's priority (the C2 worker and loggers must never preempt the loop).
 pub fn lower_priority(nice: i32) {
     // SAFETY: setpriority on the calling thread (who = 0 with PRIO_PROCESS applies to the thread
