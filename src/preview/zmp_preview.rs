@@ -128,17 +128,32 @@ impl ZmpPreview {
                     zmp_ref[i][axis] - self.disturbance.shift(&self.model, axis, i);
             }
         }
-        if !self.factored || self.factored_c2[..n] != self.c2[..n] {
-            self.riccati
-                .factor(&self.model, self.q_e, self.r, &self.c2[..n]);
+        let refactor = !self.factored || self.factored_c2[..n] != self.c2[..n];
+        if refactor {
             self.factored_c2[..n].copy_from_slice(&self.c2[..n]);
             self.factored = true;
         }
         match self.solver {
+            // New output rows (α0 moved): one fused backward pass gives the gains and both
+            // first inputs. Same rows as last time: the stored preview gains, two dot products.
+            LqSolverKind::Riccati if refactor => Ok(self.riccati.factor_first_inputs(
+                &self.model,
+                self.q_e,
+                self.r,
+                &self.c2[..n],
+                [&self.targets[0][..n], &self.targets[1][..n]],
+                [&state[0], &state[1]],
+            )),
             LqSolverKind::Riccati => {
+                self.riccati
+                    .ensure_preview_gains(&self.model, self.q_e, &self.c2[..n]);
                 Ok([0, 1].map(|a| self.riccati.first_input(&state[a], &self.targets[a][..n])))
             }
             LqSolverKind::Dense => {
+                if refactor {
+                    self.riccati
+                        .factor(&self.model, self.q_e, self.r, &self.c2[..n]);
+                }
                 let horizon = CondensedHorizon::build(&self.model, &self.c2[..n]);
                 let u = horizon
                     .solve(
