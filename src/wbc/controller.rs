@@ -46,8 +46,9 @@
 //! - Failure is never a panic: a solver status other than Solved / AlmostSolved, non-finite data
 //!   or solution, or invalid input gives the fallback torque ([`WholeBodyController::fallback_torque`]:
 //!   gravity compensation through the contacts with joint damping), a
-//!   [`WbcStatus::Fallback`], a counter, and a rate-limited warning. After a solver failure
-//!   the solver is rebuilt on the next tick (fresh equilibration).
+//!   [`WbcStatus::Fallback`], a counter, and a rate-limited warning. After a numerical solver
+//!   failure the solver is rebuilt on the next tick (fresh equilibration); an infeasible
+//!   problem keeps it.
 //!
 //! Units: SI (m, s, N, N·m, rad). Forces and CoM / hand quantities are in world axes.
 
@@ -536,8 +537,19 @@ impl WholeBodyController {
             Err(reason) => {
                 self.counters.fallbacks += 1;
                 self.counters.consecutive_fallbacks += 1;
-                if !matches!(reason, FallbackReason::InvalidInput) {
-                    // A fresh solver (fresh equilibration) next tick.
+                // A fresh solver (fresh equilibration) next tick, unless the input was bad or
+                // the problem itself infeasible (a robot that has fallen: rebuilding every tick
+                // doubled those ticks' cost and changes nothing).
+                let infeasible = matches!(
+                    reason,
+                    FallbackReason::Solver(
+                        SolverStatus::PrimalInfeasible
+                            | SolverStatus::AlmostPrimalInfeasible
+                            | SolverStatus::DualInfeasible
+                            | SolverStatus::AlmostDualInfeasible
+                    )
+                );
+                if !matches!(reason, FallbackReason::InvalidInput) && !infeasible {
                     self.drop_solvers();
                 }
                 self.apply_fallback(model, data, q, v);
