@@ -1,0 +1,104 @@
+#!/usr/bin/env python3
+"""RNEA, CRBA and ABA: upc against Pinocchio (C++, -O3) on the same URDFs, side by side.
+
+Pinocchio comes from PyPI (`pin`, installed by scripts/setup.sh in the robot venv); its C++
+headers and libraries are in the wheel, and scripts/bench_pinocchio.cpp is compiled against
+them once (about 2 minutes; cached under ~/.cache/upc/pinbench). upc's side is its criterion
+bench (`UPC_BENCH_URDF=… cargo bench --bench dynamics`). Both take random configurations,
+velocities and accelerations (free-flyer root).
+
+    ~/.cache/upc/robot-venv/bin/python scripts/bench_pinocchio.py            # default URDFs
+    ~/.cache/upc/robot-venv/bin/python scripts/bench_pinocchio.py my.urdf    # yours
+"""
+
+import hashlib
+import json
+import os
+import re
+import subprocess
+import sys
+
+import pinocchio as pin
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CACHE = os.path.expanduser("~/.cache/upc/pinbench")
+# The wheel's prefix: headers, libraries and example-robot-data's share/.
+PREFIX = pin.__file__[: pin.__file__.index("cmeel.prefix") + len("cmeel.prefix")]
+
+
+def default_urdfs():
+    import icub_models
+
+    erd = os.path.join(PREFIX, "share", "example-robot-data", "robots")
+    return [
+        os.path.join(ROOT, "assets", "icub_like", "icub_like.urdf"),
+        str(icub_models.get_model_file("iCubGazeboV2_5")),
+        os.path.join(erd, "romeo_description", "urdf", "romeo.urdf"),
+        os.path.join(erd, "tiago_description", "robots", "tiago_dual.urdf"),
+    ]
+
+
+def pinocchio_bench():
+    src = os.path.join(ROOT, "scripts", "bench_pinocchio.cpp")
+    digest = hashlib.sha256(open(src, "rb").read()).hexdigest()[:12]
+    exe = os.path.join(CACHE, f"bench-{digest}")
+    if os.path.exists(exe):
+        return exe
+    if not os.path.isdir("/usr/include/eigen3"):
+        sys.exit("Eigen's headers are missing (/usr/include/eigen3): run scripts/setup.sh")
+    os.makedirs(CACHE, exist_ok=True)
+    print("compiling the Pinocchio benchmark (about 2 minutes, once)...", file=sys.stderr)
+    # The definitions Pinocchio's own CMake config exports to its users.
+    cmd = [
+        "g++", "-O3", "-DNDEBUG", "-std=c++17",
+        "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", "-DBOOST_MPL_LIMIT_LIST_SIZE=30",
+        "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30", "-DBOOST_FUSION_INVOKE_MAX_ARITY=12",
+        src, "-I" + os.path.join(PREFIX, "include"), "-I/usr/include/eigen3",
+        "-L" + os.path.join(PREFIX, "lib"), "-lpinocchio_default", "-lboost_serialization",
+        "-lboost_filesystem", "-Wl,-rpath," + os.path.join(PREFIX, "lib"), "-o", exe,
+    ]
+    subprocess.run(cmd, check=True)
+    return exe
+
+
+def pinocchio_times(exe, urdf):
+    model = pin.buildModelFromUrdf(urdf, pin.JointModelFreeFlyer())
+    path = os.path.join(CACHE, hashlib.sha256(urdf.encode()).hexdigest()[:12] + ".bin")
+    model.saveToBinary(path)
+    return json.loads(subprocess.run([exe, path], check=True, capture_output=True, text=True).stdout)
+
+
+def upc_times(urdf):
+    env = dict(os.environ, UPC_BENCH_URDF=urdf)
+    out = subprocess.run(
+        ["cargo", "bench", "--bench", "dynamics", "--", "env_urdf/(rnea|crba|aba)$"],
+        cwd=ROOT, env=env, capture_output=True, text=True, check=True,
+    )
+    text = out.stdout + out.stderr
+    times = {}
+    unit = {"ns": 1e-3, "µs": 1.0, "us": 1.0, "ms": 1e3}
+    for alg in ("rnea", "crba", "aba"):
+        m = re.search(rf"env_urdf/{alg}\s+time:\s+\[\S+ \S+ (\S+) (\S+)", text)
+        if m:
+            times[alg] = float(m.group(1)) * unit[m.group(2)]
+    skipped = re.search(r"ABA skipped: (.*)", text)
+    return times, skipped.group(1) if skipped else None
+
+
+def main():
+    urdfs = sys.argv[1:] or default_urdfs()
+    exe = pinocchio_bench()
+    print(f"{'URDF':<28} {'nv':>4}  {'algorithm':<5} {'upc µs':>8} {'Pinocchio µs':>13} {'ratio':>6}")
+    for urdf in urdfs:
+        name = os.path.basename(os.path.dirname(urdf)) if urdf.endswith("model.urdf") else os.path.basename(urdf)
+        p = pinocchio_times(exe, urdf)
+        u, skipped = upc_times(urdf)
+        for alg in ("rnea", "crba", "aba"):
+            if alg in u:
+                print(f"{name:<28} {p['nv']:>4}  {alg:<5} {u[alg]:>8.2f} {p[alg]:>13.2f} {u[alg] / p[alg]:>6.2f}")
+            else:
+                print(f"{name:<28} {p['nv']:>4}  {alg:<5} {'-':>8} {p[alg]:>13.2f}   (upc: {skipped})")
+
+
+if __name__ == "__main__":
+    main()
