@@ -18,12 +18,14 @@ if [ ${#need[@]} -gt 0 ]; then
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need[@]}"
 fi
 command -v cargo >/dev/null 2>&1 || { echo "cargo not found: install Rust (rustup) first" >&2; exit 1; }
-# Python environment of the Python participants (examples/python's forecaster, the MuJoCo
-# plant of `upc sim --plant mujoco`): iceoryx2's bindings, the same version as the Rust crate,
-# and MuJoCo (its wheel carries the library).
-if ! .venv/bin/python -c 'import iceoryx2, mujoco' >/dev/null 2>&1; then
+# Python environment of the Python participants (examples/python's forecasters, the MuJoCo
+# plant of `upc sim --plant mujoco`): iceoryx2's bindings and Zenoh's, the same versions as the
+# Rust crates, MuJoCo (its wheel carries the library) and rerun's viewer (`upc run --viewer`),
+# the version of the Rust SDK.
+if ! .venv/bin/python -c 'import iceoryx2, mujoco, zenoh, rerun' >/dev/null 2>&1; then
   [ -x .venv/bin/python ] || python3 -m venv .venv
-  .venv/bin/pip install -q --disable-pip-version-check "iceoryx2==0.10.0" "mujoco==4.0.0"
+  .venv/bin/pip install -q --disable-pip-version-check "iceoryx2==0.10.0" "mujoco==4.0.0" \
+    "eclipse-zenoh==1.10.2" "rerun-sdk==0.36.3"
 fi
 # Real robots' URDFs and Pinocchio, for the loader tests and scripts/pin_check.py (about 1 GB,
 # kept outside the clone so that fresh clones on one machine share it). Not needed to run upc:

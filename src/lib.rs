@@ -14,7 +14,10 @@
 //! - [`control`]: the control server's loop pieces (tick, C2 thread, timing, real-time setup).
 //! - [`shutdown`]: SIGINT/SIGTERM handling shared by the processes.
 //! - [`channels`]: the iceoryx2 channel contract shared by every process.
+//! - [`bridge`]: the contract over Zenoh, for forecasters and viewers on other hosts.
+//! - [`recording`]: where the rerun recordings go (`.rrd` files, a live viewer).
 
+pub mod bridge;
 pub mod capability;
 pub mod channels;
 pub mod config;
@@ -23,6 +26,7 @@ pub mod dynamics;
 pub mod forecast;
 pub mod offline;
 pub mod preview;
+pub mod recording;
 pub mod report;
 pub mod robot;
 pub mod scenario;

@@ -30,6 +30,8 @@ enum Command {
     Forecast(cli::forecast::ForecastArgs),
     /// Inspect a URDF: joints, DoF, mass, CoM; dump M(q), h(q, v), CoM and a frame Jacobian as JSON.
     Model(cli::model::ModelArgs),
+    /// Forward the channels between this host's iceoryx2 and Zenoh (forecasters and viewers elsewhere).
+    Bridge(cli::bridge::BridgeArgs),
     /// Run the simulator: the humanoid on the ground and the door, over iceoryx2 (see --help).
     Sim(cli::sim::SimArgs),
     /// Largest impact each controller survives, by bisection, on the reduced models and the full simulation.
@@ -55,6 +57,7 @@ fn main() -> std::process::ExitCode {
         Command::Mjcf(args) => cli::sim::mjcf_cli(args),
         Command::Capability(args) => cli::capability::run(args),
         Command::Forecast(args) => cli::forecast::run_cli(args),
+        Command::Bridge(args) => cli::bridge::run_cli(args),
         Command::Controller(args) => cli::controller::run(args),
     };
     match result {

@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 use support::procs::*;
+use support::rrd::rrd_times;
 use upc::channels::{Bus, ForecastMsg, MAX_FORECAST, ServiceKind, StateMsg};
 
 fn controller_args(s: &Scratch, extra: &[&str]) -> Vec<String> {
@@ -417,29 +418,6 @@ fn bad_forecasts_are_rejected_counted_logged_and_leave_the_loop_alone() {
         ticks(&bad) > 0.7 * ticks(&clean),
         "clean {clean}, bad {bad}"
     );
-}
-
-/// Every record in a `.rrd` (it must decode to the end): distinct `sim_time` stamps of the
-/// entities under `prefix`, and the largest.
-fn rrd_times(p: &Path, prefix: &str) -> (usize, f64) {
-    let file = std::fs::File::open(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
-    let mut stamps = std::collections::BTreeSet::new();
-    for msg in re_log_encoding::DecoderApp::decode_lazy(std::io::BufReader::new(file)) {
-        let msg = msg.unwrap_or_else(|e| panic!("{} does not decode: {e}", p.display()));
-        if let re_log_types::LogMsg::ArrowMsg(_, arrow) = msg {
-            let chunk = re_chunk::Chunk::from_arrow_msg(&arrow).expect("chunk");
-            if !chunk.entity_path().to_string().starts_with(prefix) {
-                continue;
-            }
-            for (name, col) in chunk.timelines() {
-                if name.as_str() == "sim_time" {
-                    stamps.extend(col.times_raw().iter().copied());
-                }
-            }
-        }
-    }
-    let last = stamps.last().copied().unwrap_or(0) as f64 * 1e-9;
-    (stamps.len(), last)
 }
 
 /// Stop a controller, a simulator and a forecaster with the given signals; every one exits 0

@@ -265,6 +265,7 @@ fn run(
         duration: Some(duration),
         rrd: Some(dir.join("controller.rrd")),
         recording_id: "faults".into(),
+        live: None,
         zmp_offset: [0.0, 0.0],
         startup_timeout: 40.0,
         csv: Some(csv.clone()),

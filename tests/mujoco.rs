@@ -19,18 +19,7 @@ use upc::robot::Robot;
 
 /// The Python of `.venv` if it imports MuJoCo and iceoryx2, else `None` after saying why.
 fn mujoco_python() -> Option<PathBuf> {
-    let py = Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python");
-    let ok = Command::new(&py)
-        .args(["-c", "import mujoco, iceoryx2"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        eprintln!(
-            "SKIPPED: {} cannot import mujoco and iceoryx2 (run scripts/setup.sh)",
-            py.display()
-        );
-    }
-    ok.then_some(py)
+    venv_python("mujoco, iceoryx2")
 }
 
 /// MuJoCo's view of a generated scene at its home keyframe: body poses, mass matrix, contact

@@ -100,6 +100,7 @@ fn lockstep_run(tag: &str, steps: u64, inject_bad: bool) -> (RunSummary, StateMs
         robot: std::sync::Arc::new(upc::robot::Robot::embedded_default().unwrap()),
         rrd: None,
         recording_id: None,
+        live: None,
         node_name: format!("sim_{tag}"),
         truth_csv: None,
     };

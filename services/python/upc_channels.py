@@ -1,13 +1,14 @@
 """The channel contract of upc (services/CHANNELS.md) for Python participants.
 
-ctypes mirrors of the `#[repr(C)]` payloads of src/channels/messages.rs, their constants, and
-the service settings every upc process opens its services with (src/channels/bus.rs): a
-participant opened with other settings cannot join.
+ctypes mirrors of the `#[repr(C)]` payloads of src/channels/messages.rs, their constants, the
+service settings every upc process opens its iceoryx2 services with (src/channels/bus.rs: a
+participant opened with other settings cannot join), and the framing of the same payloads on
+Zenoh (src/bridge/wire.rs). iceoryx2 is imported only by the iceoryx2 helpers: a participant on
+another host, over Zenoh, needs only ctypes.
 """
 
 import ctypes
-
-import iceoryx2 as iox2
+import struct
 
 MAX_DOF = 48
 N_CONTACTS = 8
@@ -112,6 +113,8 @@ _HISTORY = {"state": 1, "forecast": 1, "torques": 0, "ground_truth": 0}
 
 def pubsub(node, prefix: str, kind: str, payload):
     """The publish–subscribe service `<prefix>/<kind>` with the contract's settings."""
+    import iceoryx2 as iox2
+
     return (
         node.service_builder(iox2.ServiceName.new(f"{prefix}/{kind}"))
         .publish_subscribe(payload)
@@ -127,6 +130,8 @@ def pubsub(node, prefix: str, kind: str, payload):
 
 def event(node, prefix: str, kind: str):
     """The event service `<prefix>/<kind>/event` a publisher notifies after each sample."""
+    import iceoryx2 as iox2
+
     return (
         node.service_builder(iox2.ServiceName.new(f"{prefix}/{kind}/event"))
         .event()
@@ -135,3 +140,38 @@ def event(node, prefix: str, kind: str):
         .max_nodes(16)
         .open_or_create()
     )
+
+
+# Over Zenoh (`upc bridge`): key `<key_prefix>/<kind>`, payload = a 16-byte header (magic
+# b"UPCZ", contract version u16, kind u16, payload size u32, reserved u32; little-endian) and
+# the payload's bytes as above. The bridge refuses a payload whose header does not match.
+WIRE_MAGIC = b"UPCZ"
+WIRE_VERSION = 1
+_WIRE_KIND = {"state": 1, "torques": 2, "forecast": 3, "ground_truth": 4}
+_WIRE_HEADER = struct.Struct("<4sHHII")
+
+
+class WireError(ValueError):
+    """A payload from Zenoh that is not the expected upc message."""
+
+
+def wire_encode(kind: str, msg) -> bytes:
+    """The bytes of `msg` (a payload above) on Zenoh's `<key_prefix>/<kind>`."""
+    body = bytes(msg)
+    return _WIRE_HEADER.pack(WIRE_MAGIC, WIRE_VERSION, _WIRE_KIND[kind], len(body), 0) + body
+
+
+def wire_decode(kind: str, payload, cls):
+    """The `cls` message in a payload from Zenoh's `<key_prefix>/<kind>`, or WireError."""
+    data = bytes(payload)
+    if len(data) < _WIRE_HEADER.size or data[:4] != WIRE_MAGIC:
+        raise WireError(f"not a upc payload ({len(data)} bytes)")
+    _, version, code, size, _ = _WIRE_HEADER.unpack_from(data)
+    if version != WIRE_VERSION:
+        raise WireError(f"the peer speaks contract version {version}, this one {WIRE_VERSION}")
+    if code != _WIRE_KIND[kind]:
+        raise WireError(f"payload kind {code} on the {kind} key")
+    body = data[_WIRE_HEADER.size:]
+    if size != ctypes.sizeof(cls) or len(body) != size:
+        raise WireError(f"{kind} of {len(body)} bytes, expected {ctypes.sizeof(cls)}")
+    return cls.from_buffer_copy(body)

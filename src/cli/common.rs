@@ -1,6 +1,6 @@
 //! Arguments and config loading shared by the subcommands.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use upc::config::{Config, ConfigError};
 use upc::robot::Robot;
@@ -70,4 +70,21 @@ impl RobotArg {
     pub fn load(&self) -> Result<Robot, upc::robot::RobotError> {
         Robot::load(&self.robot)
     }
+}
+
+/// The Python of upc's Python participants (the MuJoCo plant, the remote forecaster): the
+/// given one, `$UPC_PYTHON`, the `.venv` that `scripts/setup.sh` makes, else `python3`.
+pub fn python(arg: &Option<PathBuf>) -> PathBuf {
+    if let Some(p) = arg {
+        return p.clone();
+    }
+    if let Some(p) = std::env::var_os("UPC_PYTHON") {
+        return PathBuf::from(p);
+    }
+    // The working directory's venv, then the one of the source tree this binary was built from.
+    [".", env!("CARGO_MANIFEST_DIR")]
+        .iter()
+        .map(|root| Path::new(root).join(".venv/bin/python"))
+        .find(|p| p.exists())
+        .unwrap_or_else(|| PathBuf::from("python3"))
 }

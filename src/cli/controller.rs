@@ -33,6 +33,10 @@ pub struct ControllerArgs {
     /// Rerun recording id (share it with the simulator's log for one timeline).
     #[arg(long, default_value = "upc")]
     pub recording_id: String,
+    /// Stream the recording to a live rerun viewer too, e.g. rerun+http://127.0.0.1:9876/proxy
+    /// (needs --rrd; the file is written all the same).
+    #[arg(long, value_name = "URL")]
+    pub connect: Option<String>,
     /// Also write every logged tick as CSV here (needs --rrd; same decimation).
     #[arg(long)]
     pub csv: Option<PathBuf>,
@@ -67,6 +71,7 @@ pub fn run(args: ControllerArgs) -> CliResult {
         },
         rrd: args.rrd.clone(),
         recording_id: args.recording_id.clone(),
+        live: args.connect.clone(),
         zmp_offset: scenario.zmp_reference,
         startup_timeout: 60.0,
         csv: args.csv.clone(),

@@ -50,6 +50,20 @@ pub struct RunArgs {
     /// UPC_PREFIX, UPC_DURATION and UPC_SCENARIO in its environment.
     #[arg(long)]
     pub forecaster: Option<String>,
+    /// The forecast crosses Zenoh: start `upc bridge` on loopback and the remote forecaster
+    /// (`examples/python/zenoh_forecaster.py`, or the --forecaster command, which gets the
+    /// bridge's endpoint in UPC_ZENOH_CONNECT) on the Zenoh side of it.
+    #[arg(long)]
+    pub forecaster_over_zenoh: bool,
+    /// Spawn the rerun viewer (`rerun`: the one of `.venv`, which scripts/setup.sh installs,
+    /// else from PATH; an open one is reused) and stream the recordings to it live, besides
+    /// the `.rrd` files.
+    #[arg(long)]
+    pub viewer: bool,
+    /// Stream the recordings live to the rerun viewer (or `rerun --serve-grpc`) at this URL,
+    /// e.g. rerun+http://HOST:9876/proxy, besides the `.rrd` files.
+    #[arg(long, value_name = "URL", conflicts_with = "viewer")]
+    pub connect: Option<String>,
     /// No progress bar (logs only).
     #[arg(long)]
     pub quiet: bool,
@@ -85,6 +99,8 @@ struct Entry {
     sim_exit: Option<i32>,
     forecaster_exit: Option<i32>,
     controller_exit: Option<i32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    bridge_summary: Option<serde_json::Value>,
 }
 
 pub fn run(args: RunArgs) -> CliResult {
@@ -109,9 +125,26 @@ pub fn run(args: RunArgs) -> CliResult {
         Which::All => vec![ControllerKind::C0, ControllerKind::C1, ControllerKind::C2],
     };
     let exe = std::env::current_exe()?;
+    let live = match (&args.connect, args.viewer) {
+        (Some(url), _) => Some(url.clone()),
+        (None, true) => Some(spawn_viewer()?),
+        (None, false) => None,
+    };
+    // An unreachable viewer would cost each process a flush time-out at its exit: say so now.
+    if let Some(url) = &live {
+        wait_reachable(url, Duration::from_secs(if args.viewer { 10 } else { 2 }))?;
+    }
     let mut entries = Vec::new();
     for kind in kinds {
-        entries.push(run_one(&exe, &args, duration, &root, &name, kind)?);
+        entries.push(run_one(
+            &exe,
+            &args,
+            duration,
+            &root,
+            &name,
+            kind,
+            live.as_deref(),
+        )?);
     }
     let summary = serde_json::json!({
         "scenario": scenario.name,
@@ -181,7 +214,9 @@ fn run_one(
     root: &Path,
     name: &str,
     kind: ControllerKind,
+    live: Option<&str>,
 ) -> Result<Entry, Box<dyn std::error::Error + Send + Sync>> {
+    let connect: Vec<&str> = live.map_or(vec![], |url| vec!["--connect", url]);
     let dir = root.join(kind.name());
     std::fs::create_dir_all(&dir)?;
     let prefix = format!("upc_{}_{}", std::process::id(), kind.name());
@@ -226,6 +261,11 @@ fn run_one(
                 dir.join("sim.rrd"),
             ],
         })
+        .args(if args.plant == PlantChoice::Upc {
+            connect.as_slice()
+        } else {
+            &[]
+        })
         .args(args.sim_sets.iter().flat_map(|s| ["--set", s.as_str()]))
         .arg("--summary")
         .arg(dir.join("sim.json"))
@@ -237,7 +277,40 @@ fn run_one(
         .stdout(log("sim.log")?)
         .stderr(log("sim.log")?)
         .spawn()?;
+    let mut bridge = None;
     let mut forecaster = match &args.forecaster {
+        _ if args.forecaster_over_zenoh => {
+            let endpoint = format!("tcp/127.0.0.1:{}", free_loopback_port()?);
+            bridge = Some(
+                Command::new(exe)
+                    .args(["bridge", "--prefix", &prefix, "--key-prefix", &prefix])
+                    .args(["--listen", &endpoint])
+                    .arg("--summary")
+                    .arg(dir.join("bridge.json"))
+                    .stdout(log("bridge.log")?)
+                    .stderr(log("bridge.log")?)
+                    .spawn()?,
+            );
+            let mut c = match &args.forecaster {
+                Some(cmd) => {
+                    let mut c = Command::new("sh");
+                    c.args(["-c", &format!("exec {cmd}")]);
+                    c
+                }
+                None => {
+                    let script = remote_forecaster(root)?;
+                    let mut c = Command::new(super::common::python(&None));
+                    c.arg(script);
+                    c
+                }
+            };
+            c.env("UPC_PREFIX", &prefix)
+                .env("UPC_DURATION", &dur)
+                .env("UPC_SCENARIO", &args.scenario)
+                .env("UPC_SCENARIO_DIR", root.join("remote"))
+                .env("UPC_ZENOH_CONNECT", &endpoint);
+            c
+        }
         Some(cmd) => {
             let mut c = Command::new("sh");
             // `exec` so that the command itself, not the shell, gets our SIGTERM at the end.
@@ -269,6 +342,11 @@ fn run_one(
         .stdout(log("forecaster.log")?)
         .stderr(log("forecaster.log")?)
         .spawn()?;
+    if bridge.is_some() {
+        // A lockstep controller waits 0.5 s for its first window; a remote forecaster takes
+        // longer to start and connect: the controller starts once its first window is here.
+        first_forecast(&prefix, &mut forecaster, Duration::from_secs(30))?;
+    }
     let mut controller = Command::new(exe)
         .args([
             "controller",
@@ -293,6 +371,7 @@ fn run_one(
         .arg(dir.join("controller.csv"))
         .arg("--summary")
         .arg(dir.join("controller.json"))
+        .args(&connect)
         .args(args.config.to_args())
         .stdout(log("controller.log")?)
         .stderr(log("controller.log")?)
@@ -328,6 +407,11 @@ fn run_one(
     // The controller is done: give the others a moment, then ask them to stop.
     let sim_exit = stop(&mut sim, Duration::from_secs(5));
     let forecaster_exit = stop(&mut forecaster, Duration::from_secs(2));
+    if let Some(b) = &mut bridge {
+        // SAFETY: signalling our own child; SIGTERM makes it write its summary.
+        unsafe { libc::kill(b.id() as libc::pid_t, libc::SIGTERM) };
+        stop(b, Duration::from_secs(5));
+    }
     let read = |f: &str| std::fs::read_to_string(dir.join(f)).ok();
     let controller_summary = read("controller.json").and_then(|t| serde_json::from_str(&t).ok());
     let sim_summary = read("sim.json").and_then(|t| serde_json::from_str(&t).ok());
@@ -340,7 +424,101 @@ fn run_one(
         sim_exit,
         forecaster_exit,
         controller_exit,
+        bridge_summary: read("bridge.json").and_then(|t| serde_json::from_str(&t).ok()),
     })
+}
+
+/// Spawn rerun's viewer (or reuse the one open on its default port); its gRPC proxy URL.
+fn spawn_viewer() -> Result<String, Box<dyn std::error::Error + Send + Sync>> {
+    let venv = [".", env!("CARGO_MANIFEST_DIR")]
+        .iter()
+        .map(|root| Path::new(root).join(".venv/bin/rerun"))
+        .find(|p| p.exists());
+    let opts = rerun::SpawnOptions {
+        executable_path: venv.map(|p| p.display().to_string()),
+        ..Default::default()
+    };
+    let info = rerun::spawn(&opts).map_err(|e| {
+        format!("--viewer: {e} (scripts/setup.sh installs the viewer in .venv; or give --connect)")
+    })?;
+    Ok(format!("rerun+http://127.0.0.1:{}/proxy", info.port))
+}
+
+/// Wait until the gRPC endpoint of a rerun URL (`rerun+http://HOST:PORT/proxy`) accepts
+/// connections.
+fn wait_reachable(
+    url: &str,
+    limit: Duration,
+) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    let addr = url
+        .split("://")
+        .nth(1)
+        .and_then(|rest| rest.split('/').next())
+        .ok_or_else(|| format!("--connect {url}: expected rerun+http://HOST:PORT/proxy"))?;
+    let until = Instant::now() + limit;
+    loop {
+        if std::net::TcpStream::connect(addr).is_ok() {
+            return Ok(());
+        }
+        if Instant::now() >= until {
+            return Err(format!(
+                "no rerun viewer answers at {url} (a viewer needs a display; `rerun --serve-grpc` runs without one)"
+            )
+            .into());
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// A TCP port free on loopback now (the OS picks it; the bridge binds it a moment later).
+fn free_loopback_port() -> std::io::Result<u16> {
+    Ok(std::net::TcpListener::bind("127.0.0.1:0")?
+        .local_addr()?
+        .port())
+}
+
+/// The remote forecaster and what it reads, written into `root/remote/` (it runs from there
+/// as it would on another host): the script, the contract's Python mirror, and the embedded
+/// scenarios' files.
+fn remote_forecaster(root: &Path) -> std::io::Result<PathBuf> {
+    const SCRIPT: &str = include_str!("../../examples/python/zenoh_forecaster.py");
+    const CHANNELS: &str = include_str!("../../services/python/upc_channels.py");
+    let dir = root.join("remote");
+    std::fs::create_dir_all(&dir)?;
+    std::fs::write(dir.join("zenoh_forecaster.py"), SCRIPT)?;
+    std::fs::write(dir.join("upc_channels.py"), CHANNELS)?;
+    for (name, text) in upc::scenario::EMBEDDED {
+        std::fs::write(dir.join(format!("{name}.toml")), text)?;
+    }
+    Ok(dir.join("zenoh_forecaster.py"))
+}
+
+/// Wait until a forecast window is on `prefix`'s forecast service, or fail with the
+/// forecaster's fate.
+fn first_forecast(
+    prefix: &str,
+    forecaster: &mut Child,
+    timeout: Duration,
+) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    let bus = Bus::open(prefix, &format!("upc-launcher-{}", std::process::id()))?;
+    let forecasts = bus.subscriber::<upc::channels::ForecastMsg>(ServiceKind::Forecast)?;
+    let until = Instant::now() + timeout;
+    loop {
+        if forecasts.has_samples() {
+            return Ok(());
+        }
+        if let Some(status) = forecaster.try_wait()? {
+            return Err(format!("the remote forecaster exited ({status}) before its first window: see forecaster.log").into());
+        }
+        if Instant::now() >= until {
+            return Err(format!(
+                "no forecast crossed the bridge within {} s: see forecaster.log and bridge.log",
+                timeout.as_secs()
+            )
+            .into());
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
 }
 
 /// Wait up to `grace` for a child to exit, then SIGTERM it, then SIGKILL.

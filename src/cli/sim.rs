@@ -96,6 +96,10 @@ pub struct SimArgs {
     /// Rerun recording id (give the controller the same one to merge recordings).
     #[arg(long)]
     pub recording_id: Option<String>,
+    /// Stream the recording to a live rerun viewer too, e.g. rerun+http://127.0.0.1:9876/proxy
+    /// (needs --rrd; the file is written all the same).
+    #[arg(long, value_name = "URL")]
+    pub connect: Option<String>,
     /// Write the run's figures (step time, contacts, IPC overhead) as JSON here.
     #[arg(long)]
     pub summary: Option<PathBuf>,
@@ -177,22 +181,6 @@ pub fn mjcf_cli(args: MjcfArgs) -> CliResult {
     Ok(())
 }
 
-/// The Python that runs the MuJoCo plant.
-fn python(arg: &Option<PathBuf>) -> PathBuf {
-    if let Some(p) = arg {
-        return p.clone();
-    }
-    if let Some(p) = std::env::var_os("UPC_PYTHON") {
-        return PathBuf::from(p);
-    }
-    // The working directory's venv, then the one of the source tree this binary was built from.
-    [".", env!("CARGO_MANIFEST_DIR")]
-        .iter()
-        .map(|root| Path::new(root).join(".venv/bin/python"))
-        .find(|p| p.exists())
-        .unwrap_or_else(|| PathBuf::from("python3"))
-}
-
 /// `upc sim --plant mujoco`: generate the scene, then become the MuJoCo plant process (exec, so
 /// that signals and the exit status are the plant's own).
 fn run_mujoco(args: &SimArgs) -> CliResult {
@@ -207,7 +195,7 @@ fn run_mujoco(args: &SimArgs) -> CliResult {
         .clone()
         .unwrap_or_else(|| std::env::temp_dir().join(format!("upc-mujoco-{}", std::process::id())));
     let plant = write_bundle(&args.plant, &dir)?;
-    let py = python(&args.python);
+    let py = super::common::python(&args.python);
     let mut cmd = std::process::Command::new(&py);
     cmd.arg(dir.join("mujoco_plant.py")).arg(&plant);
     if let Some(s) = &args.summary {
@@ -236,6 +224,7 @@ pub fn run_cli(args: SimArgs) -> CliResult {
         config,
         rrd: args.rrd.clone(),
         recording_id: args.recording_id.clone(),
+        live: args.connect.clone(),
         truth_csv: args.truth_csv.clone(),
     };
     let stop = stop_flag();

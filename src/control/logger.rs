@@ -65,12 +65,11 @@ impl ControlLogger {
         path: &std::path::Path,
         csv: Option<&std::path::Path>,
         recording_id: &str,
+        live: Option<&str>,
         horizon: usize,
         lossless: bool,
     ) -> Result<Self, Box<dyn std::error::Error + Send + Sync>> {
-        let rec = rerun::RecordingStreamBuilder::new("upc")
-            .recording_id(recording_id)
-            .save(path)?;
+        let rec = crate::recording::open(path, Some(recording_id), live)?;
         send_blueprint(&rec);
         let mut csv = match csv {
             Some(p) => {

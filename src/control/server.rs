@@ -49,6 +49,8 @@ pub struct ServerOptions {
     pub duration: Option<f64>,
     pub rrd: Option<PathBuf>,
     pub recording_id: String,
+    /// Stream the recording to this live rerun viewer too (gRPC proxy URL).
+    pub live: Option<String>,
     /// The scenario's ZMP reference offset from the feet midpoint (m).
     pub zmp_offset: [f64; 2],
     /// Give up if no state arrives within this time of starting (s).
@@ -234,6 +236,7 @@ pub fn run_server_with(
                     p,
                     opts.csv.as_deref(),
                     &opts.recording_id,
+                    opts.live.as_deref(),
                     config.preview.horizon,
                     lockstep,
                 )

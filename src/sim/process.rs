@@ -62,6 +62,8 @@ pub struct RunOptions {
     /// Write the ground truth to this `.rrd`.
     pub rrd: Option<PathBuf>,
     pub recording_id: Option<String>,
+    /// Stream the recording to this live rerun viewer too (gRPC proxy URL).
+    pub live: Option<String>,
     /// iceoryx2 node name.
     pub node_name: String,
     /// Lockstep: write the ground truth every `record_period` as CSV here (reproducible bytes).
@@ -227,7 +229,15 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
     };
     let mut recorder = match &opts.rrd {
         Some(path) => {
-            let spawn = || Recorder::spawn(path, opts.recording_id.as_deref(), &world, robot);
+            let spawn = || {
+                Recorder::spawn(
+                    path,
+                    opts.recording_id.as_deref(),
+                    opts.live.as_deref(),
+                    &world,
+                    robot,
+                )
+            };
             // Real time: its threads in the idle class, they must not delay the steps. Lockstep
             // must end on a loaded machine too, where idle-class threads hardly run.
             let rec = match cfg.mode {

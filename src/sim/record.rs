@@ -313,14 +313,11 @@ impl Recorder {
     pub fn spawn(
         path: &Path,
         recording_id: Option<&str>,
+        live: Option<&str>,
         world: &World,
         robot: &crate::robot::Robot,
     ) -> Result<Recorder, Box<dyn std::error::Error + Send + Sync>> {
-        let mut b = rerun::RecordingStreamBuilder::new("upc");
-        if let Some(id) = recording_id {
-            b = b.recording_id(id);
-        }
-        let rec = b.save(path)?;
+        let rec = crate::recording::open(path, recording_id, live)?;
         let robot_urdf = crate::dynamics::parse_urdf(&robot.urdf)?;
         rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
         let urdf_dir = robot.urdf_path.as_deref().and_then(Path::parent);

@@ -6,3 +6,4 @@ pub mod humanoid;
 pub mod pd_driver;
 pub mod procs;
 pub mod robots;
+pub mod rrd;

@@ -261,3 +261,38 @@ impl Drop for Observer {
         }
     }
 }
+
+/// The Python of `.venv` if it imports `modules` (comma-separated), else `None` after printing
+/// why the calling test is skipped.
+pub fn venv_python(modules: &str) -> Option<PathBuf> {
+    let py = Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python");
+    let ok = Command::new(&py)
+        .args(["-c", &format!("import {modules}")])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        eprintln!(
+            "SKIPPED: {} cannot import {modules} (run scripts/setup.sh)",
+            py.display()
+        );
+    }
+    ok.then_some(py)
+}
+
+/// A CSV without the named columns, line by line (header first).
+pub fn csv_without(path: &Path, skip: &[&str]) -> Vec<String> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let keep: Vec<bool> = header.iter().map(|h| !skip.contains(h)).collect();
+    std::iter::once(header.join(","))
+        .chain(lines.map(|l| {
+            l.split(',')
+                .zip(&keep)
+                .filter(|(_, k)| **k)
+                .map(|(v, _)| v)
+                .collect::<Vec<_>>()
+                .join(",")
+        }))
+        .collect()
+}

@@ -1,0 +1,103 @@
+//! Latency the Zenoh bridge adds on loopback: a forecast put on Zenoh → the same window readable
+//! on iceoryx2 (the bridge's callback, queue, header check, copy, publish and notify; Zenoh's
+//! TCP on loopback). The bridge runs in this process; the controller's side is an iceoryx2
+//! subscriber woken by the forecast event, as in the control loop. Besides criterion's
+//! statistics, p50/p99 over 2000 round trips are printed.
+
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use upc::bridge::{BridgeConfig, wire::encode};
+use upc::channels::{Bus, ForecastMsg, ServiceKind};
+use zenoh::Wait;
+
+fn bridge(c: &mut Criterion) {
+    let prefix = format!("bench_bridge_{}", std::process::id());
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("port")
+        .port();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let cfg = BridgeConfig::load(
+        &[],
+        &[
+            format!("bridge.prefix=\"{prefix}\""),
+            format!("bridge.key_prefix=\"{prefix}\""),
+            format!("bridge.listen=[\"{endpoint}\"]"),
+        ],
+    )
+    .expect("config");
+    let stop = Arc::new(AtomicBool::new(false));
+    let thread = {
+        let stop = Arc::clone(&stop);
+        std::thread::spawn(move || upc::bridge::run(&cfg, stop))
+    };
+    let bus = Bus::open(&prefix, "bench-controller").expect("bus");
+    let forecasts = bus
+        .subscriber::<ForecastMsg>(ServiceKind::Forecast)
+        .expect("subscriber");
+    let wake = bus.listener(ServiceKind::Forecast).expect("listener");
+    let mut zc = zenoh::Config::default();
+    zc.insert_json5("connect/endpoints", &format!("[\"{endpoint}\"]"))
+        .expect("config");
+    zc.insert_json5("scouting/multicast/enabled", "false")
+        .expect("config");
+    let session = zenoh::open(zc).wait().expect("zenoh");
+    let publisher = session
+        .declare_publisher(format!("{prefix}/forecast"))
+        .wait()
+        .expect("publisher");
+    let mut msg = Box::<ForecastMsg>::default();
+    (msg.dt, msg.len) = (0.005, 500);
+    let mut buf = Vec::new();
+    let mut seq = 0u64;
+    // One forecast across: put, then wait until the controller's side holds it (None: not
+    // within `timeout`).
+    let mut round_trip = |timeout: Duration| {
+        seq += 1;
+        msg.seq = seq;
+        encode(msg.as_ref(), &mut buf);
+        let start = Instant::now();
+        publisher.put(buf.clone()).wait().expect("put");
+        loop {
+            if let Ok(Some(m)) = forecasts.latest()
+                && m.seq == seq
+            {
+                return Some(start.elapsed());
+            }
+            if start.elapsed() > timeout {
+                return None;
+            }
+            let _ = wake.wait(Duration::from_millis(1));
+        }
+    };
+    // The first puts are lost until Zenoh has connected and declared.
+    let connecting = Instant::now();
+    while round_trip(Duration::from_millis(200)).is_none() {
+        assert!(
+            connecting.elapsed() < Duration::from_secs(30),
+            "the bridge never delivered"
+        );
+    }
+    let mut cross = || round_trip(Duration::from_secs(5)).expect("a forecast did not cross");
+    let mut v: Vec<f64> = (0..2000).map(|_| cross().as_secs_f64() * 1e6).collect();
+    v.sort_by(f64::total_cmp);
+    println!(
+        "bridge forecast latency over 2000 round trips: p50 {:.0} µs, p99 {:.0} µs, max {:.0} µs",
+        v[1000], v[1980], v[1999]
+    );
+    c.bench_function("bridge/forecast_zenoh_to_iceoryx2", |b| {
+        b.iter_custom(|iters| (0..iters).map(|_| cross()).sum())
+    });
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let summary = thread.join().expect("bridge thread").expect("bridge");
+    println!(
+        "bridge: {} forwarded, forward p50 {:.0} µs p99 {:.0} µs (callback → iceoryx2)",
+        summary.forecasts_forwarded, summary.forward_p50_us, summary.forward_p99_us
+    );
+}
+
+criterion_group!(benches, bridge);
+criterion_main!(benches);

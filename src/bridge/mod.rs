@@ -1,0 +1,438 @@
+//! `upc bridge`: the contract's services between this host's iceoryx2 and Zenoh, for forecasters
+//! and viewers on other hosts. Forecasts come in from Zenoh and are published on iceoryx2, so
+//! the controller only ever sees iceoryx2 and never waits on a network; states, ground truth
+//! and torques go out to Zenoh at a decimation.
+//!
+//! Two threads, each with its own iceoryx2 node: *inbound* takes forecasts from a bounded queue
+//! that Zenoh's callback fills (a flood beyond it is dropped and counted, never buffered without
+//! bound), checks each one's header and publishes it; *outbound* wakes on each state and puts
+//! the decimated samples (Zenoh's default congestion control for data drops, so a slow network
+//! never blocks it).
+
+mod config;
+pub mod wire;
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+use zenoh::Wait;
+
+pub use config::{BRIDGE_TOML, BridgeConfig, ZenohMode};
+use wire::{WireError, WireMessage, decode_into, encode};
+
+use crate::channels::{
+    Bus, ChannelError, ForecastMsg, GroundTruthMsg, ServiceKind, StateMsg, TorqueMsg,
+};
+
+/// Why the bridge stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum BridgeError {
+    #[error(
+        "cannot open the Zenoh session ({mode}, listen {listen:?}, connect {connect:?}): {detail}"
+    )]
+    Open {
+        mode: &'static str,
+        listen: Vec<String>,
+        connect: Vec<String>,
+        detail: String,
+    },
+    #[error("Zenoh: {0}")]
+    Zenoh(String),
+    #[error(transparent)]
+    Channel(#[from] ChannelError),
+    #[error("a bridge thread panicked")]
+    Panicked,
+}
+
+/// Forecasts refused, by reason ([`WireError::key`]).
+#[derive(Debug, Default, Clone, Serialize, PartialEq, Eq)]
+pub struct RefusedBy {
+    pub not_upc: u64,
+    pub version: u64,
+    pub kind: u64,
+    pub size: u64,
+}
+
+/// What the bridge did (its summary, `--summary`).
+#[derive(Debug, Default, Clone, Serialize)]
+pub struct BridgeSummary {
+    pub key_prefix: String,
+    pub prefix: String,
+    pub mode: String,
+    pub decimation: u32,
+    /// Forecast payloads that arrived from Zenoh.
+    pub forecasts_received: u64,
+    /// Published on iceoryx2.
+    pub forecasts_forwarded: u64,
+    /// Refused by their header (another contract version, kind or size; not upc's).
+    pub forecasts_refused: u64,
+    pub forecasts_refused_by: RefusedBy,
+    /// Dropped because `inbound_queue` forecasts were already waiting (a flood).
+    pub forecasts_dropped: u64,
+    /// Zenoh callback → published on iceoryx2 (µs), over the forwarded forecasts.
+    pub forward_p50_us: f64,
+    pub forward_p99_us: f64,
+    pub forward_max_us: f64,
+    pub states_out: u64,
+    pub ground_truth_out: u64,
+    pub torques_out: u64,
+    /// Puts Zenoh refused (a put never blocks: congestion drops silently in Zenoh).
+    pub put_errors: u64,
+    /// Most Zenoh peers (or routers) connected at once, and how often one left.
+    pub peers_max: u64,
+    pub peer_losses: u64,
+    pub wall_seconds: f64,
+    /// CPU time of the bridge process (user + system) over its wall time.
+    pub cpu_seconds: f64,
+    pub cpu_percent: f64,
+}
+
+/// A forecast payload as Zenoh delivered it, and when.
+struct Inbound {
+    bytes: Vec<u8>,
+    at: Instant,
+}
+
+/// Counters the Zenoh callback updates (it runs on Zenoh's threads).
+#[derive(Default)]
+struct CallbackCounters {
+    received: AtomicU64,
+    dropped: AtomicU64,
+}
+
+/// Run the bridge until `stop` is raised or a channel fails.
+pub fn run(cfg: &BridgeConfig, stop: Arc<AtomicBool>) -> Result<BridgeSummary, BridgeError> {
+    let start = Instant::now();
+    let session = zenoh::open(cfg.zenoh().map_err(BridgeError::Zenoh)?)
+        .wait()
+        .map_err(|e| BridgeError::Open {
+            mode: cfg.mode.name(),
+            listen: cfg.listen.clone(),
+            connect: cfg.connect.clone(),
+            detail: e.to_string(),
+        })?;
+    tracing::info!(
+        "bridge: iceoryx2 `{}` ⇄ Zenoh `{}/*` ({}, listening on {:?}, connecting to {:?}), outbound every {} steps",
+        cfg.prefix,
+        cfg.key_prefix,
+        cfg.mode.name(),
+        cfg.listen,
+        cfg.connect,
+        cfg.decimation
+    );
+    let key = |kind: ServiceKind| format!("{}/{}", cfg.key_prefix, kind.suffix());
+    let counters = Arc::new(CallbackCounters::default());
+
+    let inbound = if cfg.forecast_in {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Inbound>(cfg.inbound_queue);
+        let subscriber = {
+            let counters = Arc::clone(&counters);
+            session
+                .declare_subscriber(key(ServiceKind::Forecast))
+                .callback(move |sample| on_forecast(&tx, &counters, sample.payload().to_bytes()))
+                .wait()
+                .map_err(|e| BridgeError::Zenoh(format!("subscribe to forecasts: {e}")))?
+        };
+        let prefix = cfg.prefix.clone();
+        let stop = Arc::clone(&stop);
+        let thread = std::thread::Builder::new()
+            .name("bridge-in".into())
+            .spawn(move || forward_forecasts(&prefix, &rx, &stop))
+            .map_err(|e| BridgeError::Zenoh(format!("spawn: {e}")))?;
+        Some((subscriber, thread))
+    } else {
+        None
+    };
+
+    let outbound = {
+        let session = session.clone();
+        let cfg = cfg.clone();
+        let stop = Arc::clone(&stop);
+        std::thread::Builder::new()
+            .name("bridge-out".into())
+            .spawn(move || forward_outbound(&cfg, &session, &stop))
+            .map_err(|e| BridgeError::Zenoh(format!("spawn: {e}")))?
+    };
+
+    let mut summary = BridgeSummary {
+        key_prefix: cfg.key_prefix.clone(),
+        prefix: cfg.prefix.clone(),
+        mode: cfg.mode.name().into(),
+        decimation: cfg.decimation,
+        ..Default::default()
+    };
+    let out = outbound.join().map_err(|_| BridgeError::Panicked);
+    // Whatever ended the outbound side ends the bridge.
+    stop.store(true, Ordering::Relaxed);
+    let inb = inbound.map(|(subscriber, thread)| {
+        let r = thread.join().map_err(|_| BridgeError::Panicked);
+        drop(subscriber);
+        r
+    });
+    let out = out??;
+    summary.states_out = out.states;
+    summary.ground_truth_out = out.truth;
+    summary.torques_out = out.torques;
+    summary.put_errors = out.put_errors;
+    summary.peers_max = out.peers_max;
+    summary.peer_losses = out.peer_losses;
+    if let Some(inb) = inb {
+        let mut inb = inb??;
+        summary.forecasts_forwarded = inb.forwarded;
+        summary.forecasts_refused_by = inb.refused_by.clone();
+        summary.forecasts_refused = inb.refused();
+        let (p50, p99, max) = percentiles(&mut inb.forward_us);
+        (
+            summary.forward_p50_us,
+            summary.forward_p99_us,
+            summary.forward_max_us,
+        ) = (p50, p99, max);
+    }
+    summary.forecasts_received = counters.received.load(Ordering::Relaxed);
+    summary.forecasts_dropped = counters.dropped.load(Ordering::Relaxed);
+    let _ = session.close().wait();
+    summary.wall_seconds = start.elapsed().as_secs_f64();
+    summary.cpu_seconds = process_cpu_seconds();
+    summary.cpu_percent = 100.0 * summary.cpu_seconds / summary.wall_seconds.max(1e-9);
+    Ok(summary)
+}
+
+/// Zenoh's callback: queue the payload for the inbound thread, or count it dropped.
+fn on_forecast(
+    tx: &SyncSender<Inbound>,
+    counters: &CallbackCounters,
+    bytes: std::borrow::Cow<[u8]>,
+) {
+    counters.received.fetch_add(1, Ordering::Relaxed);
+    let msg = Inbound {
+        bytes: bytes.into_owned(),
+        at: Instant::now(),
+    };
+    match tx.try_send(msg) {
+        Ok(()) => {}
+        Err(TrySendError::Full(_)) => {
+            let n = counters.dropped.fetch_add(1, Ordering::Relaxed) + 1;
+            if n.is_power_of_two() {
+                tracing::warn!(
+                    "bridge: forecast dropped, {n} so far (more arrive than are forwarded)"
+                );
+            }
+        }
+        // The inbound thread has ended: the bridge is stopping.
+        Err(TrySendError::Disconnected(_)) => {}
+    }
+}
+
+#[derive(Default)]
+struct InboundStats {
+    forwarded: u64,
+    refused_by: RefusedBy,
+    forward_us: Vec<f64>,
+}
+
+impl InboundStats {
+    fn refused(&self) -> u64 {
+        let r = &self.refused_by;
+        r.not_upc + r.version + r.kind + r.size
+    }
+
+    fn refuse(&mut self, e: &WireError) {
+        let r = &mut self.refused_by;
+        match e {
+            WireError::NotUpc(_) => r.not_upc += 1,
+            WireError::Version { .. } => r.version += 1,
+            WireError::Kind { .. } => r.kind += 1,
+            WireError::Size { .. } => r.size += 1,
+        }
+        // Rate-limited: the 1st, 2nd, 4th… refusal.
+        let n = self.refused();
+        if n.is_power_of_two() {
+            tracing::warn!("bridge: forecast refused: {e} ({n} refused so far)");
+        }
+    }
+}
+
+/// Most forwarding latencies kept for the percentiles (≈ 3 h of windows every 10 ms).
+const LATENCY_SAMPLES: usize = 1 << 20;
+
+/// The inbound thread: check and publish each queued forecast.
+fn forward_forecasts(
+    prefix: &str,
+    rx: &Receiver<Inbound>,
+    stop: &AtomicBool,
+) -> Result<InboundStats, BridgeError> {
+    let bus = Bus::open(prefix, &format!("upc-bridge-in-{}", std::process::id()))?;
+    let publisher = bus.publisher::<ForecastMsg>(ServiceKind::Forecast)?;
+    let notifier = bus.notifier(ServiceKind::Forecast)?;
+    let mut stats = InboundStats::default();
+    let mut latencies = Vec::with_capacity(4096);
+    let mut msg = Box::<ForecastMsg>::default();
+    while !stop.load(Ordering::Relaxed) {
+        let inbound = match rx.recv_timeout(Duration::from_millis(50)) {
+            Ok(m) => m,
+            Err(RecvTimeoutError::Timeout) => {
+                // A controller that subscribed since the last forecast gets it now.
+                publisher.update_connections()?;
+                continue;
+            }
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
+        if let Err(e) = decode_into(&inbound.bytes, msg.as_mut()) {
+            stats.refuse(&e);
+            continue;
+        }
+        // The controller checks the content (finite, in time, in order) as for any forecaster.
+        publisher.send_with(|m| *m = *msg)?;
+        notifier.notify()?;
+        stats.forwarded += 1;
+        if latencies.len() < LATENCY_SAMPLES {
+            latencies.push(inbound.at.elapsed().as_secs_f64() * 1e6);
+        }
+    }
+    stats.forward_us = latencies;
+    Ok(stats)
+}
+
+/// How often the outbound thread counts the connected Zenoh peers (for the log and the summary).
+const PEER_CHECK: Duration = Duration::from_millis(100);
+
+struct OutboundStats {
+    states: u64,
+    truth: u64,
+    torques: u64,
+    put_errors: u64,
+    peers_max: u64,
+    peer_losses: u64,
+}
+
+/// A Zenoh publisher of one kind, with its encoding buffer.
+struct Out {
+    publisher: zenoh::pubsub::Publisher<'static>,
+    buf: Vec<u8>,
+}
+
+impl Out {
+    fn declare(session: &zenoh::Session, key: String) -> Result<Out, BridgeError> {
+        let publisher = session
+            .declare_publisher(key.clone())
+            .wait()
+            .map_err(|e| BridgeError::Zenoh(format!("declare publisher `{key}`: {e}")))?;
+        Ok(Out {
+            publisher,
+            buf: Vec::new(),
+        })
+    }
+
+    /// Encode and put `msg`; false if Zenoh refused it.
+    fn put<T: WireMessage>(&mut self, msg: &T) -> bool {
+        encode(msg, &mut self.buf);
+        self.publisher.put(self.buf.clone()).wait().is_ok()
+    }
+}
+
+/// The outbound thread: wake on each state, forward the decimated samples.
+fn forward_outbound(
+    cfg: &BridgeConfig,
+    session: &zenoh::Session,
+    stop: &AtomicBool,
+) -> Result<OutboundStats, BridgeError> {
+    let bus = Bus::open(
+        &cfg.prefix,
+        &format!("upc-bridge-out-{}", std::process::id()),
+    )?;
+    let key = |kind: ServiceKind| format!("{}/{}", cfg.key_prefix, kind.suffix());
+    let states = bus.subscriber::<StateMsg>(ServiceKind::State)?;
+    let truth = bus.subscriber::<GroundTruthMsg>(ServiceKind::GroundTruth)?;
+    let torques = bus.subscriber::<TorqueMsg>(ServiceKind::Torques)?;
+    let wake = bus.listener(ServiceKind::State)?;
+    let mut state_out = Out::declare(session, key(ServiceKind::State))?;
+    let mut truth_out = Out::declare(session, key(ServiceKind::GroundTruth))?;
+    let mut torque_out = Out::declare(session, key(ServiceKind::Torques))?;
+    let d = u64::from(cfg.decimation);
+    let mut s = OutboundStats {
+        states: 0,
+        truth: 0,
+        torques: 0,
+        put_errors: 0,
+        peers_max: 0,
+        peer_losses: 0,
+    };
+    let mut session_id = 0u64;
+    let mut peers = 0u64;
+    let mut last_peer_check = Instant::now();
+    let put = |ok: bool, n: &mut u64, errors: &mut u64| {
+        if ok {
+            *n += 1;
+        } else {
+            *errors += 1;
+            if errors.is_power_of_two() {
+                tracing::warn!("bridge: Zenoh refused a put ({errors} so far)");
+            }
+        }
+    };
+    while !stop.load(Ordering::Relaxed) {
+        wake.wait(Duration::from_millis(20))?;
+        // Every sample, oldest first: the decimation keeps the steps that are multiples of
+        // `decimation` (a remote forecaster with a period of `decimation` steps sees each window
+        // boundary), and a new plant run's first state.
+        while let Some(st) = states.receive()? {
+            let first = st.session != session_id;
+            session_id = st.session;
+            if cfg.state_out && (first || st.step % d == 0) {
+                let ok = state_out.put(&st);
+                put(ok, &mut s.states, &mut s.put_errors);
+            }
+        }
+        while let Some(gt) = truth.receive()? {
+            if cfg.ground_truth_out && gt.step % d == 0 {
+                let ok = truth_out.put(&gt);
+                put(ok, &mut s.truth, &mut s.put_errors);
+            }
+        }
+        while let Some(tq) = torques.receive()? {
+            if cfg.torques_out && tq.state_step % d == 0 {
+                let ok = torque_out.put(&tq);
+                put(ok, &mut s.torques, &mut s.put_errors);
+            }
+        }
+        if last_peer_check.elapsed() >= PEER_CHECK {
+            last_peer_check = Instant::now();
+            let info = session.info();
+            let now = info.peers_zid().wait().count() + info.routers_zid().wait().count();
+            let now = now as u64;
+            if now != peers {
+                tracing::info!("bridge: {now} Zenoh peer(s) connected (were {peers})");
+                if now < peers {
+                    s.peer_losses += peers - now;
+                }
+                peers = now;
+                s.peers_max = s.peers_max.max(now);
+            }
+        }
+    }
+    Ok(s)
+}
+
+/// p50, p99 and max of `v` (NaN when empty).
+fn percentiles(v: &mut [f64]) -> (f64, f64, f64) {
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN, f64::NAN);
+    }
+    v.sort_by(f64::total_cmp);
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    (at(0.5), at(0.99), v[v.len() - 1])
+}
+
+/// User + system CPU time of this process (s).
+fn process_cpu_seconds() -> f64 {
+    // SAFETY: getrusage fills the zeroed struct it is given.
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut u) } != 0 {
+        return f64::NAN;
+    }
+    let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    tv(u.ru_utime) + tv(u.ru_stime)
+}
