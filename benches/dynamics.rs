@@ -2,71 +2,139 @@
 //! humanoid (38 DoF) and on the URDF named by `UPC_BENCH_URDF` if set
 //! (`UPC_BENCH_OPSPACE=root,frame` adds M_e for that URDF).
 //!
-//! Run: `cargo bench --bench dynamics`. Pinocchio reference on this machine class for a 38-DoF
-//! humanoid: RNEA ≈ 10 µs, CRBA ≈ 7 µs, ABA ≈ 22 µs.
+//! Run: `cargo bench --bench dynamics`. The `*_random` and `env_urdf` groups cycle through 64
+//! random states drawn as scripts/bench_pinocchio.cpp draws Pinocchio's, which that script
+//! compares against (`~/.cache/upc/robot-venv/bin/python scripts/bench_pinocchio.py`).
 
 use std::hint::black_box;
 use std::time::Duration;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use nalgebra::DVector;
+use nalgebra::{DVector, Vector4};
 use upc::dynamics::{
-    BaseJoint, Data, Model, OpSpaceWorkspace, ReferenceFrame, aba, compute_joint_jacobians, crba,
-    get_frame_jacobian, icub_like, jacobian_center_of_mass, rnea,
+    BaseJoint, Data, JointKind, Model, OpSpaceWorkspace, ReferenceFrame, aba,
+    compute_joint_jacobians, crba, get_frame_jacobian, icub_like, jacobian_center_of_mass, rnea,
 };
 
-/// Deterministic, non-trivial state (no randomness crate needed).
-fn state(model: &Model) -> (DVector<f64>, DVector<f64>, DVector<f64>) {
-    let mut q = model.neutral();
-    let offset = if model.has_floating_base() { 7 } else { 0 };
-    for k in offset..model.nq {
-        q[k] = 0.3 * ((k as f64) * 1.7).sin();
+/// One benchmarked state; `tau = rnea(q, v, a)` is ABA's input.
+struct State {
+    q: DVector<f64>,
+    v: DVector<f64>,
+    a: DVector<f64>,
+    tau: DVector<f64>,
+}
+
+/// splitmix64 (no randomness crate needed): uniform in [lo, hi).
+struct Rng(u64);
+
+impl Rng {
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^= z >> 31;
+        lo + (hi - lo) * ((z >> 11) as f64 / (1u64 << 53) as f64)
     }
-    let v = DVector::from_fn(model.nv, |k, _| ((k as f64) * 0.9).cos());
-    let a = DVector::from_fn(model.nv, |k, _| ((k as f64) * 1.3).sin());
-    (q, v, a)
+}
+
+/// `n` random states: q uniform within the joint limits (±π where unbounded; the free-flyer's
+/// translation within ±1 m and a uniformly random orientation), v and a uniform in [-1, 1].
+fn random_states(model: &Model, n: usize) -> Vec<(DVector<f64>, DVector<f64>, DVector<f64>)> {
+    let mut rng = Rng(0x5eed);
+    (0..n)
+        .map(|_| {
+            let mut q = model.neutral();
+            for j in &model.joints {
+                let qj = &mut q.as_mut_slice()[j.idx_q..j.idx_q + j.nq()];
+                match j.kind {
+                    JointKind::FreeFlyer => {
+                        for x in &mut qj[..3] {
+                            *x = rng.uniform(-1.0, 1.0);
+                        }
+                        // Rejection sampling in the unit ball: a uniform rotation.
+                        let quat = loop {
+                            let c = Vector4::from_fn(|_, _| rng.uniform(-1.0, 1.0));
+                            let n2 = c.norm_squared();
+                            if n2 > 1e-6 && n2 <= 1.0 {
+                                break c / n2.sqrt();
+                            }
+                        };
+                        qj[3..].copy_from_slice(quat.as_slice());
+                    }
+                    _ => {
+                        let (lo, hi) = (j.limits.lower, j.limits.upper);
+                        qj[0] = if lo.is_finite() && hi.is_finite() {
+                            rng.uniform(lo, hi)
+                        } else {
+                            rng.uniform(-std::f64::consts::PI, std::f64::consts::PI)
+                        };
+                    }
+                }
+            }
+            let v = DVector::from_fn(model.nv, |_, _| rng.uniform(-1.0, 1.0));
+            let a = DVector::from_fn(model.nv, |_, _| rng.uniform(-1.0, 1.0));
+            (q, v, a)
+        })
+        .collect()
 }
 
 fn bench_model(
     c: &mut Criterion,
     label: &str,
     model: &Model,
-    q: DVector<f64>,
+    qva: Vec<(DVector<f64>, DVector<f64>, DVector<f64>)>,
     op: Option<(&str, &str)>,
 ) {
-    let (_, v, a) = state(model);
     let mut data = Data::new(model);
-    let tau = match rnea(model, &mut data, &q, &v, &a) {
-        Ok(t) => t.clone(),
-        Err(e) => {
-            eprintln!("{label}: {e}");
-            return;
+    let mut states = Vec::with_capacity(qva.len());
+    for (q, v, a) in qva {
+        match rnea(model, &mut data, &q, &v, &a) {
+            Ok(t) => {
+                let tau = t.clone();
+                states.push(State { q, v, a, tau });
+            }
+            Err(e) => {
+                eprintln!("{label}: {e}");
+                return;
+            }
         }
-    };
+    }
+    let n = states.len();
     let mut g = c.benchmark_group(label);
     g.warm_up_time(Duration::from_millis(500))
         .measurement_time(Duration::from_secs(2))
         .sample_size(50);
+    let mut k = 0;
     g.bench_function("rnea", |b| {
         b.iter(|| {
-            let _ = black_box(rnea(model, &mut data, &q, &v, &a));
+            let s = &states[k % n];
+            k += 1;
+            let _ = black_box(rnea(model, &mut data, &s.q, &s.v, &s.a));
         })
     });
     g.bench_function("crba", |b| {
         b.iter(|| {
-            let _ = black_box(crba(model, &mut data, &q));
+            k += 1;
+            let _ = black_box(crba(model, &mut data, &states[k % n].q));
         })
     });
-    match aba(model, &mut data, &q, &v, &tau) {
-        Ok(_) => {
+    match states
+        .iter()
+        .try_for_each(|s| aba(model, &mut data, &s.q, &s.v, &s.tau).map(|_| ()))
+    {
+        Ok(()) => {
             g.bench_function("aba", |b| {
                 b.iter(|| {
-                    let _ = black_box(aba(model, &mut data, &q, &v, &tau));
+                    let s = &states[k % n];
+                    k += 1;
+                    let _ = black_box(aba(model, &mut data, &s.q, &s.v, &s.tau));
                 })
             });
         }
         Err(e) => eprintln!("{label}: ABA skipped: {e}"),
     }
+    let q = states[0].q.clone();
     g.bench_function("joint_jacobians", |b| {
         b.iter(|| {
             let _ = black_box(compute_joint_jacobians(model, &mut data, &q));
@@ -113,9 +181,10 @@ fn benches(c: &mut Criterion) {
     match icub_like::load() {
         Ok(model) => {
             let home = upc::robot::Robot::embedded_default().expect("robot").home;
-            bench_model(c, "icub_like_home", &model, home, Some(("chest", "r_hand")));
-            let (q, _, _) = state(&model);
-            bench_model(c, "icub_like_random", &model, q, Some(("chest", "r_hand")));
+            let op = Some(("chest", "r_hand"));
+            let (_, v, a) = random_states(&model, 1).remove(0);
+            bench_model(c, "icub_like_home", &model, vec![(home, v, a)], op);
+            bench_model(c, "icub_like_random", &model, random_states(&model, 64), op);
         }
         Err(e) => eprintln!("humanoid: {e}"),
     }
@@ -124,8 +193,7 @@ fn benches(c: &mut Criterion) {
             Ok(model) => {
                 let spec = std::env::var("UPC_BENCH_OPSPACE").ok();
                 let op = spec.as_deref().and_then(|s| s.split_once(','));
-                let (q, _, _) = state(&model);
-                bench_model(c, "env_urdf", &model, q, op);
+                bench_model(c, "env_urdf", &model, random_states(&model, 64), op);
             }
             Err(e) => eprintln!("UPC_BENCH_URDF={path}: {e}"),
         }

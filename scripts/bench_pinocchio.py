@@ -4,8 +4,16 @@
 Pinocchio comes from PyPI (`pin`, installed by scripts/setup.sh in the robot venv); its C++
 headers and libraries are in the wheel, and scripts/bench_pinocchio.cpp is compiled against
 them once (about 2 minutes; cached under ~/.cache/upc/pinbench). upc's side is its criterion
-bench (`UPC_BENCH_URDF=… cargo bench --bench dynamics`). Both take random configurations,
-velocities and accelerations (free-flyer root).
+bench (`UPC_BENCH_URDF=… cargo bench --bench dynamics`). Both cycle through 64 random states
+drawn the same way (q within the joint limits, the free-flyer within ±1 m and any orientation;
+v, a in [-1, 1]; free-flyer root).
+
+Like with like: upc's `crba` leaves the world placements, the world joint Jacobian and M(q) with
+both triangles; it is compared with Pinocchio's `crba(…, Convention::WORLD)` plus the copy of
+M's upper triangle into the lower one ("crba"). Pinocchio's default, `Convention::LOCAL`, fills
+M's upper triangle only and no world quantities ("crba local" row, same upc figure). Pinocchio's
+ABA also leaves the joint forces, which upc's does not compute. Pinocchio is compiled with
+-march=native; upc is built for the baseline x86-64 target (SSE2).
 
     ~/.cache/upc/robot-venv/bin/python scripts/bench_pinocchio.py            # default URDFs
     ~/.cache/upc/robot-venv/bin/python scripts/bench_pinocchio.py my.urdf    # yours
@@ -40,7 +48,13 @@ def default_urdfs():
 
 def pinocchio_bench():
     src = os.path.join(ROOT, "scripts", "bench_pinocchio.cpp")
-    digest = hashlib.sha256(open(src, "rb").read()).hexdigest()[:12]
+    # The definitions Pinocchio's own CMake config exports to its users.
+    flags = [
+        "-O3", "-march=native", "-DNDEBUG", "-std=c++17", "-Wno-deprecated-declarations",
+        "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", "-DBOOST_MPL_LIMIT_LIST_SIZE=30",
+        "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30", "-DBOOST_FUSION_INVOKE_MAX_ARITY=12",
+    ]
+    digest = hashlib.sha256(open(src, "rb").read() + " ".join(flags).encode()).hexdigest()[:12]
     exe = os.path.join(CACHE, f"bench-{digest}")
     if os.path.exists(exe):
         return exe
@@ -48,15 +62,9 @@ def pinocchio_bench():
         sys.exit("Eigen's headers are missing (/usr/include/eigen3): run scripts/setup.sh")
     os.makedirs(CACHE, exist_ok=True)
     print("compiling the Pinocchio benchmark (about 2 minutes, once)...", file=sys.stderr)
-    # The definitions Pinocchio's own CMake config exports to its users.
-    cmd = [
-        "g++", "-O3", "-DNDEBUG", "-std=c++17",
-        "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", "-DBOOST_MPL_LIMIT_LIST_SIZE=30",
-        "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30", "-DBOOST_FUSION_INVOKE_MAX_ARITY=12",
-        src, "-I" + os.path.join(PREFIX, "include"), "-I/usr/include/eigen3",
-        "-L" + os.path.join(PREFIX, "lib"), "-lpinocchio_default", "-lboost_serialization",
-        "-lboost_filesystem", "-Wl,-rpath," + os.path.join(PREFIX, "lib"), "-o", exe,
-    ]
+    cmd = ["g++", *flags, src, "-I" + os.path.join(PREFIX, "include"), "-I/usr/include/eigen3",
+           "-L" + os.path.join(PREFIX, "lib"), "-lpinocchio_default", "-lboost_serialization",
+           "-lboost_filesystem", "-Wl,-rpath," + os.path.join(PREFIX, "lib"), "-o", exe]
     subprocess.run(cmd, check=True)
     return exe
 
@@ -88,16 +96,21 @@ def upc_times(urdf):
 def main():
     urdfs = sys.argv[1:] or default_urdfs()
     exe = pinocchio_bench()
-    print(f"{'URDF':<28} {'nv':>4}  {'algorithm':<5} {'upc µs':>8} {'Pinocchio µs':>13} {'ratio':>6}")
+    print(f"{'URDF':<28} {'nv':>4}  {'algorithm':<10} {'upc µs':>8} {'Pinocchio µs':>13} {'ratio':>6}")
     for urdf in urdfs:
         name = os.path.basename(os.path.dirname(urdf)) if urdf.endswith("model.urdf") else os.path.basename(urdf)
         p = pinocchio_times(exe, urdf)
         u, skipped = upc_times(urdf)
-        for alg in ("rnea", "crba", "aba"):
-            if alg in u:
-                print(f"{name:<28} {p['nv']:>4}  {alg:<5} {u[alg]:>8.2f} {p[alg]:>13.2f} {u[alg] / p[alg]:>6.2f}")
+        for alg, ualg in (("rnea", "rnea"), ("crba", "crba"), ("crba_local", "crba"), ("aba", "aba")):
+            label = alg.replace("_", " ")
+            note = ""
+            if alg == "aba" and not p["aba_finite"]:
+                note = "  (Pinocchio returns NaN: M(q) is singular)"
+            if ualg in u:
+                ratio = u[ualg] / p[alg]
+                print(f"{name:<28} {p['nv']:>4}  {label:<10} {u[ualg]:>8.2f} {p[alg]:>13.2f} {ratio:>6.2f}{note}")
             else:
-                print(f"{name:<28} {p['nv']:>4}  {alg:<5} {'-':>8} {p[alg]:>13.2f}   (upc: {skipped})")
+                print(f"{name:<28} {p['nv']:>4}  {label:<10} {'-':>8} {p[alg]:>13.2f}   (upc: {skipped}){note}")
 
 
 if __name__ == "__main__":
