@@ -1,9 +1,10 @@
 //! Articulated-body algorithm: forward dynamics `q̈ = M⁻¹(τ − h)` in O(n) (RBDA Table 7.1).
 //!
 //! Articulated inertias are 6×6 matrices (`[lin; ang]` ordering); they are carried to the parent
-//! by a block-wise congruence, and the 1-DoF joints use rank-one updates.
+//! by a block-wise congruence on their symmetric blocks, and the 1-DoF joints use rank-one
+//! updates with `U = I^A S` read off the columns their axis selects.
 
-use nalgebra::{DVector, Matrix6, Vector6};
+use nalgebra::{Cholesky, DVector, Vector6};
 
 use super::data::Data;
 use super::error::DynamicsError;
@@ -85,8 +86,8 @@ pub(crate) fn aba_unchecked(
     // Pass 1: kinematics, bias accelerations c, rigid inertias, bias forces p (eq. 7.36-7.38).
     for (i, j) in model.joints.iter().enumerate() {
         let li = j
-            .placement
-            .compose(&j.kind.transform(&q[j.idx_q..j.idx_q + j.nq()]));
+            .kind
+            .placed_transform(&j.placement, &q[j.idx_q..j.idx_q + j.nq()]);
         data.li_m_i[i] = li;
         let vj = j.kind.motion(&v[j.idx_v..j.idx_v + j.nv()]);
         let vi = match j.parent {
@@ -106,59 +107,66 @@ pub(crate) fn aba_unchecked(
     // Pass 2: articulated inertias and bias forces, leaves to root (eq. 7.39-7.45).
     for i in (0..model.joints.len()).rev() {
         let j = &model.joints[i];
-        let ia = data.ia[i];
-        let pa = data.f[i].to_vector();
-        let c = data.c[i].to_vector();
-        match j.kind {
+        // Parents precede children: the parent's inertia is in `head`.
+        let (head, tail) = data.ia.split_at_mut(i);
+        let ia = &mut tail[0];
+        let pa = data.f[i];
+        let li = data.li_m_i[i];
+        let singular = || DynamicsError::SingularJoint {
+            joint: j.name.clone(),
+        };
+        let (u_col, d, s_pa) = match j.kind {
             JointKind::FreeFlyer => {
-                // S = 1: U = I^A, D = I^A, u = τ − p.
-                let d_inv = ia
-                    .cholesky()
-                    .ok_or_else(|| DynamicsError::SingularJoint {
-                        joint: j.name.clone(),
-                    })?
-                    .inverse();
-                data.d_inv[i] = d_inv;
+                // S = 1: U = D = I^A, u = τ − p; D is kept factored for pass 3.
+                let chol = ia.cholesky().ok_or_else(singular)?;
+                data.d_chol[i] = chol.unpack_dirty();
                 let mut u = Vector6::zeros();
                 for k in 0..6 {
-                    u[k] = tau[j.idx_v + k] - pa[k];
+                    u[k] = tau[j.idx_v + k] - pa.to_vector()[k];
                     data.u_vec[j.idx_v + k] = u[k];
                 }
                 if let Some(p) = j.parent {
                     // I^a = I^A − I^A (I^A)⁻¹ I^A = 0; p^a = p + u = τ-side wrench.
-                    let pa_new = pa + u;
-                    let fp = data.li_m_i[i].act_force(&Force::from_vector(&pa_new));
-                    data.f[p] += fp;
+                    let pa_new = pa.to_vector() + u;
+                    data.f[p] += li.act_force(&Force::from_vector(&pa_new));
                 }
+                continue;
             }
-            _ => {
-                let s = j.kind.subspace_column(0).to_vector();
-                let u_col: Vector6<f64> = ia * s;
-                let d = s.dot(&u_col);
-                if d.abs() <= 1e-14 * (1.0 + ia.abs().max()) || !d.is_finite() {
-                    return Err(DynamicsError::SingularJoint {
-                        joint: j.name.clone(),
-                    });
-                }
-                let d_inv = 1.0 / d;
-                data.d_inv[i][(0, 0)] = d_inv;
-                data.u_mat[i][0] = Force::from_vector(&u_col);
-                let u = tau[j.idx_v] - s.dot(&pa);
-                data.u_vec[j.idx_v] = u;
-                if let Some(p) = j.parent {
-                    let ia_a: Matrix6<f64> = ia - (u_col * d_inv) * u_col.transpose();
-                    let pa_a: Vector6<f64> = pa + ia_a * c + u_col * (d_inv * u);
-                    let li = data.li_m_i[i];
-                    data.ia[p] += li.act_matrix6(&ia_a);
-                    data.f[p] += li.act_force(&Force::from_vector(&pa_a));
-                }
+            // S = (0, axis): U = I^A S reads the angular columns; D = Sᵀ U, Sᵀ p.
+            JointKind::Revolute { axis } => {
+                let u_col: Vector6<f64> = ia.fixed_columns::<3>(3) * axis;
+                let d = axis.dot(&u_col.fixed_rows::<3>(3));
+                (u_col, d, axis.dot(&pa.ang))
             }
+            JointKind::Prismatic { axis } => {
+                let u_col: Vector6<f64> = ia.fixed_columns::<3>(0) * axis;
+                let d = axis.dot(&u_col.fixed_rows::<3>(0));
+                (u_col, d, axis.dot(&pa.lin))
+            }
+        };
+        // I^A is positive semi-definite: its largest entry is on its diagonal.
+        let scale = ia.diagonal().max();
+        if d.abs() <= 1e-14 * (1.0 + scale) || !d.is_finite() {
+            return Err(singular());
+        }
+        let d_inv = 1.0 / d;
+        data.d_inv[i] = d_inv;
+        data.u_col[i] = u_col;
+        let u = tau[j.idx_v] - s_pa;
+        data.u_vec[j.idx_v] = u;
+        if let Some(p) = j.parent {
+            // I^a = I^A − U D⁻¹ Uᵀ (in place: I^A is not needed afterwards).
+            *ia -= (u_col * d_inv) * u_col.transpose();
+            let pa_a: Vector6<f64> =
+                pa.to_vector() + *ia * data.c[i].to_vector() + u_col * (d_inv * u);
+            li.add_act_matrix6(ia, &mut head[p]);
+            data.f[p] += li.act_force(&Force::from_vector(&pa_a));
         }
     }
     // Pass 3: accelerations, root to leaves (eq. 7.46-7.48).
     let a0 = Motion::new(-model.gravity, nalgebra::Vector3::zeros());
     for (i, j) in model.joints.iter().enumerate() {
-        let li = data.li_m_i[i];
+        let li = &data.li_m_i[i];
         let ap = match j.parent {
             Some(p) => li.act_inv_motion(&data.a[p]),
             None => li.act_inv_motion(&a0),
@@ -172,15 +180,15 @@ pub(crate) fn aba_unchecked(
                     u[k] = data.u_vec[j.idx_v + k];
                 }
                 // q̈ = D⁻¹(u − Uᵀ a) with U = D = I^A.
-                let ddq = data.d_inv[i] * u - a_vec;
+                let ddq = Cholesky::pack_dirty(data.d_chol[i]).solve(&u) - a_vec;
                 for k in 0..6 {
                     data.ddq[j.idx_v + k] = ddq[k];
                 }
                 data.a[i] = Motion::from_vector(&(a_vec + ddq));
             }
             _ => {
-                let uf = &data.u_mat[i][0];
-                let ddq = data.d_inv[i][(0, 0)] * (data.u_vec[j.idx_v] - a_pre.dot(uf));
+                let ddq =
+                    data.d_inv[i] * (data.u_vec[j.idx_v] - a_pre.to_vector().dot(&data.u_col[i]));
                 data.ddq[j.idx_v] = ddq;
                 data.a[i] = a_pre + j.kind.motion(&[ddq]);
             }

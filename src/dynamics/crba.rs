@@ -3,12 +3,10 @@
 //! Composite inertias are summed in the `(m, h, I_O)` form; each column's force `F = I^c S`
 //! gives `M[j, i] = S_jᵀ F` at every ancestor j. Also leaves the world joint Jacobian in `data.j`.
 
-use nalgebra::{DMatrix, DVector, Vector3, Vector6};
+use nalgebra::{DMatrix, DVector, Vector6};
 
 use super::data::Data;
 use super::error::DynamicsError;
-use super::jacobian::joint_jacobians_from_placements;
-use super::kinematics::placements_unchecked;
 use super::model::Model;
 use super::spatial::Motion;
 
@@ -25,43 +23,82 @@ pub fn crba<'d>(
 
 /// Hot-path kernel. Precondition: `q.len() == model.nq`.
 ///
-/// Works in the world frame (as Pinocchio does): composite inertias are summed in world axes (a
-/// plain addition), the column force `F = I^c_i S_i` is formed once, and each ancestor entry is
-/// the 6-term dot product `M[j, i] = S_jᵀ F` with world-frame subspace columns (the joint
-/// Jacobian columns), instead of one force transform per ancestor as in RBDA Table 6.2.
+/// Works in the world frame (as Pinocchio's `Convention::WORLD`): composite inertias are summed
+/// in world axes (a plain addition), and the column force `F_k = I^c S_k` of every dof is formed
+/// once with the world-frame subspace column `S_k` (the joint Jacobian column). Joints being in
+/// depth-first order, the dofs of joint i's sub-tree are the contiguous range
+/// `idx_v .. idx_v + nv_subtree`, so row k of joint i is `M[k, c] = S_kᵀ F_c` over that range:
+/// a 6-term dot product per entry, read and written sequentially.
 pub(crate) fn crba_unchecked(model: &Model, data: &mut Data, q: &[f64]) {
-    placements_unchecked(model, data, q);
-    joint_jacobians_from_placements(model, data);
+    debug_assert_eq!(q.len(), model.nq);
+    forward_pass(model, data, q);
+    backward_pass(model, data);
+}
+
+/// Placements, world Jacobian columns and body inertias in world axes.
+fn forward_pass(model: &Model, data: &mut Data, q: &[f64]) {
     for (i, j) in model.joints.iter().enumerate() {
-        data.ycrb[i] = data.o_m_i[i].act_inertia(&j.inertia);
+        let li = j
+            .kind
+            .placed_transform(&j.placement, &q[j.idx_q..j.idx_q + j.nq()]);
+        data.li_m_i[i] = li;
+        let o = match j.parent {
+            Some(p) => data.o_m_i[p].compose(&li),
+            None => li,
+        };
+        data.o_m_i[i] = o;
+        for k in 0..j.nv() {
+            let s = o.act_motion(&j.kind.subspace_column(k));
+            data.j
+                .fixed_view_mut::<6, 1>(0, j.idx_v + k)
+                .copy_from(&s.to_vector());
+        }
+        data.oycrb[i] = o.act_inertia(&j.inertia);
     }
-    let m = &mut data.m;
-    let jac = &data.j;
+}
+
+/// Composite inertias, column forces and the rows of M over each sub-tree.
+fn backward_pass(model: &Model, data: &mut Data) {
+    let nv = model.nv;
+    let m = data.m.as_mut_slice();
     for i in (0..model.joints.len()).rev() {
         let ji = &model.joints[i];
-        let yc = data.ycrb[i];
-        for col in ji.idx_v..ji.idx_v + ji.nv() {
-            let s = jac.fixed_view::<6, 1>(0, col);
-            let f = yc.mul_motion(&Motion::new(
-                Vector3::new(s[0], s[1], s[2]),
-                Vector3::new(s[3], s[4], s[5]),
-            ));
-            let fv = Vector6::new(f.lin.x, f.lin.y, f.lin.z, f.ang.x, f.ang.y, f.ang.z);
-            let mut cur = Some(i);
-            while let Some(a) = cur {
-                let ja = &model.joints[a];
-                for r in ja.idx_v..ja.idx_v + ja.nv() {
-                    let val = jac.fixed_view::<6, 1>(0, r).dot(&fv);
-                    m[(r, col)] = val;
-                    m[(col, r)] = val;
-                }
-                cur = ja.parent;
+        let y = data.oycrb[i];
+        let (s, e) = (ji.idx_v, ji.idx_v + data.nv_subtree[i]);
+        for d in s..s + ji.nv() {
+            let sd = Motion::from_vector(&data.j.fixed_view::<6, 1>(0, d).into_owned());
+            data.fcrb[d] = y.mul_motion(&sd).to_vector();
+        }
+        for d in s..s + ji.nv() {
+            let sd: Vector6<f64> = data.j.fixed_view::<6, 1>(0, d).into_owned();
+            // Column-major: columns 0..=d on the left, d+1.. on the right.
+            let (left, right) = m.split_at_mut((d + 1) * nv);
+            for c in s..=d {
+                let val = dot6(&sd, &data.fcrb[c]);
+                left[d * nv + c] = val;
+                left[c * nv + d] = val;
+            }
+            let col_d = &mut left[d * nv + d + 1..d * nv + e];
+            for ((m_cd, col_c), fc) in col_d
+                .iter_mut()
+                .zip(right.chunks_exact_mut(nv))
+                .zip(&data.fcrb[d + 1..e])
+            {
+                let val = dot6(&sd, fc);
+                *m_cd = val;
+                col_c[d] = val;
             }
         }
         if let Some(p) = ji.parent {
-            data.ycrb[p] += yc;
+            data.oycrb[p] += y;
         }
     }
     // Entries between joints on different branches are never written: they stay at the zero
     // `Data::new` put there (so `data.m` must not be written by callers).
+}
+
+/// 6-term dot product summed as a tree (three independent products at a time, not one chain).
+#[inline(always)]
+fn dot6(a: &Vector6<f64>, b: &Vector6<f64>) -> f64 {
+    (a[0] * b[0] + a[3] * b[3]) + (a[1] * b[1] + a[4] * b[4]) + (a[2] * b[2] + a[5] * b[5])
 }

@@ -1,7 +1,7 @@
 //! Preallocated workspace of the algorithms. Sized once from the model; the algorithms only
 //! overwrite it, so a control tick never allocates.
 
-use nalgebra::{DMatrix, DVector, Matrix6, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix6, Vector3, Vector6};
 
 use super::model::Model;
 use super::spatial::{Force, Inertia, Motion, SE3};
@@ -23,8 +23,15 @@ pub struct Data {
     pub a: Vec<Motion>,
     /// Net body wrenches (RNEA) / articulated bias forces (ABA), local.
     pub f: Vec<Force>,
-    /// Composite rigid-body inertias (CRBA), local.
+    /// Composite rigid-body inertias of a sub-tree (operational-space inertia), local.
     pub ycrb: Vec<Inertia>,
+    /// CRBA: composite inertias in world axes at the world origin, and the column forces
+    /// `F[k] = I^c S_k` (world) of every dof.
+    pub(crate) oycrb: Vec<Inertia>,
+    pub(crate) fcrb: Vec<Vector6<f64>>,
+    /// Number of dofs of each joint's sub-tree (its dofs are `idx_v .. idx_v + nv_subtree`:
+    /// joints are in depth-first order).
+    pub(crate) nv_subtree: Vec<usize>,
     /// Joint-space inertia matrix `M(q)` (both triangles filled).
     pub m: DMatrix<f64>,
     /// Joint torques (RNEA output) or bias `h(q, v)` (nonlinear_effects output).
@@ -35,10 +42,12 @@ pub struct Data {
     pub j: DMatrix<f64>,
     /// Frame Jacobian output (6×nv).
     pub frame_j: DMatrix<f64>,
-    /// ABA: articulated inertias, `U = I^A S`, `D⁻¹`, `u`, bias accelerations `c`.
+    /// ABA: articulated inertias; for 1-dof joints `U = I^A S` and `D⁻¹`, for free-flyers the
+    /// Cholesky factor of `D = I^A`; `u`; bias accelerations `c`.
     pub(crate) ia: Vec<Matrix6<f64>>,
-    pub(crate) u_mat: Vec<[Force; 6]>,
-    pub(crate) d_inv: Vec<Matrix6<f64>>,
+    pub(crate) u_col: Vec<Vector6<f64>>,
+    pub(crate) d_inv: Vec<f64>,
+    pub(crate) d_chol: Vec<Matrix6<f64>>,
     pub(crate) u_vec: DVector<f64>,
     pub(crate) c: Vec<Motion>,
     /// CoM: subtree mass and subtree first moment (world frame).
@@ -55,6 +64,12 @@ impl Data {
         let n = model.njoints();
         let nf = model.frames.len();
         let nv = model.nv;
+        let mut nv_subtree: Vec<usize> = model.joints.iter().map(|j| j.nv()).collect();
+        for (i, j) in model.joints.iter().enumerate().rev() {
+            if let Some(p) = j.parent {
+                nv_subtree[p] += nv_subtree[i];
+            }
+        }
         Self {
             li_m_i: vec![SE3::identity(); n],
             o_m_i: vec![SE3::identity(); n],
@@ -63,14 +78,18 @@ impl Data {
             a: vec![Motion::zero(); n],
             f: vec![Force::zero(); n],
             ycrb: vec![Inertia::zero(); n],
+            oycrb: vec![Inertia::zero(); n],
+            fcrb: vec![Vector6::zeros(); nv],
+            nv_subtree,
             m: DMatrix::zeros(nv, nv),
             tau: DVector::zeros(nv),
             ddq: DVector::zeros(nv),
             j: DMatrix::zeros(6, nv),
             frame_j: DMatrix::zeros(6, nv),
             ia: vec![Matrix6::zeros(); n],
-            u_mat: vec![[Force::zero(); 6]; n],
-            d_inv: vec![Matrix6::zeros(); n],
+            u_col: vec![Vector6::zeros(); n],
+            d_inv: vec![0.0; n],
+            d_chol: vec![Matrix6::zeros(); n],
             u_vec: DVector::zeros(nv),
             c: vec![Motion::zero(); n],
             subtree_mass: vec![0.0; n],

@@ -66,6 +66,42 @@ impl JointKind {
         }
     }
 
+    /// `placement · jMc(q)`: the parent-to-child placement of a joint whose frame sits at
+    /// `placement` in the parent body (equal to `placement.compose(&self.transform(q))`). A
+    /// revolute joint about a coordinate axis (±x, ±y, ±z: most URDF joints) mixes two columns
+    /// of the placement's rotation (12 products instead of Rodrigues' formula and 27).
+    #[inline(always)]
+    pub fn placed_transform(&self, placement: &SE3, q: &[f64]) -> SE3 {
+        match self {
+            JointKind::Revolute { axis } => {
+                let (s, c) = q[0].sin_cos();
+                let p = &placement.rot;
+                let (p0, p1, p2) = (p.column(0), p.column(1), p.column(2));
+                let rot = if axis.y == 0.0 && axis.z == 0.0 && axis.x.abs() == 1.0 {
+                    // R_x(θ) = [e_x, (0, c, s), (0, −s, c)]; a −x axis turns by −θ.
+                    let s = s * axis.x;
+                    Matrix3::from_columns(&[p0.into(), c * p1 + s * p2, c * p2 - s * p1])
+                } else if axis.x == 0.0 && axis.z == 0.0 && axis.y.abs() == 1.0 {
+                    // R_y(θ) = [(c, 0, −s), e_y, (s, 0, c)].
+                    let s = s * axis.y;
+                    Matrix3::from_columns(&[c * p0 - s * p2, p1.into(), s * p0 + c * p2])
+                } else if axis.x == 0.0 && axis.y == 0.0 && axis.z.abs() == 1.0 {
+                    // R_z(θ) = [(c, s, 0), (−s, c, 0), e_z].
+                    let s = s * axis.z;
+                    Matrix3::from_columns(&[c * p0 + s * p1, c * p1 - s * p0, p2.into()])
+                } else {
+                    p * axis_rotation_sc(axis, s, c)
+                };
+                SE3::new(rot, placement.trans)
+            }
+            JointKind::Prismatic { axis } => SE3::new(
+                placement.rot,
+                placement.rot * (axis * q[0]) + placement.trans,
+            ),
+            JointKind::FreeFlyer => placement.compose(&self.transform(q)),
+        }
+    }
+
     /// Joint velocity `S q̇` in the child frame.
     #[inline]
     pub fn motion(&self, v: &[f64]) -> Motion {
@@ -124,6 +160,12 @@ impl JointKind {
 #[inline]
 fn axis_rotation(a: &Vector3<f64>, angle: f64) -> Matrix3<f64> {
     let (s, c) = angle.sin_cos();
+    axis_rotation_sc(a, s, c)
+}
+
+/// Rodrigues' formula from the angle's sine and cosine.
+#[inline]
+fn axis_rotation_sc(a: &Vector3<f64>, s: f64, c: f64) -> Matrix3<f64> {
     let t = 1.0 - c;
     let (x, y, z) = (a.x, a.y, a.z);
     Matrix3::new(
@@ -137,4 +179,41 @@ fn axis_rotation(a: &Vector3<f64>, angle: f64) -> Matrix3<f64> {
         t * y * z + s * x,
         t * z * z + c,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn placed_transform_is_the_placement_composed_with_the_joint_transform() {
+        let placement = SE3::from_xyz_rpy([0.1, -0.2, 0.3], [0.4, -0.5, 0.6]);
+        let mut axes: Vec<Vector3<f64>> = Vec::new();
+        for k in 0..3 {
+            for sign in [1.0, -1.0] {
+                let mut a = Vector3::zeros();
+                a[k] = sign;
+                axes.push(a);
+            }
+        }
+        axes.push(Vector3::new(0.3, -0.4, 0.5).normalize());
+        let mut kinds: Vec<JointKind> = axes
+            .iter()
+            .flat_map(|&axis| [JointKind::Revolute { axis }, JointKind::Prismatic { axis }])
+            .collect();
+        kinds.push(JointKind::FreeFlyer);
+        for kind in kinds {
+            for q0 in [-2.5, 0.0, 0.7] {
+                let ff = [0.2, -0.1, q0, 0.1, -0.3, 0.2, 0.9];
+                let q = if kind.nq() == 7 { &ff[..] } else { &ff[2..3] };
+                let expected = placement.compose(&kind.transform(q));
+                let got = kind.placed_transform(&placement, q);
+                assert!(
+                    (got.rot - expected.rot).abs().max() < 1e-15
+                        && (got.trans - expected.trans).abs().max() < 1e-15,
+                    "{kind:?} at {q0}"
+                );
+            }
+        }
+    }
 }

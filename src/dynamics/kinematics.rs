@@ -56,8 +56,8 @@ pub(crate) fn placements_unchecked(model: &Model, data: &mut Data, q: &[f64]) {
     debug_assert_eq!(q.len(), model.nq);
     for (i, j) in model.joints.iter().enumerate() {
         let li = j
-            .placement
-            .compose(&j.kind.transform(&q[j.idx_q..j.idx_q + j.nq()]));
+            .kind
+            .placed_transform(&j.placement, &q[j.idx_q..j.idx_q + j.nq()]);
         data.li_m_i[i] = li;
         data.o_m_i[i] = match j.parent {
             Some(p) => data.o_m_i[p].compose(&li),

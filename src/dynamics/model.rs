@@ -100,7 +100,9 @@ impl Model {
     }
 
     /// Appends a joint carrying a body of inertia `inertia` (in the body frame). The parent
-    /// must already exist; a body frame named `body` is added too.
+    /// must already exist; a body frame named `body` is added too. Joints come in depth-first
+    /// preorder (the parent is the last joint or one of its ancestors), so that every sub-tree
+    /// owns a contiguous range of joints and of dofs (CRBA fills M's rows over that range).
     pub fn add_joint(
         &mut self,
         name: impl Into<String>,
@@ -119,6 +121,23 @@ impl Model {
                 joint: name,
                 reason: format!("parent joint index {p} does not exist yet"),
             });
+        }
+        if let Some(p) = parent {
+            let mut cur = self.joints.len().checked_sub(1);
+            while let Some(c) = cur
+                && c != p
+            {
+                cur = self.joints[c].parent;
+            }
+            if cur.is_none() {
+                return Err(DynamicsError::InvalidJoint {
+                    joint: name,
+                    reason: format!(
+                        "parent joint index {p} is neither the last joint nor one of its \
+                         ancestors (joints must be added depth-first)"
+                    ),
+                });
+            }
         }
         if self.joints.iter().any(|j| j.name == name) {
             return Err(DynamicsError::DuplicateName {
@@ -211,7 +230,7 @@ impl Model {
     pub fn neutral(&self) -> DVector<f64> {
         let mut q = DVector::zeros(self.nq);
         for j in &self.joints {
-            if j.kind == JointKind::FreeFlyer {
+            if matches!(j.kind, JointKind::FreeFlyer) {
                 q[j.idx_q + 6] = 1.0;
             }
         }
@@ -251,8 +270,13 @@ impl Model {
     /// not be zero.
     pub fn check_q(&self, q: &DVector<f64>) -> Result<(), DynamicsError> {
         check_vec("q", q, self.nq)?;
+        // Only free-flyers have nq ≠ nv (one more each): stop once all are checked.
+        let mut free_flyers = self.nq - self.nv;
         for j in &self.joints {
-            if j.kind == JointKind::FreeFlyer {
+            if free_flyers == 0 {
+                break;
+            }
+            if matches!(j.kind, JointKind::FreeFlyer) {
                 let n2: f64 = (3..7).map(|k| q[j.idx_q + k] * q[j.idx_q + k]).sum();
                 if n2 < 1e-12 {
                     return Err(DynamicsError::InvalidJoint {
@@ -260,6 +284,7 @@ impl Model {
                         reason: "the base quaternion in q is zero".into(),
                     });
                 }
+                free_flyers -= 1;
             }
         }
         Ok(())

@@ -75,8 +75,8 @@ pub(crate) fn rnea_unchecked(
     // Forward pass: velocities, accelerations, net body wrenches (RBDA eq. 5.7–5.9).
     for (i, j) in model.joints.iter().enumerate() {
         let li = j
-            .placement
-            .compose(&j.kind.transform(&q[j.idx_q..j.idx_q + j.nq()]));
+            .kind
+            .placed_transform(&j.placement, &q[j.idx_q..j.idx_q + j.nq()]);
         data.li_m_i[i] = li;
         let vj = match v {
             Some(v) => j.kind.motion(&v[j.idx_v..j.idx_v + j.nv()]),

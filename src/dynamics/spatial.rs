@@ -13,6 +13,17 @@ pub fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
 }
 
+/// `R S Rᵀ` for a symmetric `S`: `T = R S`, then `(T Rᵀ)_ij = T_i · R_j` on the upper triangle
+/// only, mirrored.
+#[inline]
+pub fn rotate_symmetric(r: &Matrix3<f64>, s: &Matrix3<f64>) -> Matrix3<f64> {
+    let t = r * s;
+    let e =
+        |i: usize, j: usize| t[(i, 0)] * r[(j, 0)] + t[(i, 1)] * r[(j, 1)] + t[(i, 2)] * r[(j, 2)];
+    let (xx, xy, xz, yy, yz, zz) = (e(0, 0), e(0, 1), e(0, 2), e(1, 1), e(1, 2), e(2, 2));
+    Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz)
+}
+
 /// Rigid placement `aMb`: the pose of frame b in frame a (`x_a = rot · x_b + trans`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SE3 {
@@ -101,45 +112,71 @@ impl SE3 {
     }
 
     /// Rigid-body inertia expressed in b → expressed in a (parallel-axis theorem on the
-    /// `(m, h, I_origin)` form; no 6×6 product).
+    /// `(m, h, I_origin)` form; no 6×6 product). Only the upper triangle of the symmetric
+    /// `I_O` is computed.
     #[inline]
     pub fn act_inertia(&self, y: &Inertia) -> Inertia {
+        let r = &self.rot;
         let p = &self.trans;
-        let rot_i = self.rot * y.rot * self.rot.transpose();
-        let h = self.rot * y.h + y.mass * p;
-        // I_O = I_p + (2 hᵀp − m|p|²) 1 − (h pᵀ + p hᵀ − m p pᵀ), with h in a.
-        let hp = h.dot(p);
-        let pp = p.dot(p);
-        let outer = h * p.transpose() + p * h.transpose() - y.mass * (p * p.transpose());
-        let rot = rot_i + Matrix3::from_diagonal_element(2.0 * hp - y.mass * pp) - outer;
+        let m = y.mass;
+        let h = r * y.h + m * p;
+        let rot_i = rotate_symmetric(r, &y.rot);
+        // I_O = R I Rᵀ + (2 hᵀp − m|p|²) 1 − (h pᵀ + p hᵀ − m p pᵀ), with h in a.
+        let d = 2.0 * h.dot(p) - m * p.dot(p);
+        let o = |i: usize, j: usize| h[i] * p[j] + p[i] * h[j] - m * p[i] * p[j];
+        let (xx, yy, zz) = (
+            rot_i[(0, 0)] + d - o(0, 0),
+            rot_i[(1, 1)] + d - o(1, 1),
+            rot_i[(2, 2)] + d - o(2, 2),
+        );
+        let (xy, xz, yz) = (
+            rot_i[(0, 1)] - o(0, 1),
+            rot_i[(0, 2)] - o(0, 2),
+            rot_i[(1, 2)] - o(1, 2),
+        );
         Inertia {
-            mass: y.mass,
+            mass: m,
             h,
-            rot,
+            rot: Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz),
         }
     }
 
-    /// Articulated-body inertia (a 6×6 map motion → force) expressed in b → in a:
-    /// `X* · I · X*ᵀ` done block-wise (RBDA eq. 2.66) to avoid two full 6×6 products.
+    /// Adds the articulated-body inertia `m` (a symmetric 6×6 map motion → force, blocks
+    /// `[[A, B], [Bᵀ, C]]`) expressed in b to `out` expressed in a: `out += X* m X*ᵀ` (RBDA
+    /// eq. 2.66) with `X* = [[R, 0], [P R, R]]`, `P = [p]×`. Block-wise: rotate the blocks
+    /// (`A`, `C` symmetric: upper triangles only), then shift by `p`:
+    /// `A' = A`, `B' = B − A P`, `C' = C + P B' + (P B)ᵀ` (rotated blocks; `Pᵀ = −P`).
     #[inline]
-    pub fn act_matrix6(&self, m: &Matrix6<f64>) -> Matrix6<f64> {
+    pub fn add_act_matrix6(&self, m: &Matrix6<f64>, out: &mut Matrix6<f64>) {
         let r = &self.rot;
-        let rt = r.transpose();
-        let a = r * m.fixed_view::<3, 3>(0, 0) * rt;
-        let b = r * m.fixed_view::<3, 3>(0, 3) * rt;
-        let c = r * m.fixed_view::<3, 3>(3, 3) * rt;
-        // X* = [[1, 0], [P, 1]] after rotation, P = [p]×.
-        let p = skew(&self.trans);
-        let pa = p * a;
-        let b_new = b - a * p; // A Pᵀ + B
-        let c_new = c + pa * (-p) + p * b + (p * b).transpose();
-        let mut out = Matrix6::zeros();
-        out.fixed_view_mut::<3, 3>(0, 0).copy_from(&a);
-        out.fixed_view_mut::<3, 3>(0, 3).copy_from(&b_new);
-        out.fixed_view_mut::<3, 3>(3, 0)
-            .copy_from(&b_new.transpose());
-        out.fixed_view_mut::<3, 3>(3, 3).copy_from(&c_new);
-        out
+        let p = &self.trans;
+        let a = rotate_symmetric(r, &m.fixed_view::<3, 3>(0, 0).into_owned());
+        let b = r * m.fixed_view::<3, 3>(0, 3) * r.transpose();
+        let c = rotate_symmetric(r, &m.fixed_view::<3, 3>(3, 3).into_owned());
+        // Row i of A P is (A_i × p)ᵀ (A symmetric: column i = row i).
+        let ap = Matrix3::from_rows(&[
+            a.column(0).cross(p).transpose(),
+            a.column(1).cross(p).transpose(),
+            a.column(2).cross(p).transpose(),
+        ]);
+        let b_new = b - ap;
+        // Column j of P X is p × X_j.
+        let cross_cols = |x: &Matrix3<f64>| {
+            Matrix3::from_columns(&[
+                p.cross(&x.column(0)),
+                p.cross(&x.column(1)),
+                p.cross(&x.column(2)),
+            ])
+        };
+        let c_new = c + cross_cols(&b_new) + cross_cols(&b).transpose();
+        let mut o = out.fixed_view_mut::<3, 3>(0, 0);
+        o += a;
+        let mut o = out.fixed_view_mut::<3, 3>(0, 3);
+        o += b_new;
+        let mut o = out.fixed_view_mut::<3, 3>(3, 0);
+        o += b_new.transpose();
+        let mut o = out.fixed_view_mut::<3, 3>(3, 3);
+        o += c_new;
     }
 
     /// Unit quaternion of the rotation (for reporting and the free-flyer configuration).
@@ -374,6 +411,7 @@ impl Inertia {
     }
 
     /// The 6×6 matrix of the map motion → force (for the articulated inertias of ABA).
+    #[inline]
     pub fn to_matrix(&self) -> Matrix6<f64> {
         let mut out = Matrix6::zeros();
         let hs = skew(&self.h);
@@ -448,4 +486,60 @@ pub fn log3(r: &Matrix3<f64>) -> Vector3<f64> {
         return w;
     }
     w * (theta / s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `X*` of `x` as a dense 6×6 matrix (force b → a, `[force; torque]`).
+    fn dense_force_transform(x: &SE3) -> Matrix6<f64> {
+        let mut out = Matrix6::zeros();
+        out.fixed_view_mut::<3, 3>(0, 0).copy_from(&x.rot);
+        out.fixed_view_mut::<3, 3>(3, 3).copy_from(&x.rot);
+        out.fixed_view_mut::<3, 3>(3, 0)
+            .copy_from(&(skew(&x.trans) * x.rot));
+        out
+    }
+
+    fn placement() -> SE3 {
+        SE3::from_xyz_rpy([0.3, -0.7, 0.2], [0.5, -1.1, 2.0])
+    }
+
+    fn body() -> Inertia {
+        let i_c = Matrix3::new(0.3, 0.02, -0.01, 0.02, 0.2, 0.03, -0.01, 0.03, 0.25);
+        Inertia::from_com(2.5, Vector3::new(0.1, -0.05, 0.2), i_c)
+    }
+
+    #[test]
+    fn inertia_transform_matches_the_dense_congruence() {
+        let x = placement();
+        let xs = dense_force_transform(&x);
+        let expected = xs * body().to_matrix() * xs.transpose();
+        let got = x.act_inertia(&body()).to_matrix();
+        assert!((got - expected).abs().max() < 1e-12, "{got} vs {expected}");
+    }
+
+    #[test]
+    fn articulated_inertia_transform_matches_the_dense_congruence() {
+        // A symmetric matrix with all blocks full (an articulated inertia after a rank-one
+        // update is no longer of the rigid-body form).
+        let u = Vector6::new(0.3, -0.2, 0.5, 0.1, 0.7, -0.4);
+        let m = body().to_matrix() - 0.8 * u * u.transpose() + Matrix6::identity();
+        let x = placement();
+        let xs = dense_force_transform(&x);
+        let base = Matrix6::from_fn(|r, c| (r * 6 + c) as f64 * 0.01);
+        let expected = base + xs * m * xs.transpose();
+        let mut got = base;
+        x.add_act_matrix6(&m, &mut got);
+        assert!((got - expected).abs().max() < 1e-12, "{got} vs {expected}");
+    }
+
+    #[test]
+    fn symmetric_rotation_is_r_s_rt() {
+        let r = placement().rot;
+        let s = body().rot;
+        let got = rotate_symmetric(&r, &s);
+        assert!((got - r * s * r.transpose()).abs().max() < 1e-14);
+    }
 }
