@@ -7,8 +7,9 @@ use nalgebra::{DMatrix, DVector, Vector6};
 
 use super::data::Data;
 use super::error::DynamicsError;
+use super::joint::JointKind;
 use super::model::Model;
-use super::spatial::Motion;
+use super::spatial::{Force, Motion};
 
 /// `M(q)` in `data.m` (both triangles). Also refreshes `data.li_m_i`, `data.o_m_i`, `data.j`.
 pub fn crba<'d>(
@@ -47,11 +48,23 @@ fn forward_pass(model: &Model, data: &mut Data, q: &[f64]) {
             None => li,
         };
         data.o_m_i[i] = o;
-        for k in 0..j.nv() {
-            let s = o.act_motion(&j.kind.subspace_column(k));
-            data.j
-                .fixed_view_mut::<6, 1>(0, j.idx_v + k)
-                .copy_from(&s.to_vector());
+        match j.kind {
+            // S = (0, axis) carried to the world origin: ω = R axis, v = p × ω.
+            JointKind::Revolute { axis } => {
+                let w = o.rot * axis;
+                let v = o.trans.cross(&w);
+                data.j
+                    .fixed_view_mut::<6, 1>(0, j.idx_v)
+                    .copy_from(&Vector6::new(v.x, v.y, v.z, w.x, w.y, w.z));
+            }
+            _ => {
+                for k in 0..j.nv() {
+                    let s = o.act_motion(&j.kind.subspace_column(k));
+                    data.j
+                        .fixed_view_mut::<6, 1>(0, j.idx_v + k)
+                        .copy_from(&s.to_vector());
+                }
+            }
         }
         data.oycrb[i] = o.act_inertia(&j.inertia);
     }
@@ -69,25 +82,22 @@ fn backward_pass(model: &Model, data: &mut Data) {
             let sd = Motion::from_vector(&data.j.fixed_view::<6, 1>(0, d).into_owned());
             data.fcrb[d] = y.mul_motion(&sd).to_vector();
         }
-        for d in s..s + ji.nv() {
-            let sd: Vector6<f64> = data.j.fixed_view::<6, 1>(0, d).into_owned();
-            // Column-major: columns 0..=d on the left, d+1.. on the right.
-            let (left, right) = m.split_at_mut((d + 1) * nv);
-            for c in s..=d {
-                let val = dot6(&sd, &data.fcrb[c]);
-                left[d * nv + c] = val;
-                left[c * nv + d] = val;
+        if let JointKind::FreeFlyer = ji.kind {
+            // The free-flyer's six world columns are X_o (its world placement as a motion
+            // transform), so its rows are X_oᵀ F_c: each F_c expressed in the body, one inverse
+            // force transform for six entries.
+            let o = data.o_m_i[i];
+            for c in s..e {
+                let f = o
+                    .act_inv_force(&Force::from_vector(&data.fcrb[c]))
+                    .to_vector();
+                m[c * nv + s..c * nv + s + 6].copy_from_slice(f.as_slice());
+                for (k, x) in f.iter().enumerate() {
+                    m[(s + k) * nv + c] = *x;
+                }
             }
-            let col_d = &mut left[d * nv + d + 1..d * nv + e];
-            for ((m_cd, col_c), fc) in col_d
-                .iter_mut()
-                .zip(right.chunks_exact_mut(nv))
-                .zip(&data.fcrb[d + 1..e])
-            {
-                let val = dot6(&sd, fc);
-                *m_cd = val;
-                col_c[d] = val;
-            }
+        } else {
+            row_of_1dof(m, nv, &data.j, &data.fcrb, s, e);
         }
         if let Some(p) = ji.parent {
             data.oycrb[p] += y;
@@ -95,6 +105,33 @@ fn backward_pass(model: &Model, data: &mut Data) {
     }
     // Entries between joints on different branches are never written: they stay at the zero
     // `Data::new` put there (so `data.m` must not be written by callers).
+}
+
+/// Row `d` of M (a 1-dof joint) over its sub-tree's columns `d .. e`, and the same entries of
+/// column `d`: `M[d, c] = M[c, d] = S_dᵀ F_c`.
+#[inline(always)]
+fn row_of_1dof(
+    m: &mut [f64],
+    nv: usize,
+    jac: &DMatrix<f64>,
+    fcrb: &[Vector6<f64>],
+    d: usize,
+    e: usize,
+) {
+    let sd: Vector6<f64> = jac.fixed_view::<6, 1>(0, d).into_owned();
+    // Column-major: columns 0..=d on the left, d+1.. on the right.
+    let (left, right) = m.split_at_mut((d + 1) * nv);
+    let col_d = &mut left[d * nv + d..d * nv + e];
+    col_d[0] = dot6(&sd, &fcrb[d]);
+    for ((m_cd, col_c), fc) in col_d[1..]
+        .iter_mut()
+        .zip(right.chunks_exact_mut(nv))
+        .zip(&fcrb[d + 1..e])
+    {
+        let val = dot6(&sd, fc);
+        *m_cd = val;
+        col_c[d] = val;
+    }
 }
 
 /// 6-term dot product summed as a tree (three independent products at a time, not one chain).

@@ -111,6 +111,16 @@ impl SE3 {
         }
     }
 
+    /// Force expressed in a → expressed in b.
+    #[inline]
+    pub fn act_inv_force(&self, f: &Force) -> Force {
+        let rt = self.rot.transpose();
+        Force {
+            lin: rt * f.lin,
+            ang: rt * (f.ang - self.trans.cross(&f.lin)),
+        }
+    }
+
     /// Rigid-body inertia expressed in b → expressed in a (parallel-axis theorem on the
     /// `(m, h, I_origin)` form; no 6×6 product). Only the upper triangle of the symmetric
     /// `I_O` is computed.
@@ -121,9 +131,11 @@ impl SE3 {
         let m = y.mass;
         let h = r * y.h + m * p;
         let rot_i = rotate_symmetric(r, &y.rot);
-        // I_O = R I Rᵀ + (2 hᵀp − m|p|²) 1 − (h pᵀ + p hᵀ − m p pᵀ), with h in a.
-        let d = 2.0 * h.dot(p) - m * p.dot(p);
-        let o = |i: usize, j: usize| h[i] * p[j] + p[i] * h[j] - m * p[i] * p[j];
+        // I_O = R I Rᵀ + (2 hᵀp − m|p|²) 1 − (h pᵀ + p hᵀ − m p pᵀ), with h in a,
+        //     = R I Rᵀ + 2 gᵀp 1 − (g pᵀ + p gᵀ) with g = h − m p / 2.
+        let g = h - (0.5 * m) * p;
+        let d = 2.0 * g.dot(p);
+        let o = |i: usize, j: usize| g[i] * p[j] + p[i] * g[j];
         let (xx, yy, zz) = (
             rot_i[(0, 0)] + d - o(0, 0),
             rot_i[(1, 1)] + d - o(1, 1),
