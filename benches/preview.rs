@@ -1,5 +1,5 @@
 //! Preview core timings: C0/C1 per solve (Riccati vs dense) at N = 100/300/600, the hand
-//! previewer, and one C2 gain search (Gauss–Newton warm/cold, Nelder–Mead).
+//! previewer, and one C2 gain search (Gauss–Newton warm/cold, Nelder–Mead). Single-threaded.
 
 use std::hint::black_box;
 
@@ -28,6 +28,10 @@ fn model(c: &Config) -> CartTable {
 }
 
 fn lq(c: &mut Criterion) {
+    // Single-threaded faer, as the controller runs it (`control::server`): with faer's default
+    // thread pool the dense solve's time depended on what the other core was doing (0.96 to
+    // 2.2 ms between runs), and so did every "× the dense solve" ratio.
+    faer::set_global_parallelism(faer::Par::Seq);
     let cfg = config(&[]);
     let state = [
         Vector3::new(0.01, -0.02, 0.3),
