@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 
 use serde_json::Value;
-use support::procs::{csv_without, venv_python};
+use support::procs::{csv_without, serial, venv_python};
 
 /// Columns of `controller.csv` that are wall-clock measurements.
 const TIMING_COLUMNS: [&str; 2] = ["tick_us", "wbc_us"];
@@ -124,6 +124,9 @@ fn assert_same(a: &Path, b: &Path) {
 }
 
 fn twice(controller: &str, duration: &str) {
+    // One test at a time: the loaded-machine test keeps both cores busy, and a C2 worker
+    // (nice 10) of another test's run starved behind it past the 0.5 s lockstep wait.
+    let _serial = serial();
     let out = scratch(controller);
     let a = run(&out, "a", controller, duration);
     let b = run(&out, "b", controller, duration);
@@ -164,6 +167,7 @@ fn lockstep_c1_with_the_forecast_over_zenoh_gives_the_iceoryx2_runs_bytes() {
     if venv_python("zenoh").is_none() {
         return;
     }
+    let _serial = serial();
     let out = scratch("zenoh");
     let local = run(&out, "local", "c1", "2.5");
     let remote = run_with(&out, "remote", "c1", "2.5", &["--forecaster-over-zenoh"]);
@@ -217,6 +221,7 @@ impl Drop for Load {
 
 #[test]
 fn lockstep_c2_reruns_byte_for_byte_on_a_loaded_machine() {
+    let _serial = serial();
     let out = scratch("load");
     let a = run(&out, "quiet", "c2", "1.5");
     let b = {
