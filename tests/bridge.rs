@@ -11,7 +11,6 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use serde_json::Value;
 use support::procs::*;
 use upc::bridge::wire::{HEADER_LEN, encode};
 use upc::channels::{Bus, ForecastMsg, ServiceKind, StateMsg};
@@ -69,10 +68,6 @@ impl Clock {
     }
 }
 
-fn controller_json(s: &Scratch) -> Value {
-    json(&s.path("controller.json"))
-}
-
 #[test]
 fn remote_forecaster_killed_garbage_bad_windows_and_a_flood_over_zenoh() {
     let Some(py) = venv_python("zenoh") else {
@@ -80,10 +75,7 @@ fn remote_forecaster_killed_garbage_bad_windows_and_a_flood_over_zenoh() {
     };
     let _serial = serial();
     let s = Scratch::new("bridge_faults");
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("port")
-        .port();
+    let port = free_port();
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let scenario = s.scenario();
     let mut p = Procs::default();
@@ -105,25 +97,7 @@ fn remote_forecaster_killed_garbage_bad_windows_and_a_flood_over_zenoh() {
             &summary,
         ],
     );
-    let ctl_summary = s.path("controller.json").display().to_string();
-    p.start(
-        &s,
-        "controller",
-        &[
-            "controller",
-            "--realtime",
-            "--scenario",
-            &scenario,
-            "--duration",
-            "1000",
-            "--prefix",
-            &s.prefix,
-            "--summary",
-            &ctl_summary,
-            "--set",
-            "controller.rate_hz=500",
-        ],
-    );
+    start_controller(&mut p, &s, &["--set", "controller.rate_hz=500"]);
     p.start(
         &s,
         "sim",
@@ -216,7 +190,7 @@ fn remote_forecaster_killed_garbage_bad_windows_and_a_flood_over_zenoh() {
     p.stop(&s, "controller", libc::SIGTERM);
     p.stop(&s, "bridge", libc::SIGTERM);
     p.stop(&s, "sim", libc::SIGTERM);
-    let c = controller_json(&s);
+    let c = json(&s.path("controller.json"));
     let b = json(&s.path("bridge.json"));
     let remote_log = std::fs::read_to_string(s.path("remote.log")).unwrap_or_default();
     let msg = format!("controller {c}\nbridge {b}\nremote {remote_log}");

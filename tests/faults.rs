@@ -14,33 +14,6 @@ use support::procs::*;
 use support::rrd::rrd_times;
 use upc::channels::{Bus, ForecastMsg, MAX_FORECAST, ServiceKind, StateMsg};
 
-fn controller_args(s: &Scratch, extra: &[&str]) -> Vec<String> {
-    let scenario = s.scenario();
-    let mut v: Vec<String> = [
-        "controller",
-        "--realtime",
-        "--scenario",
-        &scenario,
-        "--duration",
-        "1000",
-        "--prefix",
-        &s.prefix,
-    ]
-    .iter()
-    .map(|x| x.to_string())
-    .collect();
-    v.push("--summary".into());
-    v.push(s.path("controller.json").display().to_string());
-    v.extend(extra.iter().map(|x| x.to_string()));
-    v
-}
-
-fn start_controller(p: &mut Procs, s: &Scratch, extra: &[&str]) {
-    let args = controller_args(s, extra);
-    let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    p.start(s, "controller", &args);
-}
-
 fn start_sim(p: &mut Procs, s: &Scratch, name: &str, extra: &[&str]) {
     let summary = s.path(&format!("{name}.json")).display().to_string();
     let scenario = s.scenario();

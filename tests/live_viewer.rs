@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use support::procs::csv_without;
+use support::procs::{csv_without, free_port};
 use support::rrd::rrd_times;
 
 fn run(out: &Path, name: &str, extra: &[&str]) -> PathBuf {
@@ -41,10 +41,7 @@ fn a_live_viewer_gets_every_record_of_the_files_and_the_run_is_unchanged() {
     let out = std::env::temp_dir().join(format!("upc-live-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
     std::fs::create_dir_all(&out).expect("dir");
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("port")
-        .port();
+    let port = free_port();
     let live = out.join("live.rrd");
     // A process group: `rerun` is a Python launcher of the viewer's binary, both are stopped.
     let mut viewer = Command::new(&rerun)

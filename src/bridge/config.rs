@@ -54,14 +54,7 @@ pub struct BridgeConfig {
 
 impl BridgeConfig {
     pub fn load(files: &[PathBuf], sets: &[String]) -> Result<BridgeConfig, ConfigError> {
-        let mut layers = Layers::new();
-        layers.push_str("<embedded config/bridge.toml>", BRIDGE_TOML)?;
-        for f in files {
-            layers.push_file(f)?;
-        }
-        for s in sets {
-            layers.push_override(s)?;
-        }
+        let layers = Layers::stack("<embedded config/bridge.toml>", BRIDGE_TOML, files, sets)?;
         let file: BridgeFile = layers.typed()?;
         file.bridge.validate(&layers)?;
         Ok(file.bridge)

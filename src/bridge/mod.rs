@@ -26,6 +26,7 @@ use wire::{WireError, WireMessage, decode_into, encode};
 use crate::channels::{
     Bus, ChannelError, ForecastMsg, GroundTruthMsg, ServiceKind, StateMsg, TorqueMsg,
 };
+use crate::control::LatencyHistogram;
 
 /// Why the bridge stopped.
 #[derive(Debug, thiserror::Error)]
@@ -123,7 +124,6 @@ pub fn run(cfg: &BridgeConfig, stop: Arc<AtomicBool>) -> Result<BridgeSummary, B
         cfg.connect,
         cfg.decimation
     );
-    let key = |kind: ServiceKind| format!("{}/{}", cfg.key_prefix, kind.suffix());
     let counters = Arc::new(CallbackCounters::default());
 
     let inbound = if cfg.forecast_in {
@@ -131,7 +131,7 @@ pub fn run(cfg: &BridgeConfig, stop: Arc<AtomicBool>) -> Result<BridgeSummary, B
         let subscriber = {
             let counters = Arc::clone(&counters);
             session
-                .declare_subscriber(key(ServiceKind::Forecast))
+                .declare_subscriber(key(cfg, ServiceKind::Forecast))
                 .callback(move |sample| on_forecast(&tx, &counters, sample.payload().to_bytes()))
                 .wait()
                 .map_err(|e| BridgeError::Zenoh(format!("subscribe to forecasts: {e}")))?
@@ -180,16 +180,14 @@ pub fn run(cfg: &BridgeConfig, stop: Arc<AtomicBool>) -> Result<BridgeSummary, B
     summary.peers_max = out.peers_max;
     summary.peer_losses = out.peer_losses;
     if let Some(inb) = inb {
-        let mut inb = inb??;
+        let inb = inb??;
         summary.forecasts_forwarded = inb.forwarded;
         summary.forecasts_refused_by = inb.refused_by.clone();
         summary.forecasts_refused = inb.refused();
-        let (p50, p99, max) = percentiles(&mut inb.forward_us);
-        (
-            summary.forward_p50_us,
-            summary.forward_p99_us,
-            summary.forward_max_us,
-        ) = (p50, p99, max);
+        let l = &inb.forward;
+        summary.forward_p50_us = l.quantile(0.5) * 1e6;
+        summary.forward_p99_us = l.quantile(0.99) * 1e6;
+        summary.forward_max_us = l.max() * 1e6;
     }
     summary.forecasts_received = counters.received.load(Ordering::Relaxed);
     summary.forecasts_dropped = counters.dropped.load(Ordering::Relaxed);
@@ -230,7 +228,8 @@ fn on_forecast(
 struct InboundStats {
     forwarded: u64,
     refused_by: RefusedBy,
-    forward_us: Vec<f64>,
+    /// Zenoh callback → published on iceoryx2.
+    forward: LatencyHistogram,
 }
 
 impl InboundStats {
@@ -255,9 +254,6 @@ impl InboundStats {
     }
 }
 
-/// Most forwarding latencies kept for the percentiles (≈ 3 h of windows every 10 ms).
-const LATENCY_SAMPLES: usize = 1 << 20;
-
 /// The inbound thread: check and publish each queued forecast.
 fn forward_forecasts(
     prefix: &str,
@@ -268,7 +264,6 @@ fn forward_forecasts(
     let publisher = bus.publisher::<ForecastMsg>(ServiceKind::Forecast)?;
     let notifier = bus.notifier(ServiceKind::Forecast)?;
     let mut stats = InboundStats::default();
-    let mut latencies = Vec::with_capacity(4096);
     let mut msg = Box::<ForecastMsg>::default();
     while !stop.load(Ordering::Relaxed) {
         let inbound = match rx.recv_timeout(Duration::from_millis(50)) {
@@ -288,17 +283,15 @@ fn forward_forecasts(
         publisher.send_with(|m| *m = *msg)?;
         notifier.notify()?;
         stats.forwarded += 1;
-        if latencies.len() < LATENCY_SAMPLES {
-            latencies.push(inbound.at.elapsed().as_secs_f64() * 1e6);
-        }
+        stats.forward.record(inbound.at.elapsed());
     }
-    stats.forward_us = latencies;
     Ok(stats)
 }
 
 /// How often the outbound thread counts the connected Zenoh peers (for the log and the summary).
 const PEER_CHECK: Duration = Duration::from_millis(100);
 
+#[derive(Default)]
 struct OutboundStats {
     states: u64,
     truth: u64,
@@ -308,10 +301,9 @@ struct OutboundStats {
     peer_losses: u64,
 }
 
-/// A Zenoh publisher of one kind, with its encoding buffer.
+/// A Zenoh publisher of one kind.
 struct Out {
     publisher: zenoh::pubsub::Publisher<'static>,
-    buf: Vec<u8>,
 }
 
 impl Out {
@@ -320,16 +312,14 @@ impl Out {
             .declare_publisher(key.clone())
             .wait()
             .map_err(|e| BridgeError::Zenoh(format!("declare publisher `{key}`: {e}")))?;
-        Ok(Out {
-            publisher,
-            buf: Vec::new(),
-        })
+        Ok(Out { publisher })
     }
 
-    /// Encode and put `msg`; false if Zenoh refused it.
-    fn put<T: WireMessage>(&mut self, msg: &T) -> bool {
-        encode(msg, &mut self.buf);
-        self.publisher.put(self.buf.clone()).wait().is_ok()
+    /// Encode and put `msg` (the buffer is handed to Zenoh); false if Zenoh refused it.
+    fn put<T: WireMessage>(&self, msg: &T) -> bool {
+        let mut buf = Vec::with_capacity(wire::HEADER_LEN + size_of::<T>());
+        encode(msg, &mut buf);
+        self.publisher.put(buf).wait().is_ok()
     }
 }
 
@@ -343,23 +333,15 @@ fn forward_outbound(
         &cfg.prefix,
         &format!("upc-bridge-out-{}", std::process::id()),
     )?;
-    let key = |kind: ServiceKind| format!("{}/{}", cfg.key_prefix, kind.suffix());
     let states = bus.subscriber::<StateMsg>(ServiceKind::State)?;
     let truth = bus.subscriber::<GroundTruthMsg>(ServiceKind::GroundTruth)?;
     let torques = bus.subscriber::<TorqueMsg>(ServiceKind::Torques)?;
     let wake = bus.listener(ServiceKind::State)?;
-    let mut state_out = Out::declare(session, key(ServiceKind::State))?;
-    let mut truth_out = Out::declare(session, key(ServiceKind::GroundTruth))?;
-    let mut torque_out = Out::declare(session, key(ServiceKind::Torques))?;
+    let state_out = Out::declare(session, key(cfg, ServiceKind::State))?;
+    let truth_out = Out::declare(session, key(cfg, ServiceKind::GroundTruth))?;
+    let torque_out = Out::declare(session, key(cfg, ServiceKind::Torques))?;
     let d = u64::from(cfg.decimation);
-    let mut s = OutboundStats {
-        states: 0,
-        truth: 0,
-        torques: 0,
-        put_errors: 0,
-        peers_max: 0,
-        peer_losses: 0,
-    };
+    let mut s = OutboundStats::default();
     let mut session_id = 0u64;
     let mut peers = 0u64;
     let mut last_peer_check = Instant::now();
@@ -416,14 +398,9 @@ fn forward_outbound(
     Ok(s)
 }
 
-/// p50, p99 and max of `v` (NaN when empty).
-fn percentiles(v: &mut [f64]) -> (f64, f64, f64) {
-    if v.is_empty() {
-        return (f64::NAN, f64::NAN, f64::NAN);
-    }
-    v.sort_by(f64::total_cmp);
-    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
-    (at(0.5), at(0.99), v[v.len() - 1])
+/// The Zenoh key of a service: `<key_prefix>/<kind>`.
+fn key(cfg: &BridgeConfig, kind: ServiceKind) -> String {
+    format!("{}/{}", cfg.key_prefix, kind.suffix())
 }
 
 /// User + system CPU time of this process (s).

@@ -6,15 +6,13 @@ use upc::bridge::{BridgeConfig, run};
 use upc::shutdown::stop_flag;
 
 use super::CliResult;
+use super::common::ConfigArgs;
 
 #[derive(clap::Args)]
 pub struct BridgeArgs {
-    /// Config files layered over the embedded `config/bridge.toml`, in order.
-    #[arg(long = "config")]
-    pub configs: Vec<PathBuf>,
-    /// Override a key, e.g. --set bridge.connect='["tcp/10.0.0.2:7447"]' (applied last).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    pub sets: Vec<String>,
+    /// Files (layout of `config/bridge.toml`) and `--set bridge.key=value` overrides.
+    #[command(flatten)]
+    pub config: ConfigArgs,
     /// iceoryx2 service prefix (overrides bridge.prefix).
     #[arg(long)]
     pub prefix: Option<String>,
@@ -34,7 +32,7 @@ pub struct BridgeArgs {
 }
 
 pub fn run_cli(args: BridgeArgs) -> CliResult {
-    let mut sets = args.sets.clone();
+    let mut sets = args.config.sets.clone();
     for (key, v) in [
         ("bridge.prefix", &args.prefix),
         (
@@ -55,7 +53,7 @@ pub fn run_cli(args: BridgeArgs) -> CliResult {
             sets.push(format!("{key}={list}"));
         }
     }
-    let cfg = BridgeConfig::load(&args.configs, &sets)?;
+    let cfg = BridgeConfig::load(&args.config.configs, &sets)?;
     // Before Zenoh starts its threads: they inherit the blocked signals, this one handles them.
     let stop = stop_flag();
     let summary = run(&cfg, stop)?;

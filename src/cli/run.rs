@@ -292,11 +292,7 @@ fn run_one(
                     .spawn()?,
             );
             let mut c = match &args.forecaster {
-                Some(cmd) => {
-                    let mut c = Command::new("sh");
-                    c.args(["-c", &format!("exec {cmd}")]);
-                    c
-                }
+                Some(cmd) => shell(cmd),
                 None => {
                     let script = remote_forecaster(root)?;
                     let mut c = Command::new(super::common::python(&None));
@@ -312,10 +308,8 @@ fn run_one(
             c
         }
         Some(cmd) => {
-            let mut c = Command::new("sh");
-            // `exec` so that the command itself, not the shell, gets our SIGTERM at the end.
-            c.args(["-c", &format!("exec {cmd}")])
-                .env("UPC_PREFIX", &prefix)
+            let mut c = shell(cmd);
+            c.env("UPC_PREFIX", &prefix)
                 .env("UPC_DURATION", &dur)
                 .env("UPC_SCENARIO", &args.scenario);
             c
@@ -428,6 +422,14 @@ fn run_one(
     })
 }
 
+/// `cmd` through `sh -c`, with `exec` so that the command itself, not the shell, gets our
+/// SIGTERM at the end.
+fn shell(cmd: &str) -> Command {
+    let mut c = Command::new("sh");
+    c.args(["-c", &format!("exec {cmd}")]);
+    c
+}
+
 /// Spawn rerun's viewer (or reuse the one open on its default port); its gRPC proxy URL.
 fn spawn_viewer() -> Result<String, Box<dyn std::error::Error + Send + Sync>> {
     let venv = [".", env!("CARGO_MANIFEST_DIR")]
@@ -482,11 +484,10 @@ fn free_loopback_port() -> std::io::Result<u16> {
 /// scenarios' files.
 fn remote_forecaster(root: &Path) -> std::io::Result<PathBuf> {
     const SCRIPT: &str = include_str!("../../examples/python/zenoh_forecaster.py");
-    const CHANNELS: &str = include_str!("../../services/python/upc_channels.py");
     let dir = root.join("remote");
     std::fs::create_dir_all(&dir)?;
     std::fs::write(dir.join("zenoh_forecaster.py"), SCRIPT)?;
-    std::fs::write(dir.join("upc_channels.py"), CHANNELS)?;
+    std::fs::write(dir.join("upc_channels.py"), super::sim::CHANNELS_PY)?;
     for (name, text) in upc::scenario::EMBEDDED {
         std::fs::write(dir.join(format!("{name}.toml")), text)?;
     }

@@ -146,7 +146,7 @@ pub fn load_config(args: &PlantArgs) -> Result<SimConfig, upc::config::ConfigErr
 
 /// The plant process, written beside the scene it runs.
 const MUJOCO_PLANT_PY: &str = include_str!("../../services/python/mujoco_plant.py");
-const CHANNELS_PY: &str = include_str!("../../services/python/upc_channels.py");
+pub(super) const CHANNELS_PY: &str = include_str!("../../services/python/upc_channels.py");
 
 /// Writes the MuJoCo bundle of `args` into `dir`; returns the path of its `plant.json`.
 fn write_bundle(

@@ -39,6 +39,25 @@ impl Layers {
         Self::default()
     }
 
+    /// Embedded defaults, then `files`, then `--set` overrides: the stack of a process's own
+    /// config file (`config/sim.toml`, `config/bridge.toml`).
+    pub fn stack(
+        origin: &str,
+        defaults: &str,
+        files: &[std::path::PathBuf],
+        sets: &[String],
+    ) -> Result<Self, ConfigError> {
+        let mut layers = Self::new();
+        layers.push_str(origin, defaults)?;
+        for f in files {
+            layers.push_file(f)?;
+        }
+        for s in sets {
+            layers.push_override(s)?;
+        }
+        Ok(layers)
+    }
+
     /// Add a layer from TOML text; `origin` names it in errors (a path, or `<embedded …>`).
     pub fn push_str(&mut self, origin: &str, text: &str) -> Result<(), ConfigError> {
         let table: toml::Table =

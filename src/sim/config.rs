@@ -128,14 +128,7 @@ impl SimConfig {
 
     /// Embedded defaults, then `files` in order, then `sets` (`sim.key=value`).
     pub fn load(files: &[PathBuf], sets: &[String]) -> Result<SimConfig, ConfigError> {
-        let mut layers = Layers::new();
-        layers.push_str("<embedded config/sim.toml>", SIM_TOML)?;
-        for f in files {
-            layers.push_file(f)?;
-        }
-        for s in sets {
-            layers.push_override(s)?;
-        }
+        let layers = Layers::stack("<embedded config/sim.toml>", SIM_TOML, files, sets)?;
         let file: SimFile = layers.typed()?;
         file.sim.validate(&layers)?;
         Ok(file.sim)

@@ -136,6 +136,44 @@ impl Drop for Procs {
     }
 }
 
+/// `upc controller` in real time on the scratch's quiet scenario and prefix, its summary in
+/// `<dir>/controller.json`, then `extra`.
+pub fn controller_args(s: &Scratch, extra: &[&str]) -> Vec<String> {
+    let scenario = s.scenario();
+    let mut v: Vec<String> = [
+        "controller",
+        "--realtime",
+        "--scenario",
+        &scenario,
+        "--duration",
+        "1000",
+        "--prefix",
+        &s.prefix,
+    ]
+    .iter()
+    .map(|x| x.to_string())
+    .collect();
+    v.push("--summary".into());
+    v.push(s.path("controller.json").display().to_string());
+    v.extend(extra.iter().map(|x| x.to_string()));
+    v
+}
+
+/// Start [`controller_args`] as process `controller`.
+pub fn start_controller(p: &mut Procs, s: &Scratch, extra: &[&str]) {
+    let args = controller_args(s, extra);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    p.start(s, "controller", &args);
+}
+
+/// A TCP port free on loopback now (the OS picks it; a process binds it a moment later).
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port()
+}
+
 /// Runs `upc args…` to completion (logs at warn) and asserts that it succeeded, with its
 /// stderr in the message.
 pub fn upc_ok<S: AsRef<std::ffi::OsStr>>(args: impl IntoIterator<Item = S>) {
