@@ -267,9 +267,18 @@ fn mujoco_real_time_holds_hands_over_and_holds_again_when_the_controller_dies() 
     obs.wait_for(1, before.time + 2.0, &mut p, &s);
     let driven = obs.get();
     assert_eq!(driven.flags & STATE_FLAG_HOLD, 0, "handed over: {driven:?}");
+    // A stall of both processes (twice the command timeout) is not a lost controller.
+    p.freeze(&["sim", "controller"], 0.1);
+    obs.wait_for(1, driven.time + 0.5, &mut p, &s);
+    let stalled = obs.get();
+    assert_eq!(
+        stalled.flags & STATE_FLAG_HOLD,
+        0,
+        "after a stall: {stalled:?}"
+    );
     p.signal("controller", libc::SIGKILL);
     let _ = p.wait("controller", Duration::from_secs(5));
-    obs.wait_for(1, driven.time + 1.0, &mut p, &s);
+    obs.wait_for(1, stalled.time + 1.0, &mut p, &s);
     let lost = obs.get();
     assert_ne!(lost.flags & STATE_FLAG_HOLD, 0, "held again: {lost:?}");
     p.stop(&s, "sim", libc::SIGTERM);

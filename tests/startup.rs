@@ -219,3 +219,46 @@ fn controller_killed_and_restarted_plant_holds_and_the_new_one_takes_over() {
         u(&sim["commands"], "stale")
     );
 }
+
+/// A stall of the whole machine (every process descheduled 0.1 s, twice the command timeout)
+/// is not a lost controller: the plant published no state either, and counts the controller's
+/// silence in its own live time. A controller frozen alone for as long is lost: the plant holds
+/// and hands over again once its torques resume.
+#[test]
+fn a_machine_stall_is_not_a_lost_controller_but_a_frozen_controller_is() {
+    let _serial = serial();
+    let s = Scratch::new("startup_stall");
+    let mut p = Procs::default();
+    let obs = Observer::start(&s.prefix);
+    start_sim(&mut p, &s, "sim");
+    start_unit(&mut p, &s, "upc-controller", "controller", &[]);
+    start_unit(&mut p, &s, "upc-forecaster", "forecaster", &[]);
+    obs.wait_for(1, 1.0, &mut p, &s);
+    p.freeze(&["sim", "controller", "forecaster"], 0.1);
+    let after_stall = obs.get().time + 0.5;
+    obs.wait_for(1, after_stall, &mut p, &s);
+    let stalled = obs.get();
+    p.freeze(&["controller"], 0.1);
+    let after_freeze = obs.get().time + 1.0;
+    obs.wait_for(1, after_freeze, &mut p, &s);
+    let seen = obs.get();
+    stop_all(&mut p, &s, &["sim", "controller", "forecaster"]);
+    assert_eq!(
+        stalled.flags & STATE_FLAG_HOLD,
+        0,
+        "driven after the machine stall: {stalled:?}"
+    );
+    assert_stands(&seen, "stall, then a frozen controller");
+    let sim = json(&s.path("sim.json"));
+    let c = json(&s.path("controller.json"));
+    assert!(f(&c, "longest_state_gap") > 0.09, "the stall happened: {c}");
+    assert_eq!(u(&sim["hold"], "losses"), 1, "{sim}");
+    assert_eq!(u(&sim["hold"], "handovers"), 2, "{sim}");
+    assert_eq!(u(&c, "tick_errors"), 0, "{c}");
+    eprintln!(
+        "stall: CoM drop {:.2} mm, hold steps {}, longest state gap {:.0} ms",
+        (seen.com_z0 - seen.com_z_min) * 1e3,
+        u(&sim["hold"], "hold_steps"),
+        f(&c, "longest_state_gap") * 1e3
+    );
+}

@@ -666,9 +666,16 @@ class Process:
         p, period = self.p, self.sim["dt"]
         cmd_timeout = self.sim["command_timeout"]
         commanded, applied = np.zeros(p.n), np.zeros(p.n)
-        last_cmd = None
+        last_cmd = last_pass = None
         nxt = time.monotonic() + period
         while self.steps < total and not stop["now"]:
+            # The command's age counts this plant's live time only: a pass longer than a
+            # period was its own stall, with no state for the controller to answer
+            # (CommandClock in src/sim/hold.rs).
+            top = time.monotonic()
+            if last_pass is not None and last_cmd is not None:
+                last_cmd = min(last_cmd + max(0.0, top - last_pass - period), top)
+            last_pass = top
             fresh = False
             while (msg := self.receive()) is not None:
                 # A controller's own fallback (it has no state to control from) does not take

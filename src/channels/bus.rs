@@ -3,7 +3,7 @@
 use core::fmt::Debug;
 use core::time::Duration;
 
-use iceoryx2::port::listener::Listener as IoxListener;
+use iceoryx2::port::listener::{Listener as IoxListener, ListenerWaitError};
 use iceoryx2::port::notifier::Notifier as IoxNotifier;
 use iceoryx2::port::publisher::Publisher as IoxPublisher;
 use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
@@ -267,13 +267,16 @@ pub struct Listener {
 }
 
 impl Listener {
-    /// Block up to `timeout` for a notification; true if one (or more) arrived.
+    /// Block up to `timeout` for a notification; true if one (or more) arrived. A wait
+    /// interrupted by a signal returns false early, like a time-out: Linux ends timed waits
+    /// with EINTR when a stopped process is continued (SIGSTOP/SIGCONT: a debugger, job
+    /// control, a freezer cgroup) even without a handler, and that is no reason to stop.
     pub fn wait(&self, timeout: Duration) -> Result<bool, ChannelError> {
-        let n = self
-            .inner
-            .timed_wait(|_| {}, timeout)
-            .map_err(|e| err("wait", e))?;
-        Ok(n > 0)
+        match self.inner.timed_wait(|_| {}, timeout) {
+            Ok(n) => Ok(n > 0),
+            Err(ListenerWaitError::InterruptSignal) => Ok(false),
+            Err(e) => Err(err("wait", e)),
+        }
     }
 
     /// Wait until `ready()` holds or a notification arrives, for at most `timeout`; true unless

@@ -13,6 +13,8 @@
 //! - `Control`: τ = τ_c.
 //! - `Damping`: τ = −D q̇ (`sim.process.safe_damping`).
 
+use std::time::{Duration, Instant};
+
 use nalgebra::DVector;
 
 use super::config::{HoldConfig, HoldKind};
@@ -208,6 +210,55 @@ impl Supervisor {
     }
 }
 
+/// How long the controller has been silent, in the plant's *live* wall time: a period the plant
+/// itself overran (descheduled, a slow step) published no state, so the controller had nothing
+/// to answer and that time does not count against it. Without this a stall of the whole machine
+/// longer than `command_timeout` reads as a lost controller once the plant resumes, though the
+/// controller answers within a period of the next state. A controller silent while the plant
+/// runs on time is still lost after `timeout`, also when the plant runs steadily behind (its
+/// passes then take less than a period each and credit nothing).
+#[derive(Debug, Clone, Copy)]
+pub struct CommandClock {
+    period: Duration,
+    timeout: Duration,
+    last_pass: Option<Instant>,
+    last_command: Option<Instant>,
+}
+
+impl CommandClock {
+    pub fn new(period: Duration, timeout: Duration) -> Self {
+        Self {
+            period,
+            timeout,
+            last_pass: None,
+            last_command: None,
+        }
+    }
+
+    /// The top of a plant loop pass at `now`: what this pass took beyond one period since the
+    /// last one was the plant's own stall, credited to the controller's silence.
+    pub fn pass(&mut self, now: Instant) {
+        if let (Some(prev), Some(cmd)) = (self.last_pass, self.last_command.as_mut()) {
+            let stall = now
+                .saturating_duration_since(prev)
+                .saturating_sub(self.period);
+            *cmd = (*cmd + stall).min(now);
+        }
+        self.last_pass = Some(now);
+    }
+
+    /// A fresh command arrived at `now`.
+    pub fn command(&mut self, now: Instant) {
+        self.last_command = Some(now);
+    }
+
+    /// Whether the last command is current at `now`.
+    pub fn current(&self, now: Instant) -> bool {
+        self.last_command
+            .is_some_and(|t| now.saturating_duration_since(t) <= self.timeout)
+    }
+}
+
 /// Joint damping `τ = −D q̇` (the actuated joints: the last `out.len()` entries of `v`).
 fn damping(d: f64, v: &DVector<f64>, out: &mut DVector<f64>) {
     let off = v.len() - out.len();
@@ -305,6 +356,47 @@ mod tests {
         let s = sup.stats;
         assert_eq!((s.handovers, s.losses), (2, 1));
         assert!(s.hold_steps > 900 && s.handover_steps >= 200 && s.damping_steps > 0);
+    }
+
+    #[test]
+    fn command_age_counts_the_plant_s_live_time_only() {
+        let ms = Duration::from_millis;
+        let t0 = Instant::now();
+        let mut c = CommandClock::new(ms(1), ms(50));
+        assert!(!c.current(t0), "no command yet");
+        c.pass(t0);
+        c.command(t0);
+        // The plant on time, the controller silent: lost after 50 ms.
+        for k in 1..=60 {
+            c.pass(t0 + ms(k));
+            assert_eq!(c.current(t0 + ms(k)), k <= 50, "at {k} ms");
+        }
+        // The plant itself stalls 45 ms after a command at 100 ms: once it resumes, the
+        // controller gets a few periods to answer the new state (3 ms late here: current).
+        let mut c = CommandClock::new(ms(1), ms(50));
+        c.pass(t0 + ms(100));
+        c.command(t0 + ms(100));
+        c.pass(t0 + ms(146));
+        for k in 147..=149 {
+            c.pass(t0 + ms(k));
+            assert!(c.current(t0 + ms(k)), "at {k} ms");
+        }
+        // ... but not forever: 50 ms of live time after the stall, it is lost.
+        for k in 150..=200 {
+            c.pass(t0 + ms(k));
+        }
+        assert!(!c.current(t0 + ms(200)));
+        // A plant steadily behind (passes of 0.8 ms, no sleep) credits nothing.
+        let mut c = CommandClock::new(ms(1), ms(50));
+        let us = Duration::from_micros;
+        c.pass(t0);
+        c.command(t0);
+        let mut now = t0;
+        while now < t0 + ms(51) {
+            now += us(800);
+            c.pass(now);
+        }
+        assert!(!c.current(now));
     }
 
     #[test]

@@ -8,7 +8,8 @@
 //! - **Real-time**: step every `dt` of wall time (absolute deadlines, overruns counted). Who
 //!   drives the robot is the [`Supervisor`]'s call: until the controller's first valid torques
 //!   the robot is held at its start posture (`[sim.hold]`), then handed over to the torques
-//!   without a jump; with no command for `sim.process.command_timeout` it is held again, and
+//!   without a jump; with no command for `sim.process.command_timeout` (of the plant's own live
+//!   time: its own stalls are not the controller's silence, [`CommandClock`]) it is held again, and
 //!   after `sim.hold.lost_timeout` only damped. Transitions are logged; the state's flags say
 //!   when the plant holds.
 //!
@@ -33,7 +34,7 @@ use crate::channels::{
 
 use super::command::{CommandGate, CommandOrigin, CommandStats};
 use super::config::{Mode, Push, SimConfig};
-use super::hold::{HoldStats, Phase, Supervisor};
+use super::hold::{CommandClock, HoldStats, Phase, Supervisor};
 use super::record::{Recorder, RecorderStats};
 use super::scene::{DoorDrive, default_scene};
 use super::world::{SimError, StepReport, World};
@@ -634,13 +635,14 @@ impl Looper {
     ) -> Result<(), ProcessError> {
         let n = world.n_actuated();
         let period = Duration::from_secs_f64(cfg.dt);
-        let cmd_timeout = Duration::from_secs_f64(cfg.process.command_timeout);
+        let mut clock =
+            CommandClock::new(period, Duration::from_secs_f64(cfg.process.command_timeout));
         let start = Instant::now();
         let mut next = start + period;
-        let mut last_cmd: Option<Instant> = None;
         let mut commanded = DVector::zeros(n);
         let mut applied = DVector::zeros(n);
         while world.steps() < total && !stop.load(Ordering::Relaxed) {
+            clock.pass(Instant::now());
             let mut fresh = false;
             while let Some(msg) = ep.torques.receive()? {
                 // A controller's own fallback (it has no state to control from) does not take
@@ -656,11 +658,11 @@ impl Looper {
             }
             let now = Instant::now();
             if fresh {
-                last_cmd = Some(now);
+                clock.command(now);
             } else {
                 self.gate.stats.stale += 1;
             }
-            let current = last_cmd.is_some_and(|t| now.duration_since(t) <= cmd_timeout);
+            let current = clock.current(now);
             let t = world.time();
             let transition = self.supervisor.torques(
                 t,

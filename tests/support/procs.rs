@@ -81,6 +81,18 @@ impl Procs {
             .unwrap_or_else(|| panic!("no process {name}"))
     }
 
+    /// Freeze `names` (SIGSTOP) for `secs` of wall time, then resume them in the same order: a
+    /// stall of those processes as a busy or misbehaving machine causes it.
+    pub fn freeze(&self, names: &[&str], secs: f64) {
+        for n in names {
+            self.signal(n, libc::SIGSTOP);
+        }
+        std::thread::sleep(Duration::from_secs_f64(secs));
+        for n in names {
+            self.signal(n, libc::SIGCONT);
+        }
+    }
+
     pub fn signal(&self, name: &str, sig: i32) {
         // SAFETY: signalling our own child, which we have not reaped yet.
         unsafe { libc::kill(self.pid(name), sig) };
