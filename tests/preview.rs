@@ -209,6 +209,7 @@ fn alpha0_varying_every_tick_matches_the_dense_solve() {
     let (mut state, refs) = busy_problem(n);
     let mut ric = preview(&c, n, LqSolverKind::Riccati);
     let mut plan = upc::preview::PreviewPlan::with_capacity(n);
+    let mut worst = 0.0f64;
     for k in 0..24 {
         // Every third tick repeats the last forecast (same α0 rows).
         let shift = k - k / 3;
@@ -223,6 +224,7 @@ fn alpha0_varying_every_tick_matches_the_dense_solve() {
             .solve_c1(&state, &refs, &forces)
             .unwrap();
         for a in 0..2 {
+            worst = worst.max(rel(ur[a], ud[a]));
             assert!(
                 rel(ur[a], ud[a]) < 1e-9,
                 "tick {k} axis {a}: riccati {} dense {}",
@@ -239,6 +241,7 @@ fn alpha0_varying_every_tick_matches_the_dense_solve() {
             state[a] = model(&c).step(&state[a], ur[a]);
         }
     }
+    eprintln!("worst relative difference to the dense solve: {worst:.2e}");
 }
 
 #[test]
@@ -509,6 +512,38 @@ fn bad_inputs_are_errors_not_panics() {
         p.solve_c1(&state, &refs, &nan),
         Err(PreviewError::NotFinite { .. })
     ));
+    // The first bad sample is the one reported, whatever its kind; F_z = −∞ is not finite
+    // (not a lift-off); a finite force so large that α overflows is not finite either.
+    nan[3][0] = 0.0;
+    nan[40][2] = weight * 2.0;
+    nan[60][1] = f64::NAN;
+    assert!(matches!(
+        p.solve_c1(&state, &refs, &nan),
+        Err(PreviewError::LiftOff { step: 41, .. })
+    ));
+    nan[20][2] = f64::NEG_INFINITY;
+    assert!(matches!(
+        p.solve_c1(&state, &refs, &nan),
+        Err(PreviewError::NotFinite { step: 21, .. })
+    ));
+    let mut huge = vec![[0.0; 3]; n];
+    huge[9] = [f64::MAX, 0.0, weight - 0.5];
+    assert!(matches!(
+        p.solve_c1(&state, &refs, &huge),
+        Err(PreviewError::NotFinite { step: 10, .. })
+    ));
+    let mut bad_refs = refs.clone();
+    bad_refs[7][1] = f64::INFINITY;
+    bad_refs[9][0] = f64::NAN;
+    assert!(matches!(
+        p.solve_c0(&state, &bad_refs),
+        Err(PreviewError::NotFinite {
+            what: "ZMP reference",
+            step: 8
+        })
+    ));
+    // After the errors, a valid forecast solves as before.
+    assert!(p.solve_c1(&state, &refs, &busy_forces(n)).is_ok());
     let short = vec![[0.0; 3]; n - 1];
     assert!(matches!(
         p.solve_c1(&state, &refs, &short),

@@ -61,25 +61,54 @@ impl Disturbance {
             });
         }
         let weight = model.mass * model.gravity;
-        for (i, f) in forces[..horizon].iter().enumerate() {
-            if !f.iter().all(|v| v.is_finite()) {
-                return Err(PreviewError::NotFinite {
-                    what: "CoM disturbance",
-                    step: i + 1,
-                });
-            }
+        let forces = &forces[..horizon];
+        // Loops over slices, none with an early exit or an index check, so that they vectorise
+        // (the divisions are most of this per-tick O(N) work): the margins, their reciprocals
+        // α0, then α; the results checked last (a bad sample leaves α0 ≤ 0 or a non-finite
+        // value), and the first bad sample looked for only when there is one.
+        let alpha0 = &mut self.alpha0[..horizon];
+        for (a, f) in alpha0.iter_mut().zip(forces) {
+            *a = weight - f[2];
+        }
+        for a in alpha0.iter_mut() {
+            *a = 1.0 / *a;
+        }
+        let [ax, ay] = &mut self.alpha;
+        let (ax, ay) = (&mut ax[..horizon], &mut ay[..horizon]);
+        for (((x, y), f), a) in ax
+            .iter_mut()
+            .zip(ay.iter_mut())
+            .zip(forces)
+            .zip(alpha0.iter())
+        {
+            *x = f[0] * a;
+            *y = f[1] * a;
+        }
+        let good = |a: f64, x: f64, y: f64| {
+            (a > 0.0) & (a < f64::INFINITY) & (x.abs() < f64::INFINITY) & (y.abs() < f64::INFINITY)
+        };
+        let samples = || alpha0.iter().zip(ax.iter()).zip(ay.iter());
+        if !samples().fold(true, |ok, ((&a, &x), &y)| ok & good(a, x, y))
+            && let Some(i) = samples().position(|((&a, &x), &y)| !good(a, x, y))
+        {
+            let f = forces[i];
             let margin = weight - f[2];
-            if margin <= 0.0 {
-                return Err(PreviewError::LiftOff {
-                    step: i + 1,
-                    f_z: f[2],
-                    margin,
-                });
-            }
-            let alpha0 = 1.0 / margin;
-            self.alpha0[i] = alpha0;
-            self.alpha[0][i] = f[0] * alpha0;
-            self.alpha[1][i] = f[1] * alpha0;
+            let a = alpha0[i];
+            return Err(
+                if f.iter().all(|v| v.is_finite()) && !(a > 0.0 && a < f64::INFINITY) {
+                    // M g − F_z ≤ 0 (or so small that α0 overflows).
+                    PreviewError::LiftOff {
+                        step: i + 1,
+                        f_z: f[2],
+                        margin,
+                    }
+                } else {
+                    PreviewError::NotFinite {
+                        what: "CoM disturbance",
+                        step: i + 1,
+                    }
+                },
+            );
         }
         self.len = horizon;
         Ok(())
@@ -87,7 +116,18 @@ impl Disturbance {
 
     /// D_i = z_c α(k+i) for one axis (eq. 14).
     pub fn shift(&self, model: &CartTable, axis: usize, i: usize) -> f64 {
-        model.com_height * self.alpha[axis][i]
+        shift_of(model, self.alpha[axis][i])
+    }
+
+    /// D_i for one axis, i = 0 … `len` − 1, as [`Disturbance::shift`] gives them.
+    pub fn shifts<'a>(
+        &'a self,
+        model: &'a CartTable,
+        axis: usize,
+    ) -> impl Iterator<Item = f64> + 'a {
+        self.alpha[axis][..self.len]
+            .iter()
+            .map(|&a| shift_of(model, a))
     }
 
     fn check_capacity(&self, horizon: usize) -> Result<(), PreviewError> {
@@ -99,4 +139,10 @@ impl Disturbance {
         }
         Ok(())
     }
+}
+
+/// eq. (14): D = z_c α.
+#[inline(always)]
+fn shift_of(model: &CartTable, alpha: f64) -> f64 {
+    model.com_height * alpha
 }

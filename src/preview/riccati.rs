@@ -129,18 +129,26 @@ impl Riccati {
     /// cost-to-go of the references `t[0]`, `t[1]` alongside; returns their first feedforward
     /// inputs k_0 (zeros without `LINEAR`).
     ///
-    /// Run in scaled coordinates x̃ = S x, S = diag(1, T, T²/2), ũ = T³ u, where the
-    /// cart-table becomes Ã = [[1, 1, 1], [0, 1, 2], [0, 0, 1]], B̃ = [1/6, 1/2, 1/2], the output
-    /// row c̃ = [1, 0, 2 c2 / T²] and R̃ = R / T⁶: AᵀPA is then additions only (20 % faster
-    /// than with T's powers in every product). The gains are stored back in the original
-    /// coordinates: K = K̃ S / T³, 1/H = (1/H̃) / T⁶.
+    /// Run in coordinates where the input enters one state and every sum is an addition:
+    /// x' = T⁻¹ S x, ũ = T³ u, with S = diag(1, T, T²/2) (the cart-table's powers of the
+    /// period scaled out) and T = [e₀, e₁, B̃] (B̃ = [1/6, 1/2, 1/2], the scaled input). There
+    /// A' = [[1, 1, 1], [0, 1, 1], [0, 0, 1]], B' = e₂, the output row c' = [1, 0, 1/6 + c2 / T²]
+    /// (as sparse as the original) and R̃ = R / T⁶. B' = e₂ makes H' = R̃ + p'₂₂ a single entry
+    /// of P', so the next H' is one multiply–add after this step's division
+    /// (p'₂₂ ← a₂₂ − g₂² / H', everything else ready before the division): the recursion's
+    /// critical path is a division and a multiply–add per step, not a division and the sums
+    /// forming BᵀPB. It is the same recursion in another basis (T is well conditioned), not a
+    /// rearranged one: it agrees with the dense solve as closely as the original coordinates
+    /// did (8.3e-10 against 9.4e-10 worst relative difference over the α0 test's ticks).
+    /// The gains are stored in the original coordinates: K = K' T⁻¹ S / T³, 1/H = (1/H') / T⁶.
     ///
     /// On a CPU with FMA a copy of the kernel compiled for it runs (one rounding per multiply–
     /// add): its gains and inputs agree with the plain kernel's within 1e-10 relative (unit test).
     ///
-    /// Tried and left out: forming H̃_{i−1} from P̃_{i+1} and 1/H̃_i (only a multiply and a
-    /// subtraction after the division, the step's latency) was 6 % faster but agreed with the
-    /// dense solve 4× less closely (1.2e-9 against 3e-10 on an ill-conditioned tick).
+    /// Tried and left out (in the scaled coordinates x̃ = S x, where B̃ is dense): forming
+    /// H̃_{i−1} from P̃_{i+1} and 1/H̃_i was 6 % faster but agreed with the dense solve 4× less
+    /// closely (1.2e-9 against 3e-10 on an ill-conditioned tick): the subtraction of two
+    /// large sums that the basis change avoids.
     fn backward_pass<const LINEAR: bool>(
         &mut self,
         model: &CartTable,
@@ -189,82 +197,76 @@ impl Riccati {
         let dt = model.period;
         let dt3 = dt * dt * dt;
         let (inv_dt3, inv_dt6) = (1.0 / dt3, 1.0 / (dt3 * dt3));
-        let c_scale = 2.0 / (dt * dt);
         let r_s = r * inv_dt6;
-        // K = K̃ S / T³.
+        // The output row's third entry in x' coordinates: γ = 1/6 + c̃/2 = 1/6 + c2 / T².
+        let gamma_scale = 1.0 / (dt * dt);
+        const SIXTH: f64 = 1.0 / 6.0;
+        // K = K' T⁻¹ S / T³ (T⁻¹ = [[1, 0, −1/3], [0, 1, −1], [0, 0, 2]]).
         let (ks0, ks1, ks2) = (inv_dt3, dt * inv_dt3, dt * dt / 2.0 * inv_dt3);
-        const B0: f64 = 1.0 / 6.0;
-        const B1: f64 = 0.5;
-        // B̃ᵀP̃B̃ = Σ H_jk p̃_jk over the upper triangle.
-        const H00: f64 = B0 * B0;
-        const H01: f64 = 2.0 * B0 * B1;
-        const H11: f64 = B1 * B1;
-        const H12: f64 = 2.0 * B1 * B1;
-        // P̃_N = Q_e c̃_Nᵀ c̃_N.
-        let cn = c2[n - 1] * c_scale;
+        // P'_N = Q_e c'_Nᵀ c'_N, c' = [1, 0, γ].
+        let gn = madd(c2[n - 1], gamma_scale, SIXTH);
         let mut p = Sym3 {
             p00: q_e,
             p01: 0.0,
-            p02: q_e * cn,
+            p02: q_e * gn,
             p11: 0.0,
             p12: 0.0,
-            p22: q_e * cn * cn,
+            p22: q_e * gn * gn,
         };
-        // s̃_N = −Q_e c̃_N t_N, one lane per axis.
+        // H' = R̃ + p'22, carried on its own: the next one is a single multiply–add after the
+        // division (see `h` below).
+        let mut h = p.p22 + r_s;
+        // s'_N = −Q_e c'_Nᵀ t_N, one lane per axis.
         let w = [0, 1].map(|a| if LINEAR { -q_e * t[a][n - 1] } else { 0.0 });
-        let (mut s0, mut s1, mut s2) = (w, [0.0; 2], w.map(|w| w * cn));
+        let (mut s0, mut s1, mut s2) = (w, [0.0; 2], w.map(|w| w * gn));
         let mut ff0 = [0.0; 2];
         for i in (0..n).rev() {
-            // P̃ B̃ (B̃ = [1/6, 1/2, 1/2]) and H̃ = R̃ + B̃ᵀ P̃ B̃.
-            let pb0 = madd(B0, p.p00, B1 * (p.p01 + p.p02));
-            let pb1 = madd(B0, p.p01, B1 * (p.p11 + p.p12));
-            let pb2 = madd(B0, p.p02, B1 * (p.p12 + p.p22));
-            // H̃ straight from P̃'s entries as a sum tree (not through P̃B̃): the division waits
-            // on it, and the tree is shorter.
-            let h = (madd(H00, p.p00, H01 * p.p01) + madd(H01, p.p02, H11 * p.p11))
-                + madd(H12, p.p12, madd(H11, p.p22, r_s));
             let inv_h = 1.0 / h;
-            // G = B̃ᵀ P̃ Ã = (Ãᵀ P̃ B̃)ᵀ.
-            let g0 = pb0;
-            let g1 = pb0 + pb1;
-            let g2 = g1 + pb1 + pb2;
+            // G = B'ᵀ P' A': row 2 of P' summed from the left (A' = upper-triangular ones).
+            let g0 = p.p02;
+            let g1 = p.p02 + p.p12;
+            let g2 = g1 + p.p22;
             let (k0, k1, k2) = (-g0 * inv_h, -g1 * inv_h, -g2 * inv_h);
-            self.gain[i] = RowVector3::new(k0 * ks0, k1 * ks1, k2 * ks2);
+            let kt2 = madd(2.0, k2, madd(-1.0 / 3.0, k0, -k1));
+            self.gain[i] = RowVector3::new(k0 * ks0, k1 * ks1, kt2 * ks2);
             self.inv_h[i] = inv_h * inv_dt6;
             if LINEAR {
-                // s̃_i = Ãᵀ s̃ + K̃ᵀ (B̃ᵀ s̃) − Q_e c̃_i t_i (as `feedforward_into`, scaled).
-                let hs = [0, 1].map(|a| madd(B0, s0[a], B1 * (s1[a] + s2[a])));
+                // s'_i = A'ᵀ s' + K'ᵀ (B'ᵀ s') − Q_e c'_iᵀ t_i, with B'ᵀ s' = s'_2.
                 if i > 0 {
-                    let c = c2[i - 1] * c_scale;
+                    let gm = madd(c2[i - 1], gamma_scale, SIXTH);
                     let w = [0, 1].map(|a| -q_e * t[a][i - 1]);
-                    let n0 = [0, 1].map(|a| madd(k0, hs[a], s0[a] + w[a]));
-                    let n1 = [0, 1].map(|a| madd(k1, hs[a], s0[a] + s1[a]));
-                    let n2 =
-                        [0, 1].map(|a| madd(w[a], c, madd(k2, hs[a], s0[a] + 2.0 * s1[a] + s2[a])));
+                    let s01 = [0, 1].map(|a| s0[a] + s1[a]);
+                    let n0 = [0, 1].map(|a| madd(k0, s2[a], s0[a] + w[a]));
+                    let n1 = [0, 1].map(|a| madd(k1, s2[a], s01[a]));
+                    let n2 = [0, 1].map(|a| madd(w[a], gm, madd(k2, s2[a], s01[a] + s2[a])));
                     (s0, s1, s2) = (n0, n1, n2);
                 } else {
-                    // k̃_0 = −H̃⁻¹ B̃ᵀ s̃_1; u = ũ / T³.
-                    ff0 = hs.map(|h| -h * inv_h * inv_dt3);
+                    // k̃_0 = −H̃⁻¹ B'ᵀ s'_1; u = ũ / T³.
+                    ff0 = s2.map(|s| -s * inv_h * inv_dt3);
                 }
             }
             if i > 0 {
-                let c = c2[i - 1] * c_scale;
-                // P̃_i = Ãᵀ P̃ Ã + Q_e c̃_iᵀ c̃_i − Gᵀ H̃⁻¹ G.
+                let gm = madd(c2[i - 1], gamma_scale, SIXTH);
+                let qg = q_e * gm;
+                // A'ᵀ P' A': sums of P' over the upper-left blocks.
                 let a01 = p.p00 + p.p01;
-                let a02 = a01 + p.p01 + p.p02;
-                let a11 = a01 + p.p01 + p.p11;
-                let a12 = a02 + p.p01 + 2.0 * p.p11 + p.p12;
-                let a22 = a02 + 2.0 * (p.p01 + 2.0 * p.p11 + p.p12) + (p.p02 + 2.0 * p.p12 + p.p22);
-                // − Gᵀ H̃⁻¹ G = K̃ᵀ G (K̃ = −H̃⁻¹ G). (Forming GᵀG during the division and one
-                // multiply–add after it was no faster and agreed with the dense solve 4× less
-                // closely: 1.25e-9 relative on the α0 test.)
+                let a02 = a01 + p.p02;
+                let t11 = p.p01 + p.p11;
+                let a11 = a01 + t11;
+                let a12 = a02 + (t11 + p.p12);
+                let a22 = a12 + g2;
+                // P'_i = A'ᵀ P' A' + Q_e c'ᵀ c' − Gᵀ G / H'. Its (2, 2) entry plus R̃ is the
+                // next H': its other terms are ready before the division, so the recursion's
+                // critical path is the division and one multiply–add.
+                let c22 = madd(qg, gm, a22);
+                h = madd(-g2 * g2, inv_h, c22 + r_s);
                 p = Sym3 {
                     p00: madd(k0, g0, p.p00 + q_e),
                     p01: madd(k0, g1, a01),
-                    p02: madd(k0, g2, madd(q_e, c, a02)),
+                    p02: madd(k0, g2, a02 + qg),
                     p11: madd(k1, g1, a11),
                     p12: madd(k1, g2, a12),
-                    p22: madd(k2, g2, madd(q_e * c, c, a22)),
+                    p22: madd(k2, g2, c22),
                 };
             }
         }

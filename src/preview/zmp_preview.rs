@@ -114,19 +114,30 @@ impl ZmpPreview {
                 });
             }
         }
-        for i in 0..n {
-            if !(zmp_ref[i][0].is_finite() && zmp_ref[i][1].is_finite()) {
-                return Err(PreviewError::NotFinite {
-                    what: "ZMP reference",
-                    step: i + 1,
-                });
-            }
-            self.c2[i] = self.model.output_acc_coeff(self.disturbance.alpha0[i]);
-            for axis in 0..2 {
+        // Loops over slices without an early exit or an index check (they vectorise); a
+        // non-finite reference sample makes its target non-finite (α is finite), found after.
+        let zmp_ref = &zmp_ref[..n];
+        let (m, d) = (&self.model, &self.disturbance);
+        for (c2, a0) in self.c2[..n].iter_mut().zip(&d.alpha0[..n]) {
+            *c2 = m.output_acc_coeff(*a0);
+        }
+        let mut finite = true;
+        for (axis, target) in self.targets.iter_mut().enumerate() {
+            for ((t, z), shift) in target[..n].iter_mut().zip(zmp_ref).zip(d.shifts(m, axis)) {
                 // eq. (16): p_rd = p_ref − D.
-                self.targets[axis][i] =
-                    zmp_ref[i][axis] - self.disturbance.shift(&self.model, axis, i);
+                *t = z[axis] - shift;
+                finite &= t.is_finite();
             }
+        }
+        if !finite
+            && let Some(i) = zmp_ref
+                .iter()
+                .position(|z| !z.iter().all(|v| v.is_finite()))
+        {
+            return Err(PreviewError::NotFinite {
+                what: "ZMP reference",
+                step: i + 1,
+            });
         }
         let refactor = !self.factored || self.factored_c2[..n] != self.c2[..n];
         if refactor {
