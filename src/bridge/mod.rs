@@ -44,6 +44,8 @@ pub enum BridgeError {
     Zenoh(String),
     #[error(transparent)]
     Channel(#[from] ChannelError),
+    #[error("cannot start the bridge's {what} thread: {detail}")]
+    Spawn { what: &'static str, detail: String },
     #[error("a bridge thread panicked")]
     Panicked,
 }
@@ -141,7 +143,10 @@ pub fn run(cfg: &BridgeConfig, stop: Arc<AtomicBool>) -> Result<BridgeSummary, B
         let thread = std::thread::Builder::new()
             .name("bridge-in".into())
             .spawn(move || forward_forecasts(&prefix, &rx, &stop))
-            .map_err(|e| BridgeError::Zenoh(format!("spawn: {e}")))?;
+            .map_err(|e| BridgeError::Spawn {
+                what: "inbound",
+                detail: e.to_string(),
+            })?;
         Some((subscriber, thread))
     } else {
         None
@@ -154,7 +159,10 @@ pub fn run(cfg: &BridgeConfig, stop: Arc<AtomicBool>) -> Result<BridgeSummary, B
         std::thread::Builder::new()
             .name("bridge-out".into())
             .spawn(move || forward_outbound(&cfg, &session, &stop))
-            .map_err(|e| BridgeError::Zenoh(format!("spawn: {e}")))?
+            .map_err(|e| BridgeError::Spawn {
+                what: "outbound",
+                detail: e.to_string(),
+            })?
     };
 
     let mut summary = BridgeSummary {
@@ -264,7 +272,6 @@ fn forward_forecasts(
     let publisher = bus.publisher::<ForecastMsg>(ServiceKind::Forecast)?;
     let notifier = bus.notifier(ServiceKind::Forecast)?;
     let mut stats = InboundStats::default();
-    let mut msg = Box::<ForecastMsg>::default();
     while !stop.load(Ordering::Relaxed) {
         let inbound = match rx.recv_timeout(Duration::from_millis(50)) {
             Ok(m) => m,
@@ -275,12 +282,13 @@ fn forward_forecasts(
             }
             Err(RecvTimeoutError::Disconnected) => break,
         };
-        if let Err(e) = decode_into(&inbound.bytes, msg.as_mut()) {
+        // Decoded straight into the shared-memory sample, which is sent only if the bytes are
+        // a forecast of this contract. The controller checks the content (finite, in time, in
+        // order) as for any forecaster.
+        if let Err(e) = publisher.try_send_with(|m| decode_into(&inbound.bytes, m))? {
             stats.refuse(&e);
             continue;
         }
-        // The controller checks the content (finite, in time, in order) as for any forecaster.
-        publisher.send_with(|m| *m = *msg)?;
         notifier.notify()?;
         stats.forwarded += 1;
         stats.forward.record(inbound.at.elapsed());

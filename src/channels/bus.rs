@@ -193,6 +193,28 @@ impl<T: ZeroCopySend + Debug + Copy + 'static> Publisher<T> {
         Ok(())
     }
 
+    /// As [`Publisher::send_with`], but `fill` may refuse: the sample is then returned to the
+    /// pool unsent and its error handed back. For payloads decoded straight into shared memory.
+    pub fn try_send_with<E>(
+        &self,
+        fill: impl FnOnce(&mut T) -> Result<(), E>,
+    ) -> Result<Result<(), E>, ChannelError> {
+        let mut sample = self
+            .inner
+            .loan_uninit()
+            .map_err(|e| err("loan sample", e))?;
+        // SAFETY: as in `send_with`.
+        let mut sample = unsafe {
+            sample.payload_mut().as_mut_ptr().write_bytes(0, 1);
+            sample.assume_init()
+        };
+        if let Err(e) = fill(sample.payload_mut()) {
+            return Ok(Err(e));
+        }
+        sample.send().map_err(|e| err("send sample", e))?;
+        Ok(Ok(()))
+    }
+
     /// Send a copy of `msg`.
     pub fn send(&self, msg: &T) -> Result<(), ChannelError> {
         self.send_with(|m| *m = *msg)
