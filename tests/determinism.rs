@@ -9,12 +9,12 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 
 use serde_json::Value;
-use support::procs::{csv_without, serial, venv_python};
+use support::procs::{csv_without, freeze, serial, venv_python};
 
 /// Columns of `controller.csv` that are wall-clock measurements.
 const TIMING_COLUMNS: [&str; 2] = ["tick_us", "wbc_us"];
 /// Summary fields that are wall-clock measurements, or identify a process run.
-const TIMING_FIELDS: [&str; 24] = [
+const TIMING_FIELDS: [&str; 25] = [
     "tick_p50_us",
     "tick_p99_us",
     "tick_max_us",
@@ -43,6 +43,8 @@ const TIMING_FIELDS: [&str; 24] = [
     // which the controller counts and skips.
     "stale",
     "stale_states",
+    // Wall time without a state (a plant stopped or starved past `state_timeout`).
+    "stale_periods",
 ];
 
 fn scratch(name: &str) -> PathBuf {
@@ -229,5 +231,71 @@ fn lockstep_c2_reruns_byte_for_byte_on_a_loaded_machine() {
         run(&out, "loaded", "c2", "1.5")
     };
     assert_same(&a, &b);
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// The pid of the child of `parent` whose first argument is `sub` (`upc run`'s `sim`,
+/// `controller`), waiting for it to start.
+fn child_running(parent: u32, sub: &str) -> i32 {
+    let until = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    while std::time::Instant::now() < until {
+        let children = std::fs::read_to_string(format!("/proc/{parent}/task/{parent}/children"))
+            .unwrap_or_default();
+        for pid in children.split_whitespace() {
+            let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+            let args: Vec<&[u8]> = cmdline.split(|&b| b == 0).collect();
+            if args.get(1) == Some(&sub.as_bytes()) {
+                return pid.parse().expect("pid");
+            }
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    panic!("no `{sub}` child of upc run {parent}");
+}
+
+/// A lockstep run is a function of its inputs, not of wall time: its simulator stopped for
+/// 1.2 s (past the controller's 0.5 s state timeout), then its controller for 2.5 s (past the
+/// simulator's 2 s lockstep timeout), as a starved process or a debugger would, the run waits
+/// for each and gives the undisturbed run's bytes. (A peer whose process is gone still ends
+/// the run: `tests/faults.rs`.)
+#[test]
+fn lockstep_waits_for_a_stopped_simulator_and_controller_and_gives_the_same_bytes() {
+    let _serial = serial();
+    let out = scratch("stopped");
+    let a = run(&out, "undisturbed", "c1", "7");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_upc"))
+        .args(["run", "--quiet", "--controller", "c1", "--duration", "7"])
+        .args(["--name", "stopped", "--out"])
+        .arg(&out)
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("upc run");
+    let sim = child_running(child.id(), "sim");
+    let controller = child_running(child.id(), "controller");
+    // Mid-run: the controller has logged a tenth of its ticks or so.
+    let csv = out.join("stopped").join("c1").join("controller.csv");
+    let until = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    while std::fs::metadata(&csv).map_or(0, |m| m.len()) < 16 * 1024 {
+        assert!(std::time::Instant::now() < until, "the run did not start");
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    freeze(&[sim], 1.2);
+    std::thread::sleep(std::time::Duration::from_millis(50));
+    freeze(&[controller], 2.5);
+    assert!(child.wait().expect("upc run").success(), "upc run failed");
+    let b = out.join("stopped").join("c1");
+    assert_same(&a, &b);
+    let c: Value =
+        serde_json::from_str(&std::fs::read_to_string(b.join("controller.json")).expect("summary"))
+            .expect("json");
+    let sim_json: Value =
+        serde_json::from_str(&std::fs::read_to_string(b.join("sim.json")).expect("summary"))
+            .expect("json");
+    // Both stops fell inside the run.
+    assert!(c["longest_state_gap"].as_f64().unwrap_or(0.0) > 1.1, "{c}");
+    assert!(
+        sim_json["wall_time"].as_f64().unwrap_or(0.0) > 3.7,
+        "{sim_json}"
+    );
     let _ = std::fs::remove_dir_all(&out);
 }

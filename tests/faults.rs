@@ -114,6 +114,58 @@ fn simulator_killed_and_restarted_controller_holds_reconnects_and_resumes() {
     assert!(f(&c, "com_height_drop") < 0.03, "{c}");
 }
 
+/// In lockstep, a peer that is gone ends the run on its own: a SIGKILLed simulator stops the
+/// controller after `state_timeout` ("simulator stopped", exit 0), a SIGKILLed controller
+/// fails the simulator after `lockstep_timeout` (a peer only stopped or starved is waited for:
+/// `tests/determinism.rs`).
+#[test]
+fn lockstep_peer_killed_ends_the_run() {
+    let _serial = serial();
+    let s = Scratch::new("lockstep_gone");
+    let mut p = Procs::default();
+    let obs = Observer::start(&s.prefix);
+    let lockstep_controller = |p: &mut Procs| {
+        let mut cargs = controller_args(&s, &[]);
+        cargs.retain(|a| a != "--realtime");
+        let cargs: Vec<&str> = cargs.iter().map(String::as_str).collect();
+        p.start(&s, "controller", &cargs);
+    };
+    lockstep_controller(&mut p);
+    start_forecaster(&mut p, &s, "forecaster");
+    start_sim(
+        &mut p,
+        &s,
+        "sim1",
+        &["--mode", "lockstep", "--duration", "1000"],
+    );
+    obs.wait_for(1, 0.3, &mut p, &s);
+    p.signal("sim1", libc::SIGKILL);
+    let _ = p.wait("sim1", Duration::from_secs(5));
+    let st = p.wait("controller", Duration::from_secs(10));
+    assert!(st.success(), "controller: {st}\n{}", log(&s, "controller"));
+    let c = json(&s.path("controller.json"));
+    assert_eq!(c["stopped_by"], "simulator stopped", "{c}");
+    // The other way round.
+    lockstep_controller(&mut p);
+    start_sim(
+        &mut p,
+        &s,
+        "sim2",
+        &["--mode", "lockstep", "--duration", "1000"],
+    );
+    obs.wait_for(2, 0.3, &mut p, &s);
+    p.signal("controller", libc::SIGKILL);
+    let _ = p.wait("controller", Duration::from_secs(5));
+    let st = p.wait("sim2", Duration::from_secs(10));
+    assert!(!st.success(), "sim2 should fail: {st}");
+    let sim_log = log(&s, "sim2");
+    assert!(
+        sim_log.contains("no torques answering state"),
+        "sim2's log: {sim_log}"
+    );
+    p.stop(&s, "forecaster", libc::SIGTERM);
+}
+
 #[test]
 fn lockstep_controller_waits_for_a_restarted_simulator_when_configured() {
     let _serial = serial();

@@ -3,6 +3,7 @@
 use core::fmt::Debug;
 use core::time::Duration;
 
+use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::{Listener as IoxListener, ListenerWaitError};
 use iceoryx2::port::notifier::Notifier as IoxNotifier;
 use iceoryx2::port::publisher::Publisher as IoxPublisher;
@@ -79,10 +80,7 @@ impl Bus {
     fn pubsub<T: ZeroCopySend + Debug + 'static>(
         &self,
         kind: ServiceKind,
-    ) -> Result<
-        iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
-        ChannelError,
-    > {
+    ) -> Result<PubSubService<T>, ChannelError> {
         let name = self.service_name(kind, false)?;
         self.node
             .service_builder(&name)
@@ -129,12 +127,12 @@ impl Bus {
         &self,
         kind: ServiceKind,
     ) -> Result<Subscriber<T>, ChannelError> {
-        let inner = self
-            .pubsub::<T>(kind)?
+        let service = self.pubsub::<T>(kind)?;
+        let inner = service
             .subscriber_builder()
             .create()
             .map_err(|e| err("create subscriber", e))?;
-        Ok(Subscriber { inner })
+        Ok(Subscriber { inner, service })
     }
 
     pub fn notifier(&self, kind: ServiceKind) -> Result<Notifier, ChannelError> {
@@ -230,12 +228,45 @@ impl<T: ZeroCopySend + Debug + Copy + 'static> Publisher<T> {
     }
 }
 
+type PubSubService<T> =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>;
+
 /// Receives `T`.
 pub struct Subscriber<T: ZeroCopySend + Debug + Copy + 'static> {
     inner: IoxSubscriber<ipc::Service, T, ()>,
+    service: PubSubService<T>,
 }
 
 impl<T: ZeroCopySend + Debug + Copy + 'static> Subscriber<T> {
+    /// Whether a publisher of a living process is connected to the service: the peer is slow,
+    /// not gone. A process killed with SIGKILL leaves its publisher registered until someone
+    /// cleans up, but its node is then dead; a node whose state cannot be read counts as alive.
+    /// Lists the system's nodes (allocates, touches the file system): for time-out paths only.
+    pub fn has_live_publisher(&self) -> bool {
+        let mut nodes = Vec::new();
+        self.service.dynamic_config().list_publishers(|p| {
+            nodes.push(p.node_id);
+            CallbackProgression::Continue
+        });
+        if nodes.is_empty() {
+            return false;
+        }
+        let mut alive = false;
+        let listed = Node::<ipc::Service>::list(Config::global_config(), |node| {
+            alive = match &node {
+                NodeState::Alive(v) => nodes.contains(v.id()),
+                NodeState::Inaccessible(id) => nodes.contains(id),
+                NodeState::Dead(_) | NodeState::Undefined(_) => false,
+            };
+            if alive {
+                CallbackProgression::Stop
+            } else {
+                CallbackProgression::Continue
+            }
+        });
+        listed.is_ok() && alive
+    }
+
     /// The next sample in order, copied out.
     pub fn receive(&self) -> Result<Option<T>, ChannelError> {
         Ok(self

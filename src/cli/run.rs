@@ -228,10 +228,14 @@ fn run_one(
     };
     let dur = format!("{duration}");
     let start = Instant::now();
-    let log = |file: &str| -> std::io::Result<Stdio> {
-        Ok(Stdio::from(std::fs::File::create(dir.join(file))?))
+    // One open file for a child's stdout and stderr: two opens of the same path would each
+    // write from offset 0 over the other's lines.
+    let log = |file: &str| -> std::io::Result<(Stdio, Stdio)> {
+        let f = std::fs::File::create(dir.join(file))?;
+        Ok((Stdio::from(f.try_clone()?), Stdio::from(f)))
     };
 
+    let (out, err) = log("sim.log")?;
     let mut sim = Command::new(exe)
         .args([
             "sim",
@@ -274,21 +278,22 @@ fn run_one(
         } else {
             vec!["--truth-csv".into(), dir.join("sim.csv")]
         })
-        .stdout(log("sim.log")?)
-        .stderr(log("sim.log")?)
+        .stdout(out)
+        .stderr(err)
         .spawn()?;
     let mut bridge = None;
     let mut forecaster = match &args.forecaster {
         _ if args.forecaster_over_zenoh => {
             let endpoint = format!("tcp/127.0.0.1:{}", free_loopback_port()?);
+            let (out, err) = log("bridge.log")?;
             bridge = Some(
                 Command::new(exe)
                     .args(["bridge", "--prefix", &prefix, "--key-prefix", &prefix])
                     .args(["--listen", &endpoint])
                     .arg("--summary")
                     .arg(dir.join("bridge.json"))
-                    .stdout(log("bridge.log")?)
-                    .stderr(log("bridge.log")?)
+                    .stdout(out)
+                    .stderr(err)
                     .spawn()?,
             );
             let mut c = match &args.forecaster {
@@ -332,15 +337,14 @@ fn run_one(
             c
         }
     };
-    let mut forecaster = forecaster
-        .stdout(log("forecaster.log")?)
-        .stderr(log("forecaster.log")?)
-        .spawn()?;
+    let (out, err) = log("forecaster.log")?;
+    let mut forecaster = forecaster.stdout(out).stderr(err).spawn()?;
     if bridge.is_some() {
         // A lockstep controller waits 0.5 s for its first window; a remote forecaster takes
         // longer to start and connect: the controller starts once its first window is here.
         first_forecast(&prefix, &mut forecaster, Duration::from_secs(30))?;
     }
+    let (out, err) = log("controller.log")?;
     let mut controller = Command::new(exe)
         .args([
             "controller",
@@ -367,8 +371,8 @@ fn run_one(
         .arg(dir.join("controller.json"))
         .args(&connect)
         .args(args.config.to_args())
-        .stdout(log("controller.log")?)
-        .stderr(log("controller.log")?)
+        .stdout(out)
+        .stderr(err)
         .spawn()?;
 
     // Progress from the simulator's state stream.

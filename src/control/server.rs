@@ -5,7 +5,8 @@
 //! Faults (see `services/FAULTS.md`):
 //! - No fresh state for `state_timeout`: a stale period. In real time the loop keeps ticking and
 //!   publishes joint damping torques flagged [`TORQUE_FLAG_FALLBACK`]; in lockstep it waits
-//!   `reconnect_timeout` more for a simulator, then stops.
+//!   `reconnect_timeout` more for a simulator, then stops, unless the simulator's process is
+//!   still alive (a starved plant on a loaded machine, a debugger): that one it waits for.
 //! - A state whose step goes back: a restarted simulator. The core, the forecast window and the
 //!   metrics' initial CoM height latch again from its first state, and control resumes.
 //! - Forecasts are validated by [`ForecastWindow`]; without one the forecast decays to zero. A
@@ -287,6 +288,10 @@ pub fn run_server_with(
     let started = Instant::now();
     let mut last_state_at = Instant::now();
     let mut stale = false;
+    // Lockstep: when the plant's liveness was last checked, and whether a wait for a live but
+    // silent plant was logged in this stale period.
+    let mut liveness_checked: Option<Instant> = None;
+    let mut waiting_for_live_plant = false;
     let status_every = Duration::from_secs_f64(cc.status_every);
     let mut next_status = Instant::now() + status_every;
     let (mut hand_sq, mut c2_solve_sum, mut c2_iter_sum, mut c2_seen) = (0.0, 0.0, 0.0, 0u64);
@@ -360,8 +365,24 @@ pub fn run_server_with(
                 }
                 match cc.mode {
                     LoopMode::Lockstep => {
-                        if quiet > cc.state_timeout + cc.reconnect_timeout {
-                            break "simulator stopped".into();
+                        if quiet > cc.state_timeout + cc.reconnect_timeout
+                            && liveness_checked
+                                .is_none_or(|t| t.elapsed() >= Duration::from_millis(100))
+                        {
+                            // A lockstep run is a function of its inputs, not of wall time: a
+                            // plant that is slow (starved, stopped in a debugger) is waited for;
+                            // one whose process is gone ends the run.
+                            liveness_checked = Some(Instant::now());
+                            if !states.has_live_publisher() {
+                                break "simulator stopped".into();
+                            }
+                            if !waiting_for_live_plant {
+                                waiting_for_live_plant = true;
+                                tracing::warn!(
+                                    "no state for {quiet:.3} s, but the simulator's process is \
+                                     alive: waiting for it"
+                                );
+                            }
                         }
                     }
                     LoopMode::Realtime => {
@@ -417,6 +438,7 @@ pub fn run_server_with(
             }
         }
         stale = false;
+        waiting_for_live_plant = false;
         last_step = Some(state.step);
         session = state.session;
         last_time = state.time;

@@ -3,8 +3,10 @@
 //!
 //! - **Lockstep**: publish state `k`, wait for the [`TorqueMsg`] with `state_step = k`, step.
 //!   Answers to older states are counted as stale and skipped; no answer within
-//!   `sim.process.lockstep_timeout` (`first_command_timeout` for the first one) is an error. The
-//!   run is a pure function of the commands: two runs are bit-identical.
+//!   `sim.process.lockstep_timeout` (`first_command_timeout` for the first one) is an error,
+//!   unless the controller has answered before and its process is still alive (starved, in a
+//!   debugger): that one is waited for. The run is a pure function of the commands: two runs
+//!   are bit-identical.
 //! - **Real-time**: step every `dt` of wall time (absolute deadlines, overruns counted). Who
 //!   drives the robot is the [`Supervisor`]'s call: until the controller's first valid torques
 //!   the robot is held at its start posture (`[sim.hold]`), then handed over to the torques
@@ -574,7 +576,8 @@ impl Looper {
             } else {
                 cfg.process.lockstep_timeout
             };
-            let deadline = Instant::now() + Duration::from_secs_f64(timeout);
+            let mut deadline = Instant::now() + Duration::from_secs_f64(timeout);
+            let mut waiting_for_live_controller = false;
             'wait: loop {
                 while let Some(msg) = ep.torques.receive()? {
                     if !self.accept(&msg, n) {
@@ -595,6 +598,19 @@ impl Looper {
                 }
                 let now = Instant::now();
                 if now >= deadline {
+                    // A controller that has answered before and whose process is alive is
+                    // slow (starved, in a debugger), not gone: a lockstep run waits for it.
+                    if want > 0 && ep.torques.has_live_publisher() {
+                        if !waiting_for_live_controller {
+                            waiting_for_live_controller = true;
+                            tracing::warn!(
+                                "no torques for state {want} within {timeout} s, but the \
+                                 controller's process is alive: waiting for it"
+                            );
+                        }
+                        deadline = now + Duration::from_millis(100);
+                        continue;
+                    }
                     return Err(ProcessError::Timeout {
                         step: want,
                         timeout,

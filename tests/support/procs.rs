@@ -55,6 +55,19 @@ impl Drop for Scratch {
     }
 }
 
+/// Stop `pids` (SIGSTOP) for `secs` of wall time, then continue them in the same order.
+pub fn freeze(pids: &[i32], secs: f64) {
+    for &pid in pids {
+        // SAFETY: signalling a process this test started (directly or through `upc run`).
+        unsafe { libc::kill(pid, libc::SIGSTOP) };
+    }
+    std::thread::sleep(Duration::from_secs_f64(secs));
+    for &pid in pids {
+        // SAFETY: as above.
+        unsafe { libc::kill(pid, libc::SIGCONT) };
+    }
+}
+
 /// Child processes, SIGKILLed and reaped when dropped (a failing assertion leaves none behind).
 #[derive(Default)]
 pub struct Procs(pub Vec<(String, Child)>);
@@ -84,13 +97,8 @@ impl Procs {
     /// Freeze `names` (SIGSTOP) for `secs` of wall time, then resume them in the same order: a
     /// stall of those processes as a busy or misbehaving machine causes it.
     pub fn freeze(&self, names: &[&str], secs: f64) {
-        for n in names {
-            self.signal(n, libc::SIGSTOP);
-        }
-        std::thread::sleep(Duration::from_secs_f64(secs));
-        for n in names {
-            self.signal(n, libc::SIGCONT);
-        }
+        let pids: Vec<i32> = names.iter().map(|n| self.pid(n)).collect();
+        freeze(&pids, secs);
     }
 
     pub fn signal(&self, name: &str, sig: i32) {
