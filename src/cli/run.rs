@@ -606,4 +606,28 @@ fn print_table(entries: &[Entry]) {
             ),
         }
     }
+    // A simulator or forecaster that failed (a diverging simulation, a crashed plant or
+    // forecaster) says why in the last line of its log.
+    for e in entries {
+        for (what, exit, log) in [
+            ("simulator", e.sim_exit, "sim.log"),
+            ("forecaster", e.forecaster_exit, "forecaster.log"),
+        ] {
+            if let Some(code) = exit.filter(|&c| c != 0) {
+                let path = Path::new(&e.dir).join(log);
+                let text = std::fs::read_to_string(&path).unwrap_or_default();
+                let last = text
+                    .lines()
+                    .rev()
+                    .find(|l| !l.trim().is_empty())
+                    .unwrap_or("");
+                println!(
+                    "{}: the {what} exited with {code}: {}  ({})",
+                    e.controller,
+                    last.trim(),
+                    path.display()
+                );
+            }
+        }
+    }
 }
