@@ -77,7 +77,6 @@ fn remote_forecaster_killed_garbage_bad_windows_and_a_flood_over_zenoh() {
     let s = Scratch::new("bridge_faults");
     let port = free_port();
     let endpoint = format!("tcp/127.0.0.1:{port}");
-    let scenario = s.scenario();
     let mut p = Procs::default();
     let summary = s.path("bridge.json").display().to_string();
     p.start(
@@ -98,21 +97,7 @@ fn remote_forecaster_killed_garbage_bad_windows_and_a_flood_over_zenoh() {
         ],
     );
     start_controller(&mut p, &s, &["--set", "controller.rate_hz=500"]);
-    p.start(
-        &s,
-        "sim",
-        &[
-            "sim",
-            "--mode",
-            "realtime",
-            "--duration",
-            "0",
-            "--scenario",
-            &scenario,
-            "--prefix",
-            &s.prefix,
-        ],
-    );
+    start_plant(&mut p, &s, "sim", &[]);
     let mut clock = Clock::new(&s.prefix);
     let mut remote = remote_forecaster(&py, &s, &endpoint);
     clock.wait(1.0);

@@ -14,28 +14,6 @@ use support::procs::*;
 use support::rrd::rrd_times;
 use upc::channels::{Bus, ForecastMsg, MAX_FORECAST, ServiceKind, StateMsg};
 
-fn start_sim(p: &mut Procs, s: &Scratch, name: &str, extra: &[&str]) {
-    let summary = s.path(&format!("{name}.json")).display().to_string();
-    let scenario = s.scenario();
-    let mut args = vec!["sim"];
-    // Real time until stopped, unless `extra` says otherwise.
-    for (flag, value) in [("--mode", "realtime"), ("--duration", "0")] {
-        if !extra.contains(&flag) {
-            args.extend([flag, value]);
-        }
-    }
-    args.extend([
-        "--scenario",
-        &scenario,
-        "--prefix",
-        &s.prefix,
-        "--summary",
-        &summary,
-    ]);
-    args.extend_from_slice(extra);
-    p.start(s, name, &args);
-}
-
 fn start_forecaster(p: &mut Procs, s: &Scratch, name: &str) {
     let scenario = s.scenario();
     p.start(
@@ -67,14 +45,14 @@ fn simulator_killed_and_restarted_controller_holds_reconnects_and_resumes() {
     let obs = Observer::start(&s.prefix);
     start_controller(&mut p, &s, &[]);
     start_forecaster(&mut p, &s, "forecaster");
-    start_sim(&mut p, &s, "sim1", &[]);
+    start_plant(&mut p, &s, "sim1", &[]);
     obs.wait_for(1, 1.0, &mut p, &s);
     p.signal("sim1", libc::SIGKILL);
     let _ = p.wait("sim1", Duration::from_secs(5));
     let killed_at = obs.get().time;
     // Longer than controller.state_timeout (0.5 s): a stale period with damping torques.
     std::thread::sleep(Duration::from_millis(900));
-    start_sim(&mut p, &s, "sim2", &[]);
+    start_plant(&mut p, &s, "sim2", &[]);
     obs.wait_for(2, 2.0, &mut p, &s);
     let seen = obs.get();
     p.stop(&s, "controller", libc::SIGTERM);
@@ -124,15 +102,9 @@ fn lockstep_peer_killed_ends_the_run() {
     let s = Scratch::new("lockstep_gone");
     let mut p = Procs::default();
     let obs = Observer::start(&s.prefix);
-    let lockstep_controller = |p: &mut Procs| {
-        let mut cargs = controller_args(&s, &[]);
-        cargs.retain(|a| a != "--realtime");
-        let cargs: Vec<&str> = cargs.iter().map(String::as_str).collect();
-        p.start(&s, "controller", &cargs);
-    };
-    lockstep_controller(&mut p);
+    start_lockstep_controller(&mut p, &s, &[]);
     start_forecaster(&mut p, &s, "forecaster");
-    start_sim(
+    start_plant(
         &mut p,
         &s,
         "sim1",
@@ -146,8 +118,8 @@ fn lockstep_peer_killed_ends_the_run() {
     let c = json(&s.path("controller.json"));
     assert_eq!(c["stopped_by"], "simulator stopped", "{c}");
     // The other way round.
-    lockstep_controller(&mut p);
-    start_sim(
+    start_lockstep_controller(&mut p, &s, &[]);
+    start_plant(
         &mut p,
         &s,
         "sim2",
@@ -172,19 +144,16 @@ fn lockstep_controller_waits_for_a_restarted_simulator_when_configured() {
     let s = Scratch::new("restart_lockstep");
     let mut p = Procs::default();
     let obs = Observer::start(&s.prefix);
-    let mut cargs = controller_args(&s, &["--set", "controller.reconnect_timeout=30"]);
-    cargs.retain(|a| a != "--realtime");
-    let cargs: Vec<&str> = cargs.iter().map(String::as_str).collect();
-    p.start(&s, "controller", &cargs);
+    start_lockstep_controller(&mut p, &s, &["--set", "controller.reconnect_timeout=30"]);
     start_forecaster(&mut p, &s, "forecaster");
-    start_sim(&mut p, &s, "sim1", &["--mode", "lockstep"]);
+    start_plant(&mut p, &s, "sim1", &["--mode", "lockstep"]);
     obs.wait_for(1, 0.5, &mut p, &s);
     p.signal("sim1", libc::SIGKILL);
     let _ = p.wait("sim1", Duration::from_secs(5));
     std::thread::sleep(Duration::from_millis(900));
     // The new simulator runs 1 s and stops by itself: in lockstep it exits 0 only if every one
     // of its states was answered.
-    start_sim(
+    start_plant(
         &mut p,
         &s,
         "sim2",
@@ -221,7 +190,7 @@ fn forecaster_killed_controller_runs_on_a_decaying_forecast_and_takes_a_new_one(
     let obs = Observer::start(&s.prefix);
     start_controller(&mut p, &s, &[]);
     start_forecaster(&mut p, &s, "forecaster1");
-    start_sim(&mut p, &s, "sim", &[]);
+    start_plant(&mut p, &s, "sim", &[]);
     obs.wait_for(1, 0.8, &mut p, &s);
     p.signal("forecaster1", libc::SIGKILL);
     let _ = p.wait("forecaster1", Duration::from_secs(5));
@@ -358,7 +327,7 @@ fn forecast_run(s: &Scratch, with_bad: bool) -> (Value, Vec<(Kind, u64)>, String
     // 500 Hz: room in each period on a loaded machine, so that a difference in deadline misses
     // would be the forecasts' doing; still more than one tick per forecast (every 5 ms).
     start_controller(&mut p, s, &["--set", "controller.rate_hz=500"]);
-    start_sim(&mut p, s, "sim", &[]);
+    start_plant(&mut p, s, "sim", &[]);
     let sent = publish_forecasts(&s.prefix, 3.0, with_bad);
     p.stop(s, "controller", libc::SIGTERM);
     p.stop(s, "sim", libc::SIGTERM);
@@ -544,7 +513,7 @@ fn sigkilled_processes_leave_nothing_that_stops_the_next_start() {
         let mut p = Procs::default();
         start_controller(&mut p, &s, &[]);
         start_forecaster(&mut p, &s, "forecaster");
-        start_sim(&mut p, &s, "sim", &[]);
+        start_plant(&mut p, &s, "sim", &[]);
         obs.wait_for(round, 0.3, &mut p, &s);
         for name in ["controller", "forecaster", "sim"] {
             p.signal(name, libc::SIGKILL);
@@ -560,7 +529,7 @@ fn sigkilled_processes_leave_nothing_that_stops_the_next_start() {
     let mut p = Procs::default();
     start_controller(&mut p, &s, &[]);
     start_forecaster(&mut p, &s, "forecaster");
-    start_sim(&mut p, &s, "sim", &[]);
+    start_plant(&mut p, &s, "sim", &[]);
     obs.wait_for(6, 1.5, &mut p, &s);
     p.stop(&s, "controller", libc::SIGTERM);
     p.stop(&s, "sim", libc::SIGTERM);

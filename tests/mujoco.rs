@@ -217,31 +217,12 @@ fn mujoco_real_time_holds_hands_over_and_holds_again_when_the_controller_dies() 
     let s = Scratch::new("mujoco_rt");
     let mut p = Procs::default();
     let obs = Observer::start(&s.prefix);
-    let (scenario, summary, bundle) = (
-        s.scenario(),
-        s.path("sim.json").display().to_string(),
-        s.path("bundle").display().to_string(),
-    );
-    p.start(
+    let bundle = s.path("bundle").display().to_string();
+    start_plant(
+        &mut p,
         &s,
         "sim",
-        &[
-            "sim",
-            "--plant",
-            "mujoco",
-            "--mode",
-            "realtime",
-            "--duration",
-            "0",
-            "--scenario",
-            &scenario,
-            "--prefix",
-            &s.prefix,
-            "--summary",
-            &summary,
-            "--bundle",
-            &bundle,
-        ],
+        &["--plant", "mujoco", "--bundle", &bundle],
     );
     obs.wait_for(1, 0.5, &mut p, &s);
     let before = obs.get();
@@ -250,20 +231,7 @@ fn mujoco_real_time_holds_hands_over_and_holds_again_when_the_controller_dies() 
         0,
         "held before a controller: {before:?}"
     );
-    p.start(
-        &s,
-        "controller",
-        &[
-            "controller",
-            "--realtime",
-            "--scenario",
-            &scenario,
-            "--duration",
-            "1000",
-            "--prefix",
-            &s.prefix,
-        ],
-    );
+    start_controller(&mut p, &s, &[]);
     obs.wait_for(1, before.time + 2.0, &mut p, &s);
     let driven = obs.get();
     assert_eq!(driven.flags & STATE_FLAG_HOLD, 0, "handed over: {driven:?}");

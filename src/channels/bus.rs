@@ -176,18 +176,10 @@ pub struct Publisher<T: ZeroCopySend + Debug + Copy + 'static> {
 impl<T: ZeroCopySend + Debug + Copy + 'static> Publisher<T> {
     /// Loan a zeroed sample, let `fill` write it, send it.
     pub fn send_with(&self, fill: impl FnOnce(&mut T)) -> Result<(), ChannelError> {
-        let mut sample = self
-            .inner
-            .loan_uninit()
-            .map_err(|e| err("loan sample", e))?;
-        // SAFETY: the contract's payloads are plain old data of integers and floats, for which
-        // all-zero bytes are a valid value.
-        let mut sample = unsafe {
-            sample.payload_mut().as_mut_ptr().write_bytes(0, 1);
-            sample.assume_init()
-        };
-        fill(sample.payload_mut());
-        sample.send().map_err(|e| err("send sample", e))?;
+        let Ok(()) = self.try_send_with(|m| {
+            fill(m);
+            Ok::<(), std::convert::Infallible>(())
+        })?;
         Ok(())
     }
 
@@ -201,7 +193,8 @@ impl<T: ZeroCopySend + Debug + Copy + 'static> Publisher<T> {
             .inner
             .loan_uninit()
             .map_err(|e| err("loan sample", e))?;
-        // SAFETY: as in `send_with`.
+        // SAFETY: the contract's payloads are plain old data of integers and floats, for which
+        // all-zero bytes are a valid value.
         let mut sample = unsafe {
             sample.payload_mut().as_mut_ptr().write_bytes(0, 1);
             sample.assume_init()

@@ -246,6 +246,8 @@ impl Riccati {
                 }
             }
             if i > 0 {
+                // γ again (also formed in the linear branch): hoisting it above both branches
+                // measured 6 % slower (3.13 against 2.95 µs at N = 300, alternating runs).
                 let gm = madd(c2[i - 1], gamma_scale, SIXTH);
                 let qg = q_e * gm;
                 // A'ᵀ P' A': sums of P' over the upper-left blocks.

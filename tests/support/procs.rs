@@ -186,6 +186,37 @@ pub fn start_controller(p: &mut Procs, s: &Scratch, extra: &[&str]) {
     p.start(s, "controller", &args);
 }
 
+/// [`start_controller`] in lockstep.
+pub fn start_lockstep_controller(p: &mut Procs, s: &Scratch, extra: &[&str]) {
+    let mut args = controller_args(s, extra);
+    args.retain(|a| a != "--realtime");
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    p.start(s, "controller", &args);
+}
+
+/// Start `upc sim` on the test's scenario and prefix as process `name`, its summary in
+/// `<name>.json`: in real time until stopped, unless `extra` sets `--mode` or `--duration`.
+pub fn start_plant(p: &mut Procs, s: &Scratch, name: &str, extra: &[&str]) {
+    let summary = s.path(&format!("{name}.json")).display().to_string();
+    let scenario = s.scenario();
+    let mut args = vec!["sim"];
+    for (flag, value) in [("--mode", "realtime"), ("--duration", "0")] {
+        if !extra.contains(&flag) {
+            args.extend([flag, value]);
+        }
+    }
+    args.extend([
+        "--scenario",
+        &scenario,
+        "--prefix",
+        &s.prefix,
+        "--summary",
+        &summary,
+    ]);
+    args.extend_from_slice(extra);
+    p.start(s, name, &args);
+}
+
 /// A TCP port free on loopback now (the OS picks it; a process binds it a moment later).
 pub fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
