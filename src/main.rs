@@ -36,6 +36,8 @@ enum Command {
     Sim(cli::sim::SimArgs),
     /// Largest impact each controller survives, by bisection, on the reduced models and the full simulation.
     Capability(cli::capability::CapabilityArgs),
+    /// Largest impact survived against forecast errors (factor, shift, phantom), full simulation.
+    Robustness(cli::robustness::RobustnessArgs),
     /// Write the MuJoCo scene (MJCF, plant description, plant process) of a robot and scenario.
     Mjcf(cli::sim::MjcfArgs),
 }
@@ -58,6 +60,7 @@ fn main() -> std::process::ExitCode {
         Command::Sim(args) => cli::sim::run_cli(args),
         Command::Mjcf(args) => cli::sim::mjcf_cli(args),
         Command::Capability(args) => cli::capability::run(args),
+        Command::Robustness(args) => cli::robustness::run(args),
         Command::Forecast(args) => cli::forecast::run_cli(args),
         Command::Bridge(args) => cli::bridge::run_cli(args),
         Command::Controller(args) => cli::controller::run(args),

@@ -30,15 +30,28 @@ pub enum Variant {
     /// C1 with the predicted ZMP kept inside the support by hard constraints
     /// (`preview.zmp_constraints`).
     C1Zmp,
+    /// C0 with the CoM disturbance observer (`controller.com_observer`): the baseline of a robot
+    /// without any forecast.
+    C0Obs,
+    /// C1 previewing the forecast as received, without the correction by the measured hand
+    /// force (`controller.forecast_correction.enabled = false`).
+    C1Raw,
 }
 
 impl Variant {
-    pub const ALL: [Variant; 4] = [Variant::C0, Variant::C1, Variant::C2, Variant::C1Zmp];
+    pub const ALL: [Variant; 6] = [
+        Variant::C0,
+        Variant::C1,
+        Variant::C2,
+        Variant::C1Zmp,
+        Variant::C0Obs,
+        Variant::C1Raw,
+    ];
 
     pub fn kind(self) -> ControllerKind {
         match self {
-            Variant::C0 => ControllerKind::C0,
-            Variant::C1 | Variant::C1Zmp => ControllerKind::C1,
+            Variant::C0 | Variant::C0Obs => ControllerKind::C0,
+            Variant::C1 | Variant::C1Zmp | Variant::C1Raw => ControllerKind::C1,
             Variant::C2 => ControllerKind::C2,
         }
     }
@@ -49,12 +62,24 @@ impl Variant {
             Variant::C1 => "C1",
             Variant::C2 => "C2",
             Variant::C1Zmp => "C1+ZMP",
+            Variant::C0Obs => "C0+obs",
+            Variant::C1Raw => "C1 raw",
         }
     }
 
     /// The config override this variant needs besides its controller kind.
     pub fn config_set(self) -> Option<&'static str> {
-        (self == Variant::C1Zmp).then_some("preview.zmp_constraints=true")
+        match self {
+            Variant::C1Zmp => Some("preview.zmp_constraints=true"),
+            Variant::C0Obs => Some("controller.com_observer.enabled=true"),
+            Variant::C1Raw => Some("controller.forecast_correction.enabled=false"),
+            Variant::C0 | Variant::C1 | Variant::C2 => None,
+        }
+    }
+
+    /// Whether the variant reads the forecast at all (C0's preview ignores it).
+    pub fn uses_forecast(self) -> bool {
+        !matches!(self, Variant::C0 | Variant::C0Obs)
     }
 
     pub fn parse(s: &str) -> Option<Variant> {
@@ -63,6 +88,8 @@ impl Variant {
             "c1" => Some(Variant::C1),
             "c2" => Some(Variant::C2),
             "c1zmp" | "c1+zmp" | "c1_zmp" => Some(Variant::C1Zmp),
+            "c0obs" | "c0+obs" | "c0_obs" => Some(Variant::C0Obs),
+            "c1raw" | "c1_raw" => Some(Variant::C1Raw),
             _ => None,
         }
     }

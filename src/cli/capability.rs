@@ -30,7 +30,8 @@ pub enum Models {
 
 #[derive(clap::Args, Debug)]
 pub struct CapabilityArgs {
-    /// Controllers: c0, c1, c2, c1zmp (C1 with the ZMP constraints), comma-separated.
+    /// Controllers: c0, c1, c2, c1zmp (C1 with the ZMP constraints), c0obs (C0 with the CoM
+    /// observer), c1raw (C1 without the forecast correction), comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "c0,c1,c2,c1zmp")]
     pub controllers: Vec<String>,
     /// Impact durations (s), comma-separated.
@@ -96,14 +97,16 @@ struct Row {
     wall_time: f64,
 }
 
-type BoxError = Box<dyn std::error::Error + Send + Sync>;
+pub(super) type BoxError = Box<dyn std::error::Error + Send + Sync>;
 
 pub fn run(args: CapabilityArgs) -> CliResult {
     let variants = args
         .controllers
         .iter()
         .map(|c| {
-            Variant::parse(c).ok_or_else(|| format!("unknown controller `{c}` (c0, c1, c2, c1zmp)"))
+            Variant::parse(c).ok_or_else(|| {
+                format!("unknown controller `{c}` (c0, c1, c2, c1zmp, c0obs, c1raw)")
+            })
         })
         .collect::<Result<Vec<_>, _>>()?;
     let directions = args
@@ -201,7 +204,21 @@ pub fn run(args: CapabilityArgs) -> CliResult {
                                 case.duration,
                                 case.direction,
                             )?),
-                            Model::Full => full_case(&exe, &args, &out, &case, a, &criteria),
+                            Model::Full => full_case(
+                                &exe,
+                                &FullCase {
+                                    robot: &args.robot.robot,
+                                    plant: args.plant,
+                                    variant: case.variant,
+                                    duration: case.duration,
+                                    direction: case.direction,
+                                    forecast: ForecastCase::EXACT,
+                                },
+                                &out,
+                                a,
+                                &criteria,
+                            )
+                            .map(|r| r.survived),
                         }
                     };
                     match bisect(args.max, args.tol, &mut survives) {
@@ -263,20 +280,57 @@ pub fn run(args: CapabilityArgs) -> CliResult {
     Ok(())
 }
 
+/// How a full-simulation case's forecast departs from the impact the plant plays.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct ForecastCase {
+    /// The forecast is `scale × F(t − shift)`.
+    pub scale: f64,
+    pub shift: f64,
+    /// The plant does not push at all (`sim.push = "none"`): the forecast is a phantom.
+    pub phantom: bool,
+}
+
+impl ForecastCase {
+    pub const EXACT: ForecastCase = ForecastCase {
+        scale: 1.0,
+        shift: 0.0,
+        phantom: false,
+    };
+}
+
+/// One full-simulation case.
+pub(super) struct FullCase<'a> {
+    pub robot: &'a str,
+    pub plant: PlantChoice,
+    pub variant: Variant,
+    pub duration: f64,
+    pub direction: Direction,
+    pub forecast: ForecastCase,
+}
+
+/// What a full-simulation case gave: survived, and the controller's summary when it wrote one.
+pub(super) struct CaseResult {
+    pub survived: bool,
+    pub summary: Option<serde_json::Value>,
+}
+
 /// One full-simulation case: `upc run` of the impact with the variant's controller.
-fn full_case(
+pub(super) fn full_case(
     exe: &Path,
-    args: &CapabilityArgs,
+    case: &FullCase,
     out: &Path,
-    case: &Case,
     amplitude: f64,
     criteria: &Criteria,
-) -> Result<bool, BoxError> {
+) -> Result<CaseResult, BoxError> {
+    let f = case.forecast;
     let name = format!(
-        "{}_{}_{:.0}ms_{amplitude:.2}N",
-        case.variant.label().replace('+', "_"),
+        "{}_{}_{:.0}ms_{amplitude:.2}N_k{}_s{:.0}ms{}",
+        case.variant.label().replace(['+', ' '], "_"),
         case.direction.label(),
-        case.duration * 1e3
+        case.duration * 1e3,
+        f.scale,
+        f.shift * 1e3,
+        if f.phantom { "_phantom" } else { "" }
     );
     let dir = out.join("cases");
     let scenario = dir.join(format!("{name}.toml"));
@@ -288,9 +342,11 @@ fn full_case(
     let mut cmd = Command::new(exe);
     cmd.args(["run", "--quiet", "--controller", kind, "--scenario"])
         .arg(&scenario)
-        .args(["--robot", &args.robot.robot, "--plant", args.plant.name()])
+        .args(["--robot", case.robot, "--plant", case.plant.name()])
         .args(["--name", &name, "--out"])
         .arg(&dir)
+        .args(["--forecast-error-scale", &f.scale.to_string()])
+        .args(["--forecast-error-shift", &f.shift.to_string()])
         .env("RUST_LOG", "warn");
     if let Some(set) = case.variant.config_set() {
         cmd.args(["--set", set]);
@@ -298,22 +354,34 @@ fn full_case(
     if case.direction == Direction::Y {
         cmd.args(["--sim-set", "sim.push=\"hand\""]);
     }
+    if f.phantom {
+        cmd.args(["--sim-set", "sim.push=\"none\""]);
+    }
     let status = cmd.output()?;
     let summary = std::fs::read_to_string(dir.join(&name).join(kind).join("controller.json"));
-    let survived = match summary {
-        Ok(text) => survived_full(&serde_json::from_str(&text)?, criteria),
+    let result = match summary {
+        Ok(text) => {
+            let v: serde_json::Value = serde_json::from_str(&text)?;
+            CaseResult {
+                survived: survived_full(&v, criteria),
+                summary: Some(v),
+            }
+        }
         // A run whose controller wrote nothing: a failure of the case, not of the sweep, when
         // the process ran (a simulation that diverged); otherwise the sweep cannot go on.
         Err(e) if status.status.code().is_some() => {
             tracing::debug!("{name}: no controller summary ({e})");
-            false
+            CaseResult {
+                survived: false,
+                summary: None,
+            }
         }
         Err(e) => return Err(format!("{name}: {e}").into()),
     };
     // Keep the directory only for inspection of the last cases; the sweep makes hundreds.
     let _ = std::fs::remove_dir_all(dir.join(&name));
     let _ = std::fs::remove_file(&scenario);
-    Ok(survived)
+    Ok(result)
 }
 
 #[allow(clippy::too_many_arguments)]

@@ -8,6 +8,7 @@ pub mod controller;
 pub mod forecast;
 pub mod model;
 pub mod preview;
+pub mod robustness;
 pub mod run;
 pub mod sim;
 

@@ -55,6 +55,10 @@ pub struct RunArgs {
     /// bridge's endpoint in UPC_ZENOH_CONNECT) on the Zenoh side of it.
     #[arg(long)]
     pub forecaster_over_zenoh: bool,
+    /// No forecaster at all: the controller forecasts from the measured hand force alone
+    /// (the forecast correction with no prior) and does not wait for windows in lockstep.
+    #[arg(long, conflicts_with_all = ["forecaster", "forecaster_over_zenoh"])]
+    pub no_forecaster: bool,
     /// Spawn the rerun viewer (`rerun`: the one of `.venv`, which scripts/setup.sh installs,
     /// else from PATH; an open one is reused) and stream the recordings to it live, besides
     /// the `.rrd` files.
@@ -338,11 +342,17 @@ fn run_one(
         }
     };
     let (out, err) = log("forecaster.log")?;
-    let mut forecaster = forecaster.stdout(out).stderr(err).spawn()?;
-    if bridge.is_some() {
+    let mut forecaster = if args.no_forecaster {
+        None
+    } else {
+        Some(forecaster.stdout(out).stderr(err).spawn()?)
+    };
+    if bridge.is_some()
+        && let Some(forecaster) = forecaster.as_mut()
+    {
         // A lockstep controller waits 0.5 s for its first window; a remote forecaster takes
         // longer to start and connect: the controller starts once its first window is here.
-        first_forecast(&prefix, &mut forecaster, Duration::from_secs(30))?;
+        first_forecast(&prefix, forecaster, Duration::from_secs(30))?;
     }
     let (out, err) = log("controller.log")?;
     let mut controller = Command::new(exe)
@@ -371,6 +381,11 @@ fn run_one(
         .arg(dir.join("controller.json"))
         .args(&connect)
         .args(args.config.to_args())
+        .args(if args.no_forecaster {
+            &["--set", "controller.lockstep_forecast_wait=0"][..]
+        } else {
+            &[][..]
+        })
         .stdout(out)
         .stderr(err)
         .spawn()?;
@@ -404,7 +419,9 @@ fn run_one(
     bar.finish_and_clear();
     // The controller is done: give the others a moment, then ask them to stop.
     let sim_exit = stop(&mut sim, Duration::from_secs(5));
-    let forecaster_exit = stop(&mut forecaster, Duration::from_secs(2));
+    let forecaster_exit = forecaster
+        .as_mut()
+        .and_then(|f| stop(f, Duration::from_secs(2)));
     if let Some(b) = &mut bridge {
         // SAFETY: signalling our own child; SIGTERM makes it write its summary.
         unsafe { libc::kill(b.id() as libc::pid_t, libc::SIGTERM) };

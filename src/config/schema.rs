@@ -403,6 +403,10 @@ pub struct ControllerConfig {
     /// Control ticks between two rerun records (and 10× that between plan records).
     pub log_every: usize,
     pub realtime: crate::control::realtime::RealtimeSettings,
+    /// The forecast corrected by the measured hand force (docs/forecast_correction.md).
+    pub forecast_correction: crate::control::CorrectionSettings,
+    /// The CoM disturbance observer (docs/forecast_correction.md, "CoM observer").
+    pub com_observer: crate::control::ComObserverSettings,
 }
 
 impl ControllerConfig {
@@ -439,6 +443,12 @@ impl ControllerConfig {
         }
         if !(0..=99).contains(&self.realtime.fifo_priority) {
             return Err(l.range_error("controller.realtime.fifo_priority", "must be in 0..=99"));
+        }
+        if let Err((key, why)) = self.forecast_correction.check() {
+            return Err(l.range_error(&format!("controller.forecast_correction.{key}"), why));
+        }
+        if let Err((key, why)) = self.com_observer.check() {
+            return Err(l.range_error(&format!("controller.com_observer.{key}"), why));
         }
         Ok(())
     }

@@ -11,9 +11,14 @@
 //!   ẍ + u·dt; the CoM height is held by a PD.
 //! - The ZMP reference and the hand set-point are latched at the first tick: the feet midpoint
 //!   (plus the scenario's offset) and the hand's initial position (holding the door closed).
+//! - C1 and C2 preview the forecast as corrected by the measured hand force
+//!   ([`ForecastCorrector`], on by default); the CoM observer ([`ComObserver`], off by default)
+//!   adds the push nothing forecasts, for C0 too (docs/forecast_correction.md).
 
 use nalgebra::{DVector, Matrix3, Vector3};
 
+use super::com_observer::ComObserver;
+use super::forecast_correction::{CorrectionEstimate, ForecastCorrector};
 use super::forecast_window::ForecastWindow;
 use super::gain_thread::StampedSchedule;
 use crate::channels::StateMsg;
@@ -76,6 +81,14 @@ pub struct TickRecord {
     /// Support rectangle latched at the first tick, [[x_min, x_max], [y_min, y_max]] (world
     /// frame), so that logs can draw the ZMP against it.
     pub support: [[f64; 2]; 2],
+    /// The hand force measured this tick, and the forecast as received for the first preview
+    /// step (`f_ext` is the forecast the previewer used: corrected, when the correction is on).
+    pub f_meas: [f64; 3],
+    pub f_raw: [f64; 3],
+    /// The forecast correction's estimate (κ̂, τ̂, d̂; default when off or C0).
+    pub correction: CorrectionEstimate,
+    /// The CoM observer's force (N, x and y; zero when off).
+    pub f_obs: [f64; 2],
 }
 
 /// The controller's state between ticks.
@@ -110,6 +123,11 @@ pub struct ControllerCore {
     hand_acc_cmd: Vector3<f64>,
     latched: Option<Latched>,
     zmp_offset: [f64; 2],
+    /// The forecast corrected by the measured hand force (C1, C2), when on.
+    correction: Option<ForecastCorrector>,
+    /// The CoM disturbance observer, when on, and the total CoM disturbance horizon it adds to.
+    observer: Option<ComObserver>,
+    f_dis_total: Vec<[f64; 3]>,
     /// Ticks where the disturbance forecast was invalid and C0 ran instead.
     pub preview_fallbacks: u64,
     pub last: TickRecord,
@@ -146,6 +164,18 @@ impl ControllerCore {
         let wbc = WholeBodyController::new(&model, w)?;
         let hand_frame = model.frame_id(&w.hand_frame)?;
         let nominal = GainSchedule::constant(n, config.hand.kp, config.nominal_kd(config.hand.kp));
+        let cc = &config.controller;
+        let correction = (cc.forecast_correction.enabled && kind != ControllerKind::C0)
+            .then(|| ForecastCorrector::new(cc.forecast_correction, p.period, control_period));
+        let observer = cc.com_observer.enabled.then(|| {
+            ComObserver::new(
+                cc.com_observer,
+                cart.mass,
+                cart.gravity,
+                cart.com_height,
+                control_period,
+            )
+        });
         Ok(Self {
             data: Data::new(&model),
             q: DVector::zeros(model.nq),
@@ -173,6 +203,9 @@ impl ControllerCore {
             hand_acc_cmd: Vector3::zeros(),
             latched: None,
             zmp_offset,
+            correction,
+            observer,
+            f_dis_total: vec![[0.0; 3]; n],
             preview_fallbacks: 0,
             last: TickRecord::default(),
             model,
@@ -209,6 +242,17 @@ impl ControllerCore {
         self.hand_acc_cmd = Vector3::zeros();
         self.last_x = [Vector3::zeros(); 2];
         self.last = TickRecord::default();
+        if let Some(c) = self.correction.as_mut() {
+            c.reset();
+        }
+        if let Some(o) = self.observer.as_mut() {
+            o.reset();
+        }
+    }
+
+    /// The forecast correction's counters (`None` when it is off).
+    pub fn correction_counts(&self) -> Option<super::forecast_correction::CorrectionCounts> {
+        self.correction.as_ref().map(|c| c.counts)
     }
 
     /// Roll out the last tick's predicted horizon and copy it into a log record.
@@ -332,8 +376,34 @@ impl ControllerCore {
         for i in 0..self.horizon {
             self.zmp_ref[i] = zref;
             self.hand_desired[i] = target;
-            self.f_ext[i] = forecast.at(t + (i + 1) as f64 * self.period);
         }
+        // The hand force over the horizon: the forecast, corrected by the measured force.
+        let f_meas = state.hand_force;
+        let f_raw = forecast.at(t + self.period);
+        match self.correction.as_mut() {
+            Some(c) => {
+                c.update(t, forecast, Some(f_meas));
+                c.fill(t, self.period, forecast, &mut self.f_ext);
+            }
+            None => {
+                for i in 0..self.horizon {
+                    self.f_ext[i] = forecast.at(t + (i + 1) as f64 * self.period);
+                }
+            }
+        }
+        // The CoM observer, against the disturbance the preview modelled at the last tick.
+        let f_obs = match self.observer.as_mut() {
+            Some(o) => {
+                let known = if self.kind == ControllerKind::C0 {
+                    [0.0; 2]
+                } else {
+                    [self.last.f_dis[0], self.last.f_dis[1]]
+                };
+                o.update([com.x, com.y], [vcom.x, vcom.y], state.zmp, known);
+                o.force()
+            }
+            None => [0.0; 2],
+        };
         // The gain schedule: C2's, shifted to now, or the nominal one.
         let mut age = 0.0;
         match c2.filter(|s| s.seq > 0 && self.kind == ControllerKind::C2) {
@@ -361,8 +431,30 @@ impl ControllerCore {
             acc: self.hand_acc_cmd,
         };
         let mut fallback = false;
+        let observed = self.observer.as_ref().map(|o| {
+            let decay = (-self.period / o.settings().decay).exp();
+            (f_obs, decay)
+        });
+        // Σ: F_dis (C1, C2; zero for C0) plus the observer's force decaying over the horizon.
+        let add_observed =
+            |base: &[[f64; 3]], out: &mut [[f64; 3]], (f, decay): ([f64; 2], f64)| {
+                let mut w = 1.0;
+                for (i, o) in out.iter_mut().enumerate() {
+                    w *= decay;
+                    let b = base.get(i).copied().unwrap_or([0.0; 3]);
+                    *o = [b[0] + f[0] * w, b[1] + f[1] * w, b[2]];
+                }
+            };
         let u = match self.kind {
-            ControllerKind::C0 => self.zmp.solve_c0(&x, &self.zmp_ref),
+            ControllerKind::C0 => match observed {
+                Some(obs) => {
+                    add_observed(&[], &mut self.f_dis_total, obs);
+                    self.zmp
+                        .solve_c1(&x, &self.zmp_ref, &self.f_dis_total)
+                        .or_else(|_| self.zmp.solve_c0(&x, &self.zmp_ref))
+                }
+                None => self.zmp.solve_c0(&x, &self.zmp_ref),
+            },
             ControllerKind::C1 | ControllerKind::C2 => {
                 let r: Result<[f64; 2], PreviewError> = if m_e_ok {
                     self.previewer
@@ -373,9 +465,19 @@ impl ControllerCore {
                             &self.f_ext,
                             self.horizon,
                         )
-                        .and_then(|()| {
-                            self.zmp
-                                .solve_c1(&x, &self.zmp_ref, self.previewer.disturbance())
+                        .and_then(|()| match observed {
+                            Some(obs) => {
+                                add_observed(
+                                    self.previewer.disturbance(),
+                                    &mut self.f_dis_total,
+                                    obs,
+                                );
+                                self.zmp.solve_c1(&x, &self.zmp_ref, &self.f_dis_total)
+                            }
+                            None => {
+                                self.zmp
+                                    .solve_c1(&x, &self.zmp_ref, self.previewer.disturbance())
+                            }
                         })
                 } else {
                     Err(PreviewError::EffectiveMassNotSpd)
@@ -466,6 +568,14 @@ impl ControllerCore {
             preview_fallback: fallback,
             schedule_age: age,
             support: latched.support,
+            f_meas,
+            f_raw,
+            correction: self
+                .correction
+                .as_ref()
+                .map(|c| *c.estimate())
+                .unwrap_or_default(),
+            f_obs,
         };
         Ok(status)
     }

@@ -172,13 +172,13 @@ impl Drop for ControlLogger {
 }
 
 /// Columns of `controller.csv`; readers go by name (`upc compare`), so columns may be added.
-pub const CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_ref_x,zmp_ref_y,zmp_pred_x,zmp_pred_y,zmp_meas_x,zmp_meas_y,hand_err,kp,kd,f_ext_x,f_ext_y,f_ext_z,f_dis_x,f_dis_y,f_dis_z,hand_x,hand_y,hand_z,sup_x_min,sup_x_max,sup_y_min,sup_y_max,tick_us,wbc_us,wbc_solved,c2_cost,c2_iterations";
+pub const CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_ref_x,zmp_ref_y,zmp_pred_x,zmp_pred_y,zmp_meas_x,zmp_meas_y,hand_err,kp,kd,f_ext_x,f_ext_y,f_ext_z,f_dis_x,f_dis_y,f_dis_z,hand_x,hand_y,hand_z,sup_x_min,sup_x_max,sup_y_min,sup_y_max,tick_us,wbc_us,wbc_solved,c2_cost,c2_iterations,f_meas_x,f_meas_y,f_meas_z,f_raw_x,f_raw_y,f_raw_z,corr_factor,corr_shift,corr_offset_x,corr_offset_y,corr_offset_z,corr_contradicted,f_obs_x,f_obs_y";
 
 fn write_csv(w: &mut impl Write, t: &TickLog) -> std::io::Result<()> {
     let c = &t.core;
     writeln!(
         w,
-        "{:.4},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.2},{:.2},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.1},{:.1},{},{:.5e},{}",
+        "{:.4},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.2},{:.2},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.1},{:.1},{},{:.5e},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.3},{:.3},{:.3},{},{:.3},{:.3}",
         c.time,
         c.com[0],
         c.com[1],
@@ -209,7 +209,21 @@ fn write_csv(w: &mut impl Write, t: &TickLog) -> std::io::Result<()> {
         c.wbc_time * 1e6,
         u8::from(c.wbc_solved),
         t.c2_cost,
-        t.c2_iterations
+        t.c2_iterations,
+        c.f_meas[0],
+        c.f_meas[1],
+        c.f_meas[2],
+        c.f_raw[0],
+        c.f_raw[1],
+        c.f_raw[2],
+        c.correction.factor,
+        c.correction.shift,
+        c.correction.offset[0],
+        c.correction.offset[1],
+        c.correction.offset[2],
+        u8::from(c.correction.contradicted),
+        c.f_obs[0],
+        c.f_obs[1]
     )
 }
 
@@ -222,6 +236,9 @@ fn send_blueprint(rec: &rerun::RecordingStream) {
                 .into(),
             TimeSeriesView::new("hand error")
                 .with_contents(["/controller/hand/**"])
+                .into(),
+            TimeSeriesView::new("hand force: forecast and measured")
+                .with_contents(["/controller/forecast/**"])
                 .into(),
             TimeSeriesView::new("gains")
                 .with_contents(["/controller/gains/**"])
@@ -261,6 +278,32 @@ fn log_tick(rec: &rerun::RecordingStream, t: &TickLog) {
     scalar(rec, "controller/hand/error", c.hand_err);
     scalar(rec, "controller/hand/f_ext_x", c.f_ext[0]);
     scalar(rec, "controller/hand/f_dis_x", c.f_dis[0]);
+    // The forecast as received, as corrected, against the measured force; the correction's
+    // estimate (docs/forecast_correction.md).
+    scalar(rec, "controller/forecast/received_x", c.f_raw[0]);
+    scalar(rec, "controller/forecast/corrected_x", c.f_ext[0]);
+    scalar(rec, "controller/forecast/measured_x", c.f_meas[0]);
+    scalar(rec, "controller/forecast/received_y", c.f_raw[1]);
+    scalar(rec, "controller/forecast/corrected_y", c.f_ext[1]);
+    scalar(rec, "controller/forecast/measured_y", c.f_meas[1]);
+    scalar(rec, "controller/correction/factor", c.correction.factor);
+    scalar(
+        rec,
+        "controller/correction/shift_ms",
+        c.correction.shift * 1e3,
+    );
+    scalar(
+        rec,
+        "controller/correction/offset_x",
+        c.correction.offset[0],
+    );
+    scalar(
+        rec,
+        "controller/correction/contradicted",
+        f64::from(u8::from(c.correction.contradicted)),
+    );
+    scalar(rec, "controller/observer/f_x", c.f_obs[0]);
+    scalar(rec, "controller/observer/f_y", c.f_obs[1]);
     scalar(rec, "controller/gains/kp", c.kp);
     scalar(rec, "controller/gains/kd", c.kd);
     scalar(rec, "controller/timing/tick_us", t.tick_time * 1e6);

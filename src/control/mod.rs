@@ -3,13 +3,17 @@
 //!
 //! - [`core`]: one tick without IPC ([`ControllerCore`]).
 //! - [`forecast_window`]: validated copy of the latest force forecast.
+//! - [`forecast_correction`]: the forecast corrected by the measured hand force.
+//! - [`com_observer`]: the push on the CoM that nothing forecasts, from the measured CoP.
 //! - [`gain_thread`]: C2 in a lower-priority thread behind wait-free triple buffers.
 //! - [`logger`]: the rerun log, from its own thread, never blocking the loop.
 //! - [`server`]: the loop over iceoryx2 (`upc controller`), lockstep or real time.
 //! - [`timing`]: absolute-deadline ticker and latency histogram.
 //! - [`realtime`]: SCHED_FIFO, mlockall, CPU affinity (degrading with a warning).
 
+pub mod com_observer;
 pub mod core;
+pub mod forecast_correction;
 pub mod forecast_intake;
 pub mod forecast_window;
 pub mod gain_thread;
@@ -18,7 +22,11 @@ pub mod realtime;
 pub mod server;
 pub mod timing;
 
+pub use com_observer::{ComObserver, ComObserverSettings};
 pub use core::{ControllerCore, TickError, TickRecord};
+pub use forecast_correction::{
+    CorrectionCounts, CorrectionEstimate, CorrectionSettings, ForecastCorrector,
+};
 pub use forecast_window::{ForecastRejection, ForecastWindow};
 pub use gain_thread::{GainHandoff, GainSnapshot, StampedSchedule};
 pub use timing::{LatencyHistogram, Ticker};

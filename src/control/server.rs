@@ -119,6 +119,9 @@ pub struct ServerSummary {
     pub forecast_lost: bool,
     /// Times the forecast was lost.
     pub forecast_losses: u64,
+    /// No forecast window was ever accepted (no forecaster, or none valid): the preview ran on
+    /// the measured hand force alone, which is not a lost forecast.
+    pub forecast_never_received: bool,
     /// Accepted forecast windows whose scenario differs from the one the plant announces.
     pub forecast_scenario_mismatches: u64,
     /// The plant announced another scenario than this controller's `--scenario`.
@@ -154,6 +157,26 @@ pub struct ServerSummary {
     pub dropped_log_records: u64,
     pub realtime: super::realtime::RealtimeReport,
     pub stopped_by: String,
+    /// The forecast correction (docs/forecast_correction.md); `None`: off (or C0).
+    pub forecast_correction: Option<CorrectionSummary>,
+}
+
+/// What the forecast correction did over a run.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
+#[serde(default)]
+pub struct CorrectionSummary {
+    /// Times the measured hand force contradicted the forecast, and the plant time it did.
+    pub contradictions: u64,
+    pub contradicted_time: f64,
+    /// κ̂: smallest, largest and last; τ̂ last (s); d̂ last (N).
+    pub factor_min: f64,
+    pub factor_max: f64,
+    pub factor_last: f64,
+    pub shift_last: f64,
+    pub offset_last: [f64; 3],
+    /// Estimations of κ̂, τ̂; ticks whose measured force was not finite.
+    pub estimations: u64,
+    pub bad_measurements: u64,
 }
 
 /// Record why a lockstep run will not reproduce (the first reason only).
@@ -273,8 +296,6 @@ pub fn run_server_with(
     // Why the run will not reproduce, if it will not (no allocation on the loop: set at the end).
     let mut irreproducible: Option<&'static str> = if !lockstep {
         Some("real time: inputs arrive on wall-clock time")
-    } else if cc.lockstep_forecast_wait == 0.0 {
-        Some("controller.lockstep_forecast_wait = 0: the window a tick sees depends on timing")
     } else if kind == ControllerKind::C2 && cc.lockstep_c2_wait == 0.0 {
         Some("controller.lockstep_c2_wait = 0: C2's schedules reach the loop on its own timing")
     } else {
@@ -470,6 +491,12 @@ pub fn run_server_with(
         if let Some(why) = f.not_reproducible {
             not_reproducible(&mut irreproducible, why);
         }
+        if lockstep && f.accepted && cc.lockstep_forecast_wait == 0.0 {
+            not_reproducible(
+                &mut irreproducible,
+                "controller.lockstep_forecast_wait = 0: the window a tick sees depends on timing",
+            );
+        }
         // Scenarios: the plant's against this controller's and the forecast's.
         if state.scenario_hash != plant_hash {
             plant_hash = state.scenario_hash;
@@ -647,10 +674,25 @@ pub fn run_server_with(
         s.deadline_misses = t.missed;
     }
     s.preview_fallbacks = core.preview_fallbacks;
+    s.forecast_correction = core.correction_counts().map(|c| {
+        let e = core.last.correction;
+        CorrectionSummary {
+            contradictions: c.contradictions,
+            contradicted_time: c.contradicted_time,
+            factor_min: c.factor_min,
+            factor_max: c.factor_max,
+            factor_last: e.factor,
+            shift_last: e.shift,
+            offset_last: e.offset,
+            estimations: c.estimations,
+            bad_measurements: c.bad_measurements,
+        }
+    });
     let wc = core.wbc_counters();
     s.wbc_torque_limited_ticks = wc.torque_limited;
     s.wbc_condensation_failures = wc.condensation_failures;
     s.forecasts_accepted = intake.window.accepted;
+    s.forecast_never_received = intake.window.accepted == 0;
     s.forecasts_rejected = intake.window.rejected;
     s.forecasts_rejected_by = intake.window.rejections;
     s.forecaster_restarts = intake.window.restarts;

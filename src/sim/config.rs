@@ -56,6 +56,9 @@ pub enum Push {
     Door,
     /// No door: the force applied at the hand frame as it is, in any direction.
     Hand,
+    /// The door held at the hand, and no push at all: the scenario's force is only what a
+    /// forecaster announces (a phantom push, for tests of forecasts the hand contradicts).
+    None,
 }
 
 /// MuJoCo's friction cone.

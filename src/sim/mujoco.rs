@@ -126,7 +126,7 @@ pub fn build(robot: &Robot, cfg: &SimConfig, scenario: &Scenario) -> Result<Mujo
     }
     if cfg.push != Push::Door {
         return Err(SimError::Scene(
-            "sim.push = \"hand\": the MuJoCo plant pushes through the door only (upc's own simulator applies hand pushes)".into(),
+            "sim.push must be \"door\" on the MuJoCo plant: it pushes through the door only (upc's own simulator applies hand pushes and phantom runs, \"hand\" and \"none\")".into(),
         ));
     }
     let mut data = Data::new(model);

@@ -297,7 +297,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
                     .frame_id(&robot.description.hand.frame)
                     .map_err(SimError::from)?,
             ),
-            Push::Door => None,
+            Push::Door | Push::None => None,
         },
     };
     // State 0 before any step.

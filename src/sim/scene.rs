@@ -202,8 +202,8 @@ pub fn default_scene(
     let scene = robot_scene(
         robot,
         PhysicsParams::from_config(config),
-        config.door && config.push == super::config::Push::Door,
-        Some(scenario.force.clone()),
+        config.door && config.push != super::config::Push::Hand,
+        (config.push != super::config::Push::None).then(|| scenario.force.clone()),
     )?;
     Ok((scene, scenario))
 }

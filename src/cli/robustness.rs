@@ -1,0 +1,589 @@
+//! `upc robustness`: how much forecast error each controller survives. For each controller and
+//! impact duration, the largest single impact survived (`upc capability`'s bisection, full
+//! simulation) over a grid of forecast errors — amplitude factor κ (the forecast is κ × the
+//! force) and shift τ (the forecast τ late) — and the largest phantom survived: a forecast
+//! impact the plant never plays, up to twice C1's capability. Writes `robustness.md` (a table and
+//! a heat map per controller and duration), `.csv` and `.json`.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use indicatif::{ProgressBar, ProgressStyle};
+use upc::capability::{Capability, Criteria, Direction, Variant, bisect};
+
+use super::CliResult;
+use super::capability::{BoxError, ForecastCase, FullCase, full_case};
+use super::common::RobotArg;
+use super::sim::PlantChoice;
+
+#[derive(clap::Args, Debug)]
+pub struct RobustnessArgs {
+    /// Controllers (see `upc capability --controllers`), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "c0,c0obs,c1raw,c1,c2")]
+    pub controllers: Vec<String>,
+    /// Impact durations (s), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "0.3,1.0")]
+    pub durations: Vec<f64>,
+    /// Forecast amplitude factors κ (the forecast is κ × the force).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0,0.25,0.5,0.75,1,1.25,1.5,2"
+    )]
+    pub scales: Vec<f64>,
+    /// Forecast shifts τ (s; the forecast τ late, negative: early).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "-0.3,-0.15,0,0.15,0.3",
+        allow_hyphen_values = true
+    )]
+    pub shifts: Vec<f64>,
+    /// Skip the phantom forecasts.
+    #[arg(long)]
+    pub no_phantom: bool,
+    /// Upper bound of the search (N) for each duration, as DURATION=N (default 2.5 × the
+    /// iCub-like's exact C1 capability: 0.1=700, 0.3=160, 1=100; others 300).
+    #[arg(long, value_delimiter = ',')]
+    pub max: Vec<String>,
+    /// Bisection tolerance (N).
+    #[arg(long, default_value_t = 2.0)]
+    pub tol: f64,
+    /// Largest CoM drop (m) of a phantom case still survived.
+    #[arg(long, default_value_t = 0.005)]
+    pub phantom_com_drop: f64,
+    /// Cases run at once (default: the machine's cores).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// The plant.
+    #[arg(long, value_enum, default_value = "upc")]
+    pub plant: PlantChoice,
+    /// Output directory (default runs/robustness-<unix time>).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+    #[command(flatten)]
+    pub robot: RobotArg,
+}
+
+/// One bisection of the sweep.
+#[derive(Debug, Clone, Copy)]
+struct Cell {
+    variant: Variant,
+    duration: f64,
+    forecast: ForecastCase,
+}
+
+#[derive(Debug, Clone, serde::Serialize)]
+struct Row {
+    controller: &'static str,
+    duration: f64,
+    scale: f64,
+    shift: f64,
+    phantom: bool,
+    /// The search's upper bound (N).
+    max: f64,
+    #[serde(flatten)]
+    capability: Capability,
+    /// Phantom: the controller summary's CoM drop (m) and min CoP margin (m) at the bound.
+    at_max: Option<(f64, f64)>,
+    wall_time: f64,
+}
+
+fn default_max(duration: f64) -> f64 {
+    match duration {
+        d if (d - 0.1).abs() < 1e-9 => 700.0,
+        d if (d - 0.3).abs() < 1e-9 => 160.0,
+        d if (d - 1.0).abs() < 1e-9 => 100.0,
+        _ => 300.0,
+    }
+}
+
+pub fn run(args: RobustnessArgs) -> CliResult {
+    let variants = args
+        .controllers
+        .iter()
+        .map(|c| Variant::parse(c).ok_or_else(|| format!("unknown controller `{c}`")))
+        .collect::<Result<Vec<_>, _>>()?;
+    if args
+        .durations
+        .iter()
+        .chain(&args.scales)
+        .chain(&args.shifts)
+        .any(|v| !v.is_finite())
+        || args.durations.iter().any(|d| *d <= 0.0)
+        || args.scales.iter().any(|k| *k < 0.0)
+    {
+        return Err("durations must be > 0, scales ≥ 0, all finite".into());
+    }
+    let mut max_for = Vec::new();
+    for m in &args.max {
+        let (d, n) = m
+            .split_once('=')
+            .ok_or_else(|| format!("--max takes DURATION=N, got `{m}`"))?;
+        max_for.push((d.parse::<f64>()?, n.parse::<f64>()?));
+    }
+    let max_of = |d: f64| {
+        max_for
+            .iter()
+            .find(|(x, _)| (x - d).abs() < 1e-9)
+            .map_or(default_max(d), |m| m.1)
+    };
+    let criteria = Criteria::default();
+    let phantom_criteria = Criteria {
+        max_com_drop: args.phantom_com_drop,
+        ..criteria
+    };
+    let out = args.out.clone().unwrap_or_else(|| {
+        let secs = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        PathBuf::from(format!("runs/robustness-{secs}"))
+    });
+    std::fs::create_dir_all(out.join("cases"))?;
+    let exe = std::env::current_exe()?;
+    let jobs = args
+        .jobs
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .max(1);
+    let start = Instant::now();
+
+    // Phase 1: the error grid (C0 and C0+obs ignore the forecast: one bisection each).
+    let mut cells = Vec::new();
+    for &duration in &args.durations {
+        for &variant in &variants {
+            if !variant.uses_forecast() {
+                cells.push(Cell {
+                    variant,
+                    duration,
+                    forecast: ForecastCase::EXACT,
+                });
+                continue;
+            }
+            for &scale in &args.scales {
+                for &shift in &args.shifts {
+                    cells.push(Cell {
+                        variant,
+                        duration,
+                        forecast: ForecastCase {
+                            scale,
+                            shift,
+                            phantom: false,
+                        },
+                    });
+                }
+            }
+        }
+    }
+    let phantoms = if args.no_phantom {
+        0
+    } else {
+        args.durations.len() * variants.iter().filter(|v| v.uses_forecast()).count()
+    };
+    let per_case = 1 + ((args.max_bound() / args.tol).log2().ceil().max(0.0) as u64);
+    let bar = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new((cells.len() + phantoms) as u64 * per_case)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("[{bar:40}] {pos}/{len} runs, {elapsed} ({eta} left) {msg}")
+            .map(|s| s.progress_chars("=> "))
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let robot = args.robot.robot.as_str();
+    let run_cells = |cells: Vec<(Cell, f64, Criteria)>| -> Result<Vec<Row>, BoxError> {
+        let queue = Mutex::new(cells);
+        let rows = Mutex::new(Vec::new());
+        let first_error = Mutex::new(None::<String>);
+        std::thread::scope(|scope| {
+            for _ in 0..jobs {
+                scope.spawn(|| {
+                    loop {
+                        let Some((cell, max, crit)) =
+                            queue.lock().unwrap_or_else(|p| p.into_inner()).pop()
+                        else {
+                            return;
+                        };
+                        let t0 = Instant::now();
+                        let case = FullCase {
+                            robot,
+                            plant: args.plant,
+                            variant: cell.variant,
+                            duration: cell.duration,
+                            direction: Direction::X,
+                            forecast: cell.forecast,
+                        };
+                        let mut at_max = None;
+                        let r = bisect(max, args.tol, |a| -> Result<bool, BoxError> {
+                            bar.inc(1);
+                            let r = full_case(&exe, &case, &out, a, &crit)?;
+                            if a == max && cell.forecast.phantom {
+                                let num = |k: &str| {
+                                    r.summary
+                                        .as_ref()
+                                        .and_then(|s| s.get(k))
+                                        .and_then(serde_json::Value::as_f64)
+                                        .unwrap_or(f64::NAN)
+                                };
+                                at_max = Some((num("com_height_drop"), num("min_zmp_margin")));
+                            }
+                            Ok(r.survived)
+                        });
+                        match r {
+                            Ok(c) => {
+                                bar.inc(per_case.saturating_sub(c.runs as u64));
+                                rows.lock().unwrap_or_else(|p| p.into_inner()).push(Row {
+                                    controller: cell.variant.label(),
+                                    duration: cell.duration,
+                                    scale: cell.forecast.scale,
+                                    shift: cell.forecast.shift,
+                                    phantom: cell.forecast.phantom,
+                                    max,
+                                    capability: c,
+                                    at_max,
+                                    wall_time: t0.elapsed().as_secs_f64(),
+                                });
+                            }
+                            Err(e) => {
+                                first_error
+                                    .lock()
+                                    .unwrap_or_else(|p| p.into_inner())
+                                    .get_or_insert(format!("{cell:?}: {e}"));
+                                return;
+                            }
+                        }
+                    }
+                });
+            }
+        });
+        if let Some(e) = first_error.into_inner().unwrap_or_else(|p| p.into_inner()) {
+            return Err(e.into());
+        }
+        Ok(rows.into_inner().unwrap_or_else(|p| p.into_inner()))
+    };
+    let mut rows = run_cells(
+        cells
+            .iter()
+            .rev()
+            .map(|c| (*c, max_of(c.duration), criteria))
+            .collect(),
+    )?;
+
+    // Phase 2: phantoms up to twice C1's capability with an exact forecast (the forecast as
+    // received, when swept; else the variant's own).
+    if !args.no_phantom {
+        let exact = |label: &str, d: f64| {
+            rows.iter()
+                .find(|r| {
+                    r.controller == label
+                        && r.duration == d
+                        && r.scale == 1.0
+                        && r.shift == 0.0
+                        && !r.phantom
+                })
+                .map(|r| r.capability.survived)
+        };
+        let mut ph = Vec::new();
+        for &duration in &args.durations {
+            for &variant in variants.iter().filter(|v| v.uses_forecast()) {
+                let cap = exact(Variant::C1Raw.label(), duration)
+                    .or_else(|| exact(Variant::C1.label(), duration))
+                    .or_else(|| exact(variant.label(), duration))
+                    .unwrap_or(max_of(duration) / 2.5);
+                let cell = Cell {
+                    variant,
+                    duration,
+                    forecast: ForecastCase {
+                        scale: 1.0,
+                        shift: 0.0,
+                        phantom: true,
+                    },
+                };
+                ph.push((cell, (2.0 * cap).max(args.tol), phantom_criteria));
+            }
+        }
+        rows.extend(run_cells(ph)?);
+    }
+    bar.finish_and_clear();
+    let wall = start.elapsed().as_secs_f64();
+    let order = |r: &Row| {
+        (
+            (r.duration * 1e6) as i64,
+            variants.iter().position(|v| v.label() == r.controller),
+            r.phantom,
+            (r.scale * 1e6) as i64,
+            (r.shift * 1e6) as i64,
+        )
+    };
+    rows.sort_by_key(order);
+    write_outputs(&out, &args, &variants, &rows, wall, jobs)?;
+    println!(
+        "wrote {}/robustness.md ({wall:.0} s, {jobs} at a time)",
+        out.display()
+    );
+    Ok(())
+}
+
+impl RobustnessArgs {
+    fn max_bound(&self) -> f64 {
+        self.durations
+            .iter()
+            .map(|&d| default_max(d))
+            .fold(100.0, f64::max)
+    }
+}
+
+fn cell_text(c: &Capability) -> String {
+    match c.failed {
+        None => format!("≥ {:.0}", c.survived),
+        Some(_) => format!("{:.0}", c.survived),
+    }
+}
+
+fn write_outputs(
+    out: &Path,
+    args: &RobustnessArgs,
+    variants: &[Variant],
+    rows: &[Row],
+    wall: f64,
+    jobs: usize,
+) -> Result<(), BoxError> {
+    std::fs::write(
+        out.join("robustness.json"),
+        serde_json::to_string_pretty(&serde_json::json!({
+            "robot": args.robot.robot,
+            "plant": args.plant.name(),
+            "tol": args.tol,
+            "wall_time": wall,
+            "jobs": jobs,
+            "rows": rows,
+        }))?,
+    )?;
+    let mut csv =
+        String::from("controller,duration,scale,shift,phantom,max,survived,failed,runs\n");
+    for r in rows {
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{},{},{:.2},{},{}",
+            r.controller,
+            r.duration,
+            r.scale,
+            r.shift,
+            r.phantom,
+            r.max,
+            r.capability.survived,
+            r.capability
+                .failed
+                .map_or(String::new(), |f| format!("{f:.2}")),
+            r.capability.runs
+        );
+    }
+    std::fs::write(out.join("robustness.csv"), csv)?;
+    let fig_dir = out.join("figures");
+    std::fs::create_dir_all(&fig_dir)?;
+
+    let mut md = format!(
+        "# Robustness to forecast errors — robot `{}`, `{}` plant\n\n\
+         Largest single impact along x survived (N; full simulation, `upc capability`'s \
+         criteria, bisection to {} N), with the forecast κ × the force, τ late (negative: \
+         early). C1 and C2 correct the forecast by the measured hand force (the default); \"C1 \
+         raw\" previews it as received; C0 and C0+obs ignore the forecast (one search each, \
+         the same at every κ, τ). Phantom: the plant does not push, the forecast announces \
+         the impact; the largest phantom survived with a CoM drop under {} mm, searched up to \
+         twice C1's exact-forecast capability. Wall time: {wall:.0} s, {jobs} cases at a \
+         time.\n\n",
+        args.robot.robot,
+        args.plant.name(),
+        args.tol,
+        args.phantom_com_drop * 1e3
+    );
+    for &d in &args.durations {
+        let _ = writeln!(md, "## {d} s impact\n");
+        let c0 = |label: &str| {
+            rows.iter()
+                .find(|r| r.controller == label && r.duration == d && !r.phantom)
+                .map(|r| r.capability)
+        };
+        for &v in variants {
+            if !v.uses_forecast() {
+                if let Some(c) = c0(v.label()) {
+                    let _ = writeln!(
+                        md,
+                        "**{}**: {} N at every κ and τ (ignores the forecast).\n",
+                        v.label(),
+                        cell_text(&c)
+                    );
+                }
+                continue;
+            }
+            let _ = writeln!(md, "**{}**\n", v.label());
+            md += "| κ \\ τ (ms) |";
+            for s in &args.shifts {
+                let _ = write!(md, " {:+.0} |", s * 1e3);
+            }
+            md += "\n|---|";
+            md += &"---|".repeat(args.shifts.len());
+            md += "\n";
+            let mut grid = Vec::new();
+            for &k in &args.scales {
+                let _ = write!(md, "| {k} |");
+                let mut line = Vec::new();
+                for &s in &args.shifts {
+                    let c = rows
+                        .iter()
+                        .find(|r| {
+                            r.controller == v.label()
+                                && r.duration == d
+                                && !r.phantom
+                                && r.scale == k
+                                && r.shift == s
+                        })
+                        .map(|r| r.capability);
+                    let _ = write!(md, " {} |", c.map_or("–".into(), |c| cell_text(&c)));
+                    line.push(c.map(|c| c.survived));
+                }
+                md += "\n";
+                grid.push(line);
+            }
+            if let Some(p) = rows
+                .iter()
+                .find(|r| r.controller == v.label() && r.duration == d && r.phantom)
+            {
+                let _ = write!(
+                    md,
+                    "\nPhantom: survived up to {} N of {:.0} N searched",
+                    cell_text(&p.capability),
+                    p.max
+                );
+                if let Some((drop, margin)) = p.at_max {
+                    let _ = write!(
+                        md,
+                        " (at {:.0} N: CoM drop {:.1} mm, min CoP margin {:.1} mm)",
+                        p.max,
+                        drop * 1e3,
+                        margin * 1e3
+                    );
+                }
+                md += ".\n";
+            }
+            let name = format!(
+                "robustness_{}_{:.0}ms",
+                v.label().replace(['+', ' '], "_").to_lowercase(),
+                d * 1e3
+            );
+            let c0_cap = c0(Variant::C0.label()).map(|c| c.survived);
+            std::fs::write(
+                fig_dir.join(format!("{name}.svg")),
+                heat_map(
+                    &format!("{} — {d} s impact: largest survived (N)", v.label()),
+                    &args.scales,
+                    &args.shifts,
+                    &grid,
+                    max_or(rows, d),
+                    c0_cap,
+                ),
+            )?;
+            let _ = writeln!(md, "\n![{}](figures/{name}.svg)\n", v.label());
+        }
+    }
+    std::fs::write(out.join("robustness.md"), md)?;
+    Ok(())
+}
+
+fn max_or(rows: &[Row], d: f64) -> f64 {
+    rows.iter()
+        .filter(|r| r.duration == d && !r.phantom)
+        .map(|r| r.max)
+        .fold(1.0, f64::max)
+}
+
+/// A heat map as SVG: one cell per (κ, τ), its colour the amplitude survived over the search's
+/// bound (white → dark blue), cells below C0's capability outlined in red.
+fn heat_map(
+    title: &str,
+    scales: &[f64],
+    shifts: &[f64],
+    grid: &[Vec<Option<f64>>],
+    max: f64,
+    c0: Option<f64>,
+) -> String {
+    let (cw, ch, left, top) = (70.0, 34.0, 70.0, 50.0);
+    let w = left + cw * shifts.len() as f64 + 20.0;
+    let h = top + ch * scales.len() as f64 + 50.0;
+    let mut s = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"12\">\n\
+         <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n\
+         <text x=\"{}\" y=\"20\" text-anchor=\"middle\" font-size=\"14\">{title}</text>\n",
+        w / 2.0
+    );
+    for (i, k) in scales.iter().enumerate() {
+        let y = top + ch * i as f64;
+        let _ = writeln!(
+            s,
+            "<text x=\"{}\" y=\"{}\" text-anchor=\"end\">κ {k}</text>",
+            left - 6.0,
+            y + ch / 2.0 + 4.0
+        );
+        for (j, _) in shifts.iter().enumerate() {
+            let x = left + cw * j as f64;
+            let v = grid.get(i).and_then(|l| l.get(j)).copied().flatten();
+            let (fill, text) = match v {
+                Some(v) => {
+                    let f = (v / max).clamp(0.0, 1.0);
+                    let c = |a: f64, b: f64| (a + (b - a) * f).round() as u8;
+                    (
+                        format!(
+                            "rgb({},{},{})",
+                            c(255.0, 8.0),
+                            c(255.0, 48.0),
+                            c(255.0, 107.0)
+                        ),
+                        format!("{v:.0}"),
+                    )
+                }
+                None => ("rgb(220,220,220)".into(), "–".into()),
+            };
+            let below = matches!((v, c0), (Some(v), Some(c)) if v < c);
+            let stroke = if below {
+                "red\" stroke-width=\"3"
+            } else {
+                "gray"
+            };
+            let ink = if v.is_some_and(|v| v / max > 0.55) {
+                "white"
+            } else {
+                "black"
+            };
+            let _ = writeln!(
+                s,
+                "<rect x=\"{x}\" y=\"{y}\" width=\"{cw}\" height=\"{ch}\" fill=\"{fill}\" stroke=\"{stroke}\"/>\
+                 <text x=\"{}\" y=\"{}\" text-anchor=\"middle\" fill=\"{ink}\">{text}</text>",
+                x + cw / 2.0,
+                y + ch / 2.0 + 4.0
+            );
+        }
+    }
+    for (j, sh) in shifts.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">τ {:+.0} ms</text>",
+            left + cw * j as f64 + cw / 2.0,
+            top + ch * scales.len() as f64 + 18.0,
+            sh * 1e3
+        );
+    }
+    if let Some(c) = c0 {
+        let _ = writeln!(
+            s,
+            "<text x=\"{left}\" y=\"{}\">red outline: below C0's {c:.0} N</text>",
+            top + ch * scales.len() as f64 + 40.0
+        );
+    }
+    s += "</svg>\n";
+    s
+}

@@ -1,0 +1,719 @@
+//! Forecast correction from the measured hand force (docs/forecast_correction.md): between the
+//! forecast intake and the hand previewer, the forecast is read as the hand force to come up to
+//! an amplitude factor κ, a time shift τ and an offset d,
+//!
+//!   f_meas(t) ≈ κ f_fc(t − τ) + d,                                          (FC-1)
+//!
+//! κ and τ estimated from a short window of measured force against the forecast's past, d by an
+//! observer on what κ and τ leave unexplained. The horizon the previewer sees is
+//!
+//!   f̂(t + s) = κ̂ f_fc(t + s − τ̂) + d̂ e^{−s/T_d}.                         (FC-4)
+//!
+//! A forecast the measurement contradicts (a phantom push: κ̂ → 0; an amplitude far off) is
+//! scaled down until it agrees again. With no forecast at all, f̂ is the offset alone: the
+//! measurement held and decaying (a robot with only a wrist force sensor).
+//!
+//! Real-time: every buffer is allocated in [`ForecastCorrector::new`]; a tick is O(1) but one
+//! tick in `bin_ticks`, which re-estimates κ and τ in O(window × shifts).
+
+use serde::Deserialize;
+
+use super::forecast_window::ForecastWindow;
+
+/// `[controller.forecast_correction]`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CorrectionSettings {
+    /// Correct the forecast (C1, C2); off: the forecast as received.
+    pub enabled: bool,
+    /// Length W of the estimation window (s).
+    pub window: f64,
+    /// Largest |τ| searched (s).
+    pub max_shift: f64,
+    /// σ: standard deviation of one measured force sample (N), the estimation's noise model.
+    pub force_noise: f64,
+    /// ε: the part of the force no amplitude and shift explain (the door's and the arm's own
+    /// dynamics), relative to the forecast's RMS over the window; adds (ε·RMS)² to a bin's
+    /// variance.
+    pub model_error: f64,
+    /// A window whose forecast RMS (at τ̂) is below this (N) never becomes the estimator's
+    /// memory: the tail of a push says little about its amplitude.
+    pub min_force: f64,
+    /// σ_κ: how far κ may plausibly be from its prior mean (1, or the last estimate).
+    pub factor_sd: f64,
+    /// σ_τ: how far τ may plausibly be from its prior mean (0, or the last estimate), s.
+    pub shift_sd: f64,
+    /// σ_b: how far the window's offset may be from the offset observer's estimate (N).
+    pub offset_sd: f64,
+    /// Bounds of κ̂.
+    pub factor_bounds: [f64; 2],
+    /// Time constant (s) with which the priors return to κ = 1, τ = 0 without evidence.
+    pub forget: f64,
+    /// Time constant T_o of the offset observer (s).
+    pub offset_time_constant: f64,
+    /// Time constant T_d of the offset's decay over the horizon (s).
+    pub offset_decay: f64,
+    /// |κ̂ − 1| beyond this, with the window's evidence, is a contradicted forecast.
+    pub contradiction: f64,
+}
+
+impl Default for CorrectionSettings {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            window: 0.3,
+            max_shift: 0.35,
+            force_noise: 2.0,
+            model_error: 0.15,
+            min_force: 5.0,
+            factor_sd: 2.0,
+            shift_sd: 0.05,
+            offset_sd: 3.0,
+            factor_bounds: [0.0, 3.0],
+            forget: 3.0,
+            offset_time_constant: 0.05,
+            offset_decay: 0.3,
+            contradiction: 0.5,
+        }
+    }
+}
+
+impl CorrectionSettings {
+    /// Why the settings are unusable, if they are: (key, reason).
+    pub fn check(&self) -> Result<(), (&'static str, String)> {
+        for (key, v) in [
+            ("window", self.window),
+            ("force_noise", self.force_noise),
+            ("model_error", self.model_error),
+            ("min_force", self.min_force),
+            ("factor_sd", self.factor_sd),
+            ("shift_sd", self.shift_sd),
+            ("offset_sd", self.offset_sd),
+            ("forget", self.forget),
+            ("offset_time_constant", self.offset_time_constant),
+            ("offset_decay", self.offset_decay),
+            ("contradiction", self.contradiction),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err((key, format!("must be finite and > 0, got {v}")));
+            }
+        }
+        if !(self.max_shift.is_finite() && self.max_shift >= 0.0) {
+            return Err(("max_shift", format!("must be ≥ 0, got {}", self.max_shift)));
+        }
+        let [lo, hi] = self.factor_bounds;
+        if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo < hi) {
+            return Err(("factor_bounds", format!("need 0 ≤ lo < hi, got {lo}, {hi}")));
+        }
+        Ok(())
+    }
+}
+
+/// The correction's current estimate, for logs and the summary.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CorrectionEstimate {
+    /// κ̂.
+    pub factor: f64,
+    /// τ̂ (s): the force comes τ̂ after the forecast says (negative: before).
+    pub shift: f64,
+    /// d̂ (N).
+    pub offset: [f64; 3],
+    /// The window's evidence contradicts the forecast (|κ̂ − 1| > `contradiction`).
+    pub contradicted: bool,
+}
+
+impl Default for CorrectionEstimate {
+    fn default() -> Self {
+        Self {
+            factor: 1.0,
+            shift: 0.0,
+            offset: [0.0; 3],
+            contradicted: false,
+        }
+    }
+}
+
+/// Counters of a run.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct CorrectionCounts {
+    /// Times the forecast became contradicted.
+    pub contradictions: u64,
+    /// Plant time spent contradicted (s).
+    pub contradicted_time: f64,
+    /// Estimations run, and ticks whose measured force was not finite (skipped).
+    pub estimations: u64,
+    pub bad_measurements: u64,
+    /// Smallest and largest κ̂ seen.
+    pub factor_min: f64,
+    pub factor_max: f64,
+}
+
+type V3 = [f64; 3];
+
+/// Posterior standard deviation of κ below which an estimate becomes the next prior.
+const EVIDENCE_SD: f64 = 0.1;
+/// Time constant (s) of the model error's scale after a push: the door and the arm ring on.
+const DYNAMICS_TIME: f64 = 0.5;
+/// A window is remembered when its forecast energy is at least this fraction of the recent
+/// largest: the bulk of a push, not its tail.
+const BULK_ENERGY: f64 = 0.25;
+
+fn dot(a: &V3, b: &V3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn axpy(y: &mut V3, a: f64, x: &V3) {
+    for c in 0..3 {
+        y[c] += a * x[c];
+    }
+}
+
+/// The estimator with its preallocated history.
+pub struct ForecastCorrector {
+    s: CorrectionSettings,
+    /// Bin length T_b (s) = the preview period, and control ticks per bin.
+    bin: f64,
+    bin_ticks: usize,
+    /// Control period (s).
+    dt: f64,
+    /// Window bins n_W and shift bins M (candidates τ = m T_b, m = −M…M).
+    n_w: usize,
+    m: usize,
+    /// Rings of bin means: measured force, and the forecast for the bin's times as it was then.
+    meas: Vec<V3>,
+    fc: Vec<V3>,
+    /// Bins recorded so far (the rings' write index is `bins % len`).
+    bins: u64,
+    /// Plant time of the newest recorded bin's end.
+    last_bin_t: f64,
+    /// The bin being accumulated.
+    acc_meas: V3,
+    acc_fc: V3,
+    acc_n: usize,
+    /// Scratch: the forecast timeline g over [t_b − (n_W − 1 + M) T_b, t_b + M T_b] and its
+    /// prefix sums (Σ|g|², Σg).
+    g: Vec<V3>,
+    p2: Vec<f64>,
+    p1: Vec<V3>,
+    est: CorrectionEstimate,
+    /// Prior means (relaxing to 1 and 0 at `forget`).
+    prior_factor: f64,
+    prior_shift: f64,
+    /// The windows' recent largest mean square forecast (N²), decaying at [`DYNAMICS_TIME`]:
+    /// the scale of the model error, which outlasts the push that excited it.
+    recent_energy: f64,
+    pub counts: CorrectionCounts,
+}
+
+impl ForecastCorrector {
+    /// `bin`: the preview period (s); `dt`: the control period (s).
+    pub fn new(settings: CorrectionSettings, bin: f64, dt: f64) -> Self {
+        let bin_ticks = ((bin / dt).round() as usize).max(1);
+        let bin = bin_ticks as f64 * dt;
+        let n_w = ((settings.window / bin).round() as usize).max(2);
+        let m = (settings.max_shift / bin).round() as usize;
+        let hist = n_w + m;
+        let timeline = n_w + 2 * m;
+        Self {
+            s: settings,
+            bin,
+            bin_ticks,
+            dt,
+            n_w,
+            m,
+            meas: vec![[0.0; 3]; n_w],
+            fc: vec![[0.0; 3]; hist],
+            bins: 0,
+            last_bin_t: f64::NEG_INFINITY,
+            acc_meas: [0.0; 3],
+            acc_fc: [0.0; 3],
+            acc_n: 0,
+            g: vec![[0.0; 3]; timeline],
+            p2: vec![0.0; timeline + 1],
+            p1: vec![[0.0; 3]; timeline + 1],
+            est: CorrectionEstimate::default(),
+            prior_factor: 1.0,
+            prior_shift: 0.0,
+            recent_energy: 0.0,
+            counts: CorrectionCounts {
+                factor_min: 1.0,
+                factor_max: 1.0,
+                ..Default::default()
+            },
+        }
+    }
+
+    pub fn settings(&self) -> &CorrectionSettings {
+        &self.s
+    }
+
+    pub fn estimate(&self) -> &CorrectionEstimate {
+        &self.est
+    }
+
+    /// A new plant run: its times start over. Counters are kept. Allocation-free.
+    pub fn reset(&mut self) {
+        self.bins = 0;
+        self.last_bin_t = f64::NEG_INFINITY;
+        self.acc_meas = [0.0; 3];
+        self.acc_fc = [0.0; 3];
+        self.acc_n = 0;
+        self.est = CorrectionEstimate::default();
+        self.prior_factor = 1.0;
+        self.prior_shift = 0.0;
+        self.recent_energy = 0.0;
+    }
+
+    /// The forecast as received, for plant time `t`: the window where it covers `t` or `t` is
+    /// past the newest recorded bin; the recorded history for earlier times (a window starts
+    /// at its forecaster's present, so the forecast's past lives here only).
+    pub fn forecast_at(&self, window: &ForecastWindow, t: f64) -> V3 {
+        if window.covers(t) || self.bins == 0 || t >= self.last_bin_t {
+            return window.at(t);
+        }
+        // Bin k (k = 0 the newest) is centred at last_bin_t − (k + ½) T_b.
+        let len = self.fc.len();
+        let recorded = (self.bins as usize).min(len);
+        let x = (self.last_bin_t - t) / self.bin - 0.5;
+        if x <= 0.0 {
+            return self.fc_bin(0);
+        }
+        let k = x.floor() as usize;
+        if k + 1 >= recorded {
+            return self.fc_bin(recorded - 1);
+        }
+        let w = x - k as f64;
+        let (a, b) = (self.fc_bin(k), self.fc_bin(k + 1));
+        [0, 1, 2].map(|c| a[c] + w * (b[c] - a[c]))
+    }
+
+    /// The k-th newest recorded forecast bin (k < recorded).
+    fn fc_bin(&self, k: usize) -> V3 {
+        let len = self.fc.len();
+        self.fc[((self.bins as usize - 1 - k) % len + len) % len]
+    }
+
+    fn meas_bin(&self, k: usize) -> V3 {
+        let len = self.meas.len();
+        self.meas[(self.bins as usize - 1 - k) % len]
+    }
+
+    /// One control tick at plant time `t` with the force measured at the hand (`None`: no
+    /// measurement this tick). Updates the offset observer every tick and κ̂, τ̂ once a bin.
+    pub fn update(&mut self, t: f64, window: &ForecastWindow, measured: Option<V3>) {
+        let Some(y) = measured.filter(|y| y.iter().all(|v| v.is_finite())) else {
+            if measured.is_some() {
+                self.counts.bad_measurements += 1;
+            }
+            return;
+        };
+        let now = window.at(t);
+        // Offset observer (FC-3): a disturbance state driven by what κ̂, τ̂ leave unexplained,
+        // d̂ ← d̂ + L (y − κ̂ f_fc(t − τ̂) − d̂), L = 1 − e^{−dt/T_o}.
+        let explained = self.forecast_at(window, t - self.est.shift);
+        let l = 1.0 - (-self.dt / self.s.offset_time_constant).exp();
+        for c in 0..3 {
+            let r = y[c] - self.est.factor * explained[c];
+            self.est.offset[c] += l * (r - self.est.offset[c]);
+        }
+        if self.est.contradicted {
+            self.counts.contradicted_time += self.dt;
+        }
+        // The bin: means of the measured force and of the forecast for the same ticks.
+        axpy(&mut self.acc_meas, 1.0, &y);
+        axpy(&mut self.acc_fc, 1.0, &now);
+        self.acc_n += 1;
+        if self.acc_n < self.bin_ticks {
+            return;
+        }
+        let inv = 1.0 / self.acc_n as f64;
+        let i_m = self.bins as usize % self.meas.len();
+        let i_f = self.bins as usize % self.fc.len();
+        self.meas[i_m] = self.acc_meas.map(|v| v * inv);
+        self.fc[i_f] = self.acc_fc.map(|v| v * inv);
+        self.acc_meas = [0.0; 3];
+        self.acc_fc = [0.0; 3];
+        self.acc_n = 0;
+        self.bins += 1;
+        self.last_bin_t = t + 0.5 * self.dt;
+        if self.bins as usize >= self.n_w {
+            self.estimate_factor_and_shift(window);
+        }
+    }
+
+    /// κ̂ and τ̂ from the window (FC-2): for each candidate τ = m T_b, the MAP estimate of
+    /// (κ, b) under y_j = κ g(t_j − τ) + b + noise, priors κ ~ N(κ₀, σ_κ²), b ~ N(d̂, σ_b²),
+    /// then τ̂ the candidate of least cost with prior τ ~ N(τ₀, σ_τ²), refined by a parabola.
+    fn estimate_factor_and_shift(&mut self, window: &ForecastWindow) {
+        let (n_w, m) = (self.n_w, self.m);
+        // The timeline: g[i] is the forecast for the bin centred at
+        // t_c(i) = t_newest − (n_W − 1 + M − i) T_b, i = 0 … n_W + 2M − 1; recorded bins for
+        // the past (what was forecast then), the current window beyond the newest bin.
+        let recorded = (self.bins as usize).min(self.fc.len());
+        let newest_centre = self.last_bin_t - 0.5 * self.bin;
+        for i in 0..self.g.len() {
+            let back = (n_w - 1 + m) as isize - i as isize; // bins before the newest
+            self.g[i] = if back >= 0 {
+                let k = back as usize;
+                if k < recorded {
+                    self.fc_bin(k)
+                } else {
+                    self.fc_bin(recorded - 1)
+                }
+            } else {
+                window.at(newest_centre + (-back) as f64 * self.bin)
+            };
+        }
+        self.p2[0] = 0.0;
+        self.p1[0] = [0.0; 3];
+        for i in 0..self.g.len() {
+            self.p2[i + 1] = self.p2[i] + dot(&self.g[i], &self.g[i]);
+            let mut s = self.p1[i];
+            axpy(&mut s, 1.0, &self.g[i]);
+            self.p1[i + 1] = s;
+        }
+        // Sums over the window of the measurement alone.
+        let mut sy = [0.0; 3];
+        let mut syy = 0.0;
+        for k in 0..n_w {
+            let y = self.meas_bin(k);
+            axpy(&mut sy, 1.0, &y);
+            syy += dot(&y, &y);
+        }
+        let n = n_w as f64;
+        // Variance of one bin: the sensor's noise of a mean over the bin, and the model error
+        // in proportion to the recent forecast's RMS (the last estimations', decaying).
+        self.recent_energy *= (-self.bin / DYNAMICS_TIME).exp();
+        let var = self.s.force_noise.powi(2) / self.bin_ticks as f64
+            + self.s.model_error.powi(2) * self.recent_energy;
+        let w_k = var / self.s.factor_sd.powi(2);
+        let w_b = var / self.s.offset_sd.powi(2);
+        let w_t = var / self.s.shift_sd.powi(2);
+        let (k0, t0, b0) = (self.prior_factor, self.prior_shift, self.est.offset);
+        let [k_lo, k_hi] = self.s.factor_bounds;
+        let a = n + w_b;
+        let mut rhs_b = sy;
+        axpy(&mut rhs_b, w_b, &b0);
+        let mut best = (f64::INFINITY, 0usize, k0);
+        let mut costs = [f64::INFINITY; 3]; // J at best − 1, best, best + 1
+        let mut prev = (f64::INFINITY, k0);
+        let mut last_cost_at_best_plus_one = false;
+        let mut evidence_at_best = 0.0;
+        let mut energy_at_best = 0.0;
+        for mi in 0..=2 * m {
+            // τ = (mi − M) T_b: y_j (bin j back from the newest, j < n_W) against
+            // g(t_j − τ) = g[n_W − 1 + M − j − (mi − M)] = g[n_W − 1 + 2M − mi − j].
+            let hi = n_w + 2 * m - mi; // exclusive end of the window's g indices
+            let lo = hi - n_w;
+            let sxx = self.p2[hi] - self.p2[lo];
+            let mut sx = self.p1[hi];
+            axpy(&mut sx, -1.0, &self.p1[lo]);
+            let mut sxy = 0.0;
+            for j in 0..n_w {
+                sxy += dot(&self.meas_bin(j), &self.g[hi - 1 - j]);
+            }
+            // Eliminate b: b = (rhs_b − κ Sx) / a.
+            let h = sxx + w_k - dot(&sx, &sx) / a;
+            let r = sxy + w_k * k0 - dot(&sx, &rhs_b) / a;
+            let kappa = if h > 0.0 { r / h } else { k0 }.clamp(k_lo, k_hi);
+            let mut b = rhs_b;
+            axpy(&mut b, -kappa, &sx);
+            let b = b.map(|v| v / a);
+            // Residual Σ|y − κ x − b|² from the sums, plus the priors (all in units of var).
+            let res = syy - 2.0 * kappa * sxy - 2.0 * dot(&b, &sy)
+                + kappa * kappa * sxx
+                + 2.0 * kappa * dot(&b, &sx)
+                + n * dot(&b, &b);
+            let tau = (mi as f64 - m as f64) * self.bin;
+            let mut db = b;
+            axpy(&mut db, -1.0, &b0);
+            let cost = res.max(0.0)
+                + w_k * (kappa - k0).powi(2)
+                + w_b * dot(&db, &db)
+                + w_t * (tau - t0).powi(2);
+            if last_cost_at_best_plus_one {
+                costs[2] = cost;
+                last_cost_at_best_plus_one = false;
+            }
+            if cost < best.0 {
+                best = (cost, mi, kappa);
+                costs = [prev.0, cost, f64::INFINITY];
+                last_cost_at_best_plus_one = true;
+                evidence_at_best = h;
+                energy_at_best = sxx / n;
+            }
+            prev = (cost, kappa);
+        }
+        let (_, mi, kappa) = best;
+        let mut tau = (mi as f64 - m as f64) * self.bin;
+        // Sub-bin refinement: the vertex of the parabola through the three costs.
+        let [cm, c0, cp] = costs;
+        let curv = cm - 2.0 * c0 + cp;
+        if cm.is_finite() && cp.is_finite() && curv > 0.0 {
+            tau += 0.5 * self.bin * ((cm - cp) / curv).clamp(-1.0, 1.0);
+        }
+        self.est.factor = kappa;
+        self.est.shift = tau;
+        // The next estimation's priors: this estimate where the window gave evidence of it
+        // (else a noisy fit would random-walk the priors), relaxing toward κ = 1, τ = 0.
+        // Evidence: a tight posterior (the model error scaled by the recent push keeps the tail
+        // of a push, where the door's own dynamics dominate, from overwriting what its bulk
+        // said) and a forecast of at least `min_force` RMS.
+        let sd = (var / evidence_at_best.max(1e-300)).sqrt();
+        self.recent_energy = self.recent_energy.max(energy_at_best);
+        let keep = (-self.bin / self.s.forget).exp();
+        let evidence = sd < EVIDENCE_SD
+            && energy_at_best >= self.s.min_force.powi(2)
+            && energy_at_best >= BULK_ENERGY * self.recent_energy;
+        if evidence {
+            self.prior_factor = kappa;
+            // A refused forecast (κ̂ ≈ 0) says nothing of its timing.
+            if kappa > 0.2 {
+                self.prior_shift = tau;
+            } else {
+                self.prior_shift *= keep;
+            }
+        } else {
+            self.prior_factor = 1.0 + (self.prior_factor - 1.0) * keep;
+            self.prior_shift *= keep;
+        }
+        // Contradicted: κ̂ far from 1 with the window's evidence (posterior sd of κ below
+        // half the threshold), not merely from a prior; it stays so until the factor the
+        // estimator remembers is back within the threshold (evidence of agreement, or the
+        // memory relaxing to 1 over `forget` once the forecast says nothing more).
+        let c = self.s.contradiction;
+        let contradicted = ((kappa - 1.0).abs() > c && evidence)
+            || (self.est.contradicted && (self.prior_factor - 1.0).abs() > c);
+        if contradicted && !self.est.contradicted {
+            self.counts.contradictions += 1;
+            tracing::warn!(
+                "the measured hand force contradicts the forecast at t = {:.3} s: factor {kappa:.2}, \
+                 shift {:+.0} ms ({} so far); its weight follows the factor",
+                self.last_bin_t,
+                tau * 1e3,
+                self.counts.contradictions
+            );
+        } else if !contradicted && self.est.contradicted {
+            tracing::info!(
+                "the forecast agrees with the measured hand force again at t = {:.3} s (factor {kappa:.2})",
+                self.last_bin_t
+            );
+        }
+        self.est.contradicted = contradicted;
+        if contradicted && !evidence {
+            // A weak window does not lift a contradicted forecast's weight: its memory does.
+            self.est.factor = self.prior_factor;
+        }
+        self.counts.estimations += 1;
+        self.counts.factor_min = self.counts.factor_min.min(kappa);
+        self.counts.factor_max = self.counts.factor_max.max(kappa);
+    }
+
+    /// The corrected hand force over the horizon (FC-4): `out[i]` for t + (i + 1) `period`.
+    pub fn fill(&self, t: f64, period: f64, window: &ForecastWindow, out: &mut [V3]) {
+        let e = &self.est;
+        let decay = (-period / self.s.offset_decay).exp();
+        let mut w = 1.0;
+        for (i, f) in out.iter_mut().enumerate() {
+            w *= decay;
+            let s = (i + 1) as f64 * period;
+            let p = self.forecast_at(window, t + s - e.shift);
+            *f = [0, 1, 2].map(|c| e.factor * p[c] + e.offset[c] * w);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::channels::ForecastMsg;
+
+    /// A 1 s raised-cosine impact of `a` N along −x starting at `start`.
+    fn impact(t: f64, start: f64, a: f64) -> V3 {
+        let x = t - start;
+        if !(0.0..1.0).contains(&x) {
+            return [0.0; 3];
+        }
+        [
+            -a * 0.5 * (1.0 - (2.0 * std::f64::consts::PI * x).cos()),
+            0.0,
+            0.0,
+        ]
+    }
+
+    /// Deterministic Gaussian noise (Box–Muller over a xorshift).
+    struct Noise(u64);
+    impl Noise {
+        fn uniform(&mut self) -> f64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            ((self.0 >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        }
+        fn gauss(&mut self) -> f64 {
+            let (u, v) = (self.uniform(), self.uniform());
+            (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+        }
+    }
+
+    struct Run {
+        kappa_at_200ms: f64,
+        tau_at_200ms: f64,
+        /// First time after onset from which κ̂ stays within 10 % of the truth until 0.5 s.
+        settled_after: Option<f64>,
+        contradictions: u64,
+        forecast_at_peak: f64,
+    }
+
+    /// The forecaster publishes `scale × F(t − shift)` every 0.1 s (windows of 2 s at 5 ms, as
+    /// upc's); the hand measures F + bias + noise at 1 kHz.
+    fn run(scale: f64, shift: f64, bias: f64, sigma: f64, seed: u64, phantom: bool) -> Run {
+        let dt = 1e-3;
+        let start = 1.0;
+        let amp = 60.0;
+        let mut corr = ForecastCorrector::new(CorrectionSettings::default(), 0.005, dt);
+        let mut window = ForecastWindow::new(1.0, 1.0, 0.2, 1e4);
+        let mut msg: Box<ForecastMsg> = Box::default();
+        let mut noise = Noise(seed);
+        let mut out = vec![[0.0; 3]; 300];
+        let (mut k200, mut t200) = (f64::NAN, f64::NAN);
+        let mut settled_after = None;
+        let truth = 1.0 / scale;
+        let mut seq = 0;
+        let mut forecast_at_peak = f64::NAN;
+        for k in 0..2000 {
+            let t = k as f64 * dt;
+            if k % 100 == 0 {
+                seq += 1;
+                msg.seq = seq;
+                msg.t0 = t;
+                msg.dt = 0.005;
+                msg.len = 400;
+                msg.period = 0.1;
+                for i in 0..400 {
+                    let f = impact(t + i as f64 * 0.005 - shift, start, amp);
+                    msg.forces[i] = f.map(|v| v * scale);
+                }
+                window.offer(&msg, t).unwrap();
+            }
+            let real = if phantom {
+                [0.0; 3]
+            } else {
+                impact(t, start, amp)
+            };
+            let y = [0, 1, 2].map(|c| real[c] + bias + sigma * noise.gauss());
+            corr.update(t, &window, Some(y));
+            corr.fill(t, 0.005, &window, &mut out);
+            let e = *corr.estimate();
+            let onset = start;
+            if (t - (onset + 0.2)).abs() < 0.5 * dt {
+                k200 = e.factor;
+                t200 = e.shift;
+            }
+            if t > onset && t < start + 0.5 {
+                let ok = (e.factor - truth).abs() <= 0.1 * truth.max(0.1);
+                match (ok, settled_after) {
+                    (true, None) => settled_after = Some(t - onset),
+                    (false, Some(_)) => settled_after = None,
+                    _ => {}
+                }
+            }
+            // What the horizon says 0.1 s before the real peak at start + 0.5 s.
+            if (t - (start + 0.4)).abs() < 0.5 * dt {
+                forecast_at_peak = out[19][0];
+            }
+        }
+        Run {
+            kappa_at_200ms: k200,
+            tau_at_200ms: t200,
+            settled_after,
+            contradictions: corr.counts.contradictions,
+            forecast_at_peak,
+        }
+    }
+
+    #[test]
+    fn an_exact_forecast_is_left_as_it_is() {
+        let r = run(1.0, 0.0, 0.0, 0.0, 1, false);
+        assert!(
+            (r.kappa_at_200ms - 1.0).abs() < 1e-3,
+            "{}",
+            r.kappa_at_200ms
+        );
+        assert!(r.tau_at_200ms.abs() < 1e-3, "{}", r.tau_at_200ms);
+        assert_eq!(r.contradictions, 0);
+        assert!(
+            (r.forecast_at_peak + 60.0).abs() < 0.5,
+            "{}",
+            r.forecast_at_peak
+        );
+    }
+
+    /// The issue's goal: κ within 10 % of the truth within 200 ms of contact onset, with
+    /// σ = 2 N noise and a 5 N bias on the measured force; τ within a bin and a half.
+    #[test]
+    fn factor_and_shift_are_recovered_under_noise_and_bias() {
+        for (scale, shift) in [
+            (1.5, 0.0),
+            (0.5, 0.0),
+            (0.75, 0.15),
+            (1.25, -0.15),
+            (1.0, 0.3),
+            (1.0, -0.3),
+            (2.0, 0.0),
+        ] {
+            for seed in [3, 17, 99] {
+                let r = run(scale, shift, 5.0, 2.0, seed, false);
+                let truth = 1.0 / scale;
+                let at = r.settled_after.unwrap_or(f64::INFINITY);
+                eprintln!(
+                    "scale {scale} shift {shift:+}: κ̂ {:.3} (truth {truth:.3}), τ̂ {:+.3} (truth {:+}), within 10 % after {:.0} ms",
+                    r.kappa_at_200ms,
+                    r.tau_at_200ms,
+                    -shift,
+                    at * 1e3
+                );
+                // Within 200 ms for |shift| ≤ 150 ms (the goal's range); a forecast 300 ms early
+                // looks like a phantom for its first 300 ms and takes longer.
+                let bound = if shift < -0.2 { 0.3 } else { 0.2 };
+                assert!(at <= bound, "scale {scale} shift {shift} seed {seed}: {at}");
+                assert!(
+                    shift < -0.2 || (r.tau_at_200ms + shift).abs() <= 0.0075,
+                    "scale {scale} shift {shift} seed {seed}: τ̂ {}",
+                    r.tau_at_200ms
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_phantom_push_is_refused() {
+        let r = run(1.0, 0.0, 5.0, 2.0, 5, true);
+        assert!(r.kappa_at_200ms < 0.1, "{}", r.kappa_at_200ms);
+        assert_eq!(r.contradictions, 1);
+        // 0.1 s before the phantom's peak the horizon no longer forecasts its force.
+        assert!(r.forecast_at_peak.abs() < 10.0, "{}", r.forecast_at_peak);
+    }
+
+    #[test]
+    fn without_a_forecast_the_measurement_is_held_and_decays() {
+        let mut corr = ForecastCorrector::new(CorrectionSettings::default(), 0.005, 1e-3);
+        let window = ForecastWindow::new(1.0, 1.0, 0.2, 1e4);
+        for k in 0..500 {
+            corr.update(k as f64 * 1e-3, &window, Some([-20.0, 4.0, 0.0]));
+        }
+        let mut out = vec![[0.0; 3]; 300];
+        corr.fill(0.5, 0.005, &window, &mut out);
+        assert!(
+            (out[0][0] + 20.0 * (-0.005f64 / 0.3).exp()).abs() < 1e-3,
+            "{:?}",
+            out[0]
+        );
+        let s = 0.3;
+        assert!(
+            (out[59][1] - 4.0 * (-s / 0.3f64).exp()).abs() < 1e-3,
+            "{:?}",
+            out[59]
+        );
+    }
+}
