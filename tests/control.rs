@@ -87,6 +87,54 @@ fn bad_state_is_an_error_value() {
     assert!(e.contains("nq = 12"), "{e}");
 }
 
+/// A new plant session from another posture: after `reset`, the core latches the new posture
+/// (the whole-body QP's posture and base-orientation references included) and computes what a
+/// fresh core given that posture computes.
+#[test]
+fn reset_latches_the_posture_of_a_new_session() {
+    let config = Config::embedded_default().expect("defaults");
+    let mut a = rig(&config, ControllerKind::C1);
+    for k in 0..5 {
+        a.state.time = k as f64 * 0.001;
+        a.core
+            .tick(&a.state, &a.window, None, &mut a.tau)
+            .expect("first session");
+    }
+    // The second session: base turned by 0.3 rad about z, torso and arms moved.
+    let mut second = a.state;
+    let (s, c) = (0.15f64.sin(), 0.15f64.cos());
+    second.q[3..7].copy_from_slice(&[0.0, 0.0, s, c]);
+    for j in &a.core.model.joints[1..] {
+        let leg = ["hip", "knee", "ankle"].iter().any(|n| j.name.contains(n));
+        if !leg {
+            second.q[j.idx_q] += 0.2;
+        }
+    }
+    a.core.reset();
+    let mut fresh = rig(&config, ControllerKind::C1);
+    fresh.state = second;
+    a.state = second;
+    for k in 0..3 {
+        a.state.time = k as f64 * 0.001;
+        fresh.state.time = a.state.time;
+        let sa = a.core.tick(&a.state, &a.window, None, &mut a.tau);
+        let sf = fresh
+            .core
+            .tick(&fresh.state, &fresh.window, None, &mut fresh.tau);
+        assert_eq!(sa.expect("reset core"), sf.expect("fresh core"));
+        let d = a
+            .tau
+            .iter()
+            .zip(&fresh.tau)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            d < 1e-9,
+            "tick {k}: torques differ by {d} N·m from a fresh core's"
+        );
+    }
+}
+
 #[test]
 fn c2_thread_hands_over_time_stamped_schedules_without_blocking() {
     let mut config = Config::embedded_default().expect("defaults");

@@ -202,9 +202,11 @@ impl ControllerCore {
 
     /// Forget the latched references and the commands carried between ticks, so the next tick
     /// latches again from its state as a first tick does: for a restarted simulator, whose robot
-    /// starts over from its initial posture. Allocation-free.
+    /// starts over from its initial posture. The whole-body QP's posture reference (its root
+    /// orientation is the base-orientation target) is latched again too. Allocation-free.
     pub fn reset(&mut self) {
         self.latched = None;
+        self.wbc.reset();
         self.com_acc_cmd = Vector3::zeros();
         self.hand_acc_cmd = Vector3::zeros();
         self.last_x = [Vector3::zeros(); 2];
