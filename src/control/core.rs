@@ -16,7 +16,7 @@ use nalgebra::{DVector, Matrix3, Vector3};
 
 use super::forecast_window::ForecastWindow;
 use super::gain_thread::StampedSchedule;
-use crate::channels::StateMsg;
+use crate::channels::{MAX_DOF, StateMsg};
 use crate::config::{Config, ControllerKind};
 use crate::dynamics::{
     Data, DynamicsError, Model, OpSpaceWorkspace, ReferenceFrame, center_of_mass_velocity,
@@ -31,7 +31,9 @@ use crate::wbc::{WbcCommand, WbcStatus, WholeBodyController};
 /// Errors of a tick: the state message does not fit the model.
 #[derive(Debug, Clone, thiserror::Error)]
 pub enum TickError {
-    #[error("state has nq = {nq}, nv = {nv}; the model needs {model_nq}, {model_nv}")]
+    #[error(
+        "state has nq = {nq}, nv = {nv}; the model needs {model_nq}, {model_nv} (a state holds at most {MAX_DOF} each)"
+    )]
     Dimensions {
         nq: u32,
         nv: u32,
@@ -270,7 +272,11 @@ impl ControllerCore {
         tau: &mut [f64],
     ) -> Result<WbcStatus, TickError> {
         let (nq, nv) = (self.model.nq, self.model.nv);
-        if state.nq as usize != nq || state.nv as usize != nv {
+        // The message's arrays hold MAX_DOF values: a size beyond them is refused before any
+        // slice by it (a model larger than the message would otherwise match it).
+        let fits = |n: u32| n as usize <= MAX_DOF;
+        if !fits(state.nq) || !fits(state.nv) || state.nq as usize != nq || state.nv as usize != nv
+        {
             return Err(TickError::Dimensions {
                 nq: state.nq,
                 nv: state.nv,

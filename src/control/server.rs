@@ -186,6 +186,15 @@ pub fn run_server_with(
     let kind = cc.kind;
     let dt = 1.0 / cc.rate_hz;
     let weight = model.total_mass() * config.robot.gravity;
+    // Every state and torque message holds at most MAX_DOF values, and the loop slices its
+    // buffers by the model's sizes: a larger model could never be served.
+    if model.nq > MAX_DOF || model.nv > MAX_DOF {
+        return Err(format!(
+            "the model has nq = {}, nv = {}: the channels carry at most {MAX_DOF} each",
+            model.nq, model.nv
+        )
+        .into());
+    }
     let bus = Bus::open(&opts.prefix, "controller")?;
     let states = bus.subscriber::<StateMsg>(ServiceKind::State)?;
     let state_events = bus.listener(ServiceKind::State)?;
