@@ -152,6 +152,10 @@ pub struct ServerSummary {
     pub hand_peak_error: f64,
     pub max_zmp_error: f64,
     pub dropped_log_records: u64,
+    /// Diagnostic lines (tracing, to stderr) the process dropped so far because stderr was not
+    /// read fast enough (see [`crate::logging`]); the loop never waits on stderr.
+    #[serde(default)]
+    pub dropped_log_lines: u64,
     pub realtime: super::realtime::RealtimeReport,
     pub stopped_by: String,
 }
@@ -764,6 +768,7 @@ pub fn run_server_with(
         s.dropped_log_records = l.dropped.load(Ordering::Relaxed);
         l.finish();
     }
+    s.dropped_log_lines = crate::logging::dropped_lines();
     drop(c2);
     Ok(s)
 }
