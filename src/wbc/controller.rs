@@ -39,16 +39,19 @@
 //!   **full** problem below stays as the reference (tests compare the two) and decides any tick
 //!   whose condensation fails (H or S not positive definite).
 //! - Reuse between ticks: the sparsity pattern is fixed from the model's structure (structural
-//!   zeros included), presolve is off and zeros are not dropped, so after the first tick only the
-//!   values are pushed with `update_P/q/A/b` and the symbolic LDLᵀ analysis and the equilibration
-//!   of the first tick are reused. Clarabel is an interior-point method: it restarts from its own
-//!   initial point every solve (no warm start); what carries over is the structure.
+//!   zeros included), presolve is off and zeros are not dropped. Every solver is built at
+//!   construction ([`WholeBodyController::prepare`], from the problem at a posture with the
+//!   joints mid-range), so ticks only push values with `update_P/q/A/b` and reuse the symbolic
+//!   LDLᵀ analysis and that equilibration; no tick builds a solver (a build allocates). Clarabel
+//!   is an interior-point method: it restarts from its own initial point every solve (no warm
+//!   start); what carries over is the structure.
 //! - Failure is never a panic: a solver status other than Solved / AlmostSolved, non-finite data
 //!   or solution, or invalid input gives the fallback torque ([`WholeBodyController::fallback_torque`]:
 //!   gravity compensation through the contacts with joint damping), a
-//!   [`WbcStatus::Fallback`], a counter, and a rate-limited warning. After a numerical solver
-//!   failure the solver is rebuilt on the next tick (fresh equilibration); an infeasible
-//!   problem keeps it.
+//!   [`WbcStatus::Fallback`], a counter, and a rate-limited warning. The solvers are kept after
+//!   a failure (clarabel 0.11 cannot re-equilibrate without a rebuild, which allocates): only a
+//!   caught panic or a refused data update drops one, rebuilt by the next tick that needs it
+//!   (allocating; counted in [`WbcCounters::solver_builds`]).
 //!
 //! Units: SI (m, s, N, N·m, rad). Forces and CoM / hand quantities are in world axes.
 
@@ -138,7 +141,7 @@ pub enum FallbackReason {
     Solver(SolverStatus),
     /// The solver reported success but the solution is not finite.
     NonFiniteSolution,
-    /// The solver panicked (caught; the solver is rebuilt next tick).
+    /// The solver panicked (caught; the solver is rebuilt by the next tick, which allocates).
     SolverPanic,
 }
 
@@ -160,7 +163,8 @@ pub struct WbcCounters {
     pub almost_solved: u64,
     pub fallbacks: u64,
     pub consecutive_fallbacks: u64,
-    /// Clarabel solvers built (1 after the first tick on the fast path).
+    /// Clarabel solvers built: at construction (up to 3: condensed, screening, full); any more
+    /// were rebuilt by a tick after a panic or a refused update.
     pub solver_builds: u64,
     /// Ticks whose QP needed the torque-limit rows (a limit active at the optimum).
     pub torque_limited: u64,
