@@ -20,11 +20,16 @@ fn bench(c: &mut Criterion) {
     g.warm_up_time(Duration::from_millis(500))
         .measurement_time(Duration::from_secs(3))
         .sample_size(50);
-    for (name, kind) in [
-        ("c0_tick", ControllerKind::C0),
-        ("c1_tick", ControllerKind::C1),
+    // C1 with and without the forecast correction (docs/forecast_correction.md): the state's
+    // hand force is the forecast's, so the estimator runs its full window every 5th tick.
+    let mut uncorrected = config.clone();
+    uncorrected.controller.forecast_correction.enabled = false;
+    for (name, kind, config) in [
+        ("c0_tick", ControllerKind::C0, &config),
+        ("c1_tick", ControllerKind::C1, &config),
+        ("c1_tick_uncorrected", ControllerKind::C1, &uncorrected),
     ] {
-        let mut r = humanoid::rig(&config, kind);
+        let mut r = humanoid::rig(config, kind);
         r.window
             .offer(&humanoid::push_forecast(0.0, -40.0), 0.0)
             .expect("forecast");
@@ -34,6 +39,7 @@ fn bench(c: &mut Criterion) {
         g.bench_function(name, |b| {
             b.iter(|| {
                 r.state.time = (k % 1000) as f64 * 0.001;
+                r.state.hand_force = r.window.at(r.state.time);
                 k += 1;
                 let out = r.core.tick(&r.state, &r.window, None, &mut r.tau);
                 black_box((out.is_ok(), r.tau[0]));

@@ -24,6 +24,7 @@ pub mod config;
 pub mod control;
 pub mod dynamics;
 pub mod forecast;
+pub mod logging;
 pub mod offline;
 pub mod preview;
 pub mod recording;

@@ -1,7 +1,6 @@
 //! The `upc` command line: one binary, one subcommand per job.
 
 use clap::{Parser, Subcommand};
-use tracing_subscriber::EnvFilter;
 
 mod cli;
 
@@ -43,14 +42,9 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")),
-        )
-        .with_writer(std::io::stderr)
-        // Colours on a terminal only: `upc run` and systemd send the processes' logs to files.
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .init();
+    // Lines go to stderr from a background thread (a full pipe never stalls a loop); the guard
+    // writes out the queue when main returns.
+    let log = upc::logging::init_stderr();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Run(args) => cli::run::run(args),
@@ -65,6 +59,8 @@ fn main() -> std::process::ExitCode {
         Command::Bridge(args) => cli::bridge::run_cli(args),
         Command::Controller(args) => cli::controller::run(args),
     };
+    // Queued log lines first, then the error (which goes to stderr directly).
+    drop(log);
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {

@@ -87,6 +87,145 @@ fn bad_state_is_an_error_value() {
     assert!(e.contains("nq = 12"), "{e}");
 }
 
+/// A new plant session from another posture: after `reset`, the core latches the new posture
+/// (the whole-body QP's posture and base-orientation references included) and computes what a
+/// fresh core given that posture computes.
+#[test]
+fn reset_latches_the_posture_of_a_new_session() {
+    let config = Config::embedded_default().expect("defaults");
+    let mut a = rig(&config, ControllerKind::C1);
+    for k in 0..5 {
+        a.state.time = k as f64 * 0.001;
+        a.core
+            .tick(&a.state, &a.window, None, &mut a.tau)
+            .expect("first session");
+    }
+    // The second session: base turned by 0.3 rad about z, torso and arms moved.
+    let mut second = a.state;
+    let (s, c) = (0.15f64.sin(), 0.15f64.cos());
+    second.q[3..7].copy_from_slice(&[0.0, 0.0, s, c]);
+    for j in &a.core.model.joints[1..] {
+        let leg = ["hip", "knee", "ankle"].iter().any(|n| j.name.contains(n));
+        if !leg {
+            second.q[j.idx_q] += 0.2;
+        }
+    }
+    a.core.reset();
+    let mut fresh = rig(&config, ControllerKind::C1);
+    fresh.state = second;
+    a.state = second;
+    for k in 0..3 {
+        a.state.time = k as f64 * 0.001;
+        fresh.state.time = a.state.time;
+        let sa = a.core.tick(&a.state, &a.window, None, &mut a.tau);
+        let sf = fresh
+            .core
+            .tick(&fresh.state, &fresh.window, None, &mut fresh.tau);
+        assert_eq!(sa.expect("reset core"), sf.expect("fresh core"));
+        let d = a
+            .tau
+            .iter()
+            .zip(&fresh.tau)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            d < 1e-9,
+            "tick {k}: torques differ by {d} N·m from a fresh core's"
+        );
+    }
+}
+
+/// A state announcing more values than a message holds (a foreign plant, a model larger than
+/// the channels) is an error value, never an out-of-bounds slice.
+#[test]
+fn a_state_larger_than_a_message_is_an_error() {
+    use upc::channels::{MAX_DOF, StateMsg};
+    let model = larger_than_a_message();
+    assert!(model.nq > MAX_DOF && model.nv > MAX_DOF);
+    let (nq, nv) = (model.nq, model.nv);
+    let mut core = upc::control::ControllerCore::new(
+        model,
+        &Config::embedded_default().expect("defaults"),
+        ControllerKind::C0,
+        0.001,
+        [100.0, 20.0],
+        [0.0, 0.0],
+    )
+    .expect("core");
+    let window = upc::control::ForecastWindow::new(1.0, 1.0, 0.2, 300.0);
+    let mut tau = vec![0.0; nv - 6];
+    let state = StateMsg {
+        nq: nq as u32,
+        nv: nv as u32,
+        ..Default::default()
+    };
+    let e = core
+        .tick(&state, &window, None, &mut tau)
+        .expect_err("a state beyond the message's capacity")
+        .to_string();
+    assert!(e.contains(&format!("nq = {nq}")), "{e}");
+}
+
+/// The humanoid with a chain of extra joints on its last body: nv = 60, nq = 61 (more than a
+/// state or torque message holds).
+fn larger_than_a_message() -> upc::dynamics::Model {
+    use upc::dynamics::{Inertia, JointKind, SE3, icub_like};
+    let mut model = icub_like::load().expect("model");
+    let mut parent = model.joints.len() - 1;
+    let extra = 60 - model.nv;
+    for i in 0..extra {
+        parent = model
+            .add_joint(
+                format!("extra_{i}"),
+                Some(parent),
+                SE3::identity(),
+                JointKind::Revolute {
+                    axis: nalgebra::Vector3::z(),
+                },
+                Inertia::from_com(
+                    0.01,
+                    nalgebra::Vector3::zeros(),
+                    nalgebra::Matrix3::identity() * 1e-4,
+                ),
+                format!("extra_body_{i}"),
+            )
+            .expect("extra joint");
+    }
+    model
+}
+
+/// The server refuses such a model before its loop (which slices its MAX_DOF buffers by the
+/// model's sizes) rather than panicking at the first state.
+#[test]
+fn the_server_refuses_a_model_larger_than_a_message() {
+    use std::sync::Arc;
+    use std::sync::atomic::AtomicBool;
+    use upc::control::server::{ServerOptions, run_server};
+    let opts = ServerOptions {
+        prefix: format!("upc_test_big_model_{}", std::process::id()),
+        duration: Some(0.1),
+        rrd: None,
+        recording_id: "big".into(),
+        live: None,
+        zmp_offset: [0.0, 0.0],
+        startup_timeout: 0.5,
+        csv: None,
+        scenario_hash: None,
+        robot_hash: None,
+        robot_name: "big".into(),
+    };
+    let config = Config::embedded_default().expect("defaults");
+    let e = run_server(
+        &config,
+        larger_than_a_message(),
+        &opts,
+        Arc::new(AtomicBool::new(false)),
+    )
+    .expect_err("a model beyond the channels' capacity")
+    .to_string();
+    assert!(e.contains("at most 48"), "{e}");
+}
+
 #[test]
 fn c2_thread_hands_over_time_stamped_schedules_without_blocking() {
     let mut config = Config::embedded_default().expect("defaults");

@@ -27,10 +27,39 @@ fn controller_tick_allocations() {
         }
     });
     eprintln!(
-        "controller tick: {} allocations per tick",
-        count as f64 / 20.0
+        "controller tick: {} allocations per tick, {:?}",
+        count as f64 / 20.0,
+        r.core.wbc_counters()
     );
     // Everything but clarabel's interior-point solve is allocation-free; clarabel 0.11 makes
     // one allocation per solve (measured by tests/wbc_alloc.rs). Nothing else may add to it.
     assert!(count <= 20, "{count} allocations in 20 ticks");
+}
+
+/// From the very first tick (no warm-up), with `formulation = "full"` and torque limits low
+/// enough to bind: no tick builds a clarabel solver (they are built with the core) or latches a
+/// reference by allocating. At most clarabel's one allocation per solve remains (two solves a
+/// tick here: the screening solve without torque rows, then the full problem).
+#[test]
+fn controller_first_ticks_torque_limited_full_formulation() {
+    let mut config = Config::embedded_default().expect("defaults");
+    config.wbc.formulation = upc::config::WbcFormulation::Full;
+    config.wbc.torque_limit_scale = 0.1;
+    let mut r = rig(&config, ControllerKind::C1);
+    r.window
+        .offer(&push_forecast(0.0, -40.0), 0.0)
+        .expect("forecast");
+    let built = r.core.wbc_counters().solver_builds;
+    let ticks = 20;
+    let count = allocations(|| {
+        for k in 0..ticks {
+            r.state.time = k as f64 * 0.001;
+            let _ = r.core.tick(&r.state, &r.window, None, &mut r.tau);
+        }
+    });
+    let c = r.core.wbc_counters();
+    eprintln!("first {ticks} ticks: {count} allocations, {c:?}");
+    assert!(c.torque_limited > 0, "no torque-limited tick: {c:?}");
+    assert_eq!(c.solver_builds, built, "a tick built a solver");
+    assert!(count <= 3 * ticks, "{count} allocations in {ticks} ticks");
 }

@@ -5,7 +5,7 @@
 //! `sim.csv`) with a `summary.json` and a metrics table.
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressStyle};
@@ -404,6 +404,7 @@ fn run_one(
     bar.set_prefix(kind.name());
     let watcher = Bus::open(&prefix, "launcher")
         .and_then(|b| b.subscriber::<StateMsg>(ServiceKind::State).map(|s| (b, s)));
+    let mut died = false;
     let controller_exit = loop {
         if let Ok((_, states)) = &watcher
             && let Ok(Some(s)) = states.latest()
@@ -414,14 +415,37 @@ fn run_one(
         if let Some(status) = controller.try_wait()? {
             break status.code();
         }
+        // A participant that died ends the run at once: the controller would otherwise wait
+        // out its own time-outs (a minute for a vanished simulator).
+        let mut others: Vec<(&'static str, &mut Child)> = vec![("simulator", &mut sim)];
+        if let Some(f) = forecaster.as_mut() {
+            others.push(("forecaster", f));
+        }
+        if let Some((what, status)) = failed_participant(&mut others)? {
+            died = true;
+            let log = dir.join(if what == "simulator" {
+                "sim.log"
+            } else {
+                "forecaster.log"
+            });
+            bar.suspend(|| {
+                eprintln!(
+                    "{}: the {what} died ({status}): {}  ({}); stopping the run",
+                    kind.name(),
+                    last_log_line(&log),
+                    log.display()
+                )
+            });
+            break terminate(&mut controller, Duration::from_secs(10));
+        }
         std::thread::sleep(Duration::from_millis(50));
     };
     bar.finish_and_clear();
-    // The controller is done: give the others a moment, then ask them to stop.
-    let sim_exit = stop(&mut sim, Duration::from_secs(5));
-    let forecaster_exit = forecaster
-        .as_mut()
-        .and_then(|f| stop(f, Duration::from_secs(2)));
+    // The controller is done: give the others a moment, then ask them to stop (at once when one
+    // of them died).
+    let grace = |d: u64| Duration::from_secs(if died { 0 } else { d });
+    let sim_exit = stop(&mut sim, grace(5));
+    let forecaster_exit = forecaster.as_mut().and_then(|f| stop(f, grace(2)));
     if let Some(b) = &mut bridge {
         // SAFETY: signalling our own child; SIGTERM makes it write its summary.
         unsafe { libc::kill(b.id() as libc::pid_t, libc::SIGTERM) };
@@ -543,6 +567,51 @@ fn first_forecast(
     }
 }
 
+/// The first of `children` that has exited without success (an error exit, a signal), with its
+/// status. One that exited with success has finished its part (a forecaster past its horizon).
+fn failed_participant(
+    children: &mut [(&'static str, &mut Child)],
+) -> std::io::Result<Option<(&'static str, ExitStatus)>> {
+    for (what, child) in children.iter_mut() {
+        if let Some(status) = child.try_wait()?
+            && !status.success()
+        {
+            return Ok(Some((what, status)));
+        }
+    }
+    Ok(None)
+}
+
+/// The last non-empty line of a log file (empty when it cannot be read).
+fn last_log_line(path: &Path) -> String {
+    std::fs::read_to_string(path)
+        .unwrap_or_default()
+        .lines()
+        .rev()
+        .find(|l| !l.trim().is_empty())
+        .unwrap_or("")
+        .trim()
+        .to_string()
+}
+
+/// SIGTERM a child now (it writes its summary), SIGKILL it if it has not exited within `grace`.
+fn terminate(child: &mut Child, grace: Duration) -> Option<i32> {
+    if let Ok(Some(s)) = child.try_wait() {
+        return s.code();
+    }
+    // SAFETY: sending a signal to our own child process.
+    unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
+    let deadline = Instant::now() + grace;
+    while Instant::now() < deadline {
+        if let Ok(Some(s)) = child.try_wait() {
+            return s.code();
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let _ = child.kill();
+    child.wait().ok().and_then(|s| s.code())
+}
+
 /// Wait up to `grace` for a child to exit, then SIGTERM it, then SIGKILL.
 fn stop(child: &mut Child, grace: Duration) -> Option<i32> {
     let deadline = Instant::now() + grace;
@@ -632,19 +701,63 @@ fn print_table(entries: &[Entry]) {
         ] {
             if let Some(code) = exit.filter(|&c| c != 0) {
                 let path = Path::new(&e.dir).join(log);
-                let text = std::fs::read_to_string(&path).unwrap_or_default();
-                let last = text
-                    .lines()
-                    .rev()
-                    .find(|l| !l.trim().is_empty())
-                    .unwrap_or("");
                 println!(
                     "{}: the {what} exited with {code}: {}  ({})",
                     e.controller,
-                    last.trim(),
+                    last_log_line(&path),
                     path.display()
                 );
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sh(script: &str) -> Child {
+        Command::new("sh").args(["-c", script]).spawn().expect("sh")
+    }
+
+    #[test]
+    fn a_dead_participant_is_found_and_the_controller_stopped_at_once() {
+        let mut finished = sh("exit 0");
+        let mut crashed = sh("exit 3");
+        let mut running = sh("exec sleep 30");
+        finished.wait().expect("wait");
+        crashed.wait().expect("wait");
+        // One that finished its part is not dead.
+        let mut others = [("forecaster", &mut finished), ("simulator", &mut running)];
+        assert!(failed_participant(&mut others).expect("try_wait").is_none());
+        let mut others = [
+            ("forecaster", &mut finished),
+            ("simulator", &mut crashed),
+            ("bridge", &mut running),
+        ];
+        let (what, status) = failed_participant(&mut others)
+            .expect("try_wait")
+            .expect("a dead participant");
+        assert_eq!((what, status.code()), ("simulator", Some(3)));
+        // The survivor (standing for the controller) is stopped now, not after its time-outs.
+        let t = Instant::now();
+        terminate(&mut running, Duration::from_secs(10));
+        assert!(t.elapsed() < Duration::from_secs(5), "{:?}", t.elapsed());
+    }
+
+    #[test]
+    fn the_last_log_line_skips_trailing_blank_lines() {
+        let path = std::env::temp_dir().join(format!("upc_last_line_{}.log", std::process::id()));
+        std::fs::write(
+            &path,
+            "INFO start\nERROR simulation diverged at t = 1.2 s\n\n  \n",
+        )
+        .expect("write");
+        assert_eq!(
+            last_log_line(&path),
+            "ERROR simulation diverged at t = 1.2 s"
+        );
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(last_log_line(&path), "");
     }
 }

@@ -21,7 +21,7 @@ use super::com_observer::ComObserver;
 use super::forecast_correction::{CorrectionEstimate, ForecastCorrector};
 use super::forecast_window::ForecastWindow;
 use super::gain_thread::StampedSchedule;
-use crate::channels::StateMsg;
+use crate::channels::{MAX_DOF, StateMsg};
 use crate::config::{Config, ControllerKind};
 use crate::dynamics::{
     Data, DynamicsError, Model, OpSpaceWorkspace, ReferenceFrame, center_of_mass_velocity,
@@ -36,7 +36,9 @@ use crate::wbc::{WbcCommand, WbcStatus, WholeBodyController};
 /// Errors of a tick: the state message does not fit the model.
 #[derive(Debug, Clone, thiserror::Error)]
 pub enum TickError {
-    #[error("state has nq = {nq}, nv = {nv}; the model needs {model_nq}, {model_nv}")]
+    #[error(
+        "state has nq = {nq}, nv = {nv}; the model needs {model_nq}, {model_nv} (a state holds at most {MAX_DOF} each)"
+    )]
     Dimensions {
         nq: u32,
         nv: u32,
@@ -235,9 +237,11 @@ impl ControllerCore {
 
     /// Forget the latched references and the commands carried between ticks, so the next tick
     /// latches again from its state as a first tick does: for a restarted simulator, whose robot
-    /// starts over from its initial posture. Allocation-free.
+    /// starts over from its initial posture. The whole-body QP's posture reference (its root
+    /// orientation is the base-orientation target) is latched again too. Allocation-free.
     pub fn reset(&mut self) {
         self.latched = None;
+        self.wbc.reset();
         self.com_acc_cmd = Vector3::zeros();
         self.hand_acc_cmd = Vector3::zeros();
         self.last_x = [Vector3::zeros(); 2];
@@ -312,7 +316,11 @@ impl ControllerCore {
         tau: &mut [f64],
     ) -> Result<WbcStatus, TickError> {
         let (nq, nv) = (self.model.nq, self.model.nv);
-        if state.nq as usize != nq || state.nv as usize != nv {
+        // The message's arrays hold MAX_DOF values: a size beyond them is refused before any
+        // slice by it (a model larger than the message would otherwise match it).
+        let fits = |n: u32| n as usize <= MAX_DOF;
+        if !fits(state.nq) || !fits(state.nv) || state.nq as usize != nq || state.nv as usize != nv
+        {
             return Err(TickError::Dimensions {
                 nq: state.nq,
                 nv: state.nv,

@@ -33,8 +33,8 @@ use super::gain_thread::GainSolver;
 use super::logger::{ControlLogger, TickLog};
 use super::{ControllerCore, ForecastWindow, GainHandoff, LatencyHistogram, Ticker};
 use crate::channels::{
-    Bus, ForecastMsg, MAX_DOF, STATE_FLAG_HOLD, ServiceKind, StateMsg, TORQUE_FLAG_FALLBACK,
-    TorqueMsg,
+    Bus, ChannelError, ForecastMsg, MAX_DOF, Notifier, Publisher, STATE_FLAG_HOLD, ServiceKind,
+    StateMsg, TORQUE_FLAG_FALLBACK, TorqueMsg,
 };
 use crate::config::{Config, ControllerKind, LoopMode};
 use crate::dynamics::Model;
@@ -155,6 +155,10 @@ pub struct ServerSummary {
     pub hand_peak_error: f64,
     pub max_zmp_error: f64,
     pub dropped_log_records: u64,
+    /// Diagnostic lines (tracing, to stderr) the process dropped so far because stderr was not
+    /// read fast enough (see [`crate::logging`]); the loop never waits on stderr.
+    #[serde(default)]
+    pub dropped_log_lines: u64,
     pub realtime: super::realtime::RealtimeReport,
     pub stopped_by: String,
     /// The forecast correction (docs/forecast_correction.md); `None`: off (or C0).
@@ -177,6 +181,57 @@ pub struct CorrectionSummary {
     /// Estimations of κ̂, τ̂; ticks whose measured force was not finite.
     pub estimations: u64,
     pub bad_measurements: u64,
+}
+
+/// The damping torques [`send_damping`] publishes: `−damping · qd`, for state `step`.
+struct DampingMsg<'a> {
+    seq: u64,
+    step: u64,
+    session: u64,
+    controller: u64,
+    damping: f64,
+    /// Joint rates of the last state (length: the actuated joints).
+    qd: &'a [f64],
+}
+
+/// Publishes joint damping torques flagged [`TORQUE_FLAG_FALLBACK`] and wakes the plant.
+fn send_damping(
+    torques: &Publisher<TorqueMsg>,
+    events: &Notifier,
+    d: DampingMsg,
+) -> Result<(), ChannelError> {
+    torques.send_with(|m| {
+        m.seq = d.seq;
+        m.state_step = d.step;
+        m.session = d.session;
+        m.controller = d.controller;
+        m.n = d.qd.len() as u32;
+        m.flags = TORQUE_FLAG_FALLBACK;
+        for (t, qd) in m.tau.iter_mut().zip(d.qd) {
+            *t = -d.damping * qd;
+        }
+    })?;
+    events.notify()
+}
+
+/// The result of an IPC step of the loop; on its failure, `safe` runs once first (it sends
+/// damping torques when there is a state to damp: `Ok(true)`), and the step's error is returned
+/// whatever `safe` gives.
+fn or_safe_torques<T>(
+    step: Result<T, ChannelError>,
+    safe: impl FnOnce() -> Result<bool, ChannelError>,
+) -> Result<T, ChannelError> {
+    step.map_err(|e| {
+        match safe() {
+            Ok(true) => tracing::error!("IPC failed ({e}): damping torques sent, stopping"),
+            Ok(false) => tracing::error!("IPC failed ({e}) before any state: stopping"),
+            Err(e2) => tracing::error!(
+                "IPC failed ({e}), and the damping torques could not be sent either ({e2}): \
+                 stopping"
+            ),
+        }
+        e
+    })
 }
 
 /// Record why a lockstep run will not reproduce (the first reason only).
@@ -209,6 +264,15 @@ pub fn run_server_with(
     let kind = cc.kind;
     let dt = 1.0 / cc.rate_hz;
     let weight = model.total_mass() * config.robot.gravity;
+    // Every state and torque message holds at most MAX_DOF values, and the loop slices its
+    // buffers by the model's sizes: a larger model could never be served.
+    if model.nq > MAX_DOF || model.nv > MAX_DOF {
+        return Err(format!(
+            "the model has nq = {}, nv = {}: the channels carry at most {MAX_DOF} each",
+            model.nq, model.nv
+        )
+        .into());
+    }
     let bus = Bus::open(&opts.prefix, "controller")?;
     let states = bus.subscriber::<StateMsg>(ServiceKind::State)?;
     let state_events = bus.listener(ServiceKind::State)?;
@@ -319,6 +383,31 @@ pub fn run_server_with(
     let mut last_c2_seq = 0u64;
     let mut schedule_was_stale = false;
     let mut com_z0: Option<f64> = None;
+    // An IPC step that fails ends the run: first, one attempt at damping torques for the last
+    // state (flagged fallback), so the plant is not left with the last control torques.
+    macro_rules! ipc {
+        ($step:expr) => {
+            or_safe_torques($step, || match last_step {
+                Some(step) => {
+                    seq += 1;
+                    send_damping(
+                        &torques,
+                        &torque_events,
+                        DampingMsg {
+                            seq,
+                            step,
+                            session,
+                            controller: controller_id,
+                            damping: config.wbc.fallback_damping,
+                            qd: &last_qd[..n_tau],
+                        },
+                    )
+                    .map(|()| true)
+                }
+                None => Ok(false),
+            })?
+        };
+    }
 
     s.stopped_by = loop {
         if stop.load(Ordering::Relaxed) {
@@ -339,14 +428,14 @@ pub fn run_server_with(
         match ticker.as_mut() {
             Some(t) => t.wait(),
             None => {
-                state_events.wait_until(
+                ipc!(state_events.wait_until(
                     Duration::from_millis(20),
                     Duration::from_secs_f64(cc.ipc_spin_us * 1e-6),
                     || states.has_samples(),
-                )?;
+                ));
             }
         }
-        let received = states.latest()?;
+        let received = ipc!(states.latest());
         // A new session, or a step that goes back, is a new plant run (a restarted simulator);
         // the same step again is the lockstep simulator re-sending a state it waits on.
         let restarted = matches!((&received, last_step),
@@ -414,7 +503,7 @@ pub fn run_server_with(
                             *t = -config.wbc.fallback_damping * qd;
                         }
                         seq += 1;
-                        torques.send_with(|m| {
+                        ipc!(torques.send_with(|m| {
                             m.seq = seq;
                             m.state_step = l;
                             m.session = session;
@@ -423,8 +512,8 @@ pub fn run_server_with(
                             m.flags = TORQUE_FLAG_FALLBACK;
                             m.compute_ns = tick_start.elapsed().as_nanos() as u64;
                             m.tau[..n_tau].copy_from_slice(&tau[..n_tau]);
-                        })?;
-                        torque_events.notify()?;
+                        }));
+                        ipc!(torque_events.notify());
                         s.stale_ticks += 1;
                     }
                 }
@@ -601,7 +690,7 @@ pub fn run_server_with(
             }
         }
         seq += 1;
-        torques.send_with(|m| {
+        ipc!(torques.send_with(|m| {
             m.seq = seq;
             m.state_step = state.step;
             m.session = state.session;
@@ -610,8 +699,8 @@ pub fn run_server_with(
             m.flags = flags;
             m.compute_ns = tick_start.elapsed().saturating_sub(waited).as_nanos() as u64;
             m.tau[..n_tau].copy_from_slice(&tau[..n_tau]);
-        })?;
-        torque_events.notify()?;
+        }));
+        ipc!(torque_events.notify());
         // Lockstep waits for the forecast or C2 are not the plant's silence.
         last_state_at = Instant::now();
         let tick_time = tick_start.elapsed().saturating_sub(waited);
@@ -721,6 +810,87 @@ pub fn run_server_with(
         s.dropped_log_records = l.dropped.load(Ordering::Relaxed);
         l.finish();
     }
+    s.dropped_log_lines = crate::logging::dropped_lines();
     drop(c2);
     Ok(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn failure() -> ChannelError {
+        ChannelError {
+            what: "receive".into(),
+            detail: "injected".into(),
+        }
+    }
+
+    #[test]
+    fn a_failed_ipc_step_sends_safe_torques_once_then_fails() {
+        let mut calls = 0;
+        let ok: Result<u32, ChannelError> = or_safe_torques(Ok(7), || {
+            calls += 1;
+            Ok(true)
+        });
+        assert_eq!(
+            (ok.unwrap(), calls),
+            (7, 0),
+            "a step that works sends nothing more"
+        );
+        let e = or_safe_torques::<u32>(Err(failure()), || {
+            calls += 1;
+            Ok(true)
+        })
+        .unwrap_err();
+        assert_eq!((e.detail.as_str(), calls), ("injected", 1));
+        // The step's own error comes back even when the safe torques fail too.
+        let e = or_safe_torques::<u32>(Err(failure()), || {
+            calls += 1;
+            Err(ChannelError {
+                what: "send sample".into(),
+                detail: "also down".into(),
+            })
+        })
+        .unwrap_err();
+        assert_eq!((e.detail.as_str(), calls), ("injected", 2));
+    }
+
+    /// Over real IPC: after a failed step, a torque subscriber on the prefix sees the damping
+    /// torques of the last state, flagged fallback, and the failure is still returned.
+    #[test]
+    fn safe_torques_reach_a_subscriber_after_a_failed_step() {
+        let prefix = format!("upc_test_safe_torques_{}", std::process::id());
+        let bus = Bus::open(&prefix, "controller_test").expect("bus");
+        let torques = bus
+            .publisher::<TorqueMsg>(ServiceKind::Torques)
+            .expect("pub");
+        let events = bus.notifier(ServiceKind::Torques).expect("notifier");
+        let plant = bus
+            .subscriber::<TorqueMsg>(ServiceKind::Torques)
+            .expect("sub");
+        let qd = [0.5, -1.0, 2.0];
+        let e = or_safe_torques::<()>(Err(failure()), || {
+            send_damping(
+                &torques,
+                &events,
+                DampingMsg {
+                    seq: 9,
+                    step: 41,
+                    session: 3,
+                    controller: 5,
+                    damping: 2.0,
+                    qd: &qd,
+                },
+            )
+            .map(|()| true)
+        })
+        .unwrap_err();
+        assert_eq!(e.detail, "injected");
+        let m = plant.latest().expect("receive").expect("a torque message");
+        assert_eq!(m.flags, TORQUE_FLAG_FALLBACK);
+        assert_eq!((m.seq, m.state_step, m.session, m.n), (9, 41, 3, 3));
+        assert_eq!(&m.tau[..3], &[-1.0, 2.0, -4.0]);
+        assert!(m.tau[3..].iter().all(|&t| t == 0.0));
+    }
 }

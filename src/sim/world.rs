@@ -275,6 +275,8 @@ pub struct World {
     warm: DVector<f64>,
     /// Per contact: world point (at the start of the last step), force (N, world).
     points: Vec<Vector3<f64>>,
+    /// The contact points of the step under way, committed to `points` with the state.
+    step_points: Vec<Vector3<f64>>,
     forces: Vec<Vector3<f64>>,
     time: f64,
     steps: u64,
@@ -282,6 +284,9 @@ pub struct World {
     /// An external force on a robot point for the next steps (`sim.push = "hand"`): the point
     /// and the force (N, world).
     push: Option<(ContactPoint, Vector3<f64>)>,
+    /// Tests: make the next steps fail at their last fallible stage (after the integration).
+    #[cfg(test)]
+    fail_after_integration: bool,
 }
 
 fn dof_parents(model: &Model, offset: usize, out: &mut Vec<Option<usize>>) {
@@ -495,6 +500,7 @@ impl World {
             vh: DVector::zeros(nv_robot),
             warm: DVector::zeros(3 * nc + 3),
             points: vec![Vector3::zeros(); nc],
+            step_points: vec![Vector3::zeros(); nc],
             forces: vec![Vector3::zeros(); nc],
             contacts,
             robot,
@@ -502,6 +508,8 @@ impl World {
             steps: 0,
             last: StepReport::default(),
             push: None,
+            #[cfg(test)]
+            fail_after_integration: false,
         };
         w.refresh_points();
         Ok(w)
@@ -543,7 +551,9 @@ impl World {
     }
 
     /// Advances one step under joint torques `tau` (length [`World::n_actuated`]) and the
-    /// door's hinge torque. On error the state is unchanged.
+    /// door's hinge torque. On error the state (q, v, time, steps, the door's, the contact
+    /// points and the warm start) is unchanged: every fallible stage writes scratch only, and
+    /// the new state is committed after the last of them.
     pub fn step(&mut self, tau: &DVector<f64>, door_torque: f64) -> Result<StepReport, SimError> {
         if tau.len() != self.n_act {
             return Err(SimError::TorqueLength {
@@ -676,7 +686,7 @@ impl World {
         let mu = self.params.friction;
         for (ci, c) in self.contacts.iter().enumerate() {
             let p = world_point(&self.data, c);
-            self.points[ci] = p;
+            self.step_points[ci] = p;
             let Some(r) = self.sys.push(BlockKind::Contact { mu }) else {
                 return Err(SimError::Scene("constraint capacity exhausted".into()));
             };
@@ -788,18 +798,31 @@ impl World {
             }
             self.vstar[k] = x;
         }
+        // 6. Positions from the new velocities, into scratch (`vh`, `q_next`): the integration
+        //    may fail, and nothing is committed before it has succeeded for robot and door.
         for k in 0..nv {
-            self.v[k] = self.vstar[k];
+            self.vh[k] = self.vstar[k];
         }
-        integrate(&self.robot, &self.q, &self.v, dt, &mut self.q_next)?;
-        std::mem::swap(&mut self.q, &mut self.q_next);
+        integrate(&self.robot, &self.q, &self.vh, dt, &mut self.q_next)?;
         if let Some(d) = &mut self.door {
             for k in 0..d.model.nv {
-                d.v[k] = self.vstar[nv + k];
+                d.vh[k] = self.vstar[nv + k];
             }
-            integrate(&d.model, &d.q, &d.v, dt, &mut d.q_next)?;
+            integrate(&d.model, &d.q, &d.vh, dt, &mut d.q_next)?;
+        }
+        #[cfg(test)]
+        if self.fail_after_integration {
+            return Err(SimError::Diverged(0));
+        }
+
+        // 7. Commit: nothing below fails.
+        self.v.copy_from(&self.vh);
+        std::mem::swap(&mut self.q, &mut self.q_next);
+        if let Some(d) = &mut self.door {
+            d.v.copy_from(&d.vh);
             std::mem::swap(&mut d.q, &mut d.q_next);
         }
+        self.points.copy_from_slice(&self.step_points);
         self.time += dt;
         self.steps += 1;
 
@@ -1004,5 +1027,71 @@ impl World {
             e += one(&d.model, &mut d.data, &d.q, &d.v)?;
         }
         Ok(e)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Everything a step commits, as bits.
+    fn state_bits(w: &World) -> Vec<u64> {
+        let mut out: Vec<u64> = w
+            .q()
+            .iter()
+            .chain(w.v().iter())
+            .map(|x| x.to_bits())
+            .collect();
+        if let Some(d) = &w.door {
+            out.extend(d.q.iter().chain(d.v.iter()).map(|x| x.to_bits()));
+        }
+        out.extend(w.warm.iter().map(|x| x.to_bits()));
+        out.extend(
+            w.contact_points()
+                .iter()
+                .flat_map(|p| p.iter().map(|x| x.to_bits())),
+        );
+        out.push(w.time().to_bits());
+        out.push(w.steps());
+        out
+    }
+
+    #[test]
+    fn a_failed_step_leaves_the_state_unchanged() {
+        let mut scene =
+            crate::sim::scene::humanoid_scene_with(PhysicsParams::default(), true, None)
+                .expect("scene");
+        let w = &mut scene.world;
+        assert!(w.door.is_some());
+        let mut tau = DVector::zeros(w.n_actuated());
+        for k in 0..tau.len() {
+            tau[k] = 0.5 * ((k as f64) * 0.7).sin();
+        }
+        for _ in 0..5 {
+            w.step(&tau, 0.3).expect("step");
+        }
+        let before = state_bits(w);
+        // A step failing at its last fallible stage, once the integration has run.
+        w.fail_after_integration = true;
+        assert!(w.step(&tau, 0.3).is_err());
+        assert_eq!(
+            state_bits(w),
+            before,
+            "a failing integration changed the state"
+        );
+        w.fail_after_integration = false;
+        // A non-finite torque is refused before anything runs.
+        let mut bad = tau.clone();
+        bad[3] = f64::NAN;
+        assert!(w.step(&bad, 0.3).is_err());
+        assert_eq!(state_bits(w), before);
+        // And the world steps on as if the failures never happened.
+        let mut twin = crate::sim::scene::humanoid_scene_with(PhysicsParams::default(), true, None)
+            .expect("scene");
+        for _ in 0..6 {
+            twin.world.step(&tau, 0.3).expect("step");
+        }
+        w.step(&tau, 0.3).expect("step after the failures");
+        assert_eq!(state_bits(w), state_bits(&twin.world));
     }
 }

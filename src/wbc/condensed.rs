@@ -172,6 +172,10 @@ impl CondensedQp {
         self.qp.solver = None;
     }
 
+    pub(crate) fn has_solver(&self) -> bool {
+        self.qp.solver.is_some()
+    }
+
     /// The solution `[q̈ (nv); f (24)]` of the last successful [`Self::solve`].
     pub(crate) fn x(&self) -> &[f64] {
         &self.x

@@ -39,16 +39,19 @@
 //!   **full** problem below stays as the reference (tests compare the two) and decides any tick
 //!   whose condensation fails (H or S not positive definite).
 //! - Reuse between ticks: the sparsity pattern is fixed from the model's structure (structural
-//!   zeros included), presolve is off and zeros are not dropped, so after the first tick only the
-//!   values are pushed with `update_P/q/A/b` and the symbolic LDLᵀ analysis and the equilibration
-//!   of the first tick are reused. Clarabel is an interior-point method: it restarts from its own
-//!   initial point every solve (no warm start); what carries over is the structure.
+//!   zeros included), presolve is off and zeros are not dropped. Every solver is built at
+//!   construction ([`WholeBodyController::prepare`], from the problem at a posture with the
+//!   joints mid-range), so ticks only push values with `update_P/q/A/b` and reuse the symbolic
+//!   LDLᵀ analysis and that equilibration; no tick builds a solver (a build allocates). Clarabel
+//!   is an interior-point method: it restarts from its own initial point every solve (no warm
+//!   start); what carries over is the structure.
 //! - Failure is never a panic: a solver status other than Solved / AlmostSolved, non-finite data
 //!   or solution, or invalid input gives the fallback torque ([`WholeBodyController::fallback_torque`]:
 //!   gravity compensation through the contacts with joint damping), a
-//!   [`WbcStatus::Fallback`], a counter, and a rate-limited warning. After a numerical solver
-//!   failure the solver is rebuilt on the next tick (fresh equilibration); an infeasible
-//!   problem keeps it.
+//!   [`WbcStatus::Fallback`], a counter, and a rate-limited warning. The solvers are kept after
+//!   a failure (clarabel 0.11 cannot re-equilibrate without a rebuild, which allocates): only a
+//!   caught panic or a refused data update drops one, rebuilt by the next tick that needs it
+//!   (allocating; counted in [`WbcCounters::solver_builds`]).
 //!
 //! Units: SI (m, s, N, N·m, rad). Forces and CoM / hand quantities are in world axes.
 
@@ -65,8 +68,8 @@ use crate::config::{WbcConfig, WbcFormulation};
 use crate::dynamics::spatial::log3;
 use crate::dynamics::{
     Data, DynamicsError, JointKind, Model, ReferenceFrame, compute_joint_jacobians, crba,
-    get_frame_jacobian, gravity_torques, jacobian_center_of_mass, nonlinear_effects,
-    update_frame_placements,
+    forward_kinematics, get_frame_jacobian, gravity_torques, jacobian_center_of_mass,
+    nonlinear_effects, update_frame_placements,
 };
 
 /// Number of point contacts: 4 sole corners on each of 2 feet.
@@ -109,8 +112,20 @@ pub struct WbcCommand<'a> {
     /// whatever joints are lightest. Zero when unknown.
     pub hand_force: Vector3<f64>,
     /// Posture reference (length nq; its root quaternion is the base-orientation target). `None`:
-    /// the stored one ([`WholeBodyController::set_posture_reference`], else the first `q` seen).
+    /// the stored one ([`WholeBodyController::set_posture_reference`], else the first `q` after
+    /// construction or [`WholeBodyController::reset`]).
     pub posture_ref: Option<&'a DVector<f64>>,
+}
+
+/// Which problem [`WholeBodyController::prepare`] makes a tick solve.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Path {
+    /// The condensed problem (then the full one if a limit is violated).
+    Condensed,
+    /// The full problem, screened without its torque rows first.
+    Relaxed,
+    /// The full problem with its torque rows.
+    Full,
 }
 
 /// Why a tick fell back to the safe torque.
@@ -126,7 +141,7 @@ pub enum FallbackReason {
     Solver(SolverStatus),
     /// The solver reported success but the solution is not finite.
     NonFiniteSolution,
-    /// The solver panicked (caught; the solver is rebuilt next tick).
+    /// The solver panicked (caught; the solver is rebuilt by the next tick, which allocates).
     SolverPanic,
 }
 
@@ -148,7 +163,8 @@ pub struct WbcCounters {
     pub almost_solved: u64,
     pub fallbacks: u64,
     pub consecutive_fallbacks: u64,
-    /// Clarabel solvers built (1 after the first tick on the fast path).
+    /// Clarabel solvers built: at construction (up to 3: condensed, screening, full); any more
+    /// were rebuilt by a tick after a panic or a refused update.
     pub solver_builds: u64,
     /// Ticks whose QP needed the torque-limit rows (a limit active at the optimum).
     pub torque_limited: u64,
@@ -244,7 +260,11 @@ pub struct WholeBodyController {
     x: Vec<f64>,
     /// The last tick's optimum had a torque limit active (condensed formulation: see `solve`).
     limits_active: bool,
-    posture_ref: Option<DVector<f64>>,
+    /// The posture reference (length nq), meaningful when `posture_set`: stored by
+    /// [`WholeBodyController::set_posture_reference`] or latched from the first `q` after
+    /// construction or [`WholeBodyController::reset`]. Preallocated: latching copies.
+    posture_ref: DVector<f64>,
+    posture_set: bool,
     // Outputs.
     tau: DVector<f64>,
     last_tau: DVector<f64>,
@@ -256,8 +276,9 @@ pub struct WholeBodyController {
 
 impl WholeBodyController {
     /// Resolves the contact, foot and hand frames, decides the fixed sparsity pattern, the cones
-    /// and clarabel's settings, and preallocates every buffer. The clarabel solver itself is
-    /// built on the first tick (its equilibration needs real data).
+    /// and clarabel's settings, preallocates every buffer and builds the clarabel solvers
+    /// ([`Self::prepare`] with every joint at the middle of its range, else at the neutral
+    /// configuration), so that no tick allocates one.
     pub fn new(model: &Model, config: &WbcConfig) -> Result<Self, WbcError> {
         if !model.has_floating_base() || model.joints[0].kind != JointKind::FreeFlyer {
             return Err(WbcError::NoFloatingBase);
@@ -380,7 +401,7 @@ impl WholeBodyController {
         };
 
         let condensed = CondensedQp::new(nv, model.total_mass() * model.gravity.norm());
-        Ok(Self {
+        let mut wbc = Self {
             p: Params {
                 friction: config.friction,
                 contact_damping: config.contact_damping,
@@ -433,19 +454,107 @@ impl WholeBodyController {
             b_feet: [0.0; 12],
             x: vec![0.0; nz],
             limits_active: false,
-            posture_ref: None,
+            posture_ref: model.neutral(),
+            posture_set: false,
             tau: DVector::zeros(na),
             last_tau: DVector::zeros(na),
             ddq: DVector::zeros(nv),
             forces: [Vector3::zeros(); N_CONTACTS],
             counters: WbcCounters::default(),
             last_warn_tick: None,
-        })
+        };
+        if wbc.p.reuse_solver {
+            // The middle of every joint's range first: straight legs (the neutral
+            // configuration of most humanoids) make the condensed problem singular.
+            let mut data = Data::new(model);
+            let mut prepared = Err(WbcError::NoFloatingBase);
+            for q in [mid_range(model), model.neutral()] {
+                prepared = wbc.prepare(model, &mut data, &q);
+                if prepared.is_ok() {
+                    break;
+                }
+            }
+            if let Err(e) = prepared {
+                // Not fatal: a solver missing here is built by the first tick that needs it
+                // (counted in `solver_builds`).
+                tracing::warn!("whole-body controller: {e}; the first ticks will build them");
+            }
+        }
+        Ok(wbc)
+    }
+
+    /// Builds every clarabel solver the configured formulation may use — the condensed one
+    /// (formulation `condensed`), the full problem without its torque rows (the screening solve,
+    /// when some joint has a torque limit) and the full problem — from the problem at posture `q`
+    /// (v = 0, the hand held where it is, no CoM acceleration), so that no tick builds one (a
+    /// build allocates: the CSC matrices, clarabel's KKT system). Their equilibration is that
+    /// problem's. [`Self::new`] calls it (joints mid-range); call it again (before the loop) to
+    /// equilibrate at a more typical posture. An error says which solver could not be built
+    /// (e.g. the condensed one at a singular posture); the others are built. Counters other than
+    /// `solver_builds`, and the posture reference, are left as they were.
+    pub fn prepare(
+        &mut self,
+        model: &Model,
+        data: &mut Data,
+        q: &DVector<f64>,
+    ) -> Result<(), WbcError> {
+        if model.nv != self.nv || model.nq != self.nq {
+            return Err(WbcError::Dynamics(DynamicsError::DimensionMismatch {
+                what: "model (not the controller's)",
+                expected: self.nv,
+                got: model.nv,
+            }));
+        }
+        forward_kinematics(model, data, q)?;
+        let hand = data.o_m_f[self.hand_id].trans;
+        let v = DVector::zeros(self.nv);
+        let posture = q.clone();
+        let cmd = WbcCommand {
+            hand_pos_des: hand,
+            posture_ref: Some(&posture),
+            ..WbcCommand::default()
+        };
+        let saved = self.counters;
+        self.drop_solvers();
+        let condensed = self.p.formulation == WbcFormulation::Condensed;
+        let mut results = Vec::new();
+        for path in [Path::Condensed, Path::Relaxed, Path::Full] {
+            if path == Path::Condensed && !condensed {
+                continue;
+            }
+            let (mut t, mut it) = (Duration::ZERO, 0);
+            // Whether it solves does not matter here: the solver is built either way (a
+            // failed build is reported below).
+            let r = self.try_solve(model, data, q, &v, &cmd, Some(path), &mut t, &mut it);
+            results.push((path, r));
+        }
+        self.counters = WbcCounters {
+            solver_builds: self.counters.solver_builds,
+            ..saved
+        };
+        self.limits_active = false;
+        self.tau.fill(0.0);
+        self.ddq.fill(0.0);
+        self.forces = [Vector3::zeros(); N_CONTACTS];
+        let built = (!condensed || self.condensed.has_solver())
+            && self.relaxed.as_ref().is_none_or(|r| r.solver.is_some())
+            && self.full.solver.is_some();
+        if built || !self.p.reuse_solver {
+            Ok(())
+        } else {
+            Err(WbcError::Solver(format!(
+                "could not build every solver at this posture (condensed {}, screening {}, \
+                 full {}; solves: {results:?})",
+                self.condensed.has_solver(),
+                self.relaxed.as_ref().is_none_or(|r| r.solver.is_some()),
+                self.full.solver.is_some()
+            )))
+        }
     }
 
     /// Adjusts clarabel's settings (tuning, benchmarks). Takes effect at the next tick, which
-    /// builds a new solver; presolve and zero dropping stay off (the in-place updates need them
-    /// off).
+    /// builds a new solver (allocating: call [`Self::prepare`] after it to build them before
+    /// the loop); presolve and zero dropping stay off (the in-place updates need them off).
     pub fn tune_solver(&mut self, f: impl FnOnce(&mut DefaultSettings<f64>)) {
         f(&mut self.settings);
         self.settings.presolve_enable = false;
@@ -499,15 +608,32 @@ impl WholeBodyController {
         q_ref: &DVector<f64>,
     ) -> Result<(), WbcError> {
         model.check_q(q_ref)?;
-        match self.posture_ref.as_mut() {
-            Some(r) => r.copy_from(q_ref),
-            None => self.posture_ref = Some(q_ref.clone()),
+        if model.nq != self.nq {
+            return Err(WbcError::Dynamics(DynamicsError::DimensionMismatch {
+                what: "model (not the controller's)",
+                expected: self.nq,
+                got: model.nq,
+            }));
         }
+        self.posture_ref.copy_from(q_ref);
+        self.posture_set = true;
         Ok(())
     }
 
     pub fn posture_reference(&self) -> Option<&DVector<f64>> {
-        self.posture_ref.as_ref()
+        self.posture_set.then_some(&self.posture_ref)
+    }
+
+    /// Forgets every reference and the state carried from tick to tick, so that the next tick
+    /// starts as the first after construction: the posture reference (stored or latched; the
+    /// next `q` is latched again, its root orientation the base-orientation target), the
+    /// active-limit hint of the formulation choice and the last QP torque of the fallback. For a
+    /// new plant session (a restarted simulator, whose robot may start from another posture).
+    /// The solvers and counters are kept. Allocation-free.
+    pub fn reset(&mut self) {
+        self.posture_set = false;
+        self.limits_active = false;
+        self.last_tau.fill(0.0);
     }
 
     /// One control tick: assemble and solve the QP at `(q, v)` for `cmd`. Never panics and never
@@ -525,8 +651,16 @@ impl WholeBodyController {
         self.counters.ticks += 1;
         let mut solve_time = Duration::ZERO;
         let mut iterations = 0;
-        let status = match self.try_solve(model, data, q, v, cmd, &mut solve_time, &mut iterations)
-        {
+        let status = match self.try_solve(
+            model,
+            data,
+            q,
+            v,
+            cmd,
+            None,
+            &mut solve_time,
+            &mut iterations,
+        ) {
             Ok(almost) => {
                 self.counters.solved += 1;
                 self.counters.almost_solved += u64::from(almost);
@@ -537,21 +671,11 @@ impl WholeBodyController {
             Err(reason) => {
                 self.counters.fallbacks += 1;
                 self.counters.consecutive_fallbacks += 1;
-                // A fresh solver (fresh equilibration) next tick, unless the input was bad or
-                // the problem itself infeasible (a robot that has fallen: rebuilding every tick
-                // doubled those ticks' cost and changes nothing).
-                let infeasible = matches!(
-                    reason,
-                    FallbackReason::Solver(
-                        SolverStatus::PrimalInfeasible
-                            | SolverStatus::AlmostPrimalInfeasible
-                            | SolverStatus::DualInfeasible
-                            | SolverStatus::AlmostDualInfeasible
-                    )
-                );
-                if !matches!(reason, FallbackReason::InvalidInput) && !infeasible {
-                    self.drop_solvers();
-                }
+                // The solvers are kept (no rebuild, no allocation in the loop): every tick
+                // overwrites their data and clarabel restarts from its own initial point, so
+                // only the equilibration of `prepare` carries over. A solver is dropped (and
+                // rebuilt by the next tick, which allocates and counts in `solver_builds`) only
+                // when clarabel panicked or refused an update (see `QpInstance::run`).
                 self.apply_fallback(model, data, q, v);
                 self.warn(reason);
                 WbcStatus::Fallback(reason)
@@ -585,7 +709,8 @@ impl WholeBodyController {
         }
     }
 
-    /// The QP path. `Ok(almost_solved)` leaves τ, q̈ and f in the output buffers.
+    /// The QP path. `Ok(almost_solved)` leaves τ, q̈ and f in the output buffers. `forced`
+    /// (for [`Self::prepare`]) takes the given path whatever the formulation and limits say.
     #[allow(clippy::too_many_arguments)]
     fn try_solve(
         &mut self,
@@ -594,6 +719,7 @@ impl WholeBodyController {
         q: &DVector<f64>,
         v: &DVector<f64>,
         cmd: &WbcCommand,
+        forced: Option<Path>,
         solve_time: &mut Duration,
         iterations: &mut u32,
     ) -> Result<bool, FallbackReason> {
@@ -620,8 +746,10 @@ impl WholeBodyController {
         }
         // Kinematics and dynamics at (q, v). CRBA checks q and leaves the joint Jacobians.
         crba(model, data, q).map_err(|_| InvalidInput)?;
-        if self.posture_ref.is_none() && cmd.posture_ref.is_none() {
-            self.posture_ref = Some(q.clone()); // first tick only
+        if !self.posture_set && cmd.posture_ref.is_none() {
+            // First tick after construction or a reset: latch (a copy, no allocation).
+            self.posture_ref.copy_from(q);
+            self.posture_set = true;
         }
         update_frame_placements(model, data);
         self.build_jacobians(model, data);
@@ -668,7 +796,7 @@ impl WholeBodyController {
         // R ω̇_b) towards α = K_p log(R_ref Rᵀ) − K_d ω; in body axes the target is Rᵀ α.
         let q_ref = cmd
             .posture_ref
-            .or(self.posture_ref.as_ref())
+            .or(self.posture_set.then_some(&self.posture_ref))
             .ok_or(InvalidInput)?;
         let quat = UnitQuaternion::from_quaternion(Quaternion::new(
             q_ref[6], q_ref[3], q_ref[4], q_ref[5],
@@ -706,7 +834,11 @@ impl WholeBodyController {
         // screening solve would be wasted. Its optimum is the tick's when it respects every
         // limit; otherwise the full problem with its torque rows decides.
         let mut screen = true;
-        let condensed = if p.formulation == WbcFormulation::Condensed && !self.limits_active {
+        let use_condensed = match forced {
+            Some(path) => path == Path::Condensed,
+            None => p.formulation == WbcFormulation::Condensed && !self.limits_active,
+        };
+        let condensed = if use_condensed {
             let pb = Problem {
                 m: &data.m,
                 h: &self.h,
@@ -745,7 +877,10 @@ impl WholeBodyController {
                 Err(CondensedError::Solver(r)) => return Err(r),
             }
         } else {
-            screen = p.formulation == WbcFormulation::Full;
+            screen = match forced {
+                Some(path) => path == Path::Relaxed,
+                None => p.formulation == WbcFormulation::Full,
+            };
             None
         };
         let almost = match condensed {
@@ -1055,6 +1190,18 @@ impl WholeBodyController {
             self.forces = [Vector3::zeros(); N_CONTACTS];
         }
     }
+}
+
+/// The neutral configuration with every bounded 1-DoF joint at the middle of its range.
+fn mid_range(model: &Model) -> DVector<f64> {
+    let mut q = model.neutral();
+    for j in &model.joints {
+        let (lo, hi) = (j.limits.lower, j.limits.upper);
+        if j.nq() == 1 && lo.is_finite() && hi.is_finite() && lo < hi {
+            q[j.idx_q] = 0.5 * (lo + hi);
+        }
+    }
+    q
 }
 
 /// `τ_d = M[d, :] q̈ + h_d − Σ J_c[:, d]ᵀ f` from a solution `x = [q̈, f, …]`.

@@ -3,19 +3,18 @@
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 struct Counting;
 
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
 thread_local! {
     static COUNTING: Cell<bool> = const { Cell::new(false) };
+    // Per thread: two tests of a binary measuring at once do not add to each other's counts.
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
 }
 
 fn count() {
     if COUNTING.with(|c| c.get()) {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        ALLOCATIONS.with(|n| n.set(n.get() + 1));
     }
 }
 
@@ -40,16 +39,22 @@ static GLOBAL: Counting = Counting;
 /// Allocations made by `f` on the calling thread. Checks first that the counter works.
 pub fn allocations(f: impl FnOnce()) -> usize {
     COUNTING.with(|c| c.set(true));
-    let probe = ALLOCATIONS.load(Ordering::SeqCst);
+    let probe = ALLOCATIONS.with(|n| n.get());
     let v = std::hint::black_box(vec![0u8; 64]);
     assert!(
-        ALLOCATIONS.load(Ordering::SeqCst) > probe && v.len() == 64,
+        ALLOCATIONS.with(|n| n.get()) > probe && v.len() == 64,
         "the allocation counter does not count"
     );
     drop(v);
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = ALLOCATIONS.with(|n| n.get());
     f();
-    let n = ALLOCATIONS.load(Ordering::SeqCst) - before;
+    let n = ALLOCATIONS.with(|n| n.get()) - before;
     COUNTING.with(|c| c.set(false));
     n
+}
+
+/// The running count of the measuring thread's allocations (inside [`allocations`]), to single
+/// out one step of the measured closure.
+pub fn allocations_so_far() -> usize {
+    ALLOCATIONS.with(|n| n.get())
 }
