@@ -192,6 +192,7 @@ fn without_a_forecaster_the_measured_force_is_previewed() {
     assert!(a["reproducible"].as_bool().unwrap_or(false), "{a}");
     assert!(!fell(&a), "{a}");
     let b = run(&s, "b", &case);
+    assert_eq!(a["ticks"], b["ticks"], "{b}");
     assert_eq!(
         csv_without(&s.path("a/c1/controller.csv"), &["tick_us", "wbc_us"]),
         csv_without(&s.path("b/c1/controller.csv"), &["tick_us", "wbc_us"])
