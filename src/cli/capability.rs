@@ -167,16 +167,7 @@ pub fn run(args: CapabilityArgs) -> CliResult {
         }
     }
     let per_case = 1 + ((args.max / args.tol).log2().ceil().max(0.0) as u64);
-    let bar = if args.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(cases.len() as u64 * per_case)
-    };
-    bar.set_style(
-        ProgressStyle::with_template("[{bar:40}] {pos}/{len} runs, {elapsed} ({eta} left) {msg}")
-            .map(|s| s.progress_chars("=> "))
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
+    let bar = runs_bar(args.quiet, cases.len() as u64 * per_case);
     let jobs = args
         .jobs
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
@@ -278,6 +269,20 @@ pub fn run(args: CapabilityArgs) -> CliResult {
         out.display()
     );
     Ok(())
+}
+
+/// A progress bar counting `len` simulation runs (hidden when `quiet`).
+pub(super) fn runs_bar(quiet: bool, len: u64) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(len);
+    bar.set_style(
+        ProgressStyle::with_template("[{bar:40}] {pos}/{len} runs, {elapsed} ({eta} left) {msg}")
+            .map(|s| s.progress_chars("=> "))
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar
 }
 
 /// How a full-simulation case's forecast departs from the impact the plant plays.

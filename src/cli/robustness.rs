@@ -10,11 +10,10 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;
 
-use indicatif::{ProgressBar, ProgressStyle};
 use upc::capability::{Capability, Criteria, Direction, Variant, bisect};
 
 use super::CliResult;
-use super::capability::{BoxError, ForecastCase, FullCase, full_case};
+use super::capability::{BoxError, ForecastCase, FullCase, full_case, runs_bar};
 use super::common::RobotArg;
 use super::sim::PlantChoice;
 
@@ -185,16 +184,7 @@ pub fn run(args: RobustnessArgs) -> CliResult {
         args.durations.len() * variants.iter().filter(|v| v.uses_forecast()).count()
     };
     let per_case = 1 + ((args.max_bound() / args.tol).log2().ceil().max(0.0) as u64);
-    let bar = if args.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new((cells.len() + phantoms) as u64 * per_case)
-    };
-    bar.set_style(
-        ProgressStyle::with_template("[{bar:40}] {pos}/{len} runs, {elapsed} ({eta} left) {msg}")
-            .map(|s| s.progress_chars("=> "))
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
+    let bar = runs_bar(args.quiet, (cells.len() + phantoms) as u64 * per_case);
     let robot = args.robot.robot.as_str();
     let run_cells = |cells: Vec<(Cell, f64, Criteria)>| -> Result<Vec<Row>, BoxError> {
         let queue = Mutex::new(cells);

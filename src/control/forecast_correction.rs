@@ -195,6 +195,8 @@ pub struct ForecastCorrector {
     g: Vec<V3>,
     p2: Vec<f64>,
     p1: Vec<V3>,
+    /// Scratch: each candidate shift's cost.
+    costs: Vec<f64>,
     est: CorrectionEstimate,
     /// Prior means (relaxing to 1 and 0 at `forget`).
     prior_factor: f64,
@@ -231,6 +233,7 @@ impl ForecastCorrector {
             g: vec![[0.0; 3]; timeline],
             p2: vec![0.0; timeline + 1],
             p1: vec![[0.0; 3]; timeline + 1],
+            costs: vec![f64::INFINITY; 2 * m + 1],
             est: CorrectionEstimate::default(),
             prior_factor: 1.0,
             prior_shift: 0.0,
@@ -290,7 +293,7 @@ impl ForecastCorrector {
     /// The k-th newest recorded forecast bin (k < recorded).
     fn fc_bin(&self, k: usize) -> V3 {
         let len = self.fc.len();
-        self.fc[((self.bins as usize - 1 - k) % len + len) % len]
+        self.fc[(self.bins as usize - 1 - k) % len]
     }
 
     fn meas_bin(&self, k: usize) -> V3 {
@@ -395,9 +398,6 @@ impl ForecastCorrector {
         let mut rhs_b = sy;
         axpy(&mut rhs_b, w_b, &b0);
         let mut best = (f64::INFINITY, 0usize, k0);
-        let mut costs = [f64::INFINITY; 3]; // J at best − 1, best, best + 1
-        let mut prev = (f64::INFINITY, k0);
-        let mut last_cost_at_best_plus_one = false;
         let mut evidence_at_best = 0.0;
         let mut energy_at_best = 0.0;
         for mi in 0..=2 * m {
@@ -431,23 +431,22 @@ impl ForecastCorrector {
                 + w_k * (kappa - k0).powi(2)
                 + w_b * dot(&db, &db)
                 + w_t * (tau - t0).powi(2);
-            if last_cost_at_best_plus_one {
-                costs[2] = cost;
-                last_cost_at_best_plus_one = false;
-            }
             if cost < best.0 {
                 best = (cost, mi, kappa);
-                costs = [prev.0, cost, f64::INFINITY];
-                last_cost_at_best_plus_one = true;
                 evidence_at_best = h;
                 energy_at_best = sxx / n;
             }
-            prev = (cost, kappa);
+            self.costs[mi] = cost;
         }
         let (_, mi, kappa) = best;
         let mut tau = (mi as f64 - m as f64) * self.bin;
         // Sub-bin refinement: the vertex of the parabola through the three costs.
-        let [cm, c0, cp] = costs;
+        let at = |i: Option<usize>| i.and_then(|i| self.costs.get(i)).copied();
+        let (cm, c0, cp) = (
+            at(mi.checked_sub(1)).unwrap_or(f64::INFINITY),
+            self.costs[mi],
+            at(Some(mi + 1)).unwrap_or(f64::INFINITY),
+        );
         let curv = cm - 2.0 * c0 + cp;
         if cm.is_finite() && cp.is_finite() && curv > 0.0 {
             tau += 0.5 * self.bin * ((cm - cp) / curv).clamp(-1.0, 1.0);
