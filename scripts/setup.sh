@@ -10,6 +10,8 @@ command -v python3 >/dev/null 2>&1 || need+=(python3)
 python3 -c 'import venv, ensurepip' >/dev/null 2>&1 || need+=(python3-venv)
 # Eigen's headers: scripts/bench_pinocchio.py compiles Pinocchio's C++ against them.
 [ -d /usr/include/eigen3 ] || need+=(libeigen3-dev)
+# The lab's certificates for the bridge's TLS (scripts/lab-pki.sh; `upc run --forecaster-over-zenoh`).
+command -v openssl >/dev/null 2>&1 || need+=(openssl)
 # The font of the PNG figures of `upc compare` (loaded at run time; SVGs do without it).
 [ -f /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || need+=(fonts-dejavu-core)
 if [ ${#need[@]} -gt 0 ]; then

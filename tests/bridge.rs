@@ -196,11 +196,22 @@ fn remote_forecaster_killed_garbage_bad_windows_and_a_flood_over_zenoh() {
         assert_eq!(u(by, key), rounds, "{key}: {msg}");
     }
     let received = u(&b, "forecasts_received");
+    let accounted = [
+        "forecasts_forwarded",
+        "forecasts_refused",
+        "forecasts_dropped",
+        "forecasts_rate_limited",
+        "forecasts_second_source",
+    ];
     assert_eq!(
         received,
-        u(&b, "forecasts_forwarded") + u(&b, "forecasts_refused") + u(&b, "forecasts_dropped"),
+        accounted.iter().map(|k| u(&b, k)).sum::<u64>(),
         "{msg}"
     );
+    // One source (the anonymous key of plain loopback, whoever puts on it) and the flood held
+    // to the rate.
+    assert_eq!(u(&b, "forecasts_second_source"), 0, "{msg}");
+    assert!(u(&b, "forecasts_rate_limited") > 0, "{msg}");
     // Zenoh's publisher may itself drop under a flood (congestion control for data): what
     // arrived is at least the paced messages.
     assert!(received > 6 * rounds, "{msg}");

@@ -161,8 +161,8 @@ fn lockstep_c2_reruns_byte_for_byte() {
     twice("c2", "2.5");
 }
 
-/// The forecast crossing Zenoh (`upc bridge` and the Python remote forecaster, which evaluates
-/// the scenario on its own) changes no byte of a lockstep run: the same CSVs and summaries as
+/// The forecast crossing Zenoh (`upc bridge` with mutual TLS and the Python remote forecaster,
+/// which evaluates the scenario on its own) changes no byte of a lockstep run: the same CSVs and summaries as
 /// with upc's forecaster on iceoryx2. Skipped, saying why, without `.venv`'s Zenoh.
 #[test]
 fn lockstep_c1_with_the_forecast_over_zenoh_gives_the_iceoryx2_runs_bytes() {
@@ -183,7 +183,14 @@ fn lockstep_c1_with_the_forecast_over_zenoh_gives_the_iceoryx2_runs_bytes() {
         bridge["forecasts_forwarded"].as_u64().unwrap_or(0) >= 250,
         "{bridge}"
     );
-    for k in ["forecasts_refused", "forecasts_dropped", "put_errors"] {
+    assert_eq!(bridge["security"], "mutual TLS", "{bridge}");
+    for k in [
+        "forecasts_refused",
+        "forecasts_dropped",
+        "forecasts_rate_limited",
+        "forecasts_second_source",
+        "put_errors",
+    ] {
         assert_eq!(bridge[k], 0, "{k}: {bridge}");
     }
     assert!(

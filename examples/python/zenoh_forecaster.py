@@ -11,6 +11,13 @@ windows (k·period, once the plant's time reaches it) a lockstep run gives the s
 
     python3 examples/python/zenoh_forecaster.py --connect tcp/ROBOT:7447 --scenario multiple_impacts
 
+To a bridge with TLS (services/BRIDGE_SECURITY.md), with this forecaster's certificate, whose
+common name is its identity: it then puts on `<key_prefix>/forecast/<name>`, the only forecast
+key the bridge lets that identity use.
+
+    python3 examples/python/zenoh_forecaster.py --connect tls/robot.lab:7447 --mode client \
+        --ca pki/ca.pem --cert pki/fc1.pem --key pki/fc1.key --name fc1
+
 `upc run --forecaster-over-zenoh` starts a bridge and this script on loopback.
 """
 
@@ -111,6 +118,14 @@ def main() -> int:
                    help="Zenoh endpoint of the bridge (repeatable), e.g. tcp/10.0.0.2:7447")
     p.add_argument("--mode", default="peer", choices=["peer", "client"])
     p.add_argument("--key-prefix", default=os.environ.get("UPC_PREFIX", "upc"))
+    p.add_argument("--name", default=os.environ.get("UPC_ZENOH_NAME", ""),
+                   help="this forecaster's identity: puts on <key_prefix>/forecast/<name> "
+                        "(a bridge with TLS takes forecasts only there; default: <key_prefix>/forecast)")
+    p.add_argument("--ca", default=os.environ.get("UPC_ZENOH_CA"), help="the lab's CA certificate (PEM): TLS")
+    p.add_argument("--cert", default=os.environ.get("UPC_ZENOH_CERT"), help="this forecaster's certificate (PEM)")
+    p.add_argument("--key", default=os.environ.get("UPC_ZENOH_KEY"), help="its private key (PEM)")
+    p.add_argument("--user", default=os.environ.get("UPC_ZENOH_USER"), help="user name, if the bridge asks for one")
+    p.add_argument("--password", default=os.environ.get("UPC_ZENOH_PASSWORD"))
     p.add_argument("--scenario", default=os.environ.get("UPC_SCENARIO"),
                    help="scenario TOML or embedded name (default: the one the plant announces)")
     p.add_argument("--scenario-dir", type=Path,
@@ -130,6 +145,17 @@ def main() -> int:
     conf.insert_json5("mode", json.dumps(a.mode))
     conf.insert_json5("connect/endpoints", json.dumps(a.connect))
     conf.insert_json5("scouting/multicast/enabled", "false" if a.connect else "true")
+    if a.ca:
+        tls = "transport/link/tls"
+        conf.insert_json5(f"{tls}/root_ca_certificate", json.dumps(a.ca))
+        if a.cert and a.key:
+            conf.insert_json5(f"{tls}/connect_certificate", json.dumps(a.cert))
+            conf.insert_json5(f"{tls}/connect_private_key", json.dumps(a.key))
+            conf.insert_json5(f"{tls}/enable_mtls", "true")
+        conf.insert_json5(f"{tls}/verify_name_on_connect", "true")
+    if a.user:
+        conf.insert_json5("transport/auth/usrpwd/user", json.dumps(a.user))
+        conf.insert_json5("transport/auth/usrpwd/password", json.dumps(a.password or ""))
     session = zenoh.open(conf)
 
     latest = {"state": None, "refused": 0}
@@ -145,7 +171,7 @@ def main() -> int:
                 print(f"zenoh forecaster: state refused: {e}", file=sys.stderr)
 
     states = session.declare_subscriber(f"{a.key_prefix}/state", on_state)
-    publisher = session.declare_publisher(f"{a.key_prefix}/forecast")
+    publisher = session.declare_publisher(f"{a.key_prefix}/forecast" + (f"/{a.name}" if a.name else ""))
     n = max(1, min(MAX_FORECAST, math.ceil(a.window / a.dt)))
 
     # As upc's forecaster (src/forecast/mod.rs): window k starts at k·period and is published

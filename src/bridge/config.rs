@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 
+use super::security::{Posture, SecurityConfig};
 use crate::config::{ConfigError, Layers};
 
 /// The defaults shipped inside the binary.
@@ -50,6 +51,10 @@ pub struct BridgeConfig {
     pub ground_truth_out: bool,
     pub torques_out: bool,
     pub inbound_queue: usize,
+    pub forecast_rate_hz: f64,
+    pub forecast_burst: u32,
+    pub source_takeover: f64,
+    pub security: SecurityConfig,
 }
 
 impl BridgeConfig {
@@ -67,6 +72,15 @@ impl BridgeConfig {
         if self.inbound_queue == 0 {
             return Err(l.range_error("bridge.inbound_queue", "must be ≥ 1"));
         }
+        if !(self.forecast_rate_hz > 0.0 && self.forecast_rate_hz.is_finite()) {
+            return Err(l.range_error("bridge.forecast_rate_hz", "must be > 0"));
+        }
+        if self.forecast_burst == 0 {
+            return Err(l.range_error("bridge.forecast_burst", "must be ≥ 1"));
+        }
+        if !(self.source_takeover >= 0.0 && self.source_takeover.is_finite()) {
+            return Err(l.range_error("bridge.source_takeover", "must be ≥ 0 s"));
+        }
         for (key, v) in [
             ("bridge.key_prefix", &self.key_prefix),
             ("bridge.prefix", &self.prefix),
@@ -80,6 +94,21 @@ impl BridgeConfig {
                 return Err(l.range_error(key, format!("`{v}` is not a plain key prefix")));
             }
         }
+        let posture = self
+            .posture()
+            .map_err(|e| l.range_error("bridge.security", e))?;
+        if posture != Posture::PlainLoopback && self.mode != ZenohMode::Router {
+            return Err(l.range_error(
+                "bridge.mode",
+                "must be \"router\" beyond plain loopback: participants connect to the bridge as clients, so that all traffic crosses its access control",
+            ));
+        }
+        if posture != Posture::PlainLoopback && self.multicast_scouting {
+            return Err(l.range_error(
+                "bridge.multicast_scouting",
+                "must be off beyond plain loopback (peers found by multicast could bypass the bridge)",
+            ));
+        }
         if self.mode == ZenohMode::Client && self.connect.is_empty() {
             return Err(l.range_error(
                 "bridge.connect",
@@ -87,6 +116,11 @@ impl BridgeConfig {
             ));
         }
         Ok(())
+    }
+
+    /// Who may connect and how they are identified (refused: why).
+    pub fn posture(&self) -> Result<Posture, String> {
+        self.security.posture(&self.listen, &self.connect)
     }
 
     /// The Zenoh session's configuration.
@@ -104,6 +138,8 @@ impl BridgeConfig {
             "scouting/multicast/enabled",
             self.multicast_scouting.to_string(),
         )?;
+        self.security
+            .apply(self.posture()?, &self.key_prefix, &mut c)?;
         Ok(c)
     }
 }
@@ -120,19 +156,39 @@ mod tests {
     #[test]
     fn defaults_load_and_bad_values_name_their_key() {
         let c = BridgeConfig::load(&[], &[]).unwrap();
-        assert_eq!(c.mode, ZenohMode::Peer);
+        assert_eq!(c.mode, ZenohMode::Router);
+        assert_eq!(c.posture(), Ok(Posture::PlainLoopback));
         assert_eq!(c.listen, vec!["tcp/127.0.0.1:7447".to_string()]);
         c.zenoh().unwrap();
         let e = BridgeConfig::load(&[], &["bridge.decimation=0".into()]).unwrap_err();
         assert!(e.to_string().contains("bridge.decimation"), "{e}");
         let e = BridgeConfig::load(&[], &["bridge.key_prefix=\"a/*\"".into()]).unwrap_err();
         assert!(e.to_string().contains("bridge.key_prefix"), "{e}");
+        let e =
+            BridgeConfig::load(&[], &["bridge.listen=[\"tcp/0.0.0.0:7447\"]".into()]).unwrap_err();
+        assert!(e.to_string().contains("--insecure"), "{e}");
+        let e = BridgeConfig::load(
+            &[],
+            &[
+                "bridge.listen=[\"tcp/0.0.0.0:7447\"]".into(),
+                "bridge.security.insecure=true".into(),
+                "bridge.mode=\"peer\"".into(),
+            ],
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("bridge.mode"), "{e}");
         let e = BridgeConfig::load(&[], &["bridge.mode=\"client\"".into()]).unwrap_err();
         assert!(e.to_string().contains("bridge.connect"), "{e}");
-        let e = BridgeConfig::load(&[], &["bridge.listen=[\"nonsense\"]".into()])
-            .unwrap()
-            .zenoh()
-            .unwrap_err();
+        let e = BridgeConfig::load(
+            &[],
+            &[
+                "bridge.listen=[\"nonsense\"]".into(),
+                "bridge.security.insecure=true".into(),
+            ],
+        )
+        .unwrap()
+        .zenoh()
+        .unwrap_err();
         assert!(e.contains("listen/endpoints"), "{e}");
     }
 }

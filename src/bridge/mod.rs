@@ -8,11 +8,17 @@
 //! bound), checks each one's header and publishes it; *outbound* wakes on each state and puts
 //! the decimated samples (Zenoh's default congestion control for data drops, so a slow network
 //! never blocks it).
+//!
+//! Who may connect, and what each may do, is set by [`security`]; which source's forecasts are
+//! taken, and how fast, by [`gate`].
 
 mod config;
+mod gate;
+mod security;
 pub mod wire;
 
 use std::sync::Arc;
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::time::{Duration, Instant};
@@ -21,6 +27,9 @@ use serde::Serialize;
 use zenoh::Wait;
 
 pub use config::{BRIDGE_TOML, BridgeConfig, ZenohMode};
+use gate::{ForecastGate, Refusal};
+use security::Keys;
+pub use security::{Posture, SecurityConfig};
 use wire::{WireError, WireMessage, decode_into, encode};
 
 use crate::channels::{
@@ -66,7 +75,14 @@ pub struct BridgeSummary {
     pub prefix: String,
     pub mode: String,
     pub decimation: u32,
-    /// Forecast payloads that arrived from Zenoh.
+    /// How participants are identified (`mutual TLS`, … `INSECURE: …`).
+    pub security: String,
+    /// Plain TCP beyond loopback was accepted (`--insecure`).
+    pub insecure: bool,
+    /// Identities allowed to put forecasts, and to view.
+    pub forecasters: Vec<String>,
+    pub viewers: Vec<String>,
+    /// Forecast payloads that arrived from Zenoh (past Zenoh's access control).
     pub forecasts_received: u64,
     /// Published on iceoryx2.
     pub forecasts_forwarded: u64,
@@ -75,6 +91,14 @@ pub struct BridgeSummary {
     pub forecasts_refused_by: RefusedBy,
     /// Dropped because `inbound_queue` forecasts were already waiting (a flood).
     pub forecasts_dropped: u64,
+    /// Refused: another source's forecasts were being taken.
+    pub forecasts_second_source: u64,
+    /// Dropped: over `forecast_rate_hz` / `forecast_burst`.
+    pub forecasts_rate_limited: u64,
+    /// How many times a forecast source was taken (the first included), and the last one
+    /// (its identity; empty: the anonymous key of plain loopback).
+    pub forecast_sources_taken: u64,
+    pub forecast_source: String,
     /// Zenoh callback → published on iceoryx2 (µs), over the forwarded forecasts.
     pub forward_p50_us: f64,
     pub forward_p99_us: f64,
@@ -100,15 +124,19 @@ struct Inbound {
 }
 
 /// Counters the Zenoh callback updates (it runs on Zenoh's threads).
-#[derive(Default)]
-struct CallbackCounters {
+struct Intake {
+    keys_prefix: String,
+    gate: Mutex<ForecastGate>,
     received: AtomicU64,
     dropped: AtomicU64,
+    second_source: AtomicU64,
+    rate_limited: AtomicU64,
 }
 
 /// Run the bridge until `stop` is raised or a channel fails.
 pub fn run(cfg: &BridgeConfig, stop: Arc<AtomicBool>) -> Result<BridgeSummary, BridgeError> {
     let start = Instant::now();
+    let posture = cfg.posture().map_err(BridgeError::Zenoh)?;
     let session = zenoh::open(cfg.zenoh().map_err(BridgeError::Zenoh)?)
         .wait()
         .map_err(|e| BridgeError::Open {
@@ -118,23 +146,51 @@ pub fn run(cfg: &BridgeConfig, stop: Arc<AtomicBool>) -> Result<BridgeSummary, B
             detail: e.to_string(),
         })?;
     tracing::info!(
-        "bridge: iceoryx2 `{}` ⇄ Zenoh `{}/*` ({}, listening on {:?}, connecting to {:?}), outbound every {} steps",
+        "bridge: iceoryx2 `{}` ⇄ Zenoh `{}/*` ({}, listening on {:?}, connecting to {:?}), outbound every {} steps; {}",
         cfg.prefix,
         cfg.key_prefix,
         cfg.mode.name(),
         cfg.listen,
         cfg.connect,
-        cfg.decimation
+        cfg.decimation,
+        posture.name()
     );
-    let counters = Arc::new(CallbackCounters::default());
+    if posture == Posture::Insecure {
+        tracing::warn!(
+            "bridge: INSECURE: plain TCP beyond loopback; any host that reaches {:?} can read the robot's state and publish forecasts",
+            cfg.listen
+        );
+    }
+    let intake = Arc::new(Intake {
+        keys_prefix: cfg.key_prefix.clone(),
+        gate: Mutex::new(ForecastGate::new(
+            cfg.forecast_rate_hz,
+            cfg.forecast_burst,
+            Duration::from_secs_f64(cfg.source_takeover),
+        )),
+        received: AtomicU64::new(0),
+        dropped: AtomicU64::new(0),
+        second_source: AtomicU64::new(0),
+        rate_limited: AtomicU64::new(0),
+    });
 
     let inbound = if cfg.forecast_in {
         let (tx, rx) = std::sync::mpsc::sync_channel::<Inbound>(cfg.inbound_queue);
         let subscriber = {
-            let counters = Arc::clone(&counters);
+            let intake = Arc::clone(&intake);
+            let keys = Keys {
+                prefix: &cfg.key_prefix,
+            };
             session
-                .declare_subscriber(key(cfg, ServiceKind::Forecast))
-                .callback(move |sample| on_forecast(&tx, &counters, sample.payload().to_bytes()))
+                .declare_subscriber(keys.forecasts())
+                .callback(move |sample| {
+                    on_forecast(
+                        &tx,
+                        &intake,
+                        sample.key_expr().as_str(),
+                        sample.payload().to_bytes(),
+                    )
+                })
                 .wait()
                 .map_err(|e| BridgeError::Zenoh(format!("subscribe to forecasts: {e}")))?
         };
@@ -170,6 +226,10 @@ pub fn run(cfg: &BridgeConfig, stop: Arc<AtomicBool>) -> Result<BridgeSummary, B
         prefix: cfg.prefix.clone(),
         mode: cfg.mode.name().into(),
         decimation: cfg.decimation,
+        security: posture.name().into(),
+        insecure: posture == Posture::Insecure,
+        forecasters: cfg.security.forecasters.clone(),
+        viewers: cfg.security.viewers.clone(),
         ..Default::default()
     };
     let out = outbound.join().map_err(|_| BridgeError::Panicked);
@@ -197,8 +257,18 @@ pub fn run(cfg: &BridgeConfig, stop: Arc<AtomicBool>) -> Result<BridgeSummary, B
         summary.forward_p99_us = l.quantile(0.99) * 1e6;
         summary.forward_max_us = l.max() * 1e6;
     }
-    summary.forecasts_received = counters.received.load(Ordering::Relaxed);
-    summary.forecasts_dropped = counters.dropped.load(Ordering::Relaxed);
+    summary.forecasts_received = intake.received.load(Ordering::Relaxed);
+    summary.forecasts_dropped = intake.dropped.load(Ordering::Relaxed);
+    summary.forecasts_second_source = intake.second_source.load(Ordering::Relaxed);
+    summary.forecasts_rate_limited = intake.rate_limited.load(Ordering::Relaxed);
+    {
+        let g = intake
+            .gate
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        summary.forecast_sources_taken = g.sources_taken;
+        summary.forecast_source = g.source().unwrap_or_default().to_owned();
+    }
     let _ = session.close().wait();
     summary.wall_seconds = start.elapsed().as_secs_f64();
     summary.cpu_seconds = process_cpu_seconds();
@@ -206,13 +276,36 @@ pub fn run(cfg: &BridgeConfig, stop: Arc<AtomicBool>) -> Result<BridgeSummary, B
     Ok(summary)
 }
 
-/// Zenoh's callback: queue the payload for the inbound thread, or count it dropped.
+/// Zenoh's callback: past the gate (one source, the rate), queue the payload for the inbound
+/// thread; else count it refused or dropped.
 fn on_forecast(
     tx: &SyncSender<Inbound>,
-    counters: &CallbackCounters,
+    intake: &Intake,
+    key: &str,
     bytes: std::borrow::Cow<[u8]>,
 ) {
-    counters.received.fetch_add(1, Ordering::Relaxed);
+    intake.received.fetch_add(1, Ordering::Relaxed);
+    let source = Keys {
+        prefix: &intake.keys_prefix,
+    }
+    .source(key);
+    // The gate's state stays consistent if a callback panicked holding it: take it back.
+    let admitted = intake
+        .gate
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .admit(source, Instant::now());
+    if let Err(why) = admitted {
+        let (counter, what) = match why {
+            Refusal::SecondSource => (&intake.second_source, "from a second source"),
+            Refusal::RateLimited => (&intake.rate_limited, "over the rate limit"),
+        };
+        let n = counter.fetch_add(1, Ordering::Relaxed) + 1;
+        if n.is_power_of_two() {
+            tracing::warn!("bridge: forecast {what} (key `{key}`) refused, {n} so far");
+        }
+        return;
+    }
     let msg = Inbound {
         bytes: bytes.into_owned(),
         at: Instant::now(),
@@ -220,7 +313,7 @@ fn on_forecast(
     match tx.try_send(msg) {
         Ok(()) => {}
         Err(TrySendError::Full(_)) => {
-            let n = counters.dropped.fetch_add(1, Ordering::Relaxed) + 1;
+            let n = intake.dropped.fetch_add(1, Ordering::Relaxed) + 1;
             if n.is_power_of_two() {
                 tracing::warn!(
                     "bridge: forecast dropped, {n} so far (more arrive than are forwarded)"

@@ -26,6 +26,10 @@ pub struct BridgeArgs {
     /// bridge.connect).
     #[arg(long)]
     pub connect: Vec<String>,
+    /// Accept plain TCP beyond loopback (no TLS: any host that reaches the port can read the
+    /// robot's state and publish forecasts). Logged, and in the summary.
+    #[arg(long)]
+    pub insecure: bool,
     /// Write the bridge's counters here as JSON when it stops.
     #[arg(long)]
     pub summary: Option<PathBuf>,
@@ -53,15 +57,21 @@ pub fn run_cli(args: BridgeArgs) -> CliResult {
             sets.push(format!("{key}={list}"));
         }
     }
+    if args.insecure {
+        sets.push("bridge.security.insecure=true".into());
+    }
     let cfg = BridgeConfig::load(&args.config.configs, &sets)?;
     // Before Zenoh starts its threads: they inherit the blocked signals, this one handles them.
     let stop = stop_flag();
     let summary = run(&cfg, stop)?;
     tracing::info!(
-        "bridge stopped: {} forecasts forwarded, {} refused, {} dropped; {} states, {} ground truth, {} torques out; CPU {:.1} %",
+        "bridge stopped ({}): {} forecasts forwarded, {} refused, {} dropped, {} from a second source, {} over the rate; {} states, {} ground truth, {} torques out; CPU {:.1} %",
+        summary.security,
         summary.forecasts_forwarded,
         summary.forecasts_refused,
         summary.forecasts_dropped,
+        summary.forecasts_second_source,
+        summary.forecasts_rate_limited,
         summary.states_out,
         summary.ground_truth_out,
         summary.torques_out,

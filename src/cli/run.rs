@@ -50,9 +50,11 @@ pub struct RunArgs {
     /// UPC_PREFIX, UPC_DURATION and UPC_SCENARIO in its environment.
     #[arg(long)]
     pub forecaster: Option<String>,
-    /// The forecast crosses Zenoh: start `upc bridge` on loopback and the remote forecaster
+    /// The forecast crosses Zenoh: start `upc bridge` on loopback, with mutual TLS and a
+    /// throwaway CA as on a lab network, and the remote forecaster
     /// (`examples/python/zenoh_forecaster.py`, or the --forecaster command, which gets the
-    /// bridge's endpoint in UPC_ZENOH_CONNECT) on the Zenoh side of it.
+    /// bridge's endpoint in UPC_ZENOH_CONNECT and its certificate in UPC_ZENOH_CA,
+    /// UPC_ZENOH_CERT, UPC_ZENOH_KEY and UPC_ZENOH_NAME) on the Zenoh side of it.
     #[arg(long)]
     pub forecaster_over_zenoh: bool,
     /// No forecaster at all: the controller forecasts from the measured hand force alone
@@ -288,32 +290,12 @@ fn run_one(
     let mut bridge = None;
     let mut forecaster = match &args.forecaster {
         _ if args.forecaster_over_zenoh => {
-            let endpoint = format!("tcp/127.0.0.1:{}", free_loopback_port()?);
-            let (out, err) = log("bridge.log")?;
-            bridge = Some(
-                Command::new(exe)
-                    .args(["bridge", "--prefix", &prefix, "--key-prefix", &prefix])
-                    .args(["--listen", &endpoint])
-                    .arg("--summary")
-                    .arg(dir.join("bridge.json"))
-                    .stdout(out)
-                    .stderr(err)
-                    .spawn()?,
-            );
-            let mut c = match &args.forecaster {
-                Some(cmd) => shell(cmd),
-                None => {
-                    let script = remote_forecaster(root)?;
-                    let mut c = Command::new(super::common::python(&None));
-                    c.arg(script);
-                    c
-                }
-            };
+            let (b, mut c) = over_zenoh(exe, args, root, &dir, &prefix, log("bridge.log")?)?;
+            bridge = Some(b);
             c.env("UPC_PREFIX", &prefix)
                 .env("UPC_DURATION", &dur)
                 .env("UPC_SCENARIO", &args.scenario)
-                .env("UPC_SCENARIO_DIR", root.join("remote"))
-                .env("UPC_ZENOH_CONNECT", &endpoint);
+                .env("UPC_SCENARIO_DIR", root.join("remote"));
             c
         }
         Some(cmd) => {
@@ -522,6 +504,102 @@ fn free_loopback_port() -> std::io::Result<u16> {
     Ok(std::net::TcpListener::bind("127.0.0.1:0")?
         .local_addr()?
         .port())
+}
+
+/// The forecast across Zenoh on loopback, secured as on a lab network: a throwaway CA, a
+/// certificate for the bridge and one for the forecaster (`root/remote/pki/`), the bridge on
+/// mutual TLS with the forecaster as its only forecaster identity. Returns the started bridge
+/// and the forecaster's command (the script, or `--forecaster`), with the endpoint and its
+/// certificate in UPC_ZENOH_{CONNECT,CA,CERT,KEY,NAME}.
+fn over_zenoh(
+    exe: &Path,
+    args: &RunArgs,
+    root: &Path,
+    dir: &Path,
+    prefix: &str,
+    (out, err): (Stdio, Stdio),
+) -> Result<(Child, Command), Box<dyn std::error::Error + Send + Sync>> {
+    const NAME: &str = "forecaster";
+    let pki = loopback_pki(root, &["bridge", NAME])?;
+    let pem = |f: &str| pki.join(f).display().to_string();
+    let conf = dir.join("bridge.toml");
+    let mut security = toml::Table::new();
+    security.insert("tls".into(), true.into());
+    for (k, f) in [
+        ("ca", "ca.pem"),
+        ("certificate", "bridge.pem"),
+        ("private_key", "bridge.key"),
+    ] {
+        security.insert(k.into(), pem(f).into());
+    }
+    security.insert("forecasters".into(), vec![NAME.to_string()].into());
+    let mut bridge = toml::Table::new();
+    bridge.insert("security".into(), security.into());
+    let mut file = toml::Table::new();
+    file.insert("bridge".into(), bridge.into());
+    std::fs::write(&conf, file.to_string())?;
+    let endpoint = format!("tls/127.0.0.1:{}", free_loopback_port()?);
+    let bridge = Command::new(exe)
+        .args(["bridge", "--prefix", prefix, "--key-prefix", prefix])
+        .args(["--listen", &endpoint])
+        .arg("--config")
+        .arg(&conf)
+        .arg("--summary")
+        .arg(dir.join("bridge.json"))
+        .stdout(out)
+        .stderr(err)
+        .spawn()?;
+    let mut c = match &args.forecaster {
+        Some(cmd) => shell(cmd),
+        None => {
+            let mut c = Command::new(super::common::python(&None));
+            c.arg(remote_forecaster(root)?);
+            c
+        }
+    };
+    c.env("UPC_ZENOH_CONNECT", &endpoint)
+        .env("UPC_ZENOH_CA", pem("ca.pem"))
+        .env("UPC_ZENOH_CERT", pem(&format!("{NAME}.pem")))
+        .env("UPC_ZENOH_KEY", pem(&format!("{NAME}.key")))
+        .env("UPC_ZENOH_NAME", NAME);
+    Ok((bridge, c))
+}
+
+/// A CA and a certificate per name in `root/remote/pki/`, made once per run directory by the
+/// lab's own script (scripts/lab-pki.sh, embedded).
+fn loopback_pki(
+    root: &Path,
+    names: &[&str],
+) -> Result<PathBuf, Box<dyn std::error::Error + Send + Sync>> {
+    const SCRIPT: &str = include_str!("../../scripts/lab-pki.sh");
+    let dir = root.join("remote").join("pki");
+    if dir.join("ca.pem").is_file() && names.iter().all(|n| dir.join(format!("{n}.pem")).is_file())
+    {
+        return Ok(dir);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    let script = root.join("remote").join("lab-pki.sh");
+    std::fs::create_dir_all(root.join("remote"))?;
+    std::fs::write(&script, SCRIPT)?;
+    let steps = std::iter::once(vec!["ca"]).chain(names.iter().map(|n| vec!["issue", n]));
+    for step in steps {
+        let out = Command::new("bash")
+            .arg(&script)
+            .arg(step[0])
+            .arg(&dir)
+            .args(&step[1..])
+            .output()
+            .map_err(|e| format!("running bash for the loopback certificates: {e}"))?;
+        if !out.status.success() {
+            return Err(format!(
+                "making the loopback certificates ({}): {}",
+                step.join(" "),
+                String::from_utf8_lossy(&out.stderr).trim()
+            )
+            .into());
+        }
+    }
+    Ok(dir)
 }
 
 /// The remote forecaster and what it reads, written into `root/remote/` (it runs from there
