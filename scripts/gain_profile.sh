@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # C2's hand stiffness K_p over an impact under the conditions of the gain-profile question
-# (README, "C2's gain profile"): C2 on the full simulation, one impact, each condition a
+# (docs/results/gain_profile.md): C2 on the full simulation, one impact, each condition a
 # `upc run`; then the runs overlaid (`upc compare --overlay`) and K_p's mean per phase of the
 # impact (before, onset = first 30 % of the rise, growing, fading, after).
 #

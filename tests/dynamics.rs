@@ -569,7 +569,7 @@ fn programmatic_model_and_prismatic_joint() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Operational-space inertia (SPEC §4)
+// Operational-space inertia (docs/hand_previewer.md, eq. (21)–(23))
 
 #[test]
 fn operational_space_inertia_of_the_arm() {

@@ -1,7 +1,7 @@
 //! The forecast corrected by the measured hand force, in closed loop on the full simulation
 //! (docs/forecast_correction.md): a forecast 1.5 times too strong no longer topples C1, a
 //! phantom push of 1.4 times C1's capability leaves the robot standing (twice does not yet:
-//! README, "Forecast errors"), and an exact forecast gives C1's figures. Each case is one lockstep `upc run` of a single 1 s raised-cosine impact along
+//! docs/results/robustness.md), and an exact forecast gives C1's figures. Each case is one lockstep `upc run` of a single 1 s raised-cosine impact along
 //! x (`upc capability`'s), with the correction on (the default) and off.
 
 mod support;
@@ -10,7 +10,7 @@ use serde_json::Value;
 use support::procs::*;
 use upc::capability::{Direction, impact_toml};
 
-/// C1's capability with an exact forecast on this impact (N; README, `upc capability`).
+/// C1's capability with an exact forecast on this impact (N; docs/results/capability.md).
 const C1_CAPABILITY: f64 = 57.0;
 
 struct Case<'a> {

@@ -1,8 +1,9 @@
-//! Why C2's K_p follows the force instead of the paper's stiff/soft/stiff/soft (README, "C2's
-//! gain profile"): on the reduced models, the hand-tracking term of eq. (26) asks for stiffness
-//! where the force is large, the ZMP term for softness while a fast impact lasts (the hand's
-//! impedance then low-passes the disturbance the CoM must take). Each weighting alone shows
-//! its own pull on a 0.1 s, 250 N impact.
+//! Why C2's K_p follows the force instead of the paper's stiff/soft/stiff/soft
+//! (docs/results/gain_profile.md; the problem: docs/gain_search.md, eq. (26)): on the reduced
+//! models, the hand-tracking term of eq. (26) asks for stiffness where the force is large, the ZMP
+//! term for softness while a fast impact lasts (the hand's impedance then low-passes the
+//! disturbance the CoM must take). Each weighting alone shows its own pull on a 0.1 s, 250 N
+//! impact.
 
 use upc::capability::{Direction, impact_scenario};
 use upc::config::{Config, ControllerKind};

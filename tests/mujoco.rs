@@ -303,7 +303,7 @@ fn run_on_mujoco(
 /// standing under C1, the CoM holds its height and does not drift; through the scenario's
 /// 60 N push (the first 3.2 s), C0 falls while C1 stays up. On both plants C1's CoP reaches the
 /// support edge for a moment during that push (0.16 s on upc's simulator, 0.18 s on MuJoCo;
-/// README): the assertion is that it comes back, not that it never touches.
+/// docs/results/mujoco.md): the assertion is that it comes back, not that it never touches.
 #[test]
 fn on_mujoco_c1_stands_and_rides_out_the_push_that_fells_c0() {
     let Some(_) = mujoco_python() else { return };

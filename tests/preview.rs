@@ -1,5 +1,6 @@
 //! Preview core against independent truths: the dense condensed solve, analytic steady states,
-//! closed-loop eigenvalues, finite differences of eq. (26).
+//! closed-loop eigenvalues, finite differences of eq. (26). Equations: docs/preview_control.md,
+//! docs/disturbance.md, docs/hand_previewer.md, docs/gain_search.md.
 
 use nalgebra::{Matrix3, Vector3};
 use upc::config::{Config, ControllerKind, GainSolverKind, LqSolverKind};

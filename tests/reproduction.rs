@@ -1,6 +1,6 @@
-//! A shortened reproduction of the paper's experiments (SPEC §6), asserting the qualitative
-//! claims that hold in upc, on the reduced models (in process) and on the humanoid (the three
-//! processes over iceoryx2). The full figures are in the README's claims table.
+//! A shortened reproduction of the paper's experiments (Sec. IV; docs/results/claims.md), asserting
+//! the qualitative claims that hold in upc, on the reduced models (in process) and on the humanoid
+//! (the three processes over iceoryx2). The full figures are in docs/results/claims.md.
 
 use std::process::Command;
 

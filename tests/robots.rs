@@ -19,12 +19,13 @@ fn the_default_robot_computes_what_was_typed_before() {
     let d = &r.derived;
     // Mass: the sum of the URDF's link masses (assets/README.md: 29.8 kg).
     assert!((d.mass - 29.8).abs() < 1e-9, "mass {}", d.mass);
-    // Soles 0.14 × 0.065 m, 0.14 m apart (SPEC §7 facts the URDF was drawn from).
+    // Soles 0.14 × 0.065 m, 0.14 m apart (iCub facts the URDF was drawn from:
+    // docs/reduced_models.md).
     assert!((d.support[0][0] + 0.07).abs() < 1e-12 && (d.support[0][1] - 0.07).abs() < 1e-12);
     assert!((d.support[1][1] - 0.1025).abs() < 1e-12, "{:?}", d.support);
     assert!((d.feet_distance - 0.14).abs() < 1e-12);
     assert!(d.sole_tilt < 1e-6, "{}", d.sole_tilt);
-    // CoM height with knees slightly bent: 0.50–0.54 m (SPEC §7).
+    // CoM height with knees slightly bent: 0.50–0.54 m (docs/reduced_models.md).
     assert!((0.50..0.54).contains(&d.com_height), "{}", d.com_height);
     // Independent: the CoM of the home configuration, and M_e of the chest → hand chain there.
     let model = upc::dynamics::icub_like::load().expect("model");

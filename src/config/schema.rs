@@ -17,7 +17,7 @@ pub struct Config {
     pub controller: ControllerConfig,
 }
 
-/// Reduced-model parameters of the robot (SPEC §1, §3).
+/// Reduced-model parameters of the robot (docs/reduced_models.md, eq. (1)–(3), (10)).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RobotConfig {
@@ -42,11 +42,12 @@ pub struct SupportConfig {
 pub enum LqSolverKind {
     /// Backward Riccati recursion, O(N).
     Riccati,
-    /// Condensed dense normal equations (SPEC §2), O(N³): the reference.
+    /// Condensed dense normal equations (docs/preview_control.md, eq. (9), (15)), O(N³): the
+    /// reference.
     Dense,
 }
 
-/// ZMP preview controller parameters (SPEC §2–3).
+/// ZMP preview controller parameters (docs/preview_control.md, eq. (7); docs/disturbance.md).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PreviewConfig {
@@ -72,7 +73,7 @@ pub enum DampingMode {
     Free,
 }
 
-/// Hand impedance (SPEC §4).
+/// Hand impedance (docs/hand_previewer.md, eq. (17), (23)).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct HandConfig {
@@ -99,7 +100,7 @@ pub enum GainSolverKind {
     NelderMead,
 }
 
-/// C2's gain search (SPEC §5, eq. 26).
+/// C2's gain search (docs/gain_search.md, eq. (26)).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GainSearchConfig {
@@ -122,8 +123,8 @@ pub struct GainSearchConfig {
     pub tolerance: f64,
 }
 
-/// Whole-body torque controller: the LQP of SPEC §6 (`src/wbc/`). Weights are those of the
-/// least-squares tasks `½ w ‖A z − r‖²` (accelerations in m/s², rad/s²; forces in N).
+/// Whole-body torque controller: the LQP of docs/whole_body_qp.md (`src/wbc/`). Weights are those
+/// of the least-squares tasks `½ w ‖A z − r‖²` (accelerations in m/s², rad/s²; forces in N).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct WbcConfig {
@@ -132,7 +133,8 @@ pub struct WbcConfig {
     pub feet: [String; 2],
     /// Frame of the hand impedance task.
     pub hand_frame: String,
-    /// The body the hand's arm chain starts from (M_e of the chain root → hand, SPEC §4).
+    /// The body the hand's arm chain starts from (M_e of the chain root → hand,
+    /// docs/hand_previewer.md, eq. (21)–(23)).
     pub hand_chain_root: String,
     /// Coulomb friction coefficient μ of the friction cones.
     pub friction: f64,
@@ -329,7 +331,7 @@ impl Config {
     }
 }
 
-/// Which balance controller runs (SPEC §6).
+/// Which balance controller runs (docs/README.md: C0, C1, C2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum ControllerKind {

@@ -1,7 +1,9 @@
 //! One control tick, without IPC: robot state and force forecast in, joint torques out.
 //!
 //! Per tick: kinematics, CoM and the hand's M_e from the model; the hand previewer and C0/C1
-//! with the latest gain schedule; the whole-body QP. Allocation-free after construction.
+//! with the latest gain schedule; the whole-body QP. Allocation-free after construction. The
+//! mathematics, and the choices below: docs/preview_control.md, docs/hand_previewer.md,
+//! docs/whole_body_qp.md.
 //!
 //! Choices, written down:
 //! - The preview runs on its own grid (period T of `[preview]`, 5 ms) from the measured CoM

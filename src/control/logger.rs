@@ -22,7 +22,8 @@ pub struct TickLog {
     pub core: TickRecord,
     /// Tick compute time (s).
     pub tick_time: f64,
-    /// Latest C2 result: eq. (26) cost, nominal cost, iterations, solve time (s).
+    /// Latest C2 result: eq. (26) cost (docs/gain_search.md), nominal cost, iterations, solve
+    /// time (s).
     pub c2_cost: f64,
     pub c2_nominal_cost: f64,
     pub c2_iterations: u32,

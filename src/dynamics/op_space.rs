@@ -1,5 +1,6 @@
-//! Operational-space inertia of a sub-chain (SPEC §4): `M_e = (J H̃⁻¹ Jᵀ)⁻¹` and the dynamically
-//! consistent pseudo-inverse `J̄ = H̃⁻¹ Jᵀ M_e` (Khatib 1987).
+//! Operational-space inertia of a sub-chain (docs/hand_previewer.md, eq. (21)–(23)):
+//! `M_e = (J H̃⁻¹ Jᵀ)⁻¹` and the dynamically consistent pseudo-inverse `J̄ = H̃⁻¹ Jᵀ M_e`
+//! (Khatib 1987).
 //!
 //! The sub-chain is the set of joints strictly between a root body (e.g. `chest`) and a frame
 //! (e.g. `r_hand`). `H̃` is the block of `M(q)` for those joints and `J` the 3×n world-aligned

@@ -1,4 +1,5 @@
-//! The cart-table model of the CoM along one horizontal axis (SPEC §1, eq. 1–3).
+//! The cart-table model of the CoM along one horizontal axis (docs/reduced_models.md, eq. (1)–(3),
+//! (10)).
 
 use nalgebra::{Matrix3, Vector3};
 

@@ -1,5 +1,5 @@
 //! C1 with the predicted ZMP kept inside the support bounds as hard constraints (Wieber 2006,
-//! beyond the paper). A sparse QP over the inputs and states of both axes, solved with clarabel:
+//! beyond the paper; docs/preview_control.md). A sparse QP over the inputs and states of both axes, solved with clarabel:
 //!   min ½ Σ Q_e (c_i·x_i − t_i)² + ½ R u²   s.t.  x_{i+1} = A x_i + B u_i,
 //!   p_min − D_i ≤ c_i·x_i ≤ p_max − D_i     (the true ZMP c_i·x_i + D_i inside, eq. 11).
 //! The sparsity is fixed, so after the first tick only the values are updated. This mode

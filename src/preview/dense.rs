@@ -1,5 +1,6 @@
-//! The condensed horizon of SPEC §2 (Wieber) and its closed-form solve: the O(N³) reference
-//! against which the Riccati solver is tested and benchmarked. Allocates; not for the tick path.
+//! The condensed horizon (Wieber; docs/preview_control.md, eq. (5), (9), (12), (15)) and its
+//! closed-form solve: the O(N³) reference against which the Riccati solver is tested and
+//! benchmarked. Allocates; not for the tick path.
 
 use faer::{Mat, Side};
 use nalgebra::Vector3;

@@ -1,5 +1,6 @@
-//! The CoM-disturbance horizon of SPEC §3 (eq. 10–16): α0 shared by both axes, and the ZMP shift
-//! D = z_c α per axis. Built from a force forecast, validated, into preallocated storage.
+//! The CoM-disturbance horizon (docs/disturbance.md, eq. (10)–(16)): α0 shared by both axes, and
+//! the ZMP shift D = z_c α per axis. Built from a force forecast, validated, into preallocated
+//! storage.
 
 use super::{CartTable, PreviewError};
 

@@ -1,10 +1,10 @@
-//! Hand impedance previewer (SPEC §4, eq. 17, 23–25): the hand under the operational-space
-//! impedance law and a known external force, over the horizon, and the equivalent CoM
-//! disturbance the body feels.
+//! Hand impedance previewer (docs/hand_previewer.md, eq. (17), (23)–(25)): the hand under the
+//! operational-space impedance law and a known external force, over the horizon, and the equivalent
+//! CoM disturbance the body feels.
 //!
 //! Choices, written down:
-//! - The J̇_e J_e† velocity term of eq. (23)–(25) is neglected (SPEC §4 allows it): over a
-//!   1.5 s horizon the chest→hand configuration barely changes while the hand holds the door.
+//! - The J̇_e J_e† velocity term of eq. (23)–(25) is neglected (docs/hand_previewer.md): over
+//!   a 1.5 s horizon the chest→hand configuration barely changes while the hand holds the door.
 //! - eq. (24) is read as a semi-implicit step: position and velocity advance with the cart-table
 //!   A, then the acceleration at k+1 is the impedance law evaluated at the new position and
 //!   velocity, with the gains, desired state and force of step k+1.

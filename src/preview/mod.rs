@@ -1,4 +1,5 @@
-//! The paper's reduced models and preview controllers (SPEC §1–5).
+//! The paper's reduced models and preview controllers (docs/README.md indexes the equations; each
+//! module cites its page).
 //!
 //! - [`CartTable`]: the CoM cart-table model (eq. 1–3) and its time-varying output row (eq. 10).
 //! - [`Disturbance`]: the CoM-disturbance horizon α0, D of eq. (10)–(16), validated.

@@ -1,4 +1,5 @@
-//! The finite-horizon LQ problem of SPEC §2–3 solved by backward Riccati recursion, O(N).
+//! The finite-horizon LQ problem of docs/preview_control.md (eq. (7), (9), (15)) solved by backward
+//! Riccati recursion, O(N).
 //!
 //! Problem (one axis; both axes share the output rows, hence the feedback gains):
 //!   min ½ Σ_{j=1..N} Q_e (c_j·x_j − t_j)² + ½ Σ_{i=0..N−1} R u_i²,   x_{i+1} = A x_i + B u_i,

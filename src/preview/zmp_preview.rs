@@ -1,4 +1,5 @@
-//! C0 and C1: ZMP preview control of the CoM along x and y (SPEC §2–3).
+//! C0 and C1: ZMP preview control of the CoM along x and y (docs/preview_control.md,
+//! docs/disturbance.md, eq. (1)–(16)).
 
 use nalgebra::Vector3;
 

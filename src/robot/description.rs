@@ -14,7 +14,7 @@
 //! contacts = "collision"                   # or "frames", or [[x, y, z], …] × 4 in the sole frame
 //! [hand]
 //! frame = "right_rubber_hand"              # holds the door
-//! chain_root = "torso_link"                # M_e is the chain root → hand's (SPEC §4)
+//! chain_root = "torso_link"                # M_e: chain root → hand (docs/hand_previewer.md)
 //! [home]                                   # joint = angle (rad); the others at 0
 //! left_knee_joint = 0.3
 //! [config]                                 # robot-dependent values of config/default.toml

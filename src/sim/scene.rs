@@ -1,6 +1,7 @@
-//! The scene (SPEC §6): a robot (the iCub-like humanoid by default, any [`Robot`]) standing on
-//! flat ground on the four contact points of each foot, its hand holding the door's handle
-//! through a spherical joint, and the door's hinge driven by the scenario's torque profile.
+//! The scene of the paper's experiments (its Sec. IV; docs/results/claims.md): a robot (the
+//! iCub-like humanoid by default, any [`Robot`]) standing on flat ground on the four contact points
+//! of each foot, its hand holding the door's handle through a spherical joint, and the door's hinge
+//! driven by the scenario's torque profile.
 //!
 //! Door placement: the door (`assets/door/door.urdf`) is turned by −90° about z so that its leaf
 //! faces the robot (its −y side, where the handle sticks out, points to world −x), and translated

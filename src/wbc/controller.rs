@@ -1,4 +1,5 @@
-//! The whole-body LQP (Salini, Padois, Bidaud 2011; SPEC §6), solved with clarabel each tick.
+//! The whole-body LQP (Salini, Padois, Bidaud 2011; docs/whole_body_qp.md, eq. (17)–(20)), solved
+//! with clarabel each tick.
 //!
 //! Decision variables `z = [q̈ (nv); f (24); e_com (3); e_hand (3)]`: the generalised
 //! accelerations (free-flyer part in the root's local frame, as `v`), the world-axes forces at
@@ -16,7 +17,7 @@
 //!      ‖(t₁ᵀf_i, t₂ᵀf_i)‖ ≤ μ nᵀ f_i            friction cones, exact               (SOC(3) × 8)
 //! ```
 //!
-//! Choices (the SPEC leaves them open):
+//! Choices (the paper leaves them open; docs/whole_body_qp.md):
 //! - Contacts: the non-accelerating condition is imposed on each sole as a rigid body (6 rows per
 //!   foot) rather than on the 4 corners (12 rows per foot of rank 6): identical when the foot is
 //!   at rest, and it spares the interior-point KKT system 12 redundant equalities. `k` (config

@@ -1,4 +1,5 @@
-//! Whole-body torque control: the LQP of the paper (Salini, Padois, Bidaud 2011; SPEC §6).
+//! Whole-body torque control: the LQP of the paper (Salini, Padois, Bidaud 2011;
+//! docs/whole_body_qp.md).
 //!
 //! Each tick [`WholeBodyController::solve`] turns the preview controller's CoM acceleration, the
 //! hand impedance law (with the current gains) and a posture reference into joint torques, by a

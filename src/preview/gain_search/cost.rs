@@ -1,5 +1,6 @@
-//! Eq. (26) as a function of the gain schedule, with the CoM jerks eliminated by an exact LQ
-//! solve (for fixed gains the problem in u is LQ), and its Gauss–Newton Jacobian.
+//! Eq. (26) (docs/gain_search.md) as a function of the gain schedule, with the CoM jerks
+//! eliminated by an exact LQ solve (for fixed gains the problem in u is LQ), and its
+//! Gauss–Newton Jacobian.
 //!
 //! The cost is a sum of squares, ½‖r‖², with residual rows (N = horizon, i = 1…N):
 //!   ZMP     √Q_e (p_a,i − p^ref_a,i)             2N   (p: eq. 11, with the F_dis of eq. 25)

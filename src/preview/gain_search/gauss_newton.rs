@@ -1,5 +1,6 @@
-//! The default C2 solver: bounded Gauss–Newton (Levenberg–Marquardt damped) on eq. (26) with the
-//! exact Jacobian through the LQ solve. Monotone: every accepted step lowers the cost.
+//! The default C2 solver: bounded Gauss–Newton (Levenberg–Marquardt damped) on eq. (26)
+//! (docs/gain_search.md) with the exact Jacobian through the LQ solve. Monotone: every accepted
+//! step lowers the cost.
 
 use nalgebra::DVector;
 

@@ -1,5 +1,5 @@
-//! C2 (SPEC §5, eq. 26): the hand's impedance gains over the horizon as decision variables,
-//! searched jointly with the CoM jerks. Two solvers behind one interface:
+//! C2 (docs/gain_search.md, eq. (26)): the hand's impedance gains over the horizon as decision
+//! variables, searched jointly with the CoM jerks. Two solvers behind one interface:
 //! - [`GainSolverKind::GaussNewton`] (default): bounded Gauss–Newton with exact Jacobians
 //!   through the LQ solve, warm-started from the previous schedule shifted in time;
 //! - [`GainSolverKind::NelderMead`]: the paper's baseline, a simplex over fewer knots.

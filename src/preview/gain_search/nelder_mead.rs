@@ -1,5 +1,5 @@
-//! The paper's C2 baseline: Nelder–Mead (argmin) over a coarse gain schedule, warm-started,
-//! solving C1 at every vertex. Bounds are kept by evaluating at the clamped point plus a
+//! The paper's C2 baseline (docs/gain_search.md): Nelder–Mead (argmin) over a coarse gain
+//! schedule, warm-started, solving C1 at every vertex. Bounds are kept by evaluating at the clamped point plus a
 //! quadratic penalty on the excursion, so the simplex is steered back inside.
 
 use std::cell::RefCell;

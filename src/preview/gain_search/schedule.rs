@@ -1,5 +1,5 @@
-//! The gain schedule searched by C2: K_p (and K_d when free) piecewise linear between knots
-//! spread evenly over the horizon. With (knots − 1) a multiple of (nm_knots − 1), the
+//! The gain schedule searched by C2 (docs/gain_search.md): K_p (and K_d when free) piecewise
+//! linear between knots spread evenly over the horizon. With (knots − 1) a multiple of (nm_knots − 1), the
 //! Nelder–Mead baseline's schedules are a subset of the default solver's.
 
 use crate::config::DampingMode;
