@@ -115,9 +115,12 @@ impl Client<'_> {
     }
 }
 
-/// Samples a client's subscriber got, by key.
+/// A sample as a client's subscriber got it: its key and payload.
+type Sample = (String, Vec<u8>);
+
+/// Samples a client's subscribers got.
 #[derive(Default, Clone)]
-struct Got(Arc<Mutex<Vec<(String, Vec<u8>)>>>);
+struct Got(Arc<Mutex<Vec<Sample>>>);
 
 impl Got {
     fn subscribe(&self, session: &zenoh::Session, key: String) -> zenoh::pubsub::Subscriber<()> {
@@ -293,7 +296,7 @@ fn only_the_labs_identities_get_through_and_each_only_where_its_role_allows() {
     // The forecast service keeps a few samples (the controller reads the newest): drain it as
     // the windows arrive.
     let mut delivered = vec![];
-    let mut drain = |delivered: &mut Vec<u64>| {
+    let drain = |delivered: &mut Vec<u64>| {
         while let Ok(Some(m)) = forecasts.receive() {
             delivered.push(m.seq);
         }

@@ -306,3 +306,71 @@ fn lockstep_waits_for_a_stopped_simulator_and_controller_and_gives_the_same_byte
     );
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// Any start order in lockstep: a forecaster started 2 s after the simulator and the controller
+/// is waited for at the first state (the plant held), taken from t = 0, and the run's bytes are
+/// those of the forecaster started first. Before, the controller waited 0.5 s, ran on without a
+/// forecast and took the late forecaster's windows from whatever plant time it had reached.
+#[test]
+fn lockstep_a_forecaster_started_late_gives_the_on_time_runs_bytes() {
+    let _serial = serial();
+    let out = scratch("late_forecaster");
+    let run = |name: &str, forecaster_delay: Option<f64>| -> PathBuf {
+        let dir = out.join(name);
+        std::fs::create_dir_all(&dir).expect("run dir");
+        let prefix = format!("late_{name}_{}", std::process::id());
+        let p = |f: &str| dir.join(f).display().to_string();
+        let upc = |args: &[&str], log: &str| {
+            Command::new(env!("CARGO_BIN_EXE_upc"))
+                .args(args)
+                .stdout(Stdio::null())
+                .stderr(std::fs::File::create(dir.join(log)).expect("log"))
+                .spawn()
+                .expect("upc")
+        };
+        let forecast = [
+            "forecast",
+            "--scenario",
+            "multiple_impacts",
+            "--prefix",
+            &prefix,
+        ];
+        let mut early = forecaster_delay
+            .is_none()
+            .then(|| upc(&forecast, "forecast.log"));
+        #[rustfmt::skip]
+        let mut sim = upc(&["sim", "--mode", "lockstep", "--duration", "2", "--scenario",
+                            "multiple_impacts", "--prefix", &prefix, "--summary", &p("sim.json"),
+                            "--truth-csv", &p("sim.csv")], "sim.log");
+        #[rustfmt::skip]
+        let mut controller = upc(&["controller", "--controller", "c1", "--scenario",
+                                   "multiple_impacts", "--prefix", &prefix, "--duration", "2",
+                                   "--rrd", &p("controller.rrd"), "--csv", &p("controller.csv"),
+                                   "--summary", &p("controller.json")], "controller.log");
+        if let Some(d) = forecaster_delay {
+            std::thread::sleep(std::time::Duration::from_secs_f64(d));
+            early = Some(upc(&forecast, "forecast.log"));
+        }
+        for (what, child) in [("sim", &mut sim), ("controller", &mut controller)] {
+            let st = child.wait().expect("wait");
+            let log = std::fs::read_to_string(dir.join(format!("{what}.log"))).unwrap_or_default();
+            assert!(st.success(), "{what}: {st}\n{log}");
+        }
+        if let Some(mut f) = early {
+            let _ = f.kill();
+            let _ = f.wait();
+        }
+        dir
+    };
+    let on_time = run("on_time", None);
+    let late = run("late", Some(2.0));
+    assert_same(&on_time, &late);
+    let c: Value = serde_json::from_str(
+        &std::fs::read_to_string(late.join("controller.json")).expect("summary"),
+    )
+    .expect("json");
+    assert_eq!(c["forecast_first_at"], 0.0, "{c}");
+    assert_eq!(c["forecast_never_received"], false, "{c}");
+    assert_eq!(c["forecast_first_wait_expired"], false, "{c}");
+    let _ = std::fs::remove_dir_all(&out);
+}

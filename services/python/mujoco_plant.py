@@ -648,9 +648,10 @@ class Process:
                     break
                 now = time.monotonic()
                 if now >= deadline:
-                    # A controller that has answered before and whose process is alive is slow
-                    # (starved, in a debugger), not gone: wait for it (as `upc sim` does).
-                    if want > 0 and self.controller_alive():
+                    # A controller whose process is alive is slow (starved, in a debugger, or
+                    # at the first state waiting for its forecaster), not gone: wait for it (as
+                    # `upc sim` does).
+                    if self.controller_alive():
                         if not waiting:
                             waiting = True
                             print(f"mujoco plant: no torques for state {want} within "

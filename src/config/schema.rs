@@ -399,6 +399,9 @@ pub struct ControllerConfig {
     /// state's time (what makes a rerun reproducible); past it, go on with the newest window
     /// and stop waiting until a window comes again. 0: never wait.
     pub lockstep_forecast_wait: f64,
+    /// Lockstep: wait this long (s, wall) for the first window of a plant session, the plant
+    /// held at its first state meanwhile: a forecaster started late is taken from t = 0.
+    pub lockstep_first_forecast_wait: f64,
     /// Lockstep: wait this long (s, wall) for the C2 search started `c2_every` ticks earlier,
     /// whose schedule applies from then on. 0: never wait (asynchronous, as in real time).
     pub lockstep_c2_wait: f64,
@@ -435,6 +438,10 @@ impl ControllerConfig {
                 self.lockstep_forecast_wait,
             ),
             ("controller.lockstep_c2_wait", self.lockstep_c2_wait),
+            (
+                "controller.lockstep_first_forecast_wait",
+                self.lockstep_first_forecast_wait,
+            ),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(l.range_error(key, format!("must be finite and ≥ 0, got {v}")));

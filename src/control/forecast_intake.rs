@@ -2,6 +2,13 @@
 //! [`ForecastWindow`] (validation, counting), logs rejections sparingly, tracks the forecast's
 //! loss on the plant's time and, in lockstep, waits (bounded) for the window whose period covers
 //! the state's time, so that the window a tick sees is a function of simulated time.
+//!
+//! A lockstep run whose forecaster starts late (any start order) waits longer for the first
+//! window of a plant session: the plant is held at its first state meanwhile, so the late
+//! forecaster is taken from t = 0 and the run's bytes are those of an on-time start. Without a
+//! forecaster within that wait, the run goes on without one (the forecast correction forecasts
+//! from the measured hand force alone); a forecaster that joins later still is taken up from
+//! its first window on, and the run is marked as depending on timing.
 
 use std::time::{Duration, Instant};
 
@@ -17,6 +24,8 @@ pub struct Intake {
     pub waited: Option<Duration>,
     /// The wait ended without the window.
     pub timed_out: bool,
+    /// The wait for a forecaster's first window ended without one: going on without forecast.
+    pub gave_up_first: bool,
     /// The forecast was lost this tick (nothing valid for `loss_after` of plant time and the
     /// window no longer covers the horizon): it decays to zero from here.
     pub lost: bool,
@@ -30,6 +39,14 @@ pub struct ForecastIntake {
     events: Listener,
     /// Lockstep wait for the covering window; `None`: never wait (real time, or 0 configured).
     wait: Option<Duration>,
+    /// Lockstep wait for the first window of a plant session (a forecaster starting late).
+    first_wait: Option<Duration>,
+    /// A window was accepted in this plant session.
+    received: bool,
+    /// The first-window wait of this session ended without one.
+    gave_up_first: bool,
+    /// Plant time of the first window accepted in this plant session.
+    pub first_at: Option<f64>,
     /// Waiting is on (off after a time-out until a window arrives, or for a forecaster that
     /// promises no period).
     awaiting: bool,
@@ -42,13 +59,14 @@ pub struct ForecastIntake {
 }
 
 impl ForecastIntake {
-    /// `wait`: the lockstep wait (`None` in real time); `loss_after`: plant time without a valid
-    /// window before the forecast counts as lost; `horizon`: the preview horizon (s).
+    /// `wait`: the lockstep wait (`None` in real time) and, for a session's first window,
+    /// `first_wait` (at least `wait`); `loss_after`: plant time without a valid window before the
+    /// forecast counts as lost; `horizon`: the preview horizon (s).
     pub fn new(
         window: ForecastWindow,
         forecasts: Subscriber<ForecastMsg>,
         events: Listener,
-        wait: Option<Duration>,
+        (wait, first_wait): (Option<Duration>, Duration),
         loss_after: f64,
         horizon: f64,
     ) -> Self {
@@ -57,6 +75,10 @@ impl ForecastIntake {
             forecasts,
             events,
             wait,
+            first_wait: wait.map(|w| w.max(first_wait)),
+            received: false,
+            gave_up_first: false,
+            first_at: None,
             awaiting: wait.is_some(),
             last_accepted_t: 0.0,
             missing: false,
@@ -71,6 +93,9 @@ impl ForecastIntake {
         self.window.reset();
         self.last_accepted_t = t;
         self.awaiting = self.wait.is_some();
+        self.received = false;
+        self.gave_up_first = false;
+        self.first_at = None;
     }
 
     /// Offer the newest message at plant time `t`; true if accepted.
@@ -82,6 +107,11 @@ impl ForecastIntake {
         match r {
             Ok(()) => {
                 self.last_accepted_t = t;
+                if !self.received {
+                    self.received = true;
+                    self.first_at = Some(t);
+                    tracing::info!("first forecast window taken at t = {t:.3} s");
+                }
                 if self.missing {
                     self.missing = false;
                     tracing::info!("forecast back at t = {t:.3} s");
@@ -108,8 +138,19 @@ impl ForecastIntake {
         };
         if out.accepted && self.wait.is_some() {
             self.awaiting = true; // a forecaster is (back): wait for it
+            if self.gave_up_first {
+                self.gave_up_first = false;
+                out.not_reproducible = Some(
+                    "a forecaster joined after the lockstep wait for its first window: the tick it is taken at depends on timing",
+                );
+            }
         }
-        if let Some(wait) = self.wait
+        let wait = if self.received {
+            self.wait
+        } else {
+            self.first_wait
+        };
+        if let Some(wait) = wait
             && self.awaiting
             && !self.window.promised_at(t)
         {
@@ -126,12 +167,24 @@ impl ForecastIntake {
                     if now >= until {
                         self.awaiting = false;
                         out.timed_out = true;
-                        out.not_reproducible = Some("a lockstep wait for the forecast timed out");
-                        tracing::warn!(
-                            "no forecast window for t = {t:.3} s within {} s: going on with the \
-                             newest (not waiting again until a window arrives)",
-                            wait.as_secs_f64()
-                        );
+                        if self.received {
+                            out.not_reproducible =
+                                Some("a lockstep wait for the forecast timed out");
+                            tracing::warn!(
+                                "no forecast window for t = {t:.3} s within {} s: going on with \
+                                 the newest (not waiting again until a window arrives)",
+                                wait.as_secs_f64()
+                            );
+                        } else {
+                            // Nothing depends on timing unless a forecaster joins later.
+                            self.gave_up_first = true;
+                            out.gave_up_first = true;
+                            tracing::warn!(
+                                "no forecaster within {} s (t = {t:.3} s): going on without a \
+                                 forecast; one that starts later is taken up from its first window",
+                                wait.as_secs_f64()
+                            );
+                        }
                         break;
                     }
                     let forecasts = &self.forecasts;

@@ -122,6 +122,11 @@ pub struct ServerSummary {
     /// No forecast window was ever accepted (no forecaster, or none valid): the preview ran on
     /// the measured hand force alone, which is not a lost forecast.
     pub forecast_never_received: bool,
+    /// Plant time (s) of the first window accepted in the last plant session (lockstep: the
+    /// same for a forecaster started late, which the plant waited for).
+    pub forecast_first_at: Option<f64>,
+    /// Lockstep: the wait for a forecaster's first window ended without one.
+    pub forecast_first_wait_expired: bool,
     /// Accepted forecast windows whose scenario differs from the one the plant announces.
     pub forecast_scenario_mismatches: u64,
     /// The plant announced another scenario than this controller's `--scenario`.
@@ -304,8 +309,11 @@ pub fn run_server_with(
         ),
         bus.subscriber::<ForecastMsg>(ServiceKind::Forecast)?,
         bus.listener(ServiceKind::Forecast)?,
-        (lockstep && cc.lockstep_forecast_wait > 0.0)
-            .then(|| Duration::from_secs_f64(cc.lockstep_forecast_wait)),
+        (
+            (lockstep && cc.lockstep_forecast_wait > 0.0)
+                .then(|| Duration::from_secs_f64(cc.lockstep_forecast_wait)),
+            Duration::from_secs_f64(cc.lockstep_first_forecast_wait),
+        ),
         cc.state_timeout,
         horizon_time,
     );
@@ -573,6 +581,7 @@ pub fn run_server_with(
             waited += w;
         }
         s.forecast_wait_timeouts += u64::from(f.timed_out);
+        s.forecast_first_wait_expired |= f.gave_up_first;
         if f.lost {
             s.forecast_lost = true;
             s.forecast_losses += 1;
@@ -782,6 +791,7 @@ pub fn run_server_with(
     s.wbc_condensation_failures = wc.condensation_failures;
     s.forecasts_accepted = intake.window.accepted;
     s.forecast_never_received = intake.window.accepted == 0;
+    s.forecast_first_at = intake.first_at;
     s.forecasts_rejected = intake.window.rejected;
     s.forecasts_rejected_by = intake.window.rejections;
     s.forecaster_restarts = intake.window.restarts;

@@ -598,9 +598,10 @@ impl Looper {
                 }
                 let now = Instant::now();
                 if now >= deadline {
-                    // A controller that has answered before and whose process is alive is
-                    // slow (starved, in a debugger), not gone: a lockstep run waits for it.
-                    if want > 0 && ep.torques.has_live_publisher() {
+                    // A controller whose process is alive is slow (starved, in a debugger, or
+                    // at the first state waiting for its forecaster), not gone: a lockstep run
+                    // waits for it.
+                    if ep.torques.has_live_publisher() {
                         if !waiting_for_live_controller {
                             waiting_for_live_controller = true;
                             tracing::warn!(
