@@ -195,3 +195,39 @@ fn python_forecaster_example_drives_a_run() {
     assert!(peak > 0.002 && peak < 0.1, "hand peak error {peak}");
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// `upc run` fails after starting some of its participants (here the remote forecaster exits
+/// before its first window, once the simulator and the bridge run): it reports the cause and
+/// leaves none of them running. Before, the simulator waited out its time-out and the bridge
+/// ran until killed by hand.
+#[test]
+fn a_failed_start_leaves_no_participant_running() {
+    let out = std::env::temp_dir().join(format!("upc-system-fail-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let child = upc()
+        .args(["run", "--controller", "c1", "--duration", "1", "--quiet"])
+        .args(["--name", "fail", "--forecaster-over-zenoh"])
+        .args(["--forecaster", "sh -c 'exit 3'"])
+        .arg("--out")
+        .arg(&out)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("upc runs");
+    // The participants' service prefix names the launcher's pid.
+    let prefix = format!("upc_{}_c1", child.id());
+    let output = child.wait_with_output().expect("upc run");
+    let err = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "upc run succeeded: {err}");
+    assert!(err.contains("before its first window"), "{err}");
+    let left = Command::new("pgrep")
+        .args(["-af", &prefix])
+        .output()
+        .map(|o| o.stdout)
+        .unwrap_or_default();
+    assert!(
+        left.is_empty(),
+        "participants left running: {}",
+        String::from_utf8_lossy(&left)
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -6,9 +6,10 @@ use upc::bridge::{BridgeConfig, run};
 use upc::shutdown::stop_flag;
 
 use super::CliResult;
+use super::argv::{Argv, ToArgv, fields};
 use super::common::ConfigArgs;
 
-#[derive(clap::Args)]
+#[derive(clap::Args, Debug)]
 pub struct BridgeArgs {
     /// Files (layout of `config/bridge.toml`) and `--set bridge.key=value` overrides.
     #[command(flatten)]
@@ -33,6 +34,23 @@ pub struct BridgeArgs {
     /// Write the bridge's counters here as JSON when it stops.
     #[arg(long)]
     pub summary: Option<PathBuf>,
+}
+
+impl ToArgv for BridgeArgs {
+    fn write(&self, w: &mut Argv) {
+        let BridgeArgs {
+            config,
+            prefix,
+            key_prefix,
+            listen,
+            connect,
+            insecure,
+            summary,
+        } = self;
+        fields!(w; opt prefix, opt key_prefix, many listen, many connect, switch insecure,
+                opt summary);
+        w.nested(config);
+    }
 }
 
 pub fn run_cli(args: BridgeArgs) -> CliResult {

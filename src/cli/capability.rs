@@ -13,12 +13,14 @@ use indicatif::{ProgressBar, ProgressStyle};
 use upc::capability::{
     Capability, Criteria, Direction, Variant, bisect, impact_toml, survived_full, survives_reduced,
 };
-use upc::config::Config;
+use upc::config::{Config, ControllerKind};
 use upc::report::figures::{Figure, Line, Panel, write_figure};
 use upc::report::series::{Quantity, Series, SeriesSource};
 
 use super::CliResult;
-use super::common::RobotArg;
+use super::argv::Argv;
+use super::common::{ConfigArgs, RobotArg};
+use super::run::{RunArgs, Which};
 use super::sim::PlantChoice;
 
 #[derive(Clone, Copy, PartialEq, Eq, Debug, clap::ValueEnum)]
@@ -343,25 +345,51 @@ pub(super) fn full_case(
         &scenario,
         impact_toml(amplitude, case.duration, case.direction),
     )?;
-    let kind = case.variant.kind().name();
-    let mut cmd = Command::new(exe);
-    cmd.args(["run", "--quiet", "--controller", kind, "--scenario"])
-        .arg(&scenario)
-        .args(["--robot", case.robot, "--plant", case.plant.name()])
-        .args(["--name", &name, "--out"])
-        .arg(&dir)
-        .args(["--forecast-error-scale", &f.scale.to_string()])
-        .args(["--forecast-error-shift", &f.shift.to_string()])
-        .env("RUST_LOG", "warn");
-    if let Some(set) = case.variant.config_set() {
-        cmd.args(["--set", set]);
-    }
+    let kind = case.variant.kind();
+    let mut sim_sets = vec![];
     if case.direction == Direction::Y {
-        cmd.args(["--sim-set", "sim.push=\"hand\""]);
+        sim_sets.push("sim.push=\"hand\"".to_string());
     }
     if f.phantom {
-        cmd.args(["--sim-set", "sim.push=\"none\""]);
+        sim_sets.push("sim.push=\"none\"".to_string());
     }
+    let run = RunArgs {
+        scenario: scenario.display().to_string(),
+        controller: match kind {
+            ControllerKind::C0 => Which::C0,
+            ControllerKind::C1 => Which::C1,
+            ControllerKind::C2 => Which::C2,
+        },
+        realtime: false,
+        duration: None,
+        name: Some(name.clone()),
+        out: dir.clone(),
+        forecaster: None,
+        forecaster_over_zenoh: false,
+        no_forecaster: false,
+        viewer: false,
+        connect: None,
+        quiet: true,
+        forecast_error_scale: f.scale,
+        forecast_error_shift: f.shift,
+        config: ConfigArgs {
+            configs: vec![],
+            sets: case
+                .variant
+                .config_set()
+                .map(str::to_owned)
+                .into_iter()
+                .collect(),
+        },
+        sim_sets,
+        plant: case.plant,
+        robot: RobotArg {
+            robot: case.robot.to_owned(),
+        },
+    };
+    let kind = kind.name();
+    let mut cmd = Command::new(exe);
+    cmd.args(Argv::of("run", &run)).env("RUST_LOG", "warn");
     let status = cmd.output()?;
     let summary = std::fs::read_to_string(dir.join(&name).join(kind).join("controller.json"));
     let result = match summary {

@@ -6,6 +6,8 @@ use upc::config::{Config, ConfigError};
 use upc::robot::Robot;
 use upc::scenario::Scenario;
 
+use super::argv::{Argv, ToArgv, fields};
+
 /// `--config` files and `--set` overrides, layered over the embedded defaults.
 #[derive(clap::Args, Debug, Clone, Default)]
 pub struct ConfigArgs {
@@ -41,19 +43,19 @@ impl ConfigArgs {
         }
         layers.build()
     }
+}
 
-    /// The same arguments as a command line, to hand them to a child process.
-    pub fn to_args(&self) -> Vec<String> {
-        let mut v = Vec::new();
-        for c in &self.configs {
-            v.push("--config".into());
-            v.push(c.display().to_string());
-        }
-        for s in &self.sets {
-            v.push("--set".into());
-            v.push(s.clone());
-        }
-        v
+impl ToArgv for ConfigArgs {
+    fn write(&self, w: &mut Argv) {
+        let ConfigArgs { configs, sets } = self;
+        fields!(w; many configs, many sets);
+    }
+}
+
+impl ToArgv for RobotArg {
+    fn write(&self, w: &mut Argv) {
+        let RobotArg { robot } = self;
+        fields!(w; val robot);
     }
 }
 

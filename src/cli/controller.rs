@@ -9,6 +9,7 @@ use upc::scenario::Scenario;
 use upc::shutdown::stop_flag;
 
 use super::CliResult;
+use super::argv::{Argv, ToArgv, fields};
 use super::common::{ConfigArgs, RobotArg};
 
 #[derive(clap::Args, Debug, Clone)]
@@ -49,6 +50,29 @@ pub struct ControllerArgs {
     pub duration: Option<f64>,
     #[command(flatten)]
     pub config: ConfigArgs,
+}
+
+impl ToArgv for ControllerArgs {
+    fn write(&self, w: &mut Argv) {
+        let ControllerArgs {
+            scenario,
+            controller,
+            realtime,
+            robot,
+            prefix,
+            rrd,
+            recording_id,
+            connect,
+            csv,
+            summary,
+            duration,
+            config,
+        } = self;
+        fields!(w; val scenario, opt_choice controller, switch realtime, val prefix, opt rrd,
+                val recording_id, opt connect, opt csv, opt summary, opt duration);
+        w.nested(robot);
+        w.nested(config);
+    }
 }
 
 pub fn run(args: ControllerArgs) -> CliResult {

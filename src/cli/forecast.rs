@@ -6,8 +6,9 @@ use upc::scenario::Scenario;
 use upc::shutdown::stop_flag;
 
 use super::CliResult;
+use super::argv::{Argv, ToArgv, fields};
 
-#[derive(clap::Args)]
+#[derive(clap::Args, Debug)]
 pub struct ForecastArgs {
     /// Scenario whose hand force is forecast: embedded name or TOML path. Default: the one the
     /// plant announces in its states (followed when it changes).
@@ -35,6 +36,23 @@ pub struct ForecastArgs {
     /// Forecast error: publish the force this many seconds late (negative: early).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub error_shift: f64,
+}
+
+impl ToArgv for ForecastArgs {
+    fn write(&self, w: &mut Argv) {
+        let ForecastArgs {
+            scenario,
+            dt,
+            window,
+            period,
+            until,
+            prefix,
+            error_scale,
+            error_shift,
+        } = self;
+        fields!(w; opt scenario, val dt, val window, val period, opt until, val prefix,
+                val error_scale, val error_shift);
+    }
 }
 
 pub fn run_cli(args: ForecastArgs) -> CliResult {

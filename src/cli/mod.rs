@@ -1,5 +1,6 @@
 //! Subcommand implementations; each returns an error value, never panics on user input.
 
+pub mod argv;
 pub mod bridge;
 pub mod capability;
 pub mod common;

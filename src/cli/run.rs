@@ -15,8 +15,12 @@ use upc::control::server::ServerSummary;
 use upc::scenario::Scenario;
 
 use super::CliResult;
+use super::argv::{Argv, ToArgv, fields};
+use super::bridge::BridgeArgs;
 use super::common::{ConfigArgs, RobotArg};
-use super::sim::PlantChoice;
+use super::controller::ControllerArgs;
+use super::forecast::ForecastArgs;
+use super::sim::{ModeChoice, PlantArgs, PlantChoice, SimArgs};
 
 #[derive(Clone, Copy, PartialEq, Eq, Debug, clap::ValueEnum)]
 pub enum Which {
@@ -95,6 +99,37 @@ pub struct RunArgs {
 }
 
 /// One controller's run in the summary.
+impl ToArgv for RunArgs {
+    fn write(&self, w: &mut Argv) {
+        let RunArgs {
+            scenario,
+            controller,
+            realtime,
+            duration,
+            name,
+            out,
+            forecaster,
+            forecaster_over_zenoh,
+            no_forecaster,
+            viewer,
+            connect,
+            quiet,
+            forecast_error_scale,
+            forecast_error_shift,
+            config,
+            sim_sets,
+            plant,
+            robot,
+        } = self;
+        fields!(w; val scenario, choice controller, switch realtime, opt duration, opt name,
+                val out, opt forecaster, switch forecaster_over_zenoh, switch no_forecaster,
+                switch viewer, opt connect, switch quiet, val forecast_error_scale,
+                val forecast_error_shift, many sim_sets, choice plant);
+        w.nested(config);
+        w.nested(robot);
+    }
+}
+
 #[derive(Debug, serde::Serialize)]
 struct Entry {
     controller: String,
@@ -222,16 +257,10 @@ fn run_one(
     kind: ControllerKind,
     live: Option<&str>,
 ) -> Result<Entry, Box<dyn std::error::Error + Send + Sync>> {
-    let connect: Vec<&str> = live.map_or(vec![], |url| vec!["--connect", url]);
     let dir = root.join(kind.name());
     std::fs::create_dir_all(&dir)?;
     let prefix = format!("upc_{}_{}", std::process::id(), kind.name());
     let recording = format!("{name}-{}", kind.name());
-    let mode = if args.realtime {
-        "realtime"
-    } else {
-        "lockstep"
-    };
     let dur = format!("{duration}");
     let start = Instant::now();
     // One open file for a child's stdout and stderr: two opens of the same path would each
@@ -241,52 +270,39 @@ fn run_one(
         Ok((Stdio::from(f.try_clone()?), Stdio::from(f)))
     };
 
+    let upc_plant = args.plant == PlantChoice::Upc;
+    let sim_args = SimArgs {
+        plant: PlantArgs {
+            mode: Some(if args.realtime {
+                ModeChoice::Realtime
+            } else {
+                ModeChoice::Lockstep
+            }),
+            duration: Some(duration),
+            configs: vec![],
+            sets: args.sim_sets.clone(),
+            prefix: Some(prefix.clone()),
+            scenario: Some(args.scenario.clone()),
+            robot: args.robot.clone(),
+        },
+        simulator: args.plant,
+        // The MuJoCo plant records no .rrd; its generated scene is kept with the run.
+        bundle: (!upc_plant).then(|| dir.join("mujoco")),
+        python: None,
+        rrd: upc_plant.then(|| dir.join("sim.rrd")),
+        recording_id: upc_plant.then(|| recording.clone()),
+        connect: live.filter(|_| upc_plant).map(str::to_owned),
+        summary: Some(dir.join("sim.json")),
+        truth_csv: (!args.realtime).then(|| dir.join("sim.csv")),
+    };
     let (out, err) = log("sim.log")?;
-    let mut sim = Command::new(exe)
-        .args([
-            "sim",
-            "--mode",
-            mode,
-            "--duration",
-            &dur,
-            "--scenario",
-            &args.scenario,
-            "--prefix",
-            &prefix,
-            "--robot",
-            &args.robot.robot,
-        ])
-        .args(match args.plant {
-            // The MuJoCo plant records no .rrd; its generated scene is kept with the run.
-            PlantChoice::Mujoco => vec![
-                "--plant".into(),
-                "mujoco".into(),
-                "--bundle".into(),
-                dir.join("mujoco"),
-            ],
-            PlantChoice::Upc => vec![
-                "--recording-id".into(),
-                recording.clone().into(),
-                "--rrd".into(),
-                dir.join("sim.rrd"),
-            ],
-        })
-        .args(if args.plant == PlantChoice::Upc {
-            connect.as_slice()
-        } else {
-            &[]
-        })
-        .args(args.sim_sets.iter().flat_map(|s| ["--set", s.as_str()]))
-        .arg("--summary")
-        .arg(dir.join("sim.json"))
-        .args(if args.realtime {
-            vec![]
-        } else {
-            vec!["--truth-csv".into(), dir.join("sim.csv")]
-        })
-        .stdout(out)
-        .stderr(err)
-        .spawn()?;
+    let mut sim = Participant::spawn(
+        "simulator",
+        Command::new(exe)
+            .args(Argv::of("sim", &sim_args))
+            .stdout(out)
+            .stderr(err),
+    )?;
     let mut bridge = None;
     let mut forecaster = match &args.forecaster {
         _ if args.forecaster_over_zenoh => {
@@ -306,20 +322,18 @@ fn run_one(
             c
         }
         None => {
+            let forecast = ForecastArgs {
+                scenario: Some(args.scenario.clone()),
+                dt: 0.005,
+                window: 2.5,
+                period: 0.01,
+                until: Some(duration),
+                prefix: prefix.clone(),
+                error_scale: args.forecast_error_scale,
+                error_shift: args.forecast_error_shift,
+            };
             let mut c = Command::new(exe);
-            c.args([
-                "forecast",
-                "--scenario",
-                &args.scenario,
-                "--prefix",
-                &prefix,
-                "--until",
-                &dur,
-                "--error-scale",
-                &args.forecast_error_scale.to_string(),
-                "--error-shift",
-                &args.forecast_error_shift.to_string(),
-            ]);
+            c.args(Argv::of("forecast", &forecast));
             c
         }
     };
@@ -327,50 +341,47 @@ fn run_one(
     let mut forecaster = if args.no_forecaster {
         None
     } else {
-        Some(forecaster.stdout(out).stderr(err).spawn()?)
+        Some(Participant::spawn(
+            "forecaster",
+            forecaster.stdout(out).stderr(err),
+        )?)
     };
     if bridge.is_some()
         && let Some(forecaster) = forecaster.as_mut()
     {
-        // A lockstep controller waits 0.5 s for its first window; a remote forecaster takes
-        // longer to start and connect: the controller starts once its first window is here.
+        // A remote forecaster takes a while to start and connect: the controller starts once
+        // its first window is here, and a forecaster that dies first is reported at once.
         first_forecast(&prefix, forecaster, Duration::from_secs(30))?;
     }
+    let mut sets = args.config.sets.clone();
+    if args.no_forecaster {
+        sets.push("controller.lockstep_forecast_wait=0".into());
+    }
+    let controller_args = ControllerArgs {
+        scenario: args.scenario.clone(),
+        controller: Some(kind),
+        realtime: args.realtime,
+        robot: args.robot.clone(),
+        prefix: prefix.clone(),
+        rrd: Some(dir.join("controller.rrd")),
+        recording_id: recording.clone(),
+        connect: live.map(str::to_owned),
+        csv: Some(dir.join("controller.csv")),
+        summary: Some(dir.join("controller.json")),
+        duration: Some(duration),
+        config: ConfigArgs {
+            configs: args.config.configs.clone(),
+            sets,
+        },
+    };
     let (out, err) = log("controller.log")?;
-    let mut controller = Command::new(exe)
-        .args([
-            "controller",
-            "--scenario",
-            &args.scenario,
-            "--controller",
-            kind.name(),
-            "--prefix",
-            &prefix,
-            "--robot",
-            &args.robot.robot,
-        ])
-        .args(["--duration", &dur, "--recording-id", &recording])
-        .args(if args.realtime {
-            &["--realtime"][..]
-        } else {
-            &[][..]
-        })
-        .arg("--rrd")
-        .arg(dir.join("controller.rrd"))
-        .arg("--csv")
-        .arg(dir.join("controller.csv"))
-        .arg("--summary")
-        .arg(dir.join("controller.json"))
-        .args(&connect)
-        .args(args.config.to_args())
-        .args(if args.no_forecaster {
-            &["--set", "controller.lockstep_forecast_wait=0"][..]
-        } else {
-            &[][..]
-        })
-        .stdout(out)
-        .stderr(err)
-        .spawn()?;
+    let mut controller = Participant::spawn(
+        "controller",
+        Command::new(exe)
+            .args(Argv::of("controller", &controller_args))
+            .stdout(out)
+            .stderr(err),
+    )?;
 
     // Progress from the simulator's state stream.
     let bar = if args.quiet {
@@ -518,7 +529,7 @@ fn over_zenoh(
     dir: &Path,
     prefix: &str,
     (out, err): (Stdio, Stdio),
-) -> Result<(Child, Command), Box<dyn std::error::Error + Send + Sync>> {
+) -> Result<(Participant, Command), Box<dyn std::error::Error + Send + Sync>> {
     const NAME: &str = "forecaster";
     let pki = loopback_pki(root, &["bridge", NAME])?;
     let pem = |f: &str| pki.join(f).display().to_string();
@@ -539,16 +550,25 @@ fn over_zenoh(
     file.insert("bridge".into(), bridge.into());
     std::fs::write(&conf, file.to_string())?;
     let endpoint = format!("tls/127.0.0.1:{}", free_loopback_port()?);
-    let bridge = Command::new(exe)
-        .args(["bridge", "--prefix", prefix, "--key-prefix", prefix])
-        .args(["--listen", &endpoint])
-        .arg("--config")
-        .arg(&conf)
-        .arg("--summary")
-        .arg(dir.join("bridge.json"))
-        .stdout(out)
-        .stderr(err)
-        .spawn()?;
+    let bridge_args = BridgeArgs {
+        config: ConfigArgs {
+            configs: vec![conf],
+            sets: vec![],
+        },
+        prefix: Some(prefix.to_owned()),
+        key_prefix: Some(prefix.to_owned()),
+        listen: vec![endpoint.clone()],
+        connect: vec![],
+        insecure: false,
+        summary: Some(dir.join("bridge.json")),
+    };
+    let bridge = Participant::spawn(
+        "bridge",
+        Command::new(exe)
+            .args(Argv::of("bridge", &bridge_args))
+            .stdout(out)
+            .stderr(err),
+    )?;
     let mut c = match &args.forecaster {
         Some(cmd) => shell(cmd),
         None => {
@@ -642,6 +662,40 @@ fn first_forecast(
             .into());
         }
         std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// A started child process that is stopped (SIGKILL, reaped) when dropped before it exited: an
+/// error anywhere in `upc run` leaves no participant behind.
+struct Participant(Child);
+
+impl Participant {
+    fn spawn(what: &str, cmd: &mut Command) -> Result<Self, String> {
+        cmd.spawn()
+            .map(Participant)
+            .map_err(|e| format!("cannot start the {what} ({:?}): {e}", cmd.get_program()))
+    }
+}
+
+impl std::ops::Deref for Participant {
+    type Target = Child;
+    fn deref(&self) -> &Child {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for Participant {
+    fn deref_mut(&mut self) -> &mut Child {
+        &mut self.0
+    }
+}
+
+impl Drop for Participant {
+    fn drop(&mut self) {
+        if let Ok(None) = self.0.try_wait() {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
     }
 }
 

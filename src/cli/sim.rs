@@ -8,6 +8,7 @@ use upc::sim::SimConfig;
 use upc::sim::process::{RunOptions, run};
 
 use super::CliResult;
+use super::argv::{Argv, ToArgv, fields};
 use super::common::RobotArg;
 
 #[derive(Clone, Copy, PartialEq, Eq, Debug, clap::ValueEnum)]
@@ -73,7 +74,7 @@ pub struct PlantArgs {
 /// In real time (`--mode realtime`) the robot is held at its start posture until a controller's
 /// torques arrive, and held again if they stop (`[sim.hold]`): start the processes in any order.
 /// `--plant mujoco` runs the same scene in MuJoCo instead, on the same channels.
-#[derive(clap::Args)]
+#[derive(clap::Args, Debug)]
 #[command(
     after_help = "Examples:\n  upc sim                                   # lockstep, 10 s, waits for a controller\n  upc sim --mode realtime --duration 5 --rrd sim.rrd\n  upc sim --set sim.friction=0.5 --scenario multiple_impacts --prefix test1\n  upc sim --plant mujoco --robot icub      # MuJoCo as the plant (scripts/setup.sh installs it)"
 )]
@@ -113,6 +114,41 @@ pub struct SimArgs {
 /// MuJoCo's viewer: `python -m mujoco.viewer --mjcf DIR/scene.xml`), `DIR/plant.json` and the
 /// plant process `DIR/mujoco_plant.py`, generated from the robot description, the scenario and
 /// the simulator's config, as `upc sim --plant mujoco` does at its start.
+impl ToArgv for PlantArgs {
+    fn write(&self, w: &mut Argv) {
+        let PlantArgs {
+            mode,
+            duration,
+            configs,
+            sets,
+            prefix,
+            scenario,
+            robot,
+        } = self;
+        fields!(w; opt_choice mode, opt duration, many configs, many sets, opt prefix, opt scenario);
+        w.nested(robot);
+    }
+}
+
+impl ToArgv for SimArgs {
+    fn write(&self, w: &mut Argv) {
+        let SimArgs {
+            plant,
+            simulator,
+            bundle,
+            python,
+            rrd,
+            recording_id,
+            connect,
+            summary,
+            truth_csv,
+        } = self;
+        w.nested(plant);
+        fields!(w; choice simulator, opt bundle, opt python, opt rrd, opt recording_id,
+                opt connect, opt summary, opt truth_csv);
+    }
+}
+
 #[derive(clap::Args)]
 pub struct MjcfArgs {
     #[command(flatten)]
