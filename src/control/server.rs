@@ -575,7 +575,7 @@ pub fn run_server_with(
 
         // The newest forecast, validated; in lockstep, the one whose period covers this
         // state's time, waited for.
-        let f = intake.take(state.time, || stop.load(Ordering::Relaxed))?;
+        let f = ipc!(intake.take(state.time, || stop.load(Ordering::Relaxed)));
         if let Some(w) = f.waited {
             s.forecast_waits += 1;
             waited += w;

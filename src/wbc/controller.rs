@@ -73,10 +73,12 @@ use crate::dynamics::{
     nonlinear_effects, update_frame_placements,
 };
 
-/// Number of point contacts: 4 sole corners on each of 2 feet.
-pub const N_CONTACTS: usize = 8;
+/// Number of point contacts: 4 sole corners on each of 2 feet, one home for the QP and the
+/// channel contract's arrays.
+pub use crate::channels::N_CONTACTS;
 /// Corner frame suffixes, in the order of [`WbcOutput::contact_forces`] for each foot.
 pub const CORNERS: [&str; 4] = ["fl", "fr", "rl", "rr"];
+const _: () = assert!(N_CONTACTS == 2 * CORNERS.len());
 /// Warnings about fallbacks are emitted at most once per this many ticks.
 const WARN_EVERY_TICKS: u64 = 1000;
 
