@@ -77,9 +77,7 @@ fn across(c: &mut Criterion, pki: Option<&Path>) {
         std::thread::spawn(move || upc::bridge::run(&cfg, stop))
     };
     let bus = Bus::open(&prefix, "bench-controller").expect("bus");
-    let forecasts = bus
-        .subscriber::<ForecastMsg>(ServiceKind::Forecast)
-        .expect("subscriber");
+    let forecasts = bus.subscriber::<ForecastMsg>().expect("subscriber");
     let wake = bus.listener(ServiceKind::Forecast).expect("listener");
     let mut zc = zenoh::Config::default();
     zc.insert_json5("connect/endpoints", &format!("[\"{endpoint}\"]"))

@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use support::procs::*;
 use upc::bridge::wire::{HEADER_LEN, encode};
-use upc::channels::{Bus, ForecastMsg, ServiceKind, StateMsg};
+use upc::channels::{Bus, ForecastMsg, StateMsg};
 use zenoh::Wait;
 
 /// The Python remote forecaster, connected to `endpoint`, its log appended to `<dir>/remote.log`.
@@ -42,7 +42,7 @@ struct Clock {
 impl Clock {
     fn new(prefix: &str) -> Self {
         let bus = Bus::open(prefix, "bridge-test-clock").expect("bus");
-        let states = bus.subscriber::<StateMsg>(ServiceKind::State).expect("sub");
+        let states = bus.subscriber::<StateMsg>().expect("sub");
         Clock {
             _bus: bus,
             states,

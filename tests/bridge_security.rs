@@ -190,15 +190,11 @@ fn only_the_labs_identities_get_through_and_each_only_where_its_role_allows() {
     // Behind the bridge, as the controller and the plant: forecasts in, states and torques out.
     let bus = Bus::open(&kp, "bridge-security-test").expect("bus");
     let forecasts = bus
-        .subscriber::<ForecastMsg>(ServiceKind::Forecast)
+        .subscriber::<ForecastMsg>()
         .expect("forecast subscriber");
-    let states = bus
-        .publisher::<StateMsg>(ServiceKind::State)
-        .expect("state");
+    let states = bus.publisher::<StateMsg>().expect("state");
     let wake = bus.notifier(ServiceKind::State).expect("state notifier");
-    let torques = bus
-        .publisher::<TorqueMsg>(ServiceKind::Torques)
-        .expect("torques");
+    let torques = bus.publisher::<TorqueMsg>().expect("torques");
 
     let fc1 = Client {
         ca: Some(&lab),

@@ -256,13 +256,9 @@ const BAD: [Kind; 12] = [
 /// time until it reaches `until`: valid ones, or valid and bad ones alternately.
 fn publish_forecasts(prefix: &str, until: f64, with_bad: bool) -> Vec<(Kind, u64)> {
     let bus = Bus::open(prefix, "faults-forecaster").expect("bus");
-    let out = bus
-        .publisher::<ForecastMsg>(ServiceKind::Forecast)
-        .expect("publisher");
+    let out = bus.publisher::<ForecastMsg>().expect("publisher");
     let wake = bus.notifier(ServiceKind::Forecast).expect("notifier");
-    let states = bus
-        .subscriber::<StateMsg>(ServiceKind::State)
-        .expect("states");
+    let states = bus.subscriber::<StateMsg>().expect("states");
     let mut sent: Vec<(Kind, u64)> = Vec::new();
     let mut count = |k: Kind| match sent.iter_mut().find(|(x, _)| *x == k) {
         Some((_, n)) => *n += 1,

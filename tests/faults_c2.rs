@@ -216,9 +216,7 @@ impl SimClock {
         let t = std::thread::spawn(move || {
             let bus = upc::channels::Bus::open(&prefix, "faults-clock").expect("bus");
             let truth = bus
-                .subscriber::<upc::channels::GroundTruthMsg>(
-                    upc::channels::ServiceKind::GroundTruth,
-                )
+                .subscriber::<upc::channels::GroundTruthMsg>()
                 .expect("subscriber");
             while !stop_t.load(Ordering::Relaxed) {
                 if let Some(g) = truth.latest().expect("receive") {

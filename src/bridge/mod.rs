@@ -362,7 +362,7 @@ fn forward_forecasts(
     stop: &AtomicBool,
 ) -> Result<InboundStats, BridgeError> {
     let bus = Bus::open(prefix, &format!("upc-bridge-in-{}", std::process::id()))?;
-    let publisher = bus.publisher::<ForecastMsg>(ServiceKind::Forecast)?;
+    let publisher = bus.publisher::<ForecastMsg>()?;
     let notifier = bus.notifier(ServiceKind::Forecast)?;
     let mut stats = InboundStats::default();
     while !stop.load(Ordering::Relaxed) {
@@ -434,9 +434,9 @@ fn forward_outbound(
         &cfg.prefix,
         &format!("upc-bridge-out-{}", std::process::id()),
     )?;
-    let states = bus.subscriber::<StateMsg>(ServiceKind::State)?;
-    let truth = bus.subscriber::<GroundTruthMsg>(ServiceKind::GroundTruth)?;
-    let torques = bus.subscriber::<TorqueMsg>(ServiceKind::Torques)?;
+    let states = bus.subscriber::<StateMsg>()?;
+    let truth = bus.subscriber::<GroundTruthMsg>()?;
+    let torques = bus.subscriber::<TorqueMsg>()?;
     let wake = bus.listener(ServiceKind::State)?;
     let state_out = Out::declare(session, key(cfg, ServiceKind::State))?;
     let truth_out = Out::declare(session, key(cfg, ServiceKind::GroundTruth))?;

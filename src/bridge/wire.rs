@@ -5,7 +5,7 @@
 //! carries bytes and checks nothing, so the header does it: a peer with another contract
 //! version, or a payload of the wrong kind or size, is refused with the reason.
 
-use crate::channels::{ForecastMsg, GroundTruthMsg, ServiceKind, StateMsg, TorqueMsg};
+use crate::channels::{ForecastMsg, GroundTruthMsg, Payload, ServiceKind, StateMsg, TorqueMsg};
 
 /// First bytes of every upc payload on Zenoh.
 pub const WIRE_MAGIC: [u8; 4] = *b"UPCZ";
@@ -52,24 +52,14 @@ impl WireError {
 /// # Safety
 /// The type is `#[repr(C)]` plain old data of integers and floats with no implicit padding
 /// (explicit `_pad` fields), so that its bytes are all initialised and any bytes are a value.
-pub unsafe trait WireMessage: Copy + Default + 'static {
-    const KIND: ServiceKind;
-}
+pub unsafe trait WireMessage: Payload + Default {}
 
 // SAFETY: the four payloads are `#[repr(C)]`, made of u8/u32/u64/f64 fields and arrays, with
 // explicit padding fields (their sizes are multiples of 8 and checked below).
-unsafe impl WireMessage for StateMsg {
-    const KIND: ServiceKind = ServiceKind::State;
-}
-unsafe impl WireMessage for TorqueMsg {
-    const KIND: ServiceKind = ServiceKind::Torques;
-}
-unsafe impl WireMessage for ForecastMsg {
-    const KIND: ServiceKind = ServiceKind::Forecast;
-}
-unsafe impl WireMessage for GroundTruthMsg {
-    const KIND: ServiceKind = ServiceKind::GroundTruth;
-}
+unsafe impl WireMessage for StateMsg {}
+unsafe impl WireMessage for TorqueMsg {}
+unsafe impl WireMessage for ForecastMsg {}
+unsafe impl WireMessage for GroundTruthMsg {}
 // Each size is the sum of the fields' sizes (in 8-byte words): no byte of padding.
 const _: () = assert!(size_of::<StateMsg>() == 8 * (7 + 2 * 48 + 24 + 7 + 2 + 16));
 const _: () = assert!(size_of::<TorqueMsg>() == 8 * (6 + 48));

@@ -10,7 +10,7 @@ use iceoryx2::port::publisher::Publisher as IoxPublisher;
 use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
 use iceoryx2::prelude::*;
 
-use super::ServiceKind;
+use super::{Payload, ServiceKind};
 
 /// Samples a subscriber buffers before the oldest is overwritten: a slow reader sees the newest.
 const SUBSCRIBER_BUFFER: usize = 4;
@@ -111,23 +111,19 @@ impl Bus {
             .map_err(|e| err(format!("open event `{name}`"), e))
     }
 
-    pub fn publisher<T: ZeroCopySend + Debug + Copy + 'static>(
-        &self,
-        kind: ServiceKind,
-    ) -> Result<Publisher<T>, ChannelError> {
+    /// A publisher on `T`'s service.
+    pub fn publisher<T: Payload>(&self) -> Result<Publisher<T>, ChannelError> {
         let inner = self
-            .pubsub::<T>(kind)?
+            .pubsub::<T>(T::KIND)?
             .publisher_builder()
             .create()
             .map_err(|e| err("create publisher", e))?;
         Ok(Publisher { inner })
     }
 
-    pub fn subscriber<T: ZeroCopySend + Debug + Copy + 'static>(
-        &self,
-        kind: ServiceKind,
-    ) -> Result<Subscriber<T>, ChannelError> {
-        let service = self.pubsub::<T>(kind)?;
+    /// A subscriber to `T`'s service.
+    pub fn subscriber<T: Payload>(&self) -> Result<Subscriber<T>, ChannelError> {
+        let service = self.pubsub::<T>(T::KIND)?;
         let inner = service
             .subscriber_builder()
             .create()

@@ -41,6 +41,26 @@ pub enum ServiceKind {
     GroundTruth,
 }
 
+/// A payload of the contract and the service that carries it: the bus (and the Zenoh framing,
+/// [`crate::bridge::wire`]) take the service from the type, so a payload cannot be sent on
+/// another payload's service.
+pub trait Payload: iceoryx2::prelude::ZeroCopySend + std::fmt::Debug + Copy + 'static {
+    const KIND: ServiceKind;
+}
+
+impl Payload for StateMsg {
+    const KIND: ServiceKind = ServiceKind::State;
+}
+impl Payload for TorqueMsg {
+    const KIND: ServiceKind = ServiceKind::Torques;
+}
+impl Payload for ForecastMsg {
+    const KIND: ServiceKind = ServiceKind::Forecast;
+}
+impl Payload for GroundTruthMsg {
+    const KIND: ServiceKind = ServiceKind::GroundTruth;
+}
+
 impl ServiceKind {
     pub fn suffix(self) -> &'static str {
         match self {

@@ -9,7 +9,7 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressStyle};
-use upc::channels::{Bus, ServiceKind, StateMsg};
+use upc::channels::{Bus, StateMsg};
 use upc::config::ControllerKind;
 use upc::control::server::ServerSummary;
 use upc::scenario::Scenario;
@@ -395,8 +395,8 @@ fn run_one(
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     bar.set_prefix(kind.name());
-    let watcher = Bus::open(&prefix, "launcher")
-        .and_then(|b| b.subscriber::<StateMsg>(ServiceKind::State).map(|s| (b, s)));
+    let watcher =
+        Bus::open(&prefix, "launcher").and_then(|b| b.subscriber::<StateMsg>().map(|s| (b, s)));
     let mut died = false;
     let controller_exit = loop {
         if let Ok((_, states)) = &watcher
@@ -645,7 +645,7 @@ fn first_forecast(
     timeout: Duration,
 ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
     let bus = Bus::open(prefix, &format!("upc-launcher-{}", std::process::id()))?;
-    let forecasts = bus.subscriber::<upc::channels::ForecastMsg>(ServiceKind::Forecast)?;
+    let forecasts = bus.subscriber::<upc::channels::ForecastMsg>()?;
     let until = Instant::now() + timeout;
     loop {
         if forecasts.has_samples() {

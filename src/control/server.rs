@@ -279,9 +279,9 @@ pub fn run_server_with(
         .into());
     }
     let bus = Bus::open(&opts.prefix, "controller")?;
-    let states = bus.subscriber::<StateMsg>(ServiceKind::State)?;
+    let states = bus.subscriber::<StateMsg>()?;
     let state_events = bus.listener(ServiceKind::State)?;
-    let torques = bus.publisher::<TorqueMsg>(ServiceKind::Torques)?;
+    let torques = bus.publisher::<TorqueMsg>()?;
     let torque_events = bus.notifier(ServiceKind::Torques)?;
     let lockstep = cc.mode == LoopMode::Lockstep;
     // One thread for faer (C2's normal equations): parallel reductions may sum in another order
@@ -307,7 +307,7 @@ pub fn run_server_with(
             cc.forecast_decay,
             weight,
         ),
-        bus.subscriber::<ForecastMsg>(ServiceKind::Forecast)?,
+        bus.subscriber::<ForecastMsg>()?,
         bus.listener(ServiceKind::Forecast)?,
         (
             (lockstep && cc.lockstep_forecast_wait > 0.0)
@@ -872,13 +872,9 @@ mod tests {
     fn safe_torques_reach_a_subscriber_after_a_failed_step() {
         let prefix = format!("upc_test_safe_torques_{}", std::process::id());
         let bus = Bus::open(&prefix, "controller_test").expect("bus");
-        let torques = bus
-            .publisher::<TorqueMsg>(ServiceKind::Torques)
-            .expect("pub");
+        let torques = bus.publisher::<TorqueMsg>().expect("pub");
         let events = bus.notifier(ServiceKind::Torques).expect("notifier");
-        let plant = bus
-            .subscriber::<TorqueMsg>(ServiceKind::Torques)
-            .expect("sub");
+        let plant = bus.subscriber::<TorqueMsg>().expect("sub");
         let qd = [0.5, -1.0, 2.0];
         let e = or_safe_torques::<()>(Err(failure()), || {
             send_damping(

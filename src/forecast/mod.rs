@@ -116,9 +116,9 @@ pub fn run(
     s: &ForecastSettings,
     stop: Arc<AtomicBool>,
 ) -> Result<u64, ChannelError> {
-    let publisher = bus.publisher::<ForecastMsg>(ServiceKind::Forecast)?;
+    let publisher = bus.publisher::<ForecastMsg>()?;
     let notifier = bus.notifier(ServiceKind::Forecast)?;
-    let states = bus.subscriber::<StateMsg>(ServiceKind::State)?;
+    let states = bus.subscriber::<StateMsg>()?;
     let wake = bus.listener(ServiceKind::State)?;
     // Chosen at the first state (the plant says how hard it pushes its robot).
     let mut current: Option<Current> = None;

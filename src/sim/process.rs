@@ -223,9 +223,9 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
     );
     let bus = Bus::open(&cfg.process.prefix, &opts.node_name)?;
     let ep = Endpoints {
-        state: bus.publisher(ServiceKind::State)?,
-        truth: bus.publisher(ServiceKind::GroundTruth)?,
-        torques: bus.subscriber(ServiceKind::Torques)?,
+        state: bus.publisher()?,
+        truth: bus.publisher()?,
+        torques: bus.subscriber()?,
         state_event: bus.notifier(ServiceKind::State)?,
         truth_event: bus.notifier(ServiceKind::GroundTruth)?,
         torque_event: bus.listener(ServiceKind::Torques)?,

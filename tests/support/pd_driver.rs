@@ -18,8 +18,8 @@ pub fn drive(
     done: impl Fn() -> bool,
 ) -> StateMsg {
     let bus = Bus::open(prefix, &format!("ctrl_{tag}")).unwrap();
-    let states = bus.subscriber::<StateMsg>(ServiceKind::State).unwrap();
-    let torques = bus.publisher::<TorqueMsg>(ServiceKind::Torques).unwrap();
+    let states = bus.subscriber::<StateMsg>().unwrap();
+    let torques = bus.publisher::<TorqueMsg>().unwrap();
     let wake_sim = bus.notifier(ServiceKind::Torques).unwrap();
     let wake_me = bus.listener(ServiceKind::State).unwrap();
 
