@@ -1,19 +1,25 @@
 #!/usr/bin/env bash
 # Soak test (not part of `cargo test`): controller + simulator + forecaster in real time at 1 kHz
-# for a while, sampling each process's resident memory (VmRSS from /proc/<pid>/status) and the
-# controller's deadline misses as it goes. Prints whether RSS stays flat and misses do not grow.
-# See services/FAULTS.md.
+# for a while, the multiple-impact scenario's four pushes repeated every 8 s all along, sampling
+# each process's resident memory (VmRSS from /proc/<pid>/status) and the controller's deadline
+# misses and tick p99 as it goes. Prints a table per `report` minutes, and whether RSS stays flat
+# and misses do not grow. See services/FAULTS.md.
 #
-#   scripts/soak.sh [minutes] [sample_seconds]      # default: 10 minutes, a sample every 5 s
+#   scripts/soak.sh [minutes] [sample_seconds] [report_minutes]   # default: 10, 5 s, 5 min
 #
 # Environment: UPC (binary, default target/release/upc, built if missing), SOAK_DIR (output,
-# default runs/soak-<time>), SOAK_ARGS (extra controller arguments, e.g. "--controller c2").
-# Writes samples.csv (t, rss_kb per process, controller misses and ticks so far) and each
-# process's log and summary in SOAK_DIR.
+# default runs/soak-<time>), SOAK_PLANT (upc or mujoco; default upc), SOAK_ARGS (controller
+# arguments; default "--controller c2"), SOAK_QUIET=1 (no push: the robot only stands).
+# Writes samples.csv (t, rss_kb per process, the controller's ticks and misses so far, its tick
+# p99 and max over the ticks since the previous sample) and each process's log and summary in
+# SOAK_DIR.
 set -euo pipefail
 
 minutes=${1:-10}
 every=${2:-5}
+report=${3:-5}
+plant=${SOAK_PLANT:-upc}
+ctl_args=${SOAK_ARGS:---controller c2}
 root=$(cd "$(dirname "$0")/.." && pwd)
 upc=${UPC:-$root/target/release/upc}
 if [[ ! -x $upc ]]; then
@@ -24,15 +30,9 @@ mkdir -p "$dir"
 prefix="soak_$$"
 duration=$(awk "BEGIN { print $minutes * 60 }")
 
-# No push on the door: the robot stands for the whole soak (the impact scenarios end early).
-cat >"$dir/quiet.toml" <<'EOF'
-name = "quiet"
-duration = 100000.0
-zmp_reference = [0.0, 0.0]
-[force]
-kind = "impacts"
-impacts = []
-EOF
+# The scenario: multiple_impacts' pushes every 8 s for the whole soak (none with SOAK_QUIET=1).
+python3 "$root/scripts/soak_scenario.py" "$root/config/scenarios/multiple_impacts.toml" \
+    "$duration" "${SOAK_QUIET:-0}" >"$dir/soak.toml"
 
 pids=()
 cleanup() {
@@ -42,32 +42,36 @@ cleanup() {
 }
 trap cleanup EXIT
 
-# The controller logs a status line (ticks, deadline misses) every `every` seconds
-# (controller.status_every); the soak reads the newest from its log (see `status` below).
-RUST_LOG=info "$upc" controller --realtime --scenario "$dir/quiet.toml" --duration 1e9 \
+# The controller logs a status line (ticks, deadline misses, the tick p99 since the last line)
+# every `every` seconds (controller.status_every); the soak reads the newest from its log.
+# shellcheck disable=SC2086 # ctl_args is a list of arguments
+RUST_LOG=info "$upc" controller --realtime --scenario "$dir/soak.toml" --duration 1e9 \
     --prefix "$prefix" --summary "$dir/controller.json" --set "controller.status_every=$every" \
-    ${SOAK_ARGS:-} \
+    $ctl_args \
     2>"$dir/controller.log" &
 pids+=($!)
 ctl=$!
-RUST_LOG=info "$upc" forecast --scenario "$dir/quiet.toml" --until 1e9 --prefix "$prefix" \
+RUST_LOG=info "$upc" forecast --scenario "$dir/soak.toml" --until 1e9 --prefix "$prefix" \
     2>"$dir/forecaster.log" &
 pids+=($!)
 fc=$!
-RUST_LOG=info "$upc" sim --mode realtime --duration 0 --scenario "$dir/quiet.toml" \
-    --prefix "$prefix" --summary "$dir/sim.json" 2>"$dir/sim.log" >"$dir/sim.out" &
+RUST_LOG=info "$upc" sim --plant "$plant" --mode realtime --duration 0 \
+    --scenario "$dir/soak.toml" --prefix "$prefix" --summary "$dir/sim.json" \
+    2>"$dir/sim.log" >"$dir/sim.out" &
 pids+=($!)
 sim=$!
 
 rss() { awk '/^VmRSS:/ { print $2 }' "/proc/$1/status" 2>/dev/null || echo 0; }
-# The newest "status: ticks T misses M" line of the controller's log.
+# The newest status line of the controller's log: ticks, misses, tick p99 and max (µs).
 status() {
     grep -a 'status: ticks' "$dir/controller.log" | tail -1 |
-        sed -E 's/.*ticks ([0-9]+).*misses ([0-9]+).*/\1 \2/' || true
+        sed -E 's/.*ticks ([0-9]+) misses ([0-9]+).*window_tick_p99_us ([0-9]+) window_tick_max_us ([0-9]+).*/\1 \2 \3 \4/' ||
+        true
 }
 
-echo "soak: ${minutes} min in real time at 1 kHz, prefix $prefix, output $dir"
-echo "t_s,rss_controller_kb,rss_sim_kb,rss_forecaster_kb,ticks,deadline_misses" >"$dir/samples.csv"
+echo "soak: ${minutes} min in real time at 1 kHz, $plant plant, controller $ctl_args, prefix $prefix, output $dir"
+echo "t_s,rss_controller_kb,rss_sim_kb,rss_forecaster_kb,ticks,deadline_misses,tick_p99_us,tick_max_us" \
+    >"$dir/samples.csv"
 start=$(date +%s)
 while :; do
     sleep "$every"
@@ -78,11 +82,11 @@ while :; do
             exit 1
         fi
     done
-    read -r ticks misses <<<"$(status)" || true
-    line="$now,$(rss $ctl),$(rss $sim),$(rss $fc),${ticks:-0},${misses:-0}"
-    echo "$line" >>"$dir/samples.csv"
-    printf '\r  %4d s  RSS ctl %s kB  sim %s kB  fc %s kB  ticks %s  misses %s   ' \
-        "$now" "$(rss $ctl)" "$(rss $sim)" "$(rss $fc)" "${ticks:-?}" "${misses:-?}"
+    read -r ticks misses p99 tmax <<<"$(status)" || true
+    echo "$now,$(rss $ctl),$(rss $sim),$(rss $fc),${ticks:-0},${misses:-0},${p99:-0},${tmax:-0}" \
+        >>"$dir/samples.csv"
+    printf '\r  %4d s  RSS ctl %s kB  sim %s kB  fc %s kB  ticks %s  misses %s  tick p99 %s µs   ' \
+        "$now" "$(rss $ctl)" "$(rss $sim)" "$(rss $fc)" "${ticks:-?}" "${misses:-?}" "${p99:-?}"
     if awk "BEGIN { exit !($now >= $duration) }"; then break; fi
 done
 echo
@@ -90,40 +94,4 @@ kill -TERM $ctl $sim $fc
 wait $ctl $sim $fc || true
 pids=()
 
-# Verdict: RSS over the second half vs. the first sample after start-up (the first minute or
-# the first quarter, whichever is shorter, is warm-up); misses per minute, first vs. last third.
-python3 - "$dir/samples.csv" "$dir/controller.json" <<'EOF'
-import csv, json, sys
-rows = [r for r in csv.DictReader(open(sys.argv[1]))]
-s = json.load(open(sys.argv[2]))
-t = [float(r["t_s"]) for r in rows]
-warm = min(60.0, t[-1] / 4)
-base = next(i for i, x in enumerate(t) if x >= warm)
-ok = True
-for p in ["controller", "sim", "forecaster"]:
-    v = [int(r[f"rss_{p}_kb"]) for r in rows]
-    b, e, peak = v[base], v[-1], max(v[base:])
-    growth = (e - b) / b * 100 if b else 0.0
-    flat = peak - b <= max(1024, 0.02 * b)  # within 1 MB or 2 % after warm-up
-    ok &= flat
-    print(f"  {p:<10} RSS start {v[0]} kB, after warm-up {b} kB, end {e} kB, peak {peak} kB "
-          f"({growth:+.2f} %): {'flat' if flat else 'GROWS'}")
-ticks = [int(r["ticks"]) for r in rows]
-miss = [int(r["deadline_misses"]) for r in rows]
-n = len(rows) // 3 or 1
-def rate(a, b):  # misses per 1000 ticks between samples a and b
-    dt = ticks[b] - ticks[a]
-    return 1000.0 * (miss[b] - miss[a]) / dt if dt > 0 else 0.0
-first, last = rate(0, n), rate(len(rows) - 1 - n, len(rows) - 1)
-steady = last <= 2 * first + 1.0
-ok &= steady
-print(f"  controller ticks {s['ticks']}, deadline misses {s['deadline_misses']} "
-      f"({1000.0 * s['deadline_misses'] / max(1, s['ticks']):.2f} per 1000 ticks), "
-      f"tick p50 {s['tick_p50_us']:.0f} µs p99 {s['tick_p99_us']:.0f} µs max {s['tick_max_us']:.0f} µs")
-print(f"  misses per 1000 ticks: first third {first:.2f}, last third {last:.2f}: "
-      f"{'not growing' if steady else 'GROWING'}")
-print(f"  stale periods {s['stale_periods']}, reconnects {s['reconnects']}, "
-      f"dropped log records {s['dropped_log_records']}, tick errors {s['tick_errors']}")
-print("soak: PASS" if ok else "soak: FAIL")
-sys.exit(0 if ok else 1)
-EOF
+python3 "$root/scripts/soak_verdict.py" "$dir/samples.csv" "$dir/controller.json" "$report"

@@ -359,6 +359,8 @@ pub fn run_server_with(
         ..Default::default()
     };
     let mut hist = LatencyHistogram::new();
+    // The ticks since the last status line (a soak's tick p99 over time).
+    let mut window = LatencyHistogram::new();
     let mut tau = [0.0; MAX_DOF];
     // Joint rates of the last fresh state, for the damping torques of a stale period.
     let mut last_qd = [0.0; MAX_DOF];
@@ -426,12 +428,15 @@ pub fn run_server_with(
             let (misses, overruns) = ticker.as_ref().map_or((0, 0), |t| (t.missed, t.overruns));
             tracing::info!(
                 "status: ticks {} misses {misses} overruns {overruns} stale_periods {} \
-                 reconnects {} t {:.3}",
+                 reconnects {} t {:.3} window_tick_p99_us {:.0} window_tick_max_us {:.0}",
                 s.ticks,
                 s.stale_periods,
                 s.reconnects,
-                s.sim_time
+                s.sim_time,
+                window.quantile(0.99) * 1e6,
+                window.max() * 1e6
             );
+            window.reset();
         }
         match ticker.as_mut() {
             Some(t) => t.wait(),
@@ -714,6 +719,7 @@ pub fn run_server_with(
         last_state_at = Instant::now();
         let tick_time = tick_start.elapsed().saturating_sub(waited);
         hist.record(tick_time);
+        window.record(tick_time);
         s.ticks += 1;
         s.ticks_since_reconnect += 1;
         s.sim_time = state.time;

@@ -114,6 +114,14 @@ impl LatencyHistogram {
         self.count
     }
 
+    /// Empty again, keeping its storage (a window of the loop's figures, without allocating).
+    pub fn reset(&mut self) {
+        self.bins.fill(0);
+        self.count = 0;
+        self.max = Duration::ZERO;
+        self.sum = 0.0;
+    }
+
     /// The q-quantile (0…1) in seconds, at 1 µs resolution (upper bin edge).
     pub fn quantile(&self, q: f64) -> f64 {
         if self.count == 0 {
@@ -160,6 +168,15 @@ mod tests {
         );
         assert!((h.quantile(0.99) - 100e-6).abs() < 1.5e-6);
         assert_eq!(h.max(), 100e-6);
+        // A new window: only what is recorded after the reset counts.
+        h.reset();
+        assert_eq!((h.count(), h.quantile(0.99), h.max()), (0, 0.0, 0.0));
+        h.record(Duration::from_micros(7));
+        assert!(
+            (h.quantile(0.99) - 8e-6).abs() < 1e-9,
+            "{}",
+            h.quantile(0.99)
+        );
     }
 
     #[test]
