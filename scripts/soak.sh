@@ -9,7 +9,9 @@
 #
 # Environment: UPC (binary, default target/release/upc, built if missing), SOAK_DIR (output,
 # default runs/soak-<time>), SOAK_PLANT (upc or mujoco; default upc), SOAK_ARGS (controller
-# arguments; default "--controller c2"), SOAK_QUIET=1 (no push: the robot only stands).
+# arguments; default "--controller c2"), SOAK_QUIET=1 (no push: the robot only stands),
+# SOAK_RT=1 (as the services/ units deploy it: the controller with config/realtime.toml, FIFO
+# and pinned, the plant and the forecaster at SCHED_FIFO 70 through chrt; needs CAP_SYS_NICE).
 # Writes samples.csv (t, rss_kb per process, the controller's ticks and misses so far, its tick
 # p99 and max over the ticks since the previous sample) and each process's log and summary in
 # SOAK_DIR.
@@ -34,6 +36,13 @@ duration=$(awk "BEGIN { print $minutes * 60 }")
 python3 "$root/scripts/soak_scenario.py" "$root/config/scenarios/multiple_impacts.toml" \
     "$duration" "${SOAK_QUIET:-0}" >"$dir/soak.toml"
 
+ctl_rt=()
+rt=()
+if [[ ${SOAK_RT:-0} == 1 ]]; then
+    ctl_rt=(--config "$root/config/realtime.toml")
+    rt=(chrt -f 70)
+fi
+
 pids=()
 cleanup() {
     for p in "${pids[@]}"; do kill -TERM "$p" 2>/dev/null || true; done
@@ -47,15 +56,15 @@ trap cleanup EXIT
 # shellcheck disable=SC2086 # ctl_args is a list of arguments
 RUST_LOG=info "$upc" controller --realtime --scenario "$dir/soak.toml" --duration 1e9 \
     --prefix "$prefix" --summary "$dir/controller.json" --set "controller.status_every=$every" \
-    $ctl_args \
+    "${ctl_rt[@]}" $ctl_args \
     2>"$dir/controller.log" &
 pids+=($!)
 ctl=$!
-RUST_LOG=info "$upc" forecast --scenario "$dir/soak.toml" --until 1e9 --prefix "$prefix" \
+RUST_LOG=info "${rt[@]}" "$upc" forecast --scenario "$dir/soak.toml" --until 1e9 --prefix "$prefix" \
     2>"$dir/forecaster.log" &
 pids+=($!)
 fc=$!
-RUST_LOG=info "$upc" sim --plant "$plant" --mode realtime --duration 0 \
+RUST_LOG=info "${rt[@]}" "$upc" sim --plant "$plant" --mode realtime --duration 0 \
     --scenario "$dir/soak.toml" --prefix "$prefix" --summary "$dir/sim.json" \
     2>"$dir/sim.log" >"$dir/sim.out" &
 pids+=($!)

@@ -166,13 +166,13 @@ fn a_state_larger_than_a_message_is_an_error() {
     assert!(e.contains(&format!("nq = {nq}")), "{e}");
 }
 
-/// The humanoid with a chain of extra joints on its last body: nv = 60, nq = 61 (more than a
+/// The humanoid with a chain of extra joints on its last body: nv = MAX_DOF + 12 (more than a
 /// state or torque message holds).
 fn larger_than_a_message() -> upc::dynamics::Model {
     use upc::dynamics::{Inertia, JointKind, SE3, icub_like};
     let mut model = icub_like::load().expect("model");
     let mut parent = model.joints.len() - 1;
-    let extra = 60 - model.nv;
+    let extra = upc::channels::MAX_DOF + 12 - model.nv;
     for i in 0..extra {
         parent = model
             .add_joint(
@@ -223,7 +223,10 @@ fn the_server_refuses_a_model_larger_than_a_message() {
     )
     .expect_err("a model beyond the channels' capacity")
     .to_string();
-    assert!(e.contains("at most 48"), "{e}");
+    assert!(
+        e.contains(&format!("at most {}", upc::channels::MAX_DOF)) && e.contains("locked"),
+        "{e}"
+    );
 }
 
 #[test]

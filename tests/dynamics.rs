@@ -1001,3 +1001,116 @@ fn real_world_urdf_quirks_load_with_warnings_and_meaningless_inertias_are_refuse
         "{e}"
     );
 }
+
+/// A locked joint (Pinocchio's reduced model) is the full model frozen at the value: same mass,
+/// CoM and frame placements, and `M` equal to the full `M` without the locked rows and columns.
+#[test]
+fn a_locked_joint_is_the_full_model_at_its_value() {
+    let full = humanoid();
+    let lock: std::collections::HashMap<String, f64> =
+        [("l_elbow", 0.7), ("neck_yaw", -0.3), ("torso_roll", 0.1)]
+            .into_iter()
+            .map(|(n, v)| (n.to_string(), v))
+            .collect();
+    let reduced = Model::from_urdf_str_locked(icub_like::URDF, BaseJoint::Floating, &lock)
+        .expect("reduced model");
+    assert_eq!(reduced.nq, full.nq - 3);
+    assert_eq!(reduced.nv, full.nv - 3);
+    assert!((reduced.total_mass() - full.total_mass()).abs() < 1e-12);
+    let locked_dofs: Vec<usize> = lock
+        .keys()
+        .map(|n| full.joints[full.joint_id(n).expect("joint")].idx_v)
+        .collect();
+    let mut rng = Rng(23);
+    let (mut df, mut dr) = (Data::new(&full), Data::new(&reduced));
+    for _ in 0..3 {
+        let mut qf = rng.configuration(&full);
+        for (n, &v) in &lock {
+            qf[full.joints[full.joint_id(n).expect("joint")].idx_q] = v;
+        }
+        // The reduced configuration: the full one without the locked coordinates.
+        let mut qr = reduced.neutral();
+        for j in &reduced.joints {
+            let jf = &full.joints[full.joint_id(&j.name).expect("same joint")];
+            for k in 0..j.nq() {
+                qr[j.idx_q + k] = qf[jf.idx_q + k];
+            }
+        }
+        let cf = center_of_mass(&full, &mut df, &qf).expect("com");
+        let cr = center_of_mass(&reduced, &mut dr, &qr).expect("com");
+        assert!((cf - cr).norm() < 1e-12, "CoM {cf} vs {cr}");
+        forward_kinematics(&full, &mut df, &qf).expect("fk");
+        forward_kinematics(&reduced, &mut dr, &qr).expect("fk");
+        for f in &full.frames {
+            let a = &df.o_m_f[full.frame_id(&f.name).expect("frame")];
+            let b = &dr.o_m_f[reduced.frame_id(&f.name).expect("every frame is kept")];
+            assert!(
+                (a.trans - b.trans).norm() < 1e-12 && (a.rot - b.rot).amax() < 1e-12,
+                "frame {}",
+                f.name
+            );
+        }
+        let mf = crba(&full, &mut df, &qf).expect("crba").clone();
+        let mr = crba(&reduced, &mut dr, &qr).expect("crba").clone();
+        let kept: Vec<usize> = (0..full.nv).filter(|k| !locked_dofs.contains(k)).collect();
+        let sub = DMatrix::from_fn(kept.len(), kept.len(), |r, c| mf[(kept[r], kept[c])]);
+        assert!(max_abs(&(&sub - &mr)) < 1e-10, "M differs");
+    }
+    // A value outside the joint's limits is refused, naming the joint.
+    let bad: std::collections::HashMap<String, f64> = [("l_elbow".to_string(), 10.0)].into();
+    let e = Model::from_urdf_str_locked(icub_like::URDF, BaseJoint::Floating, &bad)
+        .expect_err("outside the limits")
+        .to_string();
+    assert!(e.contains("l_elbow") && e.contains("locked at 10"), "{e}");
+}
+
+/// Armature (reflected rotor inertia) adds to `M`'s diagonal, and CRBA, RNEA and ABA agree
+/// with it; a massless chain that would make `M` singular is invertible with it.
+#[test]
+fn armature_is_on_the_diagonal_and_the_algorithms_agree() {
+    let plain = humanoid();
+    let mut model = plain.clone();
+    let mut rng = Rng(31);
+    let mut arm = DVector::zeros(model.nv);
+    for i in 0..model.joints.len() {
+        if model.joints[i].nv() == 1 {
+            let a = rng.uniform(0.001, 0.05);
+            model.set_armature(i, a).expect("armature");
+            arm[model.joints[i].idx_v] = a;
+        }
+    }
+    assert!(model.set_armature(0, 0.1).is_err(), "not on the free flyer");
+    let (mut d, mut dp) = (Data::new(&model), Data::new(&plain));
+    let q = rng.configuration(&model);
+    let m = crba(&model, &mut d, &q).expect("crba").clone();
+    let mp = crba(&plain, &mut dp, &q).expect("crba").clone();
+    assert!(max_abs(&(&m - &mp - DMatrix::from_diagonal(&arm))) < 1e-12);
+    let v = rng.vector(model.nv, 1.0);
+    let a = rng.vector(model.nv, 3.0);
+    let h = nonlinear_effects(&model, &mut d, &q, &v)
+        .expect("h")
+        .clone();
+    let tau = rnea(&model, &mut d, &q, &v, &a).expect("rnea").clone();
+    assert!((&m * &a + &h - &tau).amax() < 1e-10, "RNEA ≠ M a + h");
+    let ddq = aba(&model, &mut d, &q, &v, &tau).expect("aba").clone();
+    assert!((&ddq - &a).amax() < 1e-8 * (1.0 + a.amax()), "ABA∘RNEA");
+    // A massless link on a revolute joint: singular without armature, regular with it.
+    let mut chain = Model::new("massless");
+    let j = chain
+        .add_joint(
+            "j",
+            None,
+            SE3::identity(),
+            JointKind::Revolute { axis: Vector3::z() },
+            Inertia::from_com(0.0, Vector3::zeros(), Matrix3::zeros()),
+            "b",
+        )
+        .expect("joint");
+    let one = DVector::from_element(1, 1.0);
+    let mut dc = Data::new(&chain);
+    assert!(aba(&chain, &mut dc, &one, &one, &one).is_err());
+    chain.set_armature(j, 0.01).expect("armature");
+    let mut dc = Data::new(&chain);
+    let ddq = aba(&chain, &mut dc, &one, &one, &one).expect("aba").clone();
+    assert!((ddq[0] - 100.0).abs() < 1e-9, "τ / armature: {}", ddq[0]);
+}

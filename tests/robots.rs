@@ -211,6 +211,9 @@ fn the_package_robots_stand_flat_facing_x_with_their_published_mass() {
         ("icub", 38, 30.0..36.0),
         ("talos", 38, 85.0..100.0),
         ("g1", 35, 30.0..37.0),
+        // Romeo ≈ 37–41 kg; with its fingers (massless links) and with them locked.
+        ("romeo", 61, 37.0..42.0),
+        ("romeo_locked", 37, 37.0..42.0),
     ] {
         let Some(r) = installed(name) else {
             continue;
@@ -292,5 +295,48 @@ fn mesh_files_resolve_in_the_packages_and_next_to_the_urdf() {
         for m in meshes {
             assert!(resolve_mesh(m, dir).is_some(), "{name}: {m} not found");
         }
+    }
+}
+
+/// `extends` layers a variant over a description; `[locked]` fixes joints at their home value
+/// (names or patterns, each matching some joint); `[armature]` sets rotor inertias.
+#[test]
+fn a_variant_locks_joints_by_pattern_and_sets_armatures() {
+    let base = Robot::embedded_default().expect("default");
+    let variant = "extends = \"icub_like\"\nname = \"icub_like_still_head\"\n\
+                   [home]\nneck_pitch = 0.2\n\
+                   [locked]\njoints = [\"neck_*\", \"l_wrist_yaw\"]\n\
+                   [armature]\n\"r_*\" = 0.01\n";
+    let r = Robot::parse(variant, "variant.toml", None).expect("variant");
+    assert_eq!(r.name(), "icub_like_still_head");
+    assert_eq!(r.model.nq, base.model.nq - 4);
+    assert_eq!(r.locked.len(), 4);
+    assert_eq!(r.locked["neck_pitch"], 0.2, "locked at its home value");
+    assert_eq!(r.locked["neck_yaw"], 0.0);
+    assert_ne!(r.hash, base.hash);
+    // The base's feet, hand and posture carry over: the robot stands as the base does.
+    assert!((r.derived.mass - base.derived.mass).abs() < 1e-12);
+    assert!((r.derived.com_height - base.derived.com_height).abs() < 1e-3);
+    let armed: Vec<&str> = r
+        .model
+        .joints
+        .iter()
+        .filter(|j| j.armature > 0.0)
+        .map(|j| j.name.as_str())
+        .collect();
+    assert!(
+        !armed.is_empty() && armed.iter().all(|n| n.starts_with("r_")),
+        "{armed:?}"
+    );
+    for (bad, what) in [
+        ("[locked]\njoints = [\"nose_*\"]\n", "`nose_*` matches no"),
+        ("[armature]\n\"nose\" = 0.1\n", "`nose` matches no"),
+        ("[armature]\n\"r_knee\" = -1.0\n", "armature -1"),
+    ] {
+        let text = format!("extends = \"icub_like\"\n{bad}");
+        let e = Robot::parse(&text, "bad.toml", None)
+            .expect_err(what)
+            .to_string();
+        assert!(e.contains(what), "{e}");
     }
 }

@@ -22,8 +22,10 @@ fn commands_with_wrong_length_nan_or_old_seq_are_rejected() {
             got: 31
         })
     );
+    // More torques than a message carries.
+    let over = MAX_DOF as u32 + 12;
     assert!(matches!(
-        validate_command(None, 0, 60, &tau, 60),
+        validate_command(None, 0, over, &tau, over as usize),
         Err(Rejection::WrongLength { .. })
     ));
     let mut bad = tau;
@@ -127,4 +129,37 @@ fn lockstep_over_iceoryx2_rejects_bad_commands_and_reruns_identically() {
     assert_eq!(b.commands.rejected(), 0);
     assert_eq!(sa.step, 300);
     assert_eq!(state_bits(&sa), state_bits(&sb), "lockstep reruns differ");
+}
+
+/// A participant built with another contract (here: a state of the old 48-value layout under
+/// the same type name) is refused when it meets this one on a service, with what to change.
+#[test]
+fn a_participant_with_another_contract_layout_is_refused_with_what_to_change() {
+    use iceoryx2::prelude::*;
+    #[repr(C)]
+    #[derive(Debug, Clone, Copy, ZeroCopySend)]
+    #[type_name("upc::StateMsg")]
+    struct OldStateMsg {
+        step: u64,
+        q: [f64; 48],
+    }
+    let prefix = format!("upc_test_layout_{}", std::process::id());
+    let node = NodeBuilder::new().create::<ipc::Service>().expect("node");
+    let name: ServiceName = format!("{prefix}/state").as_str().try_into().expect("name");
+    let _old = node
+        .service_builder(&name)
+        .publish_subscribe::<OldStateMsg>()
+        .create()
+        .expect("the old participant's service");
+    let bus = upc::channels::Bus::open(&prefix, "new_participant").expect("bus");
+    let e = match bus.subscriber::<StateMsg>() {
+        Ok(_) => panic!("a service of another layout was opened"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        e.contains("another layout")
+            && e.contains(&format!("MAX_DOF = {MAX_DOF}"))
+            && e.contains("same upc version"),
+        "{e}"
+    );
 }

@@ -293,7 +293,10 @@ class Plant:
         self.n = len(joints)
         self.nq, self.nv = 7 + self.n, 6 + self.n
         if self.nq > ch.MAX_DOF:
-            raise BundleError(f"nq = {self.nq}: the contract carries at most {ch.MAX_DOF}")
+            raise BundleError(
+                f"nq = {self.nq}: the contract carries at most {ch.MAX_DOF}; lock the joints "
+                "the controller need not move (`locked` in the robot description)"
+            )
         # The contract's q from MuJoCo's qpos in one gather: base position, quaternion x y z w
         # (MuJoCo's is w x y z), joints. v: the base's angular velocity (MuJoCo's is in the
         # body frame already) and the joint rates; the linear one is rotated in `_after_step`.

@@ -10,7 +10,7 @@ another host, over Zenoh, needs only ctypes.
 import ctypes
 import struct
 
-MAX_DOF = 48
+MAX_DOF = 128
 N_CONTACTS = 8
 MAX_FORECAST = 2048
 SCENARIO_NAME_LEN = 128
@@ -146,7 +146,7 @@ def event(node, prefix: str, kind: str):
 # b"UPCZ", contract version u16, kind u16, payload size u32, reserved u32; little-endian) and
 # the payload's bytes as above. The bridge refuses a payload whose header does not match.
 WIRE_MAGIC = b"UPCZ"
-WIRE_VERSION = 1
+WIRE_VERSION = 2
 _WIRE_KIND = {"state": 1, "torques": 2, "forecast": 3, "ground_truth": 4}
 _WIRE_HEADER = struct.Struct("<4sHHII")
 
@@ -168,7 +168,10 @@ def wire_decode(kind: str, payload, cls):
         raise WireError(f"not a upc payload ({len(data)} bytes)")
     _, version, code, size, _ = _WIRE_HEADER.unpack_from(data)
     if version != WIRE_VERSION:
-        raise WireError(f"the peer speaks contract version {version}, this one {WIRE_VERSION}")
+        raise WireError(
+            f"the peer speaks contract version {version}, this one {WIRE_VERSION}: run every "
+            "participant from the same upc version (services/CHANNELS.md, \"Contract version\")"
+        )
     if code != _WIRE_KIND[kind]:
         raise WireError(f"payload kind {code} on the {kind} key")
     body = data[_WIRE_HEADER.size:]

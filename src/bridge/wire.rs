@@ -5,13 +5,15 @@
 //! carries bytes and checks nothing, so the header does it: a peer with another contract
 //! version, or a payload of the wrong kind or size, is refused with the reason.
 
-use crate::channels::{ForecastMsg, GroundTruthMsg, Payload, ServiceKind, StateMsg, TorqueMsg};
+use crate::channels::{
+    ForecastMsg, GroundTruthMsg, MAX_DOF, Payload, ServiceKind, StateMsg, TorqueMsg,
+};
 
 /// First bytes of every upc payload on Zenoh.
 pub const WIRE_MAGIC: [u8; 4] = *b"UPCZ";
-/// Version of the contract's payload layouts. Raise it whenever a payload of
-/// `src/channels/messages.rs` changes layout: peers of another version are refused.
-pub const WIRE_VERSION: u16 = 1;
+/// Version of the contract's payload layouts ([`crate::channels::CONTRACT_VERSION`]): peers of
+/// another version are refused.
+pub const WIRE_VERSION: u16 = crate::channels::CONTRACT_VERSION;
 /// Header length (bytes): magic, version (u16), kind (u16), payload size (u32), reserved (u32).
 pub const HEADER_LEN: usize = 16;
 
@@ -20,7 +22,10 @@ pub const HEADER_LEN: usize = 16;
 pub enum WireError {
     #[error("not a upc payload ({0} bytes without the UPCZ magic)")]
     NotUpc(usize),
-    #[error("the peer speaks contract version {peer}, this process version {ours}")]
+    #[error(
+        "the peer speaks contract version {peer}, this process version {ours}: run every \
+         participant from the same upc version (services/CHANNELS.md, \"Contract version\")"
+    )]
     Version { peer: u16, ours: u16 },
     #[error("a {got} payload on the {want} key")]
     Kind {
@@ -61,8 +66,8 @@ unsafe impl WireMessage for TorqueMsg {}
 unsafe impl WireMessage for ForecastMsg {}
 unsafe impl WireMessage for GroundTruthMsg {}
 // Each size is the sum of the fields' sizes (in 8-byte words): no byte of padding.
-const _: () = assert!(size_of::<StateMsg>() == 8 * (7 + 2 * 48 + 24 + 7 + 2 + 16));
-const _: () = assert!(size_of::<TorqueMsg>() == 8 * (6 + 48));
+const _: () = assert!(size_of::<StateMsg>() == 8 * (7 + 2 * MAX_DOF + 24 + 7 + 2 + 16));
+const _: () = assert!(size_of::<TorqueMsg>() == 8 * (6 + MAX_DOF));
 const _: () = assert!(size_of::<ForecastMsg>() == 8 * (6 + 3 * crate::channels::MAX_FORECAST));
 const _: () = assert!(size_of::<GroundTruthMsg>() == 8 * 14);
 // The contract is little-endian; a big-endian host would need byte swaps the bridge lacks.
@@ -191,11 +196,16 @@ mod tests {
 
         encode(&ForecastMsg::default(), &mut buf);
         let mut old = buf.clone();
-        old[4] = 0;
+        old[4] = 1;
+        let e = decode_into(&old, &mut f).unwrap_err();
         assert_eq!(
-            decode_into(&old, &mut f),
-            Err(WireError::Version { peer: 0, ours: 1 })
+            e,
+            WireError::Version {
+                peer: 1,
+                ours: WIRE_VERSION
+            }
         );
+        assert!(e.to_string().contains("same upc version"), "{e}");
         let short = &buf[..buf.len() - 8];
         assert_eq!(decode_into(short, &mut f).unwrap_err().key(), "size");
         assert_eq!(decode_into(b"hello", &mut f), Err(WireError::NotUpc(5)));

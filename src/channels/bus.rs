@@ -9,6 +9,9 @@ use iceoryx2::port::notifier::Notifier as IoxNotifier;
 use iceoryx2::port::publisher::Publisher as IoxPublisher;
 use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
 use iceoryx2::prelude::*;
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
 
 use super::{Payload, ServiceKind};
 
@@ -92,7 +95,27 @@ impl Bus {
             .max_subscribers(8)
             .max_nodes(16)
             .open_or_create()
-            .map_err(|e| err(format!("open service `{name}`"), e))
+            .map_err(|e| match e {
+                PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                    PublishSubscribeOpenError::IncompatibleTypes,
+                ) => ChannelError {
+                    what: format!("open service `{name}`"),
+                    detail: format!(
+                        "another participant created it with another layout of `{}` than this \
+                         process's ({} bytes, MAX_DOF = {}, contract version {}): run every \
+                         participant from the same upc version, or update the other's mirror \
+                         of the contract (services/CHANNELS.md, \"Contract version\")",
+                        core::any::type_name::<T>()
+                            .rsplit("::")
+                            .next()
+                            .unwrap_or("payload"),
+                        core::mem::size_of::<T>(),
+                        super::MAX_DOF,
+                        super::CONTRACT_VERSION,
+                    ),
+                },
+                e => err(format!("open service `{name}`"), e),
+            })
     }
 
     fn event(

@@ -6,9 +6,16 @@
 
 use iceoryx2::prelude::*;
 
-/// Capacity of the q, v and τ arrays (the iCub-like humanoid uses nq = 39, nv = 38, 32 torques;
-/// the official iCub and Talos the same, the G1 nq = 36).
-pub const MAX_DOF: usize = 48;
+/// Capacity of the q, v and τ arrays: the contract's largest robot, nq ≤ 128 (a floating base
+/// and 121 joints; the iCub-like humanoid uses nq = 39, nv = 38, 32 torques, Romeo with its
+/// fingers nq = 62). A robot beyond it locks joints in its description (`locked`). Changing it
+/// changes the payloads' layout: raise [`CONTRACT_VERSION`].
+pub const MAX_DOF: usize = 128;
+/// Version of the payloads' layout (services/CHANNELS.md, "Contract version"): raised whenever
+/// a payload of this file changes. iceoryx2 refuses a peer of another layout when it opens a
+/// service; the Zenoh framing carries the version in its header.
+/// 1: `MAX_DOF` = 48; 2: `MAX_DOF` = 128.
+pub const CONTRACT_VERSION: u16 = 2;
 /// Contact points: four sole corners per foot, order l_fl, l_fr, l_rl, l_rr, r_fl, r_fr, r_rl, r_rr.
 pub const N_CONTACTS: usize = 8;
 /// Capacity of a force forecast (samples).

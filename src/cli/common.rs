@@ -62,7 +62,7 @@ impl ToArgv for RobotArg {
 /// `--robot`: which robot (shared by the subcommands that build or control one).
 #[derive(clap::Args, Debug, Clone)]
 pub struct RobotArg {
-    /// Robot: embedded description name (icub_like, icub, talos, g1) or path to a description
+    /// Robot: embedded description name (icub_like, icub, talos, g1, romeo, romeo_locked) or path to a description
     /// TOML (config/robots/*.toml shows the format).
     #[arg(long, default_value = upc::robot::DEFAULT)]
     pub robot: String,

@@ -115,6 +115,18 @@ fn print_robot(r: &upc::robot::Robot) -> CliResult {
         None => println!("  URDF: embedded {}", r.description.urdf.path.display()),
     }
     println!(
+        "  nq = {}, nv = {} ({} joints locked{})",
+        r.model.nq,
+        r.model.nv,
+        r.locked.len(),
+        if r.locked.is_empty() {
+            String::new()
+        } else {
+            let names: Vec<&str> = r.locked.keys().map(String::as_str).collect();
+            format!(": {}", names.join(", "))
+        }
+    );
+    println!(
         "  mass {:.3} kg; CoM at home {:.4} m above the contacts, ({:+.4}, {:+.4}) m from the feet centre",
         d.mass, d.com_height, d.com_offset[0], d.com_offset[1]
     );

@@ -273,7 +273,8 @@ pub fn run_server_with(
     // buffers by the model's sizes: a larger model could never be served.
     if model.nq > MAX_DOF || model.nv > MAX_DOF {
         return Err(format!(
-            "the model has nq = {}, nv = {}: the channels carry at most {MAX_DOF} each",
+            "the model has nq = {}, nv = {}: the channels carry at most {MAX_DOF} each; lock \
+             the joints the controller need not move (`locked` in the robot description)",
             model.nq, model.nv
         )
         .into());
@@ -459,7 +460,9 @@ pub fn run_server_with(
                 let Some(l) = last_step else {
                     if started.elapsed().as_secs_f64() > opts.startup_timeout {
                         return Err(format!(
-                            "no state from the simulator on {}/state within {} s",
+                            "no state from the simulator on {}/state within {} s (is it \
+                             running with this prefix, and from the same upc version? a plant of \
+                             another contract version cannot open the services: see its log)",
                             opts.prefix, opts.startup_timeout
                         )
                         .into());

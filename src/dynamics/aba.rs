@@ -135,12 +135,13 @@ pub(crate) fn aba_unchecked(
             // S = (0, axis): U = I^A S reads the angular columns; D = Sᵀ U, Sᵀ p.
             JointKind::Revolute { axis } => {
                 let u_col: Vector6<f64> = ia.fixed_columns::<3>(3) * axis;
-                let d = axis.dot(&u_col.fixed_rows::<3>(3));
+                // D = Sᵀ I^A S + armature (the rotor's inertia about the joint axis).
+                let d = axis.dot(&u_col.fixed_rows::<3>(3)) + j.armature;
                 (u_col, d, axis.dot(&pa.ang))
             }
             JointKind::Prismatic { axis } => {
                 let u_col: Vector6<f64> = ia.fixed_columns::<3>(0) * axis;
-                let d = axis.dot(&u_col.fixed_rows::<3>(0));
+                let d = axis.dot(&u_col.fixed_rows::<3>(0)) + j.armature;
                 (u_col, d, axis.dot(&pa.lin))
             }
         };

@@ -105,6 +105,10 @@ fn backward_pass(model: &Model, data: &mut Data) {
     }
     // Entries between joints on different branches are never written: they stay at the zero
     // `Data::new` put there (so `data.m` must not be written by callers).
+    // The rotors' reflected inertia on the diagonal (`Joint::armature`).
+    for j in model.joints.iter().filter(|j| j.armature != 0.0) {
+        m[j.idx_v * nv + j.idx_v] += j.armature;
+    }
 }
 
 /// Row `d` of M (a 1-dof joint) over its sub-tree's columns `d .. e`, and the same entries of

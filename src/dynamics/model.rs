@@ -44,6 +44,9 @@ pub struct Joint {
     pub inertia: Inertia,
     /// Name of the URDF link that is this joint's child (the body's own name).
     pub body: String,
+    /// Reflected rotor inertia of a one-dof joint (kg·m² or kg), added to `M`'s diagonal (as
+    /// Pinocchio's `armature`, MuJoCo's joint `armature`); 0 for the free flyer.
+    pub armature: f64,
 }
 
 impl Joint {
@@ -156,6 +159,7 @@ impl Model {
             limits: JointLimits::UNBOUNDED,
             inertia,
             body: body.clone(),
+            armature: 0.0,
         };
         self.nq += kind.nq();
         self.nv += kind.nv();
@@ -163,6 +167,28 @@ impl Model {
         self.joints.push(joint);
         self.add_frame(body, Some(id), SE3::identity())?;
         Ok(id)
+    }
+
+    /// Sets the armature of a one-dof joint (builder use); refused on a multi-dof joint or for a
+    /// negative or non-finite value.
+    pub fn set_armature(&mut self, joint: usize, armature: f64) -> Result<(), DynamicsError> {
+        let j = self
+            .joints
+            .get_mut(joint)
+            .ok_or_else(|| DynamicsError::InvalidJoint {
+                joint: format!("#{joint}"),
+                reason: "no such joint".into(),
+            })?;
+        if j.nv() != 1 || !armature.is_finite() || armature < 0.0 {
+            return Err(DynamicsError::InvalidJoint {
+                joint: j.name.clone(),
+                reason: format!(
+                    "armature {armature}: a finite value ≥ 0 on a one-dof joint is needed"
+                ),
+            });
+        }
+        j.armature = armature;
+        Ok(())
     }
 
     /// Sets the limits of a joint (builder use).

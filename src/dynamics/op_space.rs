@@ -180,6 +180,7 @@ impl OpSpaceWorkspace {
                 for r in 0..ji.nv() {
                     self.h_tilde[(col0 + r, col)] = ji.kind.subspace_column(r).dot(&f);
                 }
+                self.h_tilde[(col, col)] += ji.armature;
                 let mut cur = i;
                 for cj in (0..ci).rev() {
                     f = data.li_m_i[cur].act_force(&f);

@@ -103,6 +103,10 @@ pub(crate) fn rnea_unchecked(
         let fi = data.f[i];
         j.kind
             .project_force(&fi, &mut tau[j.idx_v..j.idx_v + j.nv()]);
+        if let (Some(a), true) = (a, j.armature != 0.0) {
+            // The rotor's reflected inertia (`Joint::armature`, on M's diagonal).
+            tau[j.idx_v] += j.armature * a[j.idx_v];
+        }
         if let Some(p) = j.parent {
             let fp = data.li_m_i[i].act_force(&fi);
             data.f[p] += fp;

@@ -7,6 +7,7 @@
 //! - Floating base: a free-flyer joint `root_joint` carries the root link (see
 //!   [`JointKind::FreeFlyer`] for the coordinates). [`BaseJoint::Auto`] picks a fixed base when
 //!   the URDF root link is called `world`, a floating one otherwise.
+//! - Locked joints ([`Model::from_urdf_str_locked`]) become fixed joints at their given value.
 //! - Geometry (meshes included) is ignored: a missing mesh file is not an error.
 //! - A zero `velocity`/`effort` limit (URDF 1.0's value for a missing attribute) reads as
 //!   unbounded. A mimic joint stays an independent joint, as Pinocchio's parser has it by
@@ -57,7 +58,18 @@ impl Model {
 
     /// Builds a model from URDF text.
     pub fn from_urdf_str(text: &str, base: BaseJoint) -> Result<Model, DynamicsError> {
-        let model = build(&parse_urdf(text)?, base)?;
+        Self::from_urdf_str_locked(text, base, &HashMap::new())
+    }
+
+    /// Builds a model from URDF text with the joints of `locked` (name → coordinate) fixed at
+    /// that value, as Pinocchio's `buildReducedModel`: the joint becomes a fixed one at its
+    /// placement for the value (its child merged into the parent body, its frames kept).
+    pub fn from_urdf_str_locked(
+        text: &str,
+        base: BaseJoint,
+        locked: &HashMap<String, f64>,
+    ) -> Result<Model, DynamicsError> {
+        let model = build(&parse_urdf(text)?, base, locked)?;
         for w in &model.load_warnings {
             tracing::warn!("URDF `{}`: {w}", model.name);
         }
@@ -425,7 +437,11 @@ fn joint_kind(j: &urdf_rs::Joint) -> Result<Option<(JointKind, JointLimits)>, Dy
     Ok(Some((kind, limits)))
 }
 
-fn build(robot: &urdf_rs::Robot, base: BaseJoint) -> Result<Model, DynamicsError> {
+fn build(
+    robot: &urdf_rs::Robot,
+    base: BaseJoint,
+    locked: &HashMap<String, f64>,
+) -> Result<Model, DynamicsError> {
     if robot.links.is_empty() {
         return Err(DynamicsError::Empty);
     }
@@ -445,7 +461,7 @@ fn build(robot: &urdf_rs::Robot, base: BaseJoint) -> Result<Model, DynamicsError
         .map(|l| link_inertia(l, &mut warnings))
         .collect::<Result<Vec<_>, _>>()?;
     for j in &robot.joints {
-        if let Some(m) = &j.mimic {
+        if let Some(m) = j.mimic.as_ref().filter(|_| !locked.contains_key(&j.name)) {
             warnings.push(format!(
                 "joint '{}' mimics '{}': taken as an independent joint (as Pinocchio does by default)",
                 j.name, m.joint
@@ -549,7 +565,23 @@ fn build(robot: &urdf_rs::Robot, base: BaseJoint) -> Result<Model, DynamicsError
             }
             Some(k) => {
                 let j = &robot.joints[k];
-                match joint_kind(j)? {
+                let mut kind = joint_kind(j)?;
+                let mut x = x;
+                if let (Some((k, limits)), Some(&value)) = (&kind, locked.get(&j.name)) {
+                    if k.nq() != 1 || !(limits.lower..=limits.upper).contains(&value) {
+                        return Err(DynamicsError::InvalidJoint {
+                            joint: j.name.clone(),
+                            reason: format!(
+                                "locked at {value}, outside its limits [{}, {}]",
+                                limits.lower, limits.upper
+                            ),
+                        });
+                    }
+                    // Locked: a fixed joint at the placement the value gives.
+                    x = x.compose(&k.transform(&[value]));
+                    kind = None;
+                }
+                match kind {
                     Some((kind, limits)) => {
                         let id = model.add_joint(
                             j.name.clone(),

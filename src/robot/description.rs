@@ -3,6 +3,7 @@
 //! it: [`super::Robot`] computes it.
 //!
 //! ```toml
+//! extends = "g1_base.toml"                 # optional: a description this one layers over
 //! name = "g1"
 //! description = "Unitree G1, 29 DoF (example-robot-data)"
 //! [urdf]
@@ -17,6 +18,10 @@
 //! chain_root = "torso_link"                # M_e: chain root → hand (docs/hand_previewer.md)
 //! [home]                                   # joint = angle (rad); the others at 0
 //! left_knee_joint = 0.3
+//! [locked]                                 # fixed at their home value (Pinocchio's reduced
+//! joints = ["*_hand_*", "head_*"]          # model): names or glob patterns
+//! [armature]                               # reflected rotor inertia (kg·m²), by name or
+//! "*_wrist_*" = 0.001                      # pattern; the URDF has none (0 elsewhere)
 //! [config]                                 # robot-dependent values of config/default.toml
 //! hand.kp = 400.0
 //! ```
@@ -30,6 +35,10 @@ use serde::Deserialize;
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RobotDescription {
+    /// A description this one layers over (embedded name, or path relative to this file):
+    /// its keys are this one's unless set here (a variant of a robot in a few lines).
+    #[serde(default)]
+    pub extends: Option<String>,
     pub name: String,
     #[serde(default)]
     pub description: String,
@@ -39,6 +48,14 @@ pub struct RobotDescription {
     /// Joint angles of the standing posture (rad); unlisted joints are at 0.
     #[serde(default)]
     pub home: BTreeMap<String, f64>,
+    /// Joints fixed at their home value: neither simulated nor controlled (fingers, eyes…).
+    #[serde(default)]
+    pub locked: Locked,
+    /// Reflected rotor inertia of joints (kg·m², kg for a prismatic one), by name or glob
+    /// pattern: what a URDF leaves out and real drives have. A joint chain without mass (a
+    /// URDF's fingers) needs it to have a non-singular M.
+    #[serde(default)]
+    pub armature: BTreeMap<String, f64>,
     /// Config keys layered over `config/default.toml` for this robot (gains, torque scale).
     #[serde(default)]
     pub config: Option<toml::Table>,
@@ -96,4 +113,13 @@ pub struct HandSpec {
     pub frame: String,
     /// The body the arm chain of M_e starts from (its joints are the chain's, exclusive).
     pub chain_root: String,
+}
+
+/// The joints a description locks.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Locked {
+    /// Joint names or glob patterns (`*`, `?`, `[…]`); each must match a moving joint.
+    #[serde(default)]
+    pub joints: Vec<String>,
 }

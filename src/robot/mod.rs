@@ -7,6 +7,7 @@ pub mod description;
 pub mod feet;
 pub mod packages;
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use nalgebra::{DVector, Matrix3, Vector3};
@@ -24,7 +25,7 @@ pub const DEFAULT: &str = "icub_like";
 
 /// The descriptions shipped with upc (name, TOML): usable from any directory. Their URDFs are
 /// embedded (the iCub-like) or come from a registry package (`scripts/setup.sh`).
-pub const EMBEDDED: [(&str, &str); 4] = [
+pub const EMBEDDED: [(&str, &str); 6] = [
     (
         "icub_like",
         include_str!("../../config/robots/icub_like.toml"),
@@ -32,6 +33,11 @@ pub const EMBEDDED: [(&str, &str); 4] = [
     ("icub", include_str!("../../config/robots/icub.toml")),
     ("talos", include_str!("../../config/robots/talos.toml")),
     ("g1", include_str!("../../config/robots/g1.toml")),
+    ("romeo", include_str!("../../config/robots/romeo.toml")),
+    (
+        "romeo_locked",
+        include_str!("../../config/robots/romeo_locked.toml"),
+    ),
 ];
 
 /// Files the embedded descriptions name, embedded with them.
@@ -43,7 +49,7 @@ const EMBEDDED_FILES: [(&str, &str); 1] = [(
 #[derive(Debug, thiserror::Error)]
 pub enum RobotError {
     #[error(
-        "no robot named `{0}`: give a path to a .toml description, or one of: icub_like, icub, talos, g1"
+        "no robot named `{0}`: give a path to a .toml description, or one of: icub_like, icub, talos, g1, romeo, romeo_locked"
     )]
     Unknown(String),
     #[error("robot description {path} cannot be read: {reason}")]
@@ -104,6 +110,8 @@ pub struct Robot {
     /// the origin.
     pub home: DVector<f64>,
     pub derived: Derived,
+    /// The joints the description locks and their values (rad or m), by name.
+    pub locked: std::collections::BTreeMap<String, f64>,
     /// Content hash of the description and the URDF: plant and controller must agree on it.
     pub hash: u64,
 }
@@ -134,7 +142,33 @@ impl Robot {
     /// directory), then the repository root.
     pub fn parse(text: &str, origin: &str, dir: Option<&Path>) -> Result<Robot, RobotError> {
         let mut layers = Layers::new();
+        let mut hashed = String::new();
+        // `extends`: the base description (embedded name or path, relative to this file's
+        // directory) is the layer under this one.
+        if let Some(base) = text
+            .parse::<toml::Table>()
+            .ok()
+            .and_then(|t| t.get("extends").and_then(|v| v.as_str().map(String::from)))
+        {
+            // A file next to this one first; else an embedded description of that name.
+            let path = dir.map_or_else(|| PathBuf::from(&base), |d| d.join(&base));
+            let stem = base.strip_suffix(".toml").unwrap_or(&base);
+            let embedded = EMBEDDED.iter().find(|(n, _)| *n == stem);
+            let (base_origin, base_text) = match embedded {
+                Some((n, t)) if !path.is_file() => (format!("<embedded robot {n}>"), t.to_string()),
+                _ => {
+                    let t = std::fs::read_to_string(&path).map_err(|e| RobotError::Read {
+                        path: path.display().to_string(),
+                        reason: e.to_string(),
+                    })?;
+                    (path.display().to_string(), t)
+                }
+            };
+            layers.push_str(&base_origin, &base_text)?;
+            hashed.push_str(&base_text);
+        }
         layers.push_str(origin, text)?;
+        hashed.push_str(text);
         let description: RobotDescription = layers.typed()?;
         let name = description.name.clone();
         let urdf_err = |reason: String| RobotError::Urdf {
@@ -142,8 +176,10 @@ impl Robot {
             reason,
         };
         let (urdf, urdf_path) = read_urdf(&description, dir).map_err(urdf_err)?;
-        let mut model = Model::from_urdf_str(&urdf, BaseJoint::Floating)?;
         let parsed = crate::dynamics::parse_urdf(&urdf)?;
+        let locked = locked_joints(&description, &parsed)?;
+        let mut model = Model::from_urdf_str_locked(&urdf, BaseJoint::Floating, &locked)?;
+        set_armatures(&mut model, &description, &locked)?;
         let f = &description.feet;
         let left = feet::attach(&mut model, &parsed, &f.left)?;
         let right = feet::attach(&mut model, &parsed, &f.right)?;
@@ -155,10 +191,10 @@ impl Robot {
             }
         });
         let soles = [f.left.frame.clone(), f.right.frame.clone()];
-        let home = home_configuration(&model, &description, &soles, &contacts)?;
+        let home = home_configuration(&model, &description, &locked, &soles, &contacts)?;
         let derived = derive(&model, &description, &soles, &contacts, &home)?;
         let mut h = ContentHash::default();
-        h.bytes(text.as_bytes());
+        h.bytes(hashed.as_bytes());
         h.bytes(urdf.as_bytes());
         Ok(Robot {
             hash: h.finish(),
@@ -170,6 +206,7 @@ impl Robot {
             contacts,
             home,
             derived,
+            locked: locked.into_iter().collect(),
             description,
         })
     }
@@ -299,16 +336,84 @@ fn read_urdf(
     ))
 }
 
+/// The moving joints of the URDF that `[locked]` names, with their home values. A pattern that
+/// matches no moving joint is an error (a typo would otherwise lock nothing, silently).
+fn locked_joints(
+    d: &RobotDescription,
+    urdf: &urdf_rs::Robot,
+) -> Result<HashMap<String, f64>, RobotError> {
+    use urdf_rs::JointType as T;
+    let err = |reason: String| RobotError::Home {
+        robot: d.name.clone(),
+        reason,
+    };
+    let mut locked = HashMap::new();
+    for p in &d.locked.joints {
+        let pattern =
+            glob::Pattern::new(p).map_err(|e| err(format!("[locked] pattern `{p}`: {e}")))?;
+        let mut matched = false;
+        for j in &urdf.joints {
+            let moving = matches!(j.joint_type, T::Revolute | T::Continuous | T::Prismatic);
+            if moving && pattern.matches(&j.name) {
+                matched = true;
+                let value = d.home.get(&j.name).copied().unwrap_or(0.0);
+                locked.insert(j.name.clone(), value);
+            }
+        }
+        if !matched {
+            return Err(err(format!(
+                "[locked] `{p}` matches no revolute, continuous or prismatic joint of the URDF"
+            )));
+        }
+    }
+    Ok(locked)
+}
+
+/// `[armature]`: each pattern sets the joints it matches (a later pattern wins); one that
+/// matches neither a one-dof joint of the model nor a locked joint is an error.
+fn set_armatures(
+    model: &mut Model,
+    d: &RobotDescription,
+    locked: &HashMap<String, f64>,
+) -> Result<(), RobotError> {
+    let err = |reason: String| RobotError::Home {
+        robot: d.name.clone(),
+        reason,
+    };
+    for (p, &value) in &d.armature {
+        let pattern =
+            glob::Pattern::new(p).map_err(|e| err(format!("[armature] pattern `{p}`: {e}")))?;
+        let ids: Vec<usize> = (0..model.joints.len())
+            .filter(|&i| model.joints[i].nv() == 1 && pattern.matches(&model.joints[i].name))
+            .collect();
+        if ids.is_empty() && !locked.keys().any(|n| pattern.matches(n)) {
+            return Err(err(format!(
+                "[armature] `{p}` matches no revolute, continuous or prismatic joint"
+            )));
+        }
+        for i in ids {
+            model.set_armature(i, value)?;
+        }
+    }
+    Ok(())
+}
+
 /// The description's joint angles, the base turned so that the soles' x axes (toes) point
 /// along world +x (iCub's root link, for one, faces −x) and placed so that the contact points'
 /// centroid is at the origin (their mean height 0).
 fn home_configuration(
     model: &Model,
     d: &RobotDescription,
+    locked: &HashMap<String, f64>,
     soles: &[String; 2],
     contacts: &[String; 8],
 ) -> Result<DVector<f64>, RobotError> {
-    let values: Vec<(&str, f64)> = d.home.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+    let values: Vec<(&str, f64)> = d
+        .home
+        .iter()
+        .filter(|(k, _)| !locked.contains_key(*k))
+        .map(|(k, v)| (k.as_str(), *v))
+        .collect();
     let mut q = model.configuration(&values)?;
     let mut data = Data::new(model);
     forward_kinematics(model, &mut data, &q)?;

@@ -4,8 +4,9 @@
 //! contract in `upc sim`'s place.
 //!
 //! What carries over, and how:
-//! - bodies, joint placements, axes, inertias and position limits from the [`Model`] (the URDF
-//!   as upc reads it: fixed links merged, repaired inertias), a free joint at the root;
+//! - bodies, joint placements, axes, inertias, armatures and position limits from the [`Model`]
+//!   (the URDF as upc reads it: fixed links merged, locked joints fixed, repaired inertias), a
+//!   free joint at the root;
 //! - contacts: one small sphere per contact point of the robot description, touching the
 //!   ground at the point when the sole is flat; only those spheres collide, with the floor
 //!   (upc's own simulator has the same eight point contacts and no other collisions);
@@ -261,10 +262,12 @@ pub fn build(robot: &Robot, cfg: &SimConfig, scenario: &Scenario) -> Result<Mujo
         },
         None => DoorDrive::none(),
     };
-    // Samples over the run (or the scenario, for an open-ended run) and a second beyond.
-    let horizon = cfg.duration.max(scenario.duration) + 1.0;
+    // Samples until the push ends for good, and a second beyond (the plant reads zero past the
+    // table, as the drive is): an hour's soak scenario is 3.6 million samples, not a table
+    // over the run's nominal length.
+    let horizon = drive.profile.end() + 1.0;
     let n = (horizon / cfg.dt).ceil() as usize + 1;
-    let values = (0..n).map(|k| drive.torque(k as f64 * cfg.dt)).collect();
+    let values = drive.torques_sampled(cfg.dt, n);
     let plant = PlantFile {
         format: 1,
         robot: robot.name().to_string(),
@@ -365,9 +368,14 @@ impl Mjcf {
                 } else {
                     String::new()
                 };
+                let armature = if joint.armature > 0.0 {
+                    format!(" armature=\"{}\"", joint.armature)
+                } else {
+                    String::new()
+                };
                 writeln!(
                     self.s,
-                    "{pad}  <joint name=\"{name}\" type=\"{kind}\" axis=\"{}\"{range} damping=\"{}\"/>",
+                    "{pad}  <joint name=\"{name}\" type=\"{kind}\" axis=\"{}\"{range}{armature} damping=\"{}\"/>",
                     vec3(&axis),
                     damping
                 )?;
@@ -386,6 +394,14 @@ impl Mjcf {
                 i[(0, 1)],
                 i[(0, 2)],
                 i[(1, 2)]
+            )?;
+        } else {
+            // MuJoCo refuses a moving body without mass or inertia (a URDF's massless finger
+            // links, whose dynamics the joint's armature carries): a nanogram and 1e-15 kg·m²,
+            // nothing against any armature.
+            writeln!(
+                self.s,
+                "{pad}  <inertial pos=\"0 0 0\" mass=\"1e-9\" diaginertia=\"1e-15 1e-15 1e-15\"/>"
             )?;
         }
         // Drawn as capsules to each child's origin (no collision).

@@ -172,7 +172,8 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
     let (mut world, drive) = (scene.world, scene.drive);
     if world.q().len() > MAX_DOF || world.contact_forces().len() != N_CONTACTS {
         return Err(ProcessError::Contract(format!(
-            "nq = {} (max {MAX_DOF}), {} contacts (need {N_CONTACTS})",
+            "nq = {} (max {MAX_DOF}), {} contacts (need {N_CONTACTS}): lock the joints the \
+             controller need not move (`locked` in the robot description, e.g. fingers)",
             world.q().len(),
             world.contact_forces().len()
         )));

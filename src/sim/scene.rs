@@ -40,10 +40,23 @@ pub struct DoorDrive {
 impl DoorDrive {
     /// Hinge torque at time `t` (N·m).
     pub fn torque(&self, t: f64) -> f64 {
-        let f = self.profile.at(t);
+        self.torque_of(self.profile.at(t))
+    }
+
+    /// The hinge torque of hand force `f`.
+    fn torque_of(&self, f: [f64; 3]) -> f64 {
         self.lever
             .cross(&Vector3::new(f[0], f[1], f[2]))
             .dot(&self.axis)
+    }
+
+    /// [`Self::torque`] at `k·dt`, k = 0 … n−1 (bit for bit), in one pass over the profile.
+    pub fn torques_sampled(&self, dt: f64, n: usize) -> Vec<f64> {
+        self.profile
+            .sampled(dt, n)
+            .into_iter()
+            .map(|f| self.torque_of(f))
+            .collect()
     }
 
     /// The scenario's hand force at `t` (N, world): what the door pushes with, if held still.
