@@ -40,6 +40,36 @@ fn a_tick_at_home_gives_finite_torques_for_each_controller() {
     }
 }
 
+/// Gravity has one home in the controller: `robot.gravity` of the config is the cart-table's
+/// and the whole-body dynamics' alike. On the Moon (1.62 m/s²) the torques that hold the robot
+/// at home shrink by about g_moon / g_earth (gravity is most of them at rest).
+#[test]
+fn robot_gravity_is_the_whole_controllers() {
+    let earth = Config::embedded_default().expect("defaults");
+    let robot = upc::robot::Robot::embedded_default().expect("robot");
+    let mut layers = Config::layers_for(&robot).expect("layers");
+    layers.push_override("robot.gravity=1.62").expect("set");
+    let moon = layers.build().expect("config");
+    assert_eq!(
+        earth.robot.gravity, 9.81,
+        "the model's gravity, from the robot's layer"
+    );
+    let torque = |config: &Config| {
+        let mut r = rig(config, ControllerKind::C1);
+        assert_eq!(r.core.model.gravity.z, -config.robot.gravity);
+        r.core
+            .tick(&r.state, &r.window, None, &mut r.tau)
+            .expect("tick");
+        r.tau.iter().map(|t| t * t).sum::<f64>().sqrt()
+    };
+    let ratio = torque(&moon) / torque(&earth);
+    assert!(
+        (ratio - 1.62 / 9.81).abs() < 0.05,
+        "torque ratio {ratio}, gravity ratio {}",
+        1.62 / 9.81
+    );
+}
+
 #[test]
 fn c1_leans_into_a_forecast_push_and_c0_does_not() {
     // Over 20 ticks on a frozen state, C1's commanded CoM acceleration turns toward the push

@@ -105,6 +105,7 @@ fn lockstep_run(tag: &str, steps: u64, inject_bad: bool) -> (RunSummary, StateMs
         live: None,
         node_name: format!("sim_{tag}"),
         truth_csv: None,
+        engine: Default::default(),
     };
 
     let sim = std::thread::spawn(move || {
@@ -113,6 +114,7 @@ fn lockstep_run(tag: &str, steps: u64, inject_bad: bool) -> (RunSummary, StateMs
     });
     let last = drive(&prefix, tag, steps, inject_bad, || sim.is_finished());
     let summary = sim.join().unwrap().unwrap();
+    assert_eq!(summary.error, None);
     (summary, last)
 }
 
@@ -154,8 +156,14 @@ fn a_participant_with_another_contract_layout_is_refused_with_what_to_change() {
     let bus = upc::channels::Bus::open(&prefix, "new_participant").expect("bus");
     let e = match bus.subscriber::<StateMsg>() {
         Ok(_) => panic!("a service of another layout was opened"),
-        Err(e) => e.to_string(),
+        Err(e) => e,
     };
+    // Typed: a program can tell this failure from the others.
+    assert!(
+        matches!(&e, upc::channels::ChannelError::IncompatibleLayout { payload, .. } if *payload == "StateMsg"),
+        "{e:?}"
+    );
+    let e = e.to_string();
     assert!(
         e.contains("another layout")
             && e.contains(&format!("MAX_DOF = {MAX_DOF}"))

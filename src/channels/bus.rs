@@ -18,18 +18,143 @@ use super::{Payload, ServiceKind};
 /// Samples a subscriber buffers before the oldest is overwritten: a slow reader sees the newest.
 const SUBSCRIBER_BUFFER: usize = 4;
 
-/// An IPC failure, with what was being attempted.
-#[derive(Debug, Clone, thiserror::Error)]
-#[error("{what}: {detail}")]
-pub struct ChannelError {
-    pub what: String,
-    pub detail: String,
+/// What was being attempted when an IPC step failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChannelOp {
+    NodeName,
+    CreateNode,
+    ServiceName,
+    OpenService,
+    OpenEvent,
+    CreatePublisher,
+    CreateSubscriber,
+    CreateNotifier,
+    CreateListener,
+    Loan,
+    Send,
+    UpdateConnections,
+    Receive,
+    Notify,
+    Wait,
 }
 
-fn err(what: impl Into<String>, e: impl Debug) -> ChannelError {
-    ChannelError {
-        what: what.into(),
-        detail: format!("{e:?}"),
+impl core::fmt::Display for ChannelOp {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            ChannelOp::NodeName => "node name",
+            ChannelOp::CreateNode => "create node",
+            ChannelOp::ServiceName => "service name",
+            ChannelOp::OpenService => "open service",
+            ChannelOp::OpenEvent => "open event",
+            ChannelOp::CreatePublisher => "create publisher",
+            ChannelOp::CreateSubscriber => "create subscriber",
+            ChannelOp::CreateNotifier => "create notifier",
+            ChannelOp::CreateListener => "create listener",
+            ChannelOp::Loan => "loan sample",
+            ChannelOp::Send => "send sample",
+            ChannelOp::UpdateConnections => "update connections",
+            ChannelOp::Receive => "receive",
+            ChannelOp::Notify => "notify",
+            ChannelOp::Wait => "wait",
+        })
+    }
+}
+
+/// An IPC failure: what was attempted, on which node or service, and iceoryx2's own error
+/// (typed: `source` downcasts to it).
+#[derive(Debug, Clone)]
+pub enum ChannelError {
+    /// Another participant created the service with another layout of the payload (another
+    /// contract version, or a mirror out of date).
+    IncompatibleLayout {
+        service: String,
+        payload: &'static str,
+        size: usize,
+    },
+    Ipc {
+        op: ChannelOp,
+        /// The node or service name, when the step concerns one.
+        object: Option<String>,
+        source: std::sync::Arc<dyn std::error::Error + Send + Sync>,
+    },
+}
+
+impl ChannelError {
+    /// What was being attempted.
+    pub fn op(&self) -> ChannelOp {
+        match self {
+            ChannelError::IncompatibleLayout { .. } => ChannelOp::OpenService,
+            ChannelError::Ipc { op, .. } => *op,
+        }
+    }
+
+    /// A failure of `op` with a message of its own (no iceoryx2 error behind it).
+    pub fn other(op: ChannelOp, message: impl Into<String>) -> Self {
+        let message: String = message.into();
+        ChannelError::Ipc {
+            op,
+            object: None,
+            source: std::sync::Arc::from(Box::<dyn std::error::Error + Send + Sync>::from(message)),
+        }
+    }
+}
+
+impl core::fmt::Display for ChannelError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            ChannelError::IncompatibleLayout {
+                service,
+                payload,
+                size,
+            } => write!(
+                f,
+                "open service `{service}`: another participant created it with another layout \
+                 of `{payload}` than this process's ({size} bytes, MAX_DOF = {}, contract \
+                 version {}): run every participant from the same upc version, or update the \
+                 other's mirror of the contract (services/CHANNELS.md, \"Contract version\")",
+                super::MAX_DOF,
+                super::CONTRACT_VERSION
+            ),
+            ChannelError::Ipc {
+                op,
+                object: Some(o),
+                source,
+            } => write!(f, "{op} `{o}`: {source}"),
+            ChannelError::Ipc {
+                op,
+                object: None,
+                source,
+            } => write!(f, "{op}: {source}"),
+        }
+    }
+}
+
+impl std::error::Error for ChannelError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            ChannelError::IncompatibleLayout { .. } => None,
+            ChannelError::Ipc { source, .. } => Some(source.as_ref()),
+        }
+    }
+}
+
+fn err(op: ChannelOp, e: impl std::error::Error + Send + Sync + 'static) -> ChannelError {
+    ChannelError::Ipc {
+        op,
+        object: None,
+        source: std::sync::Arc::new(e),
+    }
+}
+
+fn err_on(
+    op: ChannelOp,
+    object: impl Into<String>,
+    e: impl std::error::Error + Send + Sync + 'static,
+) -> ChannelError {
+    ChannelError::Ipc {
+        op,
+        object: Some(object.into()),
+        source: std::sync::Arc::new(e),
     }
 }
 
@@ -51,13 +176,13 @@ impl Bus {
         }
         let name: NodeName = node_name
             .try_into()
-            .map_err(|e| err(format!("node name `{node_name}`"), e))?;
+            .map_err(|e| err_on(ChannelOp::NodeName, node_name, e))?;
         let node = NodeBuilder::new()
             .name(&name)
             // Processes handle SIGINT/SIGTERM themselves (clean shutdown, complete logs).
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
-            .map_err(|e| err(format!("create node `{node_name}`"), e))?;
+            .map_err(|e| err_on(ChannelOp::CreateNode, node_name, e))?;
         Ok(Bus {
             node,
             prefix: prefix.to_string(),
@@ -77,7 +202,7 @@ impl Bus {
         );
         name.as_str()
             .try_into()
-            .map_err(|e| err(format!("service name `{name}`"), e))
+            .map_err(|e| err_on(ChannelOp::ServiceName, name.as_str(), e))
     }
 
     fn pubsub<T: ZeroCopySend + Debug + 'static>(
@@ -98,23 +223,15 @@ impl Bus {
             .map_err(|e| match e {
                 PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
                     PublishSubscribeOpenError::IncompatibleTypes,
-                ) => ChannelError {
-                    what: format!("open service `{name}`"),
-                    detail: format!(
-                        "another participant created it with another layout of `{}` than this \
-                         process's ({} bytes, MAX_DOF = {}, contract version {}): run every \
-                         participant from the same upc version, or update the other's mirror \
-                         of the contract (services/CHANNELS.md, \"Contract version\")",
-                        core::any::type_name::<T>()
-                            .rsplit("::")
-                            .next()
-                            .unwrap_or("payload"),
-                        core::mem::size_of::<T>(),
-                        super::MAX_DOF,
-                        super::CONTRACT_VERSION,
-                    ),
+                ) => ChannelError::IncompatibleLayout {
+                    service: name.to_string(),
+                    payload: core::any::type_name::<T>()
+                        .rsplit("::")
+                        .next()
+                        .unwrap_or("payload"),
+                    size: core::mem::size_of::<T>(),
                 },
-                e => err(format!("open service `{name}`"), e),
+                e => err_on(ChannelOp::OpenService, name.to_string(), e),
             })
     }
 
@@ -131,7 +248,7 @@ impl Bus {
             .max_listeners(8)
             .max_nodes(16)
             .open_or_create()
-            .map_err(|e| err(format!("open event `{name}`"), e))
+            .map_err(|e| err_on(ChannelOp::OpenEvent, name.as_str(), e))
     }
 
     /// A publisher on `T`'s service.
@@ -140,7 +257,7 @@ impl Bus {
             .pubsub::<T>(T::KIND)?
             .publisher_builder()
             .create()
-            .map_err(|e| err("create publisher", e))?;
+            .map_err(|e| err(ChannelOp::CreatePublisher, e))?;
         Ok(Publisher { inner })
     }
 
@@ -150,7 +267,7 @@ impl Bus {
         let inner = service
             .subscriber_builder()
             .create()
-            .map_err(|e| err("create subscriber", e))?;
+            .map_err(|e| err(ChannelOp::CreateSubscriber, e))?;
         Ok(Subscriber { inner, service })
     }
 
@@ -159,7 +276,7 @@ impl Bus {
             .event(kind)?
             .notifier_builder()
             .create()
-            .map_err(|e| err("create notifier", e))?;
+            .map_err(|e| err(ChannelOp::CreateNotifier, e))?;
         Ok(Notifier { inner })
     }
 
@@ -168,7 +285,7 @@ impl Bus {
             .event(kind)?
             .listener_builder()
             .create()
-            .map_err(|e| err("create listener", e))?;
+            .map_err(|e| err(ChannelOp::CreateListener, e))?;
         Ok(Listener { inner })
     }
 }
@@ -211,7 +328,7 @@ impl<T: ZeroCopySend + Debug + Copy + 'static> Publisher<T> {
         let mut sample = self
             .inner
             .loan_uninit()
-            .map_err(|e| err("loan sample", e))?;
+            .map_err(|e| err(ChannelOp::Loan, e))?;
         // SAFETY: the contract's payloads are plain old data of integers and floats, for which
         // all-zero bytes are a valid value.
         let mut sample = unsafe {
@@ -221,7 +338,7 @@ impl<T: ZeroCopySend + Debug + Copy + 'static> Publisher<T> {
         if let Err(e) = fill(sample.payload_mut()) {
             return Ok(Err(e));
         }
-        sample.send().map_err(|e| err("send sample", e))?;
+        sample.send().map_err(|e| err(ChannelOp::Send, e))?;
         Ok(Ok(()))
     }
 
@@ -236,7 +353,7 @@ impl<T: ZeroCopySend + Debug + Copy + 'static> Publisher<T> {
         use iceoryx2::port::update_connections::UpdateConnections;
         self.inner
             .update_connections()
-            .map_err(|e| err("update connections", e))
+            .map_err(|e| err(ChannelOp::UpdateConnections, e))
     }
 }
 
@@ -284,14 +401,18 @@ impl<T: ZeroCopySend + Debug + Copy + 'static> Subscriber<T> {
         Ok(self
             .inner
             .receive()
-            .map_err(|e| err("receive", e))?
+            .map_err(|e| err(ChannelOp::Receive, e))?
             .map(|s| *s))
     }
 
     /// The newest sample, dropping older ones.
     pub fn latest(&self) -> Result<Option<T>, ChannelError> {
         let mut last = None;
-        while let Some(s) = self.inner.receive().map_err(|e| err("receive", e))? {
+        while let Some(s) = self
+            .inner
+            .receive()
+            .map_err(|e| err(ChannelOp::Receive, e))?
+        {
             last = Some(*s);
         }
         Ok(last)
@@ -300,7 +421,11 @@ impl<T: ZeroCopySend + Debug + Copy + 'static> Subscriber<T> {
     /// Run `f` on the newest sample in shared memory without copying it (large payloads).
     pub fn with_latest<R>(&self, f: impl FnOnce(&T) -> R) -> Result<Option<R>, ChannelError> {
         let mut last = None;
-        while let Some(s) = self.inner.receive().map_err(|e| err("receive", e))? {
+        while let Some(s) = self
+            .inner
+            .receive()
+            .map_err(|e| err(ChannelOp::Receive, e))?
+        {
             last = Some(s);
         }
         Ok(last.map(|s| f(&s)))
@@ -322,7 +447,7 @@ impl Notifier {
         self.inner
             .notify()
             .map(|_| ())
-            .map_err(|e| err("notify", e))
+            .map_err(|e| err(ChannelOp::Notify, e))
     }
 }
 
@@ -340,7 +465,7 @@ impl Listener {
         match self.inner.timed_wait(|_| {}, timeout) {
             Ok(n) => Ok(n > 0),
             Err(ListenerWaitError::InterruptSignal) => Ok(false),
-            Err(e) => Err(err("wait", e)),
+            Err(e) => Err(err(ChannelOp::Wait, e)),
         }
     }
 
@@ -373,7 +498,10 @@ impl Listener {
 
     /// Consume pending notifications without blocking; true if there were any.
     pub fn drain(&self) -> Result<bool, ChannelError> {
-        let n = self.inner.try_wait(|_| {}).map_err(|e| err("wait", e))?;
+        let n = self
+            .inner
+            .try_wait(|_| {})
+            .map_err(|e| err(ChannelOp::Wait, e))?;
         Ok(n > 0)
     }
 }

@@ -8,7 +8,7 @@
 mod bus;
 pub mod messages;
 
-pub use bus::{Bus, ChannelError, Listener, Notifier, Publisher, Subscriber};
+pub use bus::{Bus, ChannelError, ChannelOp, Listener, Notifier, Publisher, Subscriber};
 pub use messages::*;
 
 /// A fresh non-zero identifier for a run of a process (`StateMsg::session`,

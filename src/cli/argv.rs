@@ -177,7 +177,6 @@ mod tests {
             },
             simulator: PlantChoice::Mujoco,
             bundle: Some("bundle".into()),
-            python: Some("/usr/bin/python3".into()),
             rrd: Some("sim.rrd".into()),
             recording_id: Some("r".into()),
             connect: Some("rerun+http://h:1/proxy".into()),

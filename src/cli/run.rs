@@ -187,6 +187,33 @@ pub fn run(args: RunArgs) -> CliResult {
             live.as_deref(),
         )?);
     }
+    write_summary(&args, &robot, &scenario, duration, &root, &entries)?;
+    print_table(&entries);
+    println!(
+        "\nwrote {}/ (open the logs with: rerun {}/<controller>/*.rrd)",
+        root.display(),
+        root.display()
+    );
+    let failed = entries.iter().any(|e| e.controller_summary.is_none());
+    if args.controller == Which::All {
+        report(&root, failed)?;
+    }
+    if failed {
+        return Err("a controller run failed: see its controller.log".into());
+    }
+    Ok(())
+}
+
+/// The run's `summary.json`: what was run (the arguments `upc compare` reloads) and each
+/// controller's entry.
+fn write_summary(
+    args: &RunArgs,
+    robot: &upc::robot::Robot,
+    scenario: &Scenario,
+    duration: f64,
+    root: &Path,
+    entries: &[Entry],
+) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
     let summary = serde_json::json!({
         "scenario": scenario.name,
         // What --robot and --scenario were given and the config layers: `upc compare` reloads
@@ -214,40 +241,35 @@ pub fn run(args: RunArgs) -> CliResult {
         root.join("summary.json"),
         serde_json::to_string_pretty(&summary)?,
     )?;
-    print_table(&entries);
-    println!(
-        "\nwrote {}/ (open the logs with: rerun {}/<controller>/*.rrd)",
-        root.display(),
-        root.display()
+    Ok(())
+}
+
+/// The report of C0, C1 and C2 side by side (`upc compare` of this run).
+fn report(root: &Path, failed: bool) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    // The run's config layers are in summary.json already: none added here.
+    let report = super::compare::compare(
+        &[root.to_path_buf()],
+        root.to_path_buf(),
+        &super::common::ConfigArgs::default(),
+        true,
+        true,
+        false,
     );
-    let failed = entries.iter().any(|e| e.controller_summary.is_none());
-    if args.controller == Which::All {
-        // The run's config layers are in summary.json already: none added here.
-        let report = super::compare::compare(
-            std::slice::from_ref(&root),
-            root.clone(),
-            &super::common::ConfigArgs::default(),
-            true,
-            true,
-            false,
-        );
-        match report {
-            Ok(path) => println!(
-                "wrote {} (figures in {}/figures/)",
-                path.display(),
-                root.display()
-            ),
-            // A failed controller explains a failed report: report the controller first.
-            Err(e) if failed => tracing::warn!("no report: {e}"),
-            Err(e) => return Err(format!("report: {e}").into()),
-        }
-    }
-    if failed {
-        return Err("a controller run failed: see its controller.log".into());
+    match report {
+        Ok(path) => println!(
+            "wrote {} (figures in {}/figures/)",
+            path.display(),
+            root.display()
+        ),
+        // A failed controller explains a failed report: report the controller first.
+        Err(e) if failed => tracing::warn!("no report: {e}"),
+        Err(e) => return Err(format!("report: {e}").into()),
     }
     Ok(())
 }
 
+/// One controller's run: the plant, the forecaster (and a bridge) and the controller as child
+/// processes, watched until the controller ends or another participant dies.
 fn run_one(
     exe: &Path,
     args: &RunArgs,
@@ -259,181 +281,36 @@ fn run_one(
 ) -> Result<Entry, Box<dyn std::error::Error + Send + Sync>> {
     let dir = root.join(kind.name());
     std::fs::create_dir_all(&dir)?;
-    let prefix = format!("upc_{}_{}", std::process::id(), kind.name());
-    let recording = format!("{name}-{}", kind.name());
-    let dur = format!("{duration}");
+    let ctx = Launch {
+        exe,
+        args,
+        duration,
+        root,
+        dir: &dir,
+        prefix: format!("upc_{}_{}", std::process::id(), kind.name()),
+        recording: format!("{name}-{}", kind.name()),
+        live,
+    };
     let start = Instant::now();
-    // One open file for a child's stdout and stderr: two opens of the same path would each
-    // write from offset 0 over the other's lines.
-    let log = |file: &str| -> std::io::Result<(Stdio, Stdio)> {
-        let f = std::fs::File::create(dir.join(file))?;
-        Ok((Stdio::from(f.try_clone()?), Stdio::from(f)))
-    };
-
-    let upc_plant = args.plant == PlantChoice::Upc;
-    let sim_args = SimArgs {
-        plant: PlantArgs {
-            mode: Some(if args.realtime {
-                ModeChoice::Realtime
-            } else {
-                ModeChoice::Lockstep
-            }),
-            duration: Some(duration),
-            configs: vec![],
-            sets: args.sim_sets.clone(),
-            prefix: Some(prefix.clone()),
-            scenario: Some(args.scenario.clone()),
-            robot: args.robot.clone(),
-        },
-        simulator: args.plant,
-        // The MuJoCo plant records no .rrd; its generated scene is kept with the run.
-        bundle: (!upc_plant).then(|| dir.join("mujoco")),
-        python: None,
-        rrd: upc_plant.then(|| dir.join("sim.rrd")),
-        recording_id: upc_plant.then(|| recording.clone()),
-        connect: live.filter(|_| upc_plant).map(str::to_owned),
-        summary: Some(dir.join("sim.json")),
-        truth_csv: (!args.realtime).then(|| dir.join("sim.csv")),
-    };
-    let (out, err) = log("sim.log")?;
+    let (out, err) = ctx.log("sim.log")?;
     let mut sim = Participant::spawn(
         "simulator",
         Command::new(exe)
-            .args(Argv::of("sim", &sim_args))
+            .args(Argv::of("sim", &ctx.sim_args()))
             .stdout(out)
             .stderr(err),
     )?;
-    let mut bridge = None;
-    let mut forecaster = match &args.forecaster {
-        _ if args.forecaster_over_zenoh => {
-            let (b, mut c) = over_zenoh(exe, args, root, &dir, &prefix, log("bridge.log")?)?;
-            bridge = Some(b);
-            c.env("UPC_PREFIX", &prefix)
-                .env("UPC_DURATION", &dur)
-                .env("UPC_SCENARIO", &args.scenario)
-                .env("UPC_SCENARIO_DIR", root.join("remote"));
-            c
-        }
-        Some(cmd) => {
-            let mut c = shell(cmd);
-            c.env("UPC_PREFIX", &prefix)
-                .env("UPC_DURATION", &dur)
-                .env("UPC_SCENARIO", &args.scenario);
-            c
-        }
-        None => {
-            let forecast = ForecastArgs {
-                scenario: Some(args.scenario.clone()),
-                dt: 0.005,
-                window: 2.5,
-                period: 0.01,
-                until: Some(duration),
-                prefix: prefix.clone(),
-                error_scale: args.forecast_error_scale,
-                error_shift: args.forecast_error_shift,
-            };
-            let mut c = Command::new(exe);
-            c.args(Argv::of("forecast", &forecast));
-            c
-        }
-    };
-    let (out, err) = log("forecaster.log")?;
-    let mut forecaster = if args.no_forecaster {
-        None
-    } else {
-        Some(Participant::spawn(
-            "forecaster",
-            forecaster.stdout(out).stderr(err),
-        )?)
-    };
-    if bridge.is_some()
-        && let Some(forecaster) = forecaster.as_mut()
-    {
-        // A remote forecaster takes a while to start and connect: the controller starts once
-        // its first window is here, and a forecaster that dies first is reported at once.
-        first_forecast(&prefix, forecaster, Duration::from_secs(30))?;
-    }
-    let mut sets = args.config.sets.clone();
-    if args.no_forecaster {
-        sets.push("controller.lockstep_forecast_wait=0".into());
-    }
-    let controller_args = ControllerArgs {
-        scenario: args.scenario.clone(),
-        controller: Some(kind),
-        realtime: args.realtime,
-        robot: args.robot.clone(),
-        prefix: prefix.clone(),
-        rrd: Some(dir.join("controller.rrd")),
-        recording_id: recording.clone(),
-        connect: live.map(str::to_owned),
-        csv: Some(dir.join("controller.csv")),
-        summary: Some(dir.join("controller.json")),
-        duration: Some(duration),
-        config: ConfigArgs {
-            configs: args.config.configs.clone(),
-            sets,
-        },
-    };
-    let (out, err) = log("controller.log")?;
+    let (mut forecaster, mut bridge) = ctx.forecaster()?;
+    let (out, err) = ctx.log("controller.log")?;
     let mut controller = Participant::spawn(
         "controller",
         Command::new(exe)
-            .args(Argv::of("controller", &controller_args))
+            .args(Argv::of("controller", &ctx.controller_args(kind)))
             .stdout(out)
             .stderr(err),
     )?;
-
-    // Progress from the simulator's state stream.
-    let bar = if args.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new((duration * 1000.0) as u64)
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{prefix:>3} [{bar:40}] {msg} sim time, {elapsed} wall")
-            .map(|s| s.progress_chars("=> "))
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    bar.set_prefix(kind.name());
-    let watcher =
-        Bus::open(&prefix, "launcher").and_then(|b| b.subscriber::<StateMsg>().map(|s| (b, s)));
-    let mut died = false;
-    let controller_exit = loop {
-        if let Ok((_, states)) = &watcher
-            && let Ok(Some(s)) = states.latest()
-        {
-            bar.set_position((s.time * 1000.0) as u64);
-            bar.set_message(format!("{:.2}/{duration:.2} s", s.time));
-        }
-        if let Some(status) = controller.try_wait()? {
-            break status.code();
-        }
-        // A participant that died ends the run at once: the controller would otherwise wait
-        // out its own time-outs (a minute for a vanished simulator).
-        let mut others: Vec<(&'static str, &mut Child)> = vec![("simulator", &mut sim)];
-        if let Some(f) = forecaster.as_mut() {
-            others.push(("forecaster", f));
-        }
-        if let Some((what, status)) = failed_participant(&mut others)? {
-            died = true;
-            let log = dir.join(if what == "simulator" {
-                "sim.log"
-            } else {
-                "forecaster.log"
-            });
-            bar.suspend(|| {
-                eprintln!(
-                    "{}: the {what} died ({status}): {}  ({}); stopping the run",
-                    kind.name(),
-                    last_log_line(&log),
-                    log.display()
-                )
-            });
-            break terminate(&mut controller, Duration::from_secs(10));
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    };
-    bar.finish_and_clear();
+    let (controller_exit, died) =
+        ctx.watch(kind, &mut controller, &mut sim, forecaster.as_deref_mut())?;
     // The controller is done: give the others a moment, then ask them to stop (at once when one
     // of them died).
     let grace = |d: u64| Duration::from_secs(if died { 0 } else { d });
@@ -458,6 +335,202 @@ fn run_one(
         controller_exit,
         bridge_summary: read("bridge.json").and_then(|t| serde_json::from_str(&t).ok()),
     })
+}
+
+/// What one controller's run launches its children with.
+struct Launch<'a> {
+    exe: &'a Path,
+    args: &'a RunArgs,
+    duration: f64,
+    root: &'a Path,
+    dir: &'a Path,
+    prefix: String,
+    recording: String,
+    live: Option<&'a str>,
+}
+
+impl Launch<'_> {
+    /// One open file for a child's stdout and stderr: two opens of the same path would each
+    /// write from offset 0 over the other's lines.
+    fn log(&self, file: &str) -> std::io::Result<(Stdio, Stdio)> {
+        let f = std::fs::File::create(self.dir.join(file))?;
+        Ok((Stdio::from(f.try_clone()?), Stdio::from(f)))
+    }
+
+    fn sim_args(&self) -> SimArgs {
+        let args = self.args;
+        SimArgs {
+            plant: PlantArgs {
+                mode: Some(if args.realtime {
+                    ModeChoice::Realtime
+                } else {
+                    ModeChoice::Lockstep
+                }),
+                duration: Some(self.duration),
+                configs: vec![],
+                sets: args.sim_sets.clone(),
+                prefix: Some(self.prefix.clone()),
+                scenario: Some(args.scenario.clone()),
+                robot: args.robot.clone(),
+            },
+            simulator: args.plant,
+            // MuJoCo's generated scene is kept with the run.
+            bundle: (args.plant == PlantChoice::Mujoco).then(|| self.dir.join("mujoco")),
+            rrd: Some(self.dir.join("sim.rrd")),
+            recording_id: Some(self.recording.clone()),
+            connect: self.live.map(str::to_owned),
+            summary: Some(self.dir.join("sim.json")),
+            truth_csv: (!args.realtime).then(|| self.dir.join("sim.csv")),
+        }
+    }
+
+    /// The forecaster (none with `--no-forecaster`) and, over Zenoh, the bridge it talks to.
+    #[allow(clippy::type_complexity)]
+    fn forecaster(
+        &self,
+    ) -> Result<(Option<Participant>, Option<Participant>), Box<dyn std::error::Error + Send + Sync>>
+    {
+        let (args, dur) = (self.args, format!("{}", self.duration));
+        let mut bridge = None;
+        let mut cmd = match &args.forecaster {
+            _ if args.forecaster_over_zenoh => {
+                let bridge_log = self.log("bridge.log")?;
+                let (b, mut c) = over_zenoh(
+                    self.exe,
+                    args,
+                    self.root,
+                    self.dir,
+                    &self.prefix,
+                    bridge_log,
+                )?;
+                bridge = Some(b);
+                c.env("UPC_SCENARIO_DIR", self.root.join("remote"));
+                c
+            }
+            Some(cmd) => shell(cmd),
+            None => {
+                let forecast = ForecastArgs {
+                    scenario: Some(args.scenario.clone()),
+                    dt: 0.005,
+                    window: 2.5,
+                    period: 0.01,
+                    until: Some(self.duration),
+                    prefix: self.prefix.clone(),
+                    error_scale: args.forecast_error_scale,
+                    error_shift: args.forecast_error_shift,
+                };
+                let mut c = Command::new(self.exe);
+                c.args(Argv::of("forecast", &forecast));
+                c
+            }
+        };
+        if args.forecaster.is_some() || args.forecaster_over_zenoh {
+            cmd.env("UPC_PREFIX", &self.prefix)
+                .env("UPC_DURATION", &dur)
+                .env("UPC_SCENARIO", &args.scenario);
+        }
+        let (out, err) = self.log("forecaster.log")?;
+        if args.no_forecaster {
+            return Ok((None, bridge));
+        }
+        let mut forecaster = Participant::spawn("forecaster", cmd.stdout(out).stderr(err))?;
+        if bridge.is_some() {
+            // A remote forecaster takes a while to start and connect: the controller starts once
+            // its first window is here, and a forecaster that dies first is reported at once.
+            first_forecast(&self.prefix, &mut forecaster, Duration::from_secs(30))?;
+        }
+        Ok((Some(forecaster), bridge))
+    }
+
+    fn controller_args(&self, kind: ControllerKind) -> ControllerArgs {
+        let args = self.args;
+        let mut sets = args.config.sets.clone();
+        if args.no_forecaster {
+            sets.push("controller.lockstep_forecast_wait=0".into());
+        }
+        ControllerArgs {
+            scenario: args.scenario.clone(),
+            controller: Some(kind),
+            realtime: args.realtime,
+            robot: args.robot.clone(),
+            prefix: self.prefix.clone(),
+            rrd: Some(self.dir.join("controller.rrd")),
+            recording_id: self.recording.clone(),
+            connect: self.live.map(str::to_owned),
+            csv: Some(self.dir.join("controller.csv")),
+            summary: Some(self.dir.join("controller.json")),
+            duration: Some(self.duration),
+            config: ConfigArgs {
+                configs: args.config.configs.clone(),
+                sets,
+            },
+        }
+    }
+
+    /// Progress from the plant's state stream until the controller exits; a participant that
+    /// dies ends the run at once (the controller would otherwise wait out its own time-outs, a
+    /// minute for a vanished simulator). The controller's exit code, and whether one died.
+    fn watch(
+        &self,
+        kind: ControllerKind,
+        controller: &mut Child,
+        sim: &mut Child,
+        mut forecaster: Option<&mut Child>,
+    ) -> Result<(Option<i32>, bool), Box<dyn std::error::Error + Send + Sync>> {
+        let bar = progress_bar(self.args.quiet, self.duration, kind);
+        let watcher = Bus::open(&self.prefix, "launcher")
+            .and_then(|b| b.subscriber::<StateMsg>().map(|s| (b, s)));
+        loop {
+            if let Ok((_, states)) = &watcher
+                && let Ok(Some(s)) = states.latest()
+            {
+                bar.set_position((s.time * 1000.0) as u64);
+                bar.set_message(format!("{:.2}/{:.2} s", s.time, self.duration));
+            }
+            if let Some(status) = controller.try_wait()? {
+                bar.finish_and_clear();
+                return Ok((status.code(), false));
+            }
+            let mut others: Vec<(&'static str, &mut Child)> = vec![("simulator", &mut *sim)];
+            if let Some(f) = forecaster.as_deref_mut() {
+                others.push(("forecaster", f));
+            }
+            if let Some((what, status)) = failed_participant(&mut others)? {
+                let log = self.dir.join(if what == "simulator" {
+                    "sim.log"
+                } else {
+                    "forecaster.log"
+                });
+                bar.suspend(|| {
+                    eprintln!(
+                        "{}: the {what} died ({status}): {}  ({}); stopping the run",
+                        kind.name(),
+                        last_log_line(&log),
+                        log.display()
+                    )
+                });
+                let code = terminate(controller, Duration::from_secs(10));
+                bar.finish_and_clear();
+                return Ok((code, true));
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+fn progress_bar(quiet: bool, duration: f64, kind: ControllerKind) -> ProgressBar {
+    let bar = if quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new((duration * 1000.0) as u64)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{prefix:>3} [{bar:40}] {msg} sim time, {elapsed} wall")
+            .map(|s| s.progress_chars("=> "))
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.set_prefix(kind.name());
+    bar
 }
 
 /// `cmd` through `sh -c`, with `exec` so that the command itself, not the shell, gets our

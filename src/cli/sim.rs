@@ -4,8 +4,8 @@ use std::path::{Path, PathBuf};
 
 use upc::scenario::Scenario;
 use upc::shutdown::stop_flag;
-use upc::sim::SimConfig;
 use upc::sim::process::{RunOptions, run};
+use upc::sim::{Engine, SimConfig};
 
 use super::CliResult;
 use super::argv::{Argv, ToArgv, fields};
@@ -28,9 +28,8 @@ pub enum PlantChoice {
     /// upc's own simulator (this process).
     #[default]
     Upc,
-    /// MuJoCo, through its Python bindings (`services/python/mujoco_plant.py`, run with the
-    /// Python of `scripts/setup.sh`'s `.venv`): the scene generated from the same robot
-    /// description and scenario (`upc mjcf`).
+    /// MuJoCo (its C library, from the wheel `scripts/setup.sh` installs), under the same plant
+    /// runtime: the scene generated from the same robot description and scenario (`upc mjcf`).
     Mujoco,
 }
 
@@ -84,14 +83,10 @@ pub struct SimArgs {
     /// The simulator: upc's own, or MuJoCo.
     #[arg(long = "plant", value_enum, default_value = "upc")]
     pub simulator: PlantChoice,
-    /// MuJoCo: write the generated scene here (default: a directory under the system's temp).
+    /// MuJoCo: also write the generated scene (`scene.xml`, `plant.json`) here.
     #[arg(long)]
     pub bundle: Option<PathBuf>,
-    /// MuJoCo: the Python with `mujoco` and `iceoryx2` (default: $UPC_PYTHON, else
-    /// `.venv/bin/python` of the working directory or of the source tree, else `python3`).
-    #[arg(long)]
-    pub python: Option<PathBuf>,
-    /// Write the ground truth to this rerun recording (upc's simulator only).
+    /// Write the ground truth to this rerun recording.
     #[arg(long)]
     pub rrd: Option<PathBuf>,
     /// Rerun recording id (give the controller the same one to merge recordings).
@@ -110,10 +105,6 @@ pub struct SimArgs {
     pub truth_csv: Option<PathBuf>,
 }
 
-/// Write the MuJoCo scene of a plant: `upc mjcf --out DIR` writes `DIR/scene.xml` (open it in
-/// MuJoCo's viewer: `python -m mujoco.viewer --mjcf DIR/scene.xml`), `DIR/plant.json` and the
-/// plant process `DIR/mujoco_plant.py`, generated from the robot description, the scenario and
-/// the simulator's config, as `upc sim --plant mujoco` does at its start.
 impl ToArgv for PlantArgs {
     fn write(&self, w: &mut Argv) {
         let PlantArgs {
@@ -136,7 +127,6 @@ impl ToArgv for SimArgs {
             plant,
             simulator,
             bundle,
-            python,
             rrd,
             recording_id,
             connect,
@@ -144,11 +134,15 @@ impl ToArgv for SimArgs {
             truth_csv,
         } = self;
         w.nested(plant);
-        fields!(w; choice simulator, opt bundle, opt python, opt rrd, opt recording_id,
+        fields!(w; choice simulator, opt bundle, opt rrd, opt recording_id,
                 opt connect, opt summary, opt truth_csv);
     }
 }
 
+/// Write the MuJoCo scene of a plant: `upc mjcf --out DIR` writes `DIR/scene.xml` (open it in
+/// MuJoCo's viewer: `python -m mujoco.viewer --mjcf DIR/scene.xml`) and `DIR/plant.json` (the
+/// names and figures a plant of one's own needs), generated from the robot description, the
+/// scenario and the simulator's config, as `upc sim --plant mujoco` does at its start.
 #[derive(clap::Args)]
 pub struct MjcfArgs {
     #[command(flatten)]
@@ -180,11 +174,9 @@ pub fn load_config(args: &PlantArgs) -> Result<SimConfig, upc::config::ConfigErr
     SimConfig::load(&args.configs, &sets)
 }
 
-/// The plant process, written beside the scene it runs.
-const MUJOCO_PLANT_PY: &str = include_str!("../../services/python/mujoco_plant.py");
 pub(super) const CHANNELS_PY: &str = include_str!("../../services/python/upc_channels.py");
 
-/// Writes the MuJoCo bundle of `args` into `dir`; returns the path of its `plant.json`.
+/// Writes the MuJoCo scene of `args` into `dir`; returns the path of its `plant.json`.
 fn write_bundle(
     args: &PlantArgs,
     dir: &Path,
@@ -200,58 +192,30 @@ fn write_bundle(
     };
     write("scene.xml", &scene.mjcf)?;
     write("plant.json", &serde_json::to_string_pretty(&scene.plant)?)?;
-    write("mujoco_plant.py", MUJOCO_PLANT_PY)?;
-    write("upc_channels.py", CHANNELS_PY)?;
     Ok(dir.join("plant.json"))
 }
 
 pub fn mjcf_cli(args: MjcfArgs) -> CliResult {
     let plant = write_bundle(&args.plant, &args.out)?;
     println!(
-        "wrote {}/scene.xml and {} (run it: python {}/mujoco_plant.py {})",
+        "wrote {}/scene.xml and {} (view it: python -m mujoco.viewer --mjcf {}/scene.xml)",
         args.out.display(),
         plant.display(),
-        args.out.display(),
-        plant.display()
+        args.out.display()
     );
     Ok(())
 }
 
-/// `upc sim --plant mujoco`: generate the scene, then become the MuJoCo plant process (exec, so
-/// that signals and the exit status are the plant's own).
-fn run_mujoco(args: &SimArgs) -> CliResult {
-    if args.rrd.is_some() {
-        return Err(
-            "--rrd: the MuJoCo plant writes no recording (the controller's .rrd has the states)"
-                .into(),
-        );
-    }
-    let dir = args
-        .bundle
-        .clone()
-        .unwrap_or_else(|| std::env::temp_dir().join(format!("upc-mujoco-{}", std::process::id())));
-    let plant = write_bundle(&args.plant, &dir)?;
-    let py = super::common::python(&args.python);
-    let mut cmd = std::process::Command::new(&py);
-    cmd.arg(dir.join("mujoco_plant.py")).arg(&plant);
-    if let Some(s) = &args.summary {
-        cmd.arg("--summary").arg(s);
-    }
-    if let Some(t) = &args.truth_csv {
-        cmd.arg("--truth-csv").arg(t);
-    }
-    use std::os::unix::process::CommandExt;
-    let e = cmd.exec();
-    Err(format!(
-        "could not start the MuJoCo plant with {}: {e} (run scripts/setup.sh, or give --python)",
-        py.display()
-    )
-    .into())
-}
-
 pub fn run_cli(args: SimArgs) -> CliResult {
-    if args.simulator == PlantChoice::Mujoco {
-        return run_mujoco(&args);
+    let engine = match args.simulator {
+        PlantChoice::Upc => Engine::Upc,
+        PlantChoice::Mujoco if !upc::sim::mujoco::AVAILABLE => {
+            return Err(upc::sim::mujoco::UNAVAILABLE.into());
+        }
+        PlantChoice::Mujoco => Engine::Mujoco,
+    };
+    if let Some(dir) = &args.bundle {
+        write_bundle(&args.plant, dir)?;
     }
     let config = load_config(&args.plant)?;
     let opts = RunOptions {
@@ -262,6 +226,7 @@ pub fn run_cli(args: SimArgs) -> CliResult {
         recording_id: args.recording_id.clone(),
         live: args.connect.clone(),
         truth_csv: args.truth_csv.clone(),
+        engine,
     };
     let stop = stop_flag();
     let s = run(&opts, &stop)?;
@@ -305,5 +270,8 @@ pub fn run_cli(args: SimArgs) -> CliResult {
             s.ipc_overhead_max * 1e6
         );
     }
-    Ok(())
+    match s.error {
+        Some(e) => Err(e.into()),
+        None => Ok(()),
+    }
 }

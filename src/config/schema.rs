@@ -407,11 +407,11 @@ pub struct ControllerConfig {
     pub lockstep_c2_wait: f64,
     /// Control ticks between two rerun records (and 10× that between plan records).
     pub log_every: usize,
-    pub realtime: crate::control::realtime::RealtimeSettings,
+    pub realtime: super::RealtimeSettings,
     /// The forecast corrected by the measured hand force (docs/forecast_correction.md).
-    pub forecast_correction: crate::control::CorrectionSettings,
+    pub forecast_correction: super::CorrectionSettings,
     /// The CoM disturbance observer (docs/forecast_correction.md, "CoM observer").
-    pub com_observer: crate::control::ComObserverSettings,
+    pub com_observer: super::ComObserverSettings,
 }
 
 impl ControllerConfig {

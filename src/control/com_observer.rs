@@ -9,51 +9,7 @@
 //! s² + 2ζω s + ω² put both poles at the bandwidth ω (OB-2); its estimate enters the preview as
 //! M d̂ e^{−s/T_d} over the horizon, as the forecast correction's offset does.
 
-use serde::Deserialize;
-
-/// `[controller.com_observer]`.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ComObserverSettings {
-    /// Estimate and preview pushes on the CoM that nothing forecasts (C0, C1, C2).
-    pub enabled: bool,
-    /// Bandwidth of the observer (Hz).
-    pub bandwidth: f64,
-    /// Damping ratio of its error dynamics.
-    pub damping: f64,
-    /// Time constant of the estimate's decay over the horizon (s).
-    pub decay: f64,
-    /// Largest force the estimate may take, per axis (N): a tipping foot breaks eq. (OB-1).
-    pub max_force: f64,
-}
-
-impl Default for ComObserverSettings {
-    fn default() -> Self {
-        Self {
-            enabled: false,
-            bandwidth: 5.0,
-            damping: 1.0,
-            decay: 0.3,
-            max_force: 300.0,
-        }
-    }
-}
-
-impl ComObserverSettings {
-    pub fn check(&self) -> Result<(), (&'static str, String)> {
-        for (key, v) in [
-            ("bandwidth", self.bandwidth),
-            ("damping", self.damping),
-            ("decay", self.decay),
-            ("max_force", self.max_force),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err((key, format!("must be finite and > 0, got {v}")));
-            }
-        }
-        Ok(())
-    }
-}
+pub use crate::config::ComObserverSettings;
 
 /// The observer's state, both horizontal axes.
 #[derive(Debug, Clone)]

@@ -155,6 +155,10 @@ impl ControllerCore {
         height_gains: [f64; 2],
         zmp_offset: [f64; 2],
     ) -> Result<Self, Box<dyn std::error::Error + Send + Sync>> {
+        // One gravity for the controller: the cart-table's, the forecast window's weight and
+        // the whole-body dynamics' (RNEA, the QP) are all `robot.gravity` of the config.
+        let mut model = model;
+        model.gravity = nalgebra::Vector3::new(0.0, 0.0, -config.robot.gravity);
         let p = &config.preview;
         let n = p.horizon;
         let cart = CartTable {

@@ -7,7 +7,9 @@
 //! - [`com_observer`]: the push on the CoM that nothing forecasts, from the measured CoP.
 //! - [`gain_thread`]: C2 in a lower-priority thread behind wait-free triple buffers.
 //! - [`logger`]: the rerun log, from its own thread, never blocking the loop.
-//! - [`server`]: the loop over iceoryx2 (`upc controller`), lockstep or real time.
+//! - [`server`]: the loop over iceoryx2 (`upc controller`), lockstep or real time, as named
+//!   steps; [`plant_link`]: which state is new, a restarted or silent plant (a state machine);
+//!   [`run_metrics`]: the run's figures, tick by tick; [`summary`]: what a run reports.
 //! - [`timing`]: absolute-deadline ticker and latency histogram.
 //! - [`realtime`]: SCHED_FIFO, mlockall, CPU affinity (degrading with a warning).
 
@@ -18,8 +20,11 @@ pub mod forecast_intake;
 pub mod forecast_window;
 pub mod gain_thread;
 pub mod logger;
+pub mod plant_link;
 pub mod realtime;
+pub mod run_metrics;
 pub mod server;
+pub mod summary;
 pub mod timing;
 
 pub use com_observer::{ComObserver, ComObserverSettings};

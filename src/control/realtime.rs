@@ -1,19 +1,7 @@
 //! Real-time process setup: SCHED_FIFO priority, locked memory, CPU affinity. Each step that
 //! the OS refuses (no CAP_SYS_NICE, container limits) degrades with a warning, never an error.
 
-use serde::Deserialize;
-
-/// `[controller.realtime]` settings.
-#[derive(Debug, Clone, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct RealtimeSettings {
-    /// SCHED_FIFO priority (1–99) of the control thread; 0 keeps the default scheduler.
-    pub fifo_priority: i32,
-    /// mlockall(MCL_CURRENT | MCL_FUTURE): no page faults on the control path.
-    pub lock_memory: bool,
-    /// CPU to pin the control thread to; none if absent.
-    pub cpu: Option<usize>,
-}
+pub use crate::config::RealtimeSettings;
 
 /// What was actually applied.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]

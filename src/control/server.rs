@@ -25,22 +25,19 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use serde::{Deserialize, Serialize};
-
 use super::forecast_intake::ForecastIntake;
-use super::forecast_window::RejectionCounts;
 use super::gain_thread::GainSolver;
 use super::logger::{ControlLogger, TickLog};
-use super::{ControllerCore, ForecastWindow, GainHandoff, LatencyHistogram, Ticker};
+use super::plant_link::{LinkTimeouts, PlantLink, Verdict};
+use super::run_metrics::RunMetrics;
+pub use super::summary::{CorrectionSummary, ServerSummary};
+use super::{ControllerCore, ForecastWindow, GainHandoff, Ticker};
 use crate::channels::{
-    Bus, ChannelError, ForecastMsg, MAX_DOF, Notifier, Publisher, STATE_FLAG_HOLD, ServiceKind,
-    StateMsg, TORQUE_FLAG_FALLBACK, TorqueMsg,
+    Bus, ChannelError, ForecastMsg, Listener, MAX_DOF, Notifier, Publisher, STATE_FLAG_HOLD,
+    ServiceKind, StateMsg, Subscriber, TORQUE_FLAG_FALLBACK, TorqueMsg,
 };
 use crate::config::{Config, ControllerKind, LoopMode};
 use crate::dynamics::Model;
-
-/// A measured CoP closer than this to the support edge counts as at the edge (m).
-const EDGE_BAND: f64 = 1e-3;
 
 /// How to run, beyond the config.
 #[derive(Debug, Clone)]
@@ -66,126 +63,6 @@ pub struct ServerOptions {
     pub robot_hash: Option<u64>,
     /// The robot's name, for the summary.
     pub robot_name: String,
-}
-
-/// What a run measured; written as the controller's part of `summary.json`.
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
-#[serde(default)]
-pub struct ServerSummary {
-    pub controller: String,
-    /// The robot's name (its description) and total mass (kg).
-    pub robot: String,
-    pub robot_mass: f64,
-    pub mode: String,
-    /// Lockstep with every input a function of simulated time (see the module doc): a rerun
-    /// gives the same bytes. `reproducibility` says why not, when not.
-    pub reproducible: bool,
-    pub reproducibility: String,
-    pub ticks: u64,
-    pub sim_time: f64,
-    pub tick_p50_us: f64,
-    pub tick_p99_us: f64,
-    pub tick_max_us: f64,
-    pub deadline_overruns: u64,
-    pub deadline_misses: u64,
-    /// Loop passes without a new state (real time) or with a repeated one.
-    pub stale_states: u64,
-    /// Times the state stopped for longer than `controller.state_timeout`.
-    pub stale_periods: u64,
-    /// Real time: damping torques published (flagged fallback) while the state was stale.
-    pub stale_ticks: u64,
-    /// Longest wall time between two fresh states (s).
-    pub longest_state_gap: f64,
-    /// Restarted simulators the controller latched onto and resumed with.
-    pub reconnects: u64,
-    /// Control ticks since the last reconnect (all ticks without one).
-    pub ticks_since_reconnect: u64,
-    pub tick_errors: u64,
-    pub wbc_fallbacks: u64,
-    /// Ticks whose whole-body QP had a torque limit active, and ticks the condensed QP could
-    /// not be formed (decided by the full one).
-    #[serde(default)]
-    pub wbc_torque_limited_ticks: u64,
-    #[serde(default)]
-    pub wbc_condensation_failures: u64,
-    pub preview_fallbacks: u64,
-    pub forecasts_accepted: u64,
-    pub forecasts_rejected: u64,
-    pub forecasts_rejected_by: RejectionCounts,
-    /// Windows accepted from a forecaster that restarted (its seq went back).
-    pub forecaster_restarts: u64,
-    /// The forecast was lost at some point: no valid window for `state_timeout` and the
-    /// current one no longer covering the horizon (it decays to zero).
-    pub forecast_lost: bool,
-    /// Times the forecast was lost.
-    pub forecast_losses: u64,
-    /// No forecast window was ever accepted (no forecaster, or none valid): the preview ran on
-    /// the measured hand force alone, which is not a lost forecast.
-    pub forecast_never_received: bool,
-    /// Plant time (s) of the first window accepted in the last plant session (lockstep: the
-    /// same for a forecaster started late, which the plant waited for).
-    pub forecast_first_at: Option<f64>,
-    /// Lockstep: the wait for a forecaster's first window ended without one.
-    pub forecast_first_wait_expired: bool,
-    /// Accepted forecast windows whose scenario differs from the one the plant announces.
-    pub forecast_scenario_mismatches: u64,
-    /// The plant announced another scenario than this controller's `--scenario`.
-    pub plant_scenario_mismatch: bool,
-    /// The plant's announced scenario (name and hash) at the last state.
-    pub plant_scenario: String,
-    /// Lockstep: ticks that waited for their forecast window / for C2, and waits that timed out.
-    pub forecast_waits: u64,
-    pub forecast_wait_timeouts: u64,
-    pub c2_waits: u64,
-    pub c2_wait_timeouts: u64,
-    /// Ticks computed while the plant still held the robot itself (its start-up hold or a
-    /// hand-over): the torques were blended in, not applied as such.
-    pub ticks_in_plant_hold: u64,
-    pub c2_solves: u64,
-    pub c2_failures: u64,
-    pub c2_panics: u64,
-    pub c2_stale_schedules: u64,
-    pub c2_solve_mean_ms: f64,
-    pub c2_solve_max_ms: f64,
-    pub c2_iterations_mean: f64,
-    /// Smallest distance of the measured ZMP (centre of pressure) to the support edge (m). The
-    /// measured CoP cannot leave the support: where the model ZMP would, the CoP sits on the
-    /// edge and the feet start to tip.
-    pub min_zmp_margin: f64,
-    /// Time the measured CoP spends within 1 mm of the support edge (s): the feet tipping.
-    pub time_at_support_edge: f64,
-    /// Largest drop of the CoM height below its initial height (m): a fall shows here.
-    pub com_height_drop: f64,
-    pub hand_rms_error: f64,
-    pub hand_peak_error: f64,
-    pub max_zmp_error: f64,
-    pub dropped_log_records: u64,
-    /// Diagnostic lines (tracing, to stderr) the process dropped so far because stderr was not
-    /// read fast enough (see [`crate::logging`]); the loop never waits on stderr.
-    #[serde(default)]
-    pub dropped_log_lines: u64,
-    pub realtime: super::realtime::RealtimeReport,
-    pub stopped_by: String,
-    /// The forecast correction (docs/forecast_correction.md); `None`: off (or C0).
-    pub forecast_correction: Option<CorrectionSummary>,
-}
-
-/// What the forecast correction did over a run.
-#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
-#[serde(default)]
-pub struct CorrectionSummary {
-    /// Times the measured hand force contradicted the forecast, and the plant time it did.
-    pub contradictions: u64,
-    pub contradicted_time: f64,
-    /// κ̂: smallest, largest and last; τ̂ last (s); d̂ last (N).
-    pub factor_min: f64,
-    pub factor_max: f64,
-    pub factor_last: f64,
-    pub shift_last: f64,
-    pub offset_last: [f64; 3],
-    /// Estimations of κ̂, τ̂; ticks whose measured force was not finite.
-    pub estimations: u64,
-    pub bad_measurements: u64,
 }
 
 /// The damping torques [`send_damping`] publishes: `−damping · qd`, for state `step`.
@@ -265,48 +142,630 @@ pub fn run_server_with(
     stop: Arc<AtomicBool>,
     c2_solver: Option<Box<dyn GainSolver>>,
 ) -> Result<ServerSummary, Box<dyn std::error::Error + Send + Sync>> {
-    let cc = &config.controller;
-    let kind = cc.kind;
-    let dt = 1.0 / cc.rate_hz;
-    let weight = model.total_mass() * config.robot.gravity;
-    // Every state and torque message holds at most MAX_DOF values, and the loop slices its
-    // buffers by the model's sizes: a larger model could never be served.
-    if model.nq > MAX_DOF || model.nv > MAX_DOF {
-        return Err(format!(
-            "the model has nq = {}, nv = {}: the channels carry at most {MAX_DOF} each; lock \
-             the joints the controller need not move (`locked` in the robot description)",
-            model.nq, model.nv
-        )
-        .into());
-    }
-    let bus = Bus::open(&opts.prefix, "controller")?;
-    let states = bus.subscriber::<StateMsg>()?;
-    let state_events = bus.listener(ServiceKind::State)?;
-    let torques = bus.publisher::<TorqueMsg>()?;
-    let torque_events = bus.notifier(ServiceKind::Torques)?;
-    let lockstep = cc.mode == LoopMode::Lockstep;
-    // One thread for faer (C2's normal equations): parallel reductions may sum in another order
-    // from one run to the next, and on two cores rayon's workers compete with the loop.
-    faer::set_global_parallelism(faer::Par::Seq);
-    let controller_id = crate::channels::new_run_id();
+    ControlLoop::open(config, model, opts, c2_solver)?.run(&stop)
+}
 
-    let mut core = ControllerCore::new(
-        model,
-        config,
-        kind,
-        dt,
-        [cc.com_height_kp, cc.com_height_kd],
-        opts.zmp_offset,
-    )?
-    .with_robot_hash(opts.robot_hash.unwrap_or(0));
-    let n_tau = core.model.nv - 6;
-    let horizon_time = config.preview.horizon as f64 * config.preview.period;
-    let mut intake = ForecastIntake::new(
+/// The loop's iceoryx2 ports to the plant.
+struct PlantPorts {
+    states: Subscriber<StateMsg>,
+    state_events: Listener,
+    torques: Publisher<TorqueMsg>,
+    torque_events: Notifier,
+}
+
+/// The plant's announced scenario, checked against this controller's and the forecast's.
+struct ScenarioCheck {
+    plant_hash: u64,
+    plant_name: [u8; crate::channels::SCENARIO_NAME_LEN],
+    warned_forecast: u64,
+}
+
+/// Everything the loop keeps between ticks. One pass: receive → classify ([`PlantLink`]) →
+/// tick (forecast, C2's schedule, the core) → publish → record ([`RunMetrics`]) → log.
+struct ControlLoop<'a> {
+    config: &'a Config,
+    opts: &'a ServerOptions,
+    dt: f64,
+    horizon_time: f64,
+    ports: PlantPorts,
+    core: ControllerCore,
+    intake: ForecastIntake,
+    c2: Option<GainHandoff>,
+    logger: Option<ControlLogger>,
+    ticker: Option<Ticker>,
+    link: PlantLink,
+    metrics: RunMetrics,
+    /// The summary's event counters, filled as they happen; the rest at the end.
+    s: ServerSummary,
+    n_tau: usize,
+    controller_id: u64,
+    seq: u64,
+    tau: [f64; MAX_DOF],
+    /// Joint rates of the last fresh state, for the damping torques of a stale period.
+    last_qd: [f64; MAX_DOF],
+    /// Why the run will not reproduce, if it will not (no allocation on the loop).
+    irreproducible: Option<&'static str>,
+    scenario: ScenarioCheck,
+    schedule_was_stale: bool,
+    status_every: Duration,
+    next_status: Instant,
+}
+
+/// What one tick took from the forecast and C2.
+#[derive(Default)]
+struct Inputs {
+    /// Lockstep waits for the forecast and C2: not the tick's compute time.
+    waited: Duration,
+    /// C2's schedule in use: cost, nominal cost, iterations, solve time (for the log).
+    c2_log: Option<(f64, f64, u32, f64)>,
+}
+
+impl<'a> ControlLoop<'a> {
+    fn open(
+        config: &'a Config,
+        model: Model,
+        opts: &'a ServerOptions,
+        c2_solver: Option<Box<dyn GainSolver>>,
+    ) -> Result<Self, Box<dyn std::error::Error + Send + Sync>> {
+        let cc = &config.controller;
+        let (kind, dt) = (cc.kind, 1.0 / cc.rate_hz);
+        let lockstep = cc.mode == LoopMode::Lockstep;
+        let robot_mass = model.total_mass();
+        // Every state and torque message holds at most MAX_DOF values, and the loop slices its
+        // buffers by the model's sizes: a larger model could never be served.
+        if model.nq > MAX_DOF || model.nv > MAX_DOF {
+            return Err(format!(
+                "the model has nq = {}, nv = {}: the channels carry at most {MAX_DOF} each; lock \
+                 the joints the controller need not move (`locked` in the robot description)",
+                model.nq, model.nv
+            )
+            .into());
+        }
+        let bus = Bus::open(&opts.prefix, "controller")?;
+        let ports = PlantPorts {
+            states: bus.subscriber::<StateMsg>()?,
+            state_events: bus.listener(ServiceKind::State)?,
+            torques: bus.publisher::<TorqueMsg>()?,
+            torque_events: bus.notifier(ServiceKind::Torques)?,
+        };
+        // One thread for faer (C2's normal equations): parallel reductions may sum in another
+        // order from one run to the next, and on two cores rayon's workers compete with the loop.
+        faer::set_global_parallelism(faer::Par::Seq);
+        let core = ControllerCore::new(
+            model,
+            config,
+            kind,
+            dt,
+            [cc.com_height_kp, cc.com_height_kd],
+            opts.zmp_offset,
+        )?
+        .with_robot_hash(opts.robot_hash.unwrap_or(0));
+        let n_tau = core.model.nv - 6;
+        let horizon_time = config.preview.horizon as f64 * config.preview.period;
+        let intake = forecast_intake(config, &bus, robot_mass, horizon_time)?;
+        let c2 = start_c2(config, c2_solver)?;
+        let logger = start_logger(config, opts)?;
+        let status_every = Duration::from_secs_f64(cc.status_every);
+        Ok(ControlLoop {
+            config,
+            opts,
+            dt,
+            horizon_time,
+            ports,
+            core,
+            intake,
+            c2,
+            logger,
+            ticker: (!lockstep).then(|| Ticker::new(Duration::from_secs_f64(dt))),
+            link: PlantLink::new(
+                cc.mode,
+                LinkTimeouts {
+                    state: cc.state_timeout,
+                    reconnect: cc.reconnect_timeout,
+                    startup: opts.startup_timeout,
+                },
+            ),
+            metrics: RunMetrics::new(dt),
+            s: ServerSummary {
+                controller: kind.name().into(),
+                robot: opts.robot_name.clone(),
+                robot_mass,
+                mode: format!("{:?}", cc.mode).to_lowercase(),
+                realtime: super::realtime::apply(&cc.realtime),
+                ..Default::default()
+            },
+            n_tau,
+            controller_id: crate::channels::new_run_id(),
+            seq: 0,
+            tau: [0.0; MAX_DOF],
+            last_qd: [0.0; MAX_DOF],
+            irreproducible: initially_irreproducible(cc),
+            scenario: ScenarioCheck {
+                plant_hash: 0,
+                plant_name: [0; crate::channels::SCENARIO_NAME_LEN],
+                warned_forecast: 0,
+            },
+            schedule_was_stale: false,
+            status_every,
+            next_status: Instant::now() + status_every,
+        })
+    }
+
+    fn run(
+        mut self,
+        stop: &AtomicBool,
+    ) -> Result<ServerSummary, Box<dyn std::error::Error + Send + Sync>> {
+        let stopped_by = loop {
+            if stop.load(Ordering::Relaxed) {
+                break "signal";
+            }
+            self.status_line();
+            self.wait_for_state()?;
+            let received = self.ports.states.latest();
+            let received = self.or_safe_torques(received)?;
+            let states = &self.ports.states;
+            let verdict = self
+                .link
+                .classify(received.as_ref(), || states.has_live_publisher());
+            let state = match (verdict, received) {
+                (Verdict::Control { restarted }, Some(state)) => {
+                    if restarted {
+                        // The new plant's robot starts over: latch references, the forecast's
+                        // time line and the initial CoM height again from this state.
+                        self.core.reset();
+                        self.intake.restart(state.time);
+                        self.metrics.restart();
+                    }
+                    state
+                }
+                (Verdict::Damp { step }, _) => {
+                    self.damp_stale(step)?;
+                    continue;
+                }
+                (Verdict::Gone, _) => break "simulator stopped",
+                (Verdict::NeverStarted, _) => {
+                    return Err(format!(
+                        "no state from the simulator on {}/state within {} s (is it running \
+                         with this prefix, and from the same upc version? a plant of another \
+                         contract version cannot open the services: see its log)",
+                        self.opts.prefix, self.opts.startup_timeout
+                    )
+                    .into());
+                }
+                _ => continue,
+            };
+            self.control(&state, stop)?;
+            if self
+                .opts
+                .duration
+                .is_some_and(|d| state.time >= d - 0.5 * self.dt)
+            {
+                break "duration reached";
+            }
+        };
+        Ok(self.finish(stopped_by))
+    }
+
+    /// Real time: the ticker's next deadline. Lockstep: the plant's next state (bounded).
+    fn wait_for_state(&mut self) -> Result<(), ChannelError> {
+        let Some(t) = self.ticker.as_mut() else {
+            let spin = Duration::from_secs_f64(self.config.controller.ipc_spin_us * 1e-6);
+            let states = &self.ports.states;
+            let woken = self
+                .ports
+                .state_events
+                .wait_until(Duration::from_millis(20), spin, || states.has_samples());
+            return self.or_safe_torques(woken).map(|_| ());
+        };
+        t.wait();
+        Ok(())
+    }
+
+    /// One control tick from `state`: inputs, the core, the torques out, the figures.
+    fn control(&mut self, state: &StateMsg, stop: &AtomicBool) -> Result<(), ChannelError> {
+        let tick_start = Instant::now();
+        let nv = (state.nv as usize).min(MAX_DOF);
+        for (i, qd) in self.last_qd[..self.n_tau].iter_mut().enumerate() {
+            *qd = state
+                .v
+                .get(6 + i)
+                .copied()
+                .filter(|v| v.is_finite() && 6 + i < nv)
+                .unwrap_or(0.0);
+        }
+        let mut inputs = Inputs::default();
+        let accepted = self.take_forecast(state, stop, &mut inputs)?;
+        self.check_scenarios(state, accepted);
+        if state.flags & STATE_FLAG_HOLD != 0 {
+            self.s.ticks_in_plant_hold += 1;
+        }
+        self.pick_up_c2(&mut inputs);
+        let flags = self.compute(state, &mut inputs);
+        self.publish(
+            state,
+            flags,
+            tick_start.elapsed().saturating_sub(inputs.waited),
+        )?;
+        // Lockstep waits for the forecast or C2 are not the plant's silence.
+        self.link.answered();
+        let tick_time = tick_start.elapsed().saturating_sub(inputs.waited);
+        self.metrics
+            .tick(&self.core.last, self.core.support(), tick_time);
+        if let Some(h) = self.c2.as_mut()
+            && self
+                .metrics
+                .ticks
+                .is_multiple_of(self.config.controller.c2_every as u64)
+        {
+            let (core, seq) = (&self.core, self.seq);
+            h.offer(|snap| core.snapshot(snap, seq));
+        }
+        self.record(tick_time, inputs.c2_log);
+        Ok(())
+    }
+
+    /// The newest forecast, validated; in lockstep, the one whose period covers this state's
+    /// time, waited for. Whether a window was accepted this tick.
+    fn take_forecast(
+        &mut self,
+        state: &StateMsg,
+        stop: &AtomicBool,
+        inputs: &mut Inputs,
+    ) -> Result<bool, ChannelError> {
+        let taken = self
+            .intake
+            .take(state.time, || stop.load(Ordering::Relaxed));
+        let f = self.or_safe_torques(taken)?;
+        if let Some(w) = f.waited {
+            self.s.forecast_waits += 1;
+            inputs.waited += w;
+        }
+        self.s.forecast_wait_timeouts += u64::from(f.timed_out);
+        self.s.forecast_first_wait_expired |= f.gave_up_first;
+        if f.lost {
+            self.s.forecast_lost = true;
+            self.s.forecast_losses += 1;
+        }
+        if let Some(why) = f.not_reproducible {
+            not_reproducible(&mut self.irreproducible, why);
+        }
+        let cc = &self.config.controller;
+        if cc.mode == LoopMode::Lockstep && f.accepted && cc.lockstep_forecast_wait == 0.0 {
+            not_reproducible(
+                &mut self.irreproducible,
+                "controller.lockstep_forecast_wait = 0: the window a tick sees depends on timing",
+            );
+        }
+        Ok(f.accepted)
+    }
+
+    /// The plant's scenario against this controller's and the forecast's.
+    fn check_scenarios(&mut self, state: &StateMsg, accepted: bool) {
+        let sc = &mut self.scenario;
+        if state.scenario_hash != sc.plant_hash {
+            sc.plant_hash = state.scenario_hash;
+            sc.plant_name = state.scenario;
+            if let Some(mine) = self.opts.scenario_hash
+                && sc.plant_hash != 0
+                && mine != sc.plant_hash
+            {
+                self.s.plant_scenario_mismatch = true;
+                tracing::warn!(
+                    "the plant plays `{}` (hash {:016x}), this controller was started for \
+                     another scenario (hash {mine:016x}): its ZMP reference and config may not fit",
+                    state.scenario_name(),
+                    sc.plant_hash
+                );
+            }
+        }
+        let fh = self.intake.window.scenario_hash();
+        if accepted && fh != 0 && sc.plant_hash != 0 && fh != sc.plant_hash {
+            self.s.forecast_scenario_mismatches += 1;
+            if sc.warned_forecast != fh {
+                sc.warned_forecast = fh;
+                tracing::warn!(
+                    "the forecast is of another scenario (hash {fh:016x}) than the plant plays \
+                     (`{}`, {:016x}): {} such windows so far",
+                    state.scenario_name(),
+                    sc.plant_hash,
+                    self.s.forecast_scenario_mismatches
+                );
+            }
+        }
+    }
+
+    /// C2's schedule for this tick (see `GainHandoff::take_for_tick`).
+    fn pick_up_c2(&mut self, inputs: &mut Inputs) {
+        let Some(h) = self.c2.as_mut() else { return };
+        let r = h.take_for_tick();
+        if let Some(w) = r.waited_for {
+            self.s.c2_waits += 1;
+            inputs.waited += w;
+        }
+        if r.timed_out {
+            self.s.c2_wait_timeouts += 1;
+            tracing::warn!(
+                "C2 did not finish a search within {} s: its schedules apply when they come \
+                 until it catches up",
+                self.config.controller.lockstep_c2_wait
+            );
+            not_reproducible(&mut self.irreproducible, "a lockstep wait for C2 timed out");
+        }
+    }
+
+    /// The core's tick into `self.tau`, with C2's schedule unless older than the horizon (or
+    /// from before a restart); damping torques on a malformed state. The torques' flags.
+    fn compute(&mut self, state: &StateMsg, inputs: &mut Inputs) -> u32 {
+        let horizon = self.horizon_time;
+        let schedule = self
+            .c2
+            .as_ref()
+            .map(|h| h.current())
+            .filter(|sch| sch.seq > 0 && (0.0..=horizon).contains(&(state.time - sch.time)));
+        let stale = self.c2.is_some() && schedule.is_none() && state.time > horizon;
+        if stale && !self.schedule_was_stale {
+            self.s.c2_stale_schedules += 1;
+            tracing::warn!("C2 schedule missing or older than the horizon: nominal gains");
+        }
+        self.schedule_was_stale = stale;
+        if let Some(sch) = schedule {
+            self.metrics.schedule(sch);
+        }
+        inputs.c2_log =
+            schedule.map(|sch| (sch.cost, sch.nominal_cost, sch.iterations, sch.solve_time));
+        let tau = &mut self.tau[..self.n_tau];
+        match self.core.tick(state, &self.intake.window, schedule, tau) {
+            Ok(crate::wbc::WbcStatus::Solved) => 0,
+            Ok(_) => {
+                self.s.wbc_fallbacks += 1;
+                TORQUE_FLAG_FALLBACK
+            }
+            Err(e) => {
+                // Safe behaviour on a malformed state: joint damping toward rest.
+                self.s.tick_errors += 1;
+                if self.s.tick_errors.is_power_of_two() {
+                    tracing::warn!(
+                        "bad state at step {}: {e} ({} so far); damping torques",
+                        state.step,
+                        self.s.tick_errors
+                    );
+                }
+                let damping = self.config.wbc.fallback_damping;
+                for (i, t) in tau.iter_mut().enumerate() {
+                    let qd = state
+                        .v
+                        .get(6 + i)
+                        .copied()
+                        .filter(|v| v.is_finite())
+                        .unwrap_or(0.0);
+                    *t = -damping * qd;
+                }
+                TORQUE_FLAG_FALLBACK
+            }
+        }
+    }
+
+    /// Sends `self.tau` answering `state`, and wakes the plant.
+    fn publish(
+        &mut self,
+        state: &StateMsg,
+        flags: u32,
+        compute: Duration,
+    ) -> Result<(), ChannelError> {
+        self.seq += 1;
+        let (seq, id, n, tau) = (self.seq, self.controller_id, self.n_tau, &self.tau);
+        let sent = self.ports.torques.send_with(|m| {
+            m.seq = seq;
+            m.state_step = state.step;
+            m.session = state.session;
+            m.controller = id;
+            m.n = n as u32;
+            m.flags = flags;
+            m.compute_ns = compute.as_nanos() as u64;
+            m.tau[..n].copy_from_slice(&tau[..n]);
+        });
+        self.or_safe_torques(sent)?;
+        let woken = self.ports.torque_events.notify();
+        self.or_safe_torques(woken)
+    }
+
+    /// Real time without a state to control from: joint damping on the last measured rates,
+    /// flagged so the receiver knows these are not control torques.
+    fn damp_stale(&mut self, step: u64) -> Result<(), ChannelError> {
+        let tick_start = Instant::now();
+        self.seq += 1;
+        let (seq, session, id) = (self.seq, self.link.session(), self.controller_id);
+        let (n, damping, qd) = (self.n_tau, self.config.wbc.fallback_damping, &self.last_qd);
+        let sent = self.ports.torques.send_with(|m| {
+            m.seq = seq;
+            m.state_step = step;
+            m.session = session;
+            m.controller = id;
+            m.n = n as u32;
+            m.flags = TORQUE_FLAG_FALLBACK;
+            m.compute_ns = tick_start.elapsed().as_nanos() as u64;
+            for (t, qd) in m.tau[..n].iter_mut().zip(&qd[..n]) {
+                *t = -damping * qd;
+            }
+        });
+        self.or_safe_torques(sent)?;
+        let woken = self.ports.torque_events.notify();
+        self.or_safe_torques(woken)?;
+        self.s.stale_ticks += 1;
+        Ok(())
+    }
+
+    /// The tick's record and, every tenth, the plan, to the logger thread (never waiting).
+    fn record(&mut self, tick_time: Duration, c2_log: Option<(f64, f64, u32, f64)>) {
+        let Some(l) = &self.logger else { return };
+        let every = self.config.controller.log_every as u64;
+        let ticks = self.metrics.ticks;
+        if ticks.is_multiple_of(every) {
+            let (c2_cost, c2_nominal_cost, c2_iterations, c2_solve_time) =
+                c2_log.unwrap_or_default();
+            l.tick(TickLog {
+                core: self.core.last,
+                tick_time: tick_time.as_secs_f64(),
+                c2_cost,
+                c2_nominal_cost,
+                c2_iterations,
+                c2_solve_time,
+            });
+        }
+        if ticks.is_multiple_of(10 * every) {
+            let core = &mut self.core;
+            l.plan(|p| core.fill_plan(p));
+        }
+    }
+
+    /// Every `controller.status_every`: a status line (a soak reads it).
+    fn status_line(&mut self) {
+        if self.status_every.is_zero() || Instant::now() < self.next_status {
+            return;
+        }
+        self.next_status += self.status_every;
+        let (misses, overruns) = self
+            .ticker
+            .as_ref()
+            .map_or((0, 0), |t| (t.missed, t.overruns));
+        let (p99, max) = self.metrics.take_window();
+        tracing::info!(
+            "status: ticks {} misses {misses} overruns {overruns} stale_periods {} reconnects {} \
+             t {:.3} window_tick_p99_us {:.0} window_tick_max_us {:.0}",
+            self.metrics.ticks,
+            self.link.counts.stale_periods,
+            self.link.counts.reconnects,
+            self.metrics.sim_time,
+            p99 * 1e6,
+            max * 1e6
+        );
+    }
+
+    /// An IPC step that fails ends the run: first, one attempt at damping torques for the last
+    /// state (flagged fallback), so the plant is not left with the last control torques.
+    fn or_safe_torques<T>(&mut self, step: Result<T, ChannelError>) -> Result<T, ChannelError> {
+        let (ports, last_qd, n) = (&self.ports, &self.last_qd, self.n_tau);
+        let (seq, link) = (&mut self.seq, &self.link);
+        let (controller, damping) = (self.controller_id, self.config.wbc.fallback_damping);
+        or_safe_torques(step, || match link.last_step() {
+            Some(step) => {
+                *seq += 1;
+                send_damping(
+                    &ports.torques,
+                    &ports.torque_events,
+                    DampingMsg {
+                        seq: *seq,
+                        step,
+                        session: link.session(),
+                        controller,
+                        damping,
+                        qd: &last_qd[..n],
+                    },
+                )
+                .map(|()| true)
+            }
+            None => Ok(false),
+        })
+    }
+
+    /// The summary of the run.
+    fn finish(mut self, stopped_by: &str) -> ServerSummary {
+        let mut s = std::mem::take(&mut self.s);
+        s.stopped_by = stopped_by.into();
+        self.metrics.fill(&mut s);
+        let link = self.link.counts;
+        s.stale_states = link.stale_states;
+        s.stale_periods = link.stale_periods;
+        s.reconnects = link.reconnects;
+        s.longest_state_gap = link.longest_state_gap;
+        if let Some(t) = &self.ticker {
+            s.deadline_overruns = t.overruns;
+            s.deadline_misses = t.missed;
+        }
+        s.preview_fallbacks = self.core.preview_fallbacks;
+        s.forecast_correction = self.core.correction_counts().map(|c| {
+            let e = self.core.last.correction;
+            CorrectionSummary {
+                contradictions: c.contradictions,
+                contradicted_time: c.contradicted_time,
+                factor_min: c.factor_min,
+                factor_max: c.factor_max,
+                factor_last: e.factor,
+                shift_last: e.shift,
+                offset_last: e.offset,
+                estimations: c.estimations,
+                bad_measurements: c.bad_measurements,
+            }
+        });
+        let wc = self.core.wbc_counters();
+        s.wbc_torque_limited_ticks = wc.torque_limited;
+        s.wbc_condensation_failures = wc.condensation_failures;
+        let w = &self.intake.window;
+        s.forecasts_accepted = w.accepted;
+        s.forecast_never_received = w.accepted == 0;
+        s.forecast_first_at = self.intake.first_at;
+        s.forecasts_rejected = w.rejected;
+        s.forecasts_rejected_by = w.rejections;
+        s.forecaster_restarts = w.restarts;
+        s.reproducible = self.irreproducible.is_none();
+        s.reproducibility = self.irreproducible.unwrap_or_default().into();
+        s.plant_scenario = format!(
+            "{} ({:016x})",
+            crate::channels::scenario_name(&self.scenario.plant_name),
+            self.scenario.plant_hash
+        );
+        if let Some(h) = &self.c2 {
+            s.c2_solves = h.stats.solves.load(Ordering::Relaxed);
+            s.c2_failures = h.stats.failures.load(Ordering::Relaxed);
+            s.c2_panics = h.stats.panics.load(Ordering::Relaxed);
+        }
+        if let Some(l) = self.logger.take() {
+            s.dropped_log_records = l.dropped.load(Ordering::Relaxed);
+            l.finish();
+        }
+        s.dropped_log_lines = crate::logging::dropped_lines();
+        s
+    }
+}
+
+/// C2's gain search in its thread, for C2 (`solver`: a test's stand-in).
+fn start_c2(
+    config: &Config,
+    solver: Option<Box<dyn GainSolver>>,
+) -> Result<Option<GainHandoff>, Box<dyn std::error::Error + Send + Sync>> {
+    Ok(match (config.controller.kind, solver) {
+        (ControllerKind::C2, Some(solver)) => Some(GainHandoff::spawn_with(config, solver)?),
+        (ControllerKind::C2, None) => Some(GainHandoff::spawn(config)?),
+        _ => None,
+    })
+}
+
+/// Why a run cannot reproduce from its configuration alone, if it cannot.
+fn initially_irreproducible(cc: &crate::config::ControllerConfig) -> Option<&'static str> {
+    if cc.mode != LoopMode::Lockstep {
+        Some("real time: inputs arrive on wall-clock time")
+    } else if cc.kind == ControllerKind::C2 && cc.lockstep_c2_wait == 0.0 {
+        Some("controller.lockstep_c2_wait = 0: C2's schedules reach the loop on its own timing")
+    } else {
+        None
+    }
+}
+
+/// The forecast's intake: its validation window and, in lockstep, its waits.
+fn forecast_intake(
+    config: &Config,
+    bus: &Bus,
+    robot_mass: f64,
+    horizon_time: f64,
+) -> Result<ForecastIntake, ChannelError> {
+    let cc = &config.controller;
+    let lockstep = cc.mode == LoopMode::Lockstep;
+    Ok(ForecastIntake::new(
         ForecastWindow::new(
             cc.forecast_max_age,
             cc.forecast_max_lead,
             cc.forecast_decay,
-            weight,
+            robot_mass * config.robot.gravity,
         ),
         bus.subscriber::<ForecastMsg>()?,
         bus.listener(ServiceKind::Forecast)?,
@@ -317,521 +776,34 @@ pub fn run_server_with(
         ),
         cc.state_timeout,
         horizon_time,
-    );
-    let mut c2 = match (kind, c2_solver) {
-        (ControllerKind::C2, Some(solver)) => Some(GainHandoff::spawn_with(config, solver)?),
-        (ControllerKind::C2, None) => Some(GainHandoff::spawn(config)?),
-        _ => None,
-    };
-    let logger = match &opts.rrd {
-        Some(p) => {
-            // Lockstep keeps every tick record (the CSV is part of what reruns reproduce), so its
-            // logger must get CPU time when the machine is loaded: the normal class. In real time
-            // its threads (ours and the rerun SDK's) run in the idle class, see `in_background`.
-            let start = || {
-                ControlLogger::start(
-                    p,
-                    opts.csv.as_deref(),
-                    &opts.recording_id,
-                    opts.live.as_deref(),
-                    config.preview.horizon,
-                    lockstep,
-                )
-            };
-            Some(if lockstep {
-                start()?
-            } else {
-                super::realtime::in_background(start)?
-            })
-        }
-        None => None,
-    };
-    let rt = super::realtime::apply(&cc.realtime);
-    let mut ticker =
-        (cc.mode == LoopMode::Realtime).then(|| Ticker::new(Duration::from_secs_f64(dt)));
+    ))
+}
 
-    let mut s = ServerSummary {
-        controller: kind.name().into(),
-        robot: opts.robot_name.clone(),
-        robot_mass: weight / config.robot.gravity,
-        mode: format!("{:?}", cc.mode).to_lowercase(),
-        min_zmp_margin: f64::INFINITY,
-        realtime: rt,
-        ..Default::default()
+/// The rerun log and CSV, if asked for. Lockstep keeps every tick record (the CSV is part of
+/// what reruns reproduce), so its logger must get CPU time when the machine is loaded: the
+/// normal class. In real time its threads (ours and the rerun SDK's) run in the idle class,
+/// see `in_background`.
+fn start_logger(
+    config: &Config,
+    opts: &ServerOptions,
+) -> Result<Option<ControlLogger>, Box<dyn std::error::Error + Send + Sync>> {
+    let Some(p) = &opts.rrd else { return Ok(None) };
+    let lockstep = config.controller.mode == LoopMode::Lockstep;
+    let start = || {
+        ControlLogger::start(
+            p,
+            opts.csv.as_deref(),
+            &opts.recording_id,
+            opts.live.as_deref(),
+            config.preview.horizon,
+            lockstep,
+        )
     };
-    let mut hist = LatencyHistogram::new();
-    // The ticks since the last status line (a soak's tick p99 over time).
-    let mut window = LatencyHistogram::new();
-    let mut tau = [0.0; MAX_DOF];
-    // Joint rates of the last fresh state, for the damping torques of a stale period.
-    let mut last_qd = [0.0; MAX_DOF];
-    let mut seq = 0u64;
-    let mut last_step: Option<u64> = None;
-    let mut session = 0u64;
-    // Why the run will not reproduce, if it will not (no allocation on the loop: set at the end).
-    let mut irreproducible: Option<&'static str> = if !lockstep {
-        Some("real time: inputs arrive on wall-clock time")
-    } else if kind == ControllerKind::C2 && cc.lockstep_c2_wait == 0.0 {
-        Some("controller.lockstep_c2_wait = 0: C2's schedules reach the loop on its own timing")
+    Ok(Some(if lockstep {
+        start()?
     } else {
-        None
-    };
-    // The plant's announced scenario: hash, and name for the summary.
-    let mut plant_hash = 0u64;
-    let mut plant_name = [0u8; crate::channels::SCENARIO_NAME_LEN];
-    let mut mismatch_warned = 0u64;
-    let mut last_time = 0.0;
-    let started = Instant::now();
-    let mut last_state_at = Instant::now();
-    let mut stale = false;
-    // Lockstep: when the plant's liveness was last checked, and whether a wait for a live but
-    // silent plant was logged in this stale period.
-    let mut liveness_checked: Option<Instant> = None;
-    let mut waiting_for_live_plant = false;
-    let status_every = Duration::from_secs_f64(cc.status_every);
-    let mut next_status = Instant::now() + status_every;
-    let (mut hand_sq, mut c2_solve_sum, mut c2_iter_sum, mut c2_seen) = (0.0, 0.0, 0.0, 0u64);
-    let mut last_c2_seq = 0u64;
-    let mut schedule_was_stale = false;
-    let mut com_z0: Option<f64> = None;
-    // An IPC step that fails ends the run: first, one attempt at damping torques for the last
-    // state (flagged fallback), so the plant is not left with the last control torques.
-    macro_rules! ipc {
-        ($step:expr) => {
-            or_safe_torques($step, || match last_step {
-                Some(step) => {
-                    seq += 1;
-                    send_damping(
-                        &torques,
-                        &torque_events,
-                        DampingMsg {
-                            seq,
-                            step,
-                            session,
-                            controller: controller_id,
-                            damping: config.wbc.fallback_damping,
-                            qd: &last_qd[..n_tau],
-                        },
-                    )
-                    .map(|()| true)
-                }
-                None => Ok(false),
-            })?
-        };
-    }
-
-    s.stopped_by = loop {
-        if stop.load(Ordering::Relaxed) {
-            break "signal".into();
-        }
-        if !status_every.is_zero() && Instant::now() >= next_status {
-            next_status += status_every;
-            let (misses, overruns) = ticker.as_ref().map_or((0, 0), |t| (t.missed, t.overruns));
-            tracing::info!(
-                "status: ticks {} misses {misses} overruns {overruns} stale_periods {} \
-                 reconnects {} t {:.3} window_tick_p99_us {:.0} window_tick_max_us {:.0}",
-                s.ticks,
-                s.stale_periods,
-                s.reconnects,
-                s.sim_time,
-                window.quantile(0.99) * 1e6,
-                window.max() * 1e6
-            );
-            window.reset();
-        }
-        match ticker.as_mut() {
-            Some(t) => t.wait(),
-            None => {
-                ipc!(state_events.wait_until(
-                    Duration::from_millis(20),
-                    Duration::from_secs_f64(cc.ipc_spin_us * 1e-6),
-                    || states.has_samples(),
-                ));
-            }
-        }
-        let received = ipc!(states.latest());
-        // A new session, or a step that goes back, is a new plant run (a restarted simulator);
-        // the same step again is the lockstep simulator re-sending a state it waits on.
-        let restarted = matches!((&received, last_step),
-            (Some(st), Some(l)) if st.step < l || (st.session != session && st.session != 0));
-        let state = match received {
-            Some(st) if restarted || last_step.is_none_or(|l| st.step > l) => st,
-            repeated => {
-                let Some(l) = last_step else {
-                    if started.elapsed().as_secs_f64() > opts.startup_timeout {
-                        return Err(format!(
-                            "no state from the simulator on {}/state within {} s (is it \
-                             running with this prefix, and from the same upc version? a plant of \
-                             another contract version cannot open the services: see its log)",
-                            opts.prefix, opts.startup_timeout
-                        )
-                        .into());
-                    }
-                    continue;
-                };
-                s.stale_states += u64::from(ticker.is_some() || repeated.is_some());
-                let quiet = last_state_at.elapsed().as_secs_f64();
-                if quiet <= cc.state_timeout {
-                    continue;
-                }
-                if !stale {
-                    stale = true;
-                    s.stale_periods += 1;
-                    match cc.mode {
-                        LoopMode::Realtime => tracing::warn!(
-                            "no state for {quiet:.3} s after step {l} (t = {last_time:.3} s): \
-                             damping torques until a simulator publishes again"
-                        ),
-                        LoopMode::Lockstep => tracing::warn!(
-                            "no state for {quiet:.3} s after step {l} (t = {last_time:.3} s): \
-                             waiting {} s for a simulator",
-                            cc.reconnect_timeout
-                        ),
-                    }
-                }
-                match cc.mode {
-                    LoopMode::Lockstep => {
-                        if quiet > cc.state_timeout + cc.reconnect_timeout
-                            && liveness_checked
-                                .is_none_or(|t| t.elapsed() >= Duration::from_millis(100))
-                        {
-                            // A lockstep run is a function of its inputs, not of wall time: a
-                            // plant that is slow (starved, stopped in a debugger) is waited for;
-                            // one whose process is gone ends the run.
-                            liveness_checked = Some(Instant::now());
-                            if !states.has_live_publisher() {
-                                break "simulator stopped".into();
-                            }
-                            if !waiting_for_live_plant {
-                                waiting_for_live_plant = true;
-                                tracing::warn!(
-                                    "no state for {quiet:.3} s, but the simulator's process is \
-                                     alive: waiting for it"
-                                );
-                            }
-                        }
-                    }
-                    LoopMode::Realtime => {
-                        // No state to control from: joint damping on the last measured rates,
-                        // flagged so the receiver knows these are not control torques.
-                        let tick_start = Instant::now();
-                        for (t, qd) in tau[..n_tau].iter_mut().zip(&last_qd[..n_tau]) {
-                            *t = -config.wbc.fallback_damping * qd;
-                        }
-                        seq += 1;
-                        ipc!(torques.send_with(|m| {
-                            m.seq = seq;
-                            m.state_step = l;
-                            m.session = session;
-                            m.controller = controller_id;
-                            m.n = n_tau as u32;
-                            m.flags = TORQUE_FLAG_FALLBACK;
-                            m.compute_ns = tick_start.elapsed().as_nanos() as u64;
-                            m.tau[..n_tau].copy_from_slice(&tau[..n_tau]);
-                        }));
-                        ipc!(torque_events.notify());
-                        s.stale_ticks += 1;
-                    }
-                }
-                continue;
-            }
-        };
-        if last_step.is_some() {
-            let gap = last_state_at.elapsed().as_secs_f64();
-            s.longest_state_gap = s.longest_state_gap.max(gap);
-            if restarted {
-                // The new simulator's robot starts over: latch references, the forecast's time
-                // line and the metrics' initial CoM height again from this state.
-                s.reconnects += 1;
-                s.ticks_since_reconnect = 0;
-                core.reset();
-                intake.restart(state.time);
-                com_z0 = None;
-                tracing::warn!(
-                    "simulator restarted: step {} (t = {:.3} s) after step {} (t = {last_time:.3} \
-                     s), {gap:.3} s without state; references re-latched, control resumes \
-                     (reconnect {})",
-                    state.step,
-                    state.time,
-                    last_step.unwrap_or(0),
-                    s.reconnects
-                );
-            } else if stale {
-                tracing::info!(
-                    "state back at step {} after {gap:.3} s: control resumes",
-                    state.step
-                );
-            }
-        }
-        stale = false;
-        waiting_for_live_plant = false;
-        last_step = Some(state.step);
-        session = state.session;
-        last_time = state.time;
-        let tick_start = Instant::now();
-        // Lockstep waits for the forecast and C2: not the tick's compute time.
-        let mut waited = Duration::ZERO;
-        let nv = (state.nv as usize).min(MAX_DOF);
-        for (i, qd) in last_qd[..n_tau].iter_mut().enumerate() {
-            *qd = state
-                .v
-                .get(6 + i)
-                .copied()
-                .filter(|v| v.is_finite() && 6 + i < nv)
-                .unwrap_or(0.0);
-        }
-
-        // The newest forecast, validated; in lockstep, the one whose period covers this
-        // state's time, waited for.
-        let f = ipc!(intake.take(state.time, || stop.load(Ordering::Relaxed)));
-        if let Some(w) = f.waited {
-            s.forecast_waits += 1;
-            waited += w;
-        }
-        s.forecast_wait_timeouts += u64::from(f.timed_out);
-        s.forecast_first_wait_expired |= f.gave_up_first;
-        if f.lost {
-            s.forecast_lost = true;
-            s.forecast_losses += 1;
-        }
-        if let Some(why) = f.not_reproducible {
-            not_reproducible(&mut irreproducible, why);
-        }
-        if lockstep && f.accepted && cc.lockstep_forecast_wait == 0.0 {
-            not_reproducible(
-                &mut irreproducible,
-                "controller.lockstep_forecast_wait = 0: the window a tick sees depends on timing",
-            );
-        }
-        // Scenarios: the plant's against this controller's and the forecast's.
-        if state.scenario_hash != plant_hash {
-            plant_hash = state.scenario_hash;
-            plant_name = state.scenario;
-            if let Some(mine) = opts.scenario_hash
-                && plant_hash != 0
-                && mine != plant_hash
-            {
-                s.plant_scenario_mismatch = true;
-                tracing::warn!(
-                    "the plant plays `{}` (hash {plant_hash:016x}), this controller was started for \
-                     another scenario (hash {mine:016x}): its ZMP reference and config may not fit",
-                    state.scenario_name()
-                );
-            }
-        }
-        let fh = intake.window.scenario_hash();
-        if f.accepted && fh != 0 && plant_hash != 0 && fh != plant_hash {
-            s.forecast_scenario_mismatches += 1;
-            if mismatch_warned != fh {
-                mismatch_warned = fh;
-                tracing::warn!(
-                    "the forecast is of another scenario (hash {fh:016x}) than the plant plays \
-                     (`{}`, {plant_hash:016x}): {} such windows so far",
-                    state.scenario_name(),
-                    s.forecast_scenario_mismatches
-                );
-            }
-        }
-        if state.flags & STATE_FLAG_HOLD != 0 {
-            s.ticks_in_plant_hold += 1;
-        }
-
-        // C2's schedule for this tick (see `GainHandoff::take_for_tick`), unless older than the
-        // horizon (or from before a restart).
-        let with_c2 = c2.is_some();
-        if let Some(h) = c2.as_mut() {
-            let r = h.take_for_tick();
-            if let Some(w) = r.waited_for {
-                s.c2_waits += 1;
-                waited += w;
-            }
-            if r.timed_out {
-                s.c2_wait_timeouts += 1;
-                tracing::warn!(
-                    "C2 did not finish a search within {} s: its schedules apply when they come \
-                     until it catches up",
-                    cc.lockstep_c2_wait
-                );
-                not_reproducible(&mut irreproducible, "a lockstep wait for C2 timed out");
-            }
-        }
-        let schedule = c2
-            .as_ref()
-            .map(|h| h.current())
-            .filter(|sch| sch.seq > 0 && (0.0..=horizon_time).contains(&(state.time - sch.time)));
-        let stale = with_c2 && schedule.is_none() && state.time > horizon_time;
-        if stale && !schedule_was_stale {
-            s.c2_stale_schedules += 1;
-            tracing::warn!("C2 schedule missing or older than the horizon: nominal gains");
-        }
-        schedule_was_stale = stale;
-        if let Some(sch) = schedule
-            && sch.seq != last_c2_seq
-        {
-            last_c2_seq = sch.seq;
-            c2_seen += 1;
-            c2_solve_sum += sch.solve_time;
-            c2_iter_sum += sch.iterations as f64;
-            s.c2_solve_max_ms = s.c2_solve_max_ms.max(sch.solve_time * 1e3);
-        }
-        let c2_log =
-            schedule.map(|sch| (sch.cost, sch.nominal_cost, sch.iterations, sch.solve_time));
-
-        let mut flags = 0;
-        match core.tick(&state, &intake.window, schedule, &mut tau[..n_tau]) {
-            Ok(crate::wbc::WbcStatus::Solved) => {}
-            Ok(_) => {
-                s.wbc_fallbacks += 1;
-                flags |= TORQUE_FLAG_FALLBACK;
-            }
-            Err(e) => {
-                // Safe behaviour on a malformed state: joint damping toward rest.
-                s.tick_errors += 1;
-                if s.tick_errors.is_power_of_two() {
-                    tracing::warn!(
-                        "bad state at step {}: {e} ({} so far); damping torques",
-                        state.step,
-                        s.tick_errors
-                    );
-                }
-                for (i, t) in tau[..n_tau].iter_mut().enumerate() {
-                    let qd = state
-                        .v
-                        .get(6 + i)
-                        .copied()
-                        .filter(|v| v.is_finite())
-                        .unwrap_or(0.0);
-                    *t = -config.wbc.fallback_damping * qd;
-                }
-                flags |= TORQUE_FLAG_FALLBACK;
-            }
-        }
-        seq += 1;
-        ipc!(torques.send_with(|m| {
-            m.seq = seq;
-            m.state_step = state.step;
-            m.session = state.session;
-            m.controller = controller_id;
-            m.n = n_tau as u32;
-            m.flags = flags;
-            m.compute_ns = tick_start.elapsed().saturating_sub(waited).as_nanos() as u64;
-            m.tau[..n_tau].copy_from_slice(&tau[..n_tau]);
-        }));
-        ipc!(torque_events.notify());
-        // Lockstep waits for the forecast or C2 are not the plant's silence.
-        last_state_at = Instant::now();
-        let tick_time = tick_start.elapsed().saturating_sub(waited);
-        hist.record(tick_time);
-        window.record(tick_time);
-        s.ticks += 1;
-        s.ticks_since_reconnect += 1;
-        s.sim_time = state.time;
-
-        if let Some(h) = c2.as_mut()
-            && s.ticks.is_multiple_of(cc.c2_every as u64)
-        {
-            h.offer(|snap| core.snapshot(snap, seq));
-        }
-        // Metrics of the measured ZMP and the hand.
-        let rec = core.last;
-        if let Some(sup) = core.support() {
-            let margin = (0..2)
-                .map(|a| (rec.zmp_meas[a] - sup[a][0]).min(sup[a][1] - rec.zmp_meas[a]))
-                .fold(f64::INFINITY, f64::min);
-            s.min_zmp_margin = s.min_zmp_margin.min(margin);
-            if margin < EDGE_BAND {
-                s.time_at_support_edge += dt;
-            }
-        }
-        let z0 = *com_z0.get_or_insert(rec.com[2]);
-        s.com_height_drop = s.com_height_drop.max(z0 - rec.com[2]);
-        let zerr = ((rec.zmp_meas[0] - rec.zmp_ref[0]).powi(2)
-            + (rec.zmp_meas[1] - rec.zmp_ref[1]).powi(2))
-        .sqrt();
-        s.max_zmp_error = s.max_zmp_error.max(zerr);
-        hand_sq += rec.hand_err * rec.hand_err;
-        s.hand_peak_error = s.hand_peak_error.max(rec.hand_err);
-        if let Some(l) = &logger {
-            if s.ticks.is_multiple_of(cc.log_every as u64) {
-                let (c2_cost, c2_nominal_cost, c2_iterations, c2_solve_time) =
-                    c2_log.unwrap_or_default();
-                l.tick(TickLog {
-                    core: rec,
-                    tick_time: tick_time.as_secs_f64(),
-                    c2_cost,
-                    c2_nominal_cost,
-                    c2_iterations,
-                    c2_solve_time,
-                });
-            }
-            if s.ticks.is_multiple_of(10 * cc.log_every as u64) {
-                l.plan(|p| core.fill_plan(p));
-            }
-        }
-        if opts.duration.is_some_and(|d| state.time >= d - 0.5 * dt) {
-            break "duration reached".into();
-        }
-    };
-
-    s.tick_p50_us = hist.quantile(0.5) * 1e6;
-    s.tick_p99_us = hist.quantile(0.99) * 1e6;
-    s.tick_max_us = hist.max() * 1e6;
-    if let Some(t) = &ticker {
-        s.deadline_overruns = t.overruns;
-        s.deadline_misses = t.missed;
-    }
-    s.preview_fallbacks = core.preview_fallbacks;
-    s.forecast_correction = core.correction_counts().map(|c| {
-        let e = core.last.correction;
-        CorrectionSummary {
-            contradictions: c.contradictions,
-            contradicted_time: c.contradicted_time,
-            factor_min: c.factor_min,
-            factor_max: c.factor_max,
-            factor_last: e.factor,
-            shift_last: e.shift,
-            offset_last: e.offset,
-            estimations: c.estimations,
-            bad_measurements: c.bad_measurements,
-        }
-    });
-    let wc = core.wbc_counters();
-    s.wbc_torque_limited_ticks = wc.torque_limited;
-    s.wbc_condensation_failures = wc.condensation_failures;
-    s.forecasts_accepted = intake.window.accepted;
-    s.forecast_never_received = intake.window.accepted == 0;
-    s.forecast_first_at = intake.first_at;
-    s.forecasts_rejected = intake.window.rejected;
-    s.forecasts_rejected_by = intake.window.rejections;
-    s.forecaster_restarts = intake.window.restarts;
-    s.reproducible = irreproducible.is_none();
-    s.reproducibility = irreproducible.unwrap_or_default().into();
-    s.plant_scenario = format!(
-        "{} ({plant_hash:016x})",
-        crate::channels::scenario_name(&plant_name)
-    );
-    if let Some(h) = &c2 {
-        s.c2_solves = h.stats.solves.load(Ordering::Relaxed);
-        s.c2_failures = h.stats.failures.load(Ordering::Relaxed);
-        s.c2_panics = h.stats.panics.load(Ordering::Relaxed);
-    }
-    if c2_seen > 0 {
-        s.c2_solve_mean_ms = c2_solve_sum / c2_seen as f64 * 1e3;
-        s.c2_iterations_mean = c2_iter_sum / c2_seen as f64;
-    }
-    if s.ticks > 0 {
-        s.hand_rms_error = (hand_sq / s.ticks as f64).sqrt();
-    }
-    if !s.min_zmp_margin.is_finite() {
-        s.min_zmp_margin = 0.0;
-    }
-    if let Some(l) = logger {
-        s.dropped_log_records = l.dropped.load(Ordering::Relaxed);
-        l.finish();
-    }
-    s.dropped_log_lines = crate::logging::dropped_lines();
-    drop(c2);
-    Ok(s)
+        super::realtime::in_background(start)?
+    }))
 }
 
 #[cfg(test)]
@@ -839,10 +811,7 @@ mod tests {
     use super::*;
 
     fn failure() -> ChannelError {
-        ChannelError {
-            what: "receive".into(),
-            detail: "injected".into(),
-        }
+        ChannelError::other(crate::channels::ChannelOp::Receive, "injected")
     }
 
     #[test]
@@ -862,17 +831,17 @@ mod tests {
             Ok(true)
         })
         .unwrap_err();
-        assert_eq!((e.detail.as_str(), calls), ("injected", 1));
+        assert_eq!((e.to_string(), calls), ("receive: injected".into(), 1));
         // The step's own error comes back even when the safe torques fail too.
         let e = or_safe_torques::<u32>(Err(failure()), || {
             calls += 1;
-            Err(ChannelError {
-                what: "send sample".into(),
-                detail: "also down".into(),
-            })
+            Err(ChannelError::other(
+                crate::channels::ChannelOp::Send,
+                "also down",
+            ))
         })
         .unwrap_err();
-        assert_eq!((e.detail.as_str(), calls), ("injected", 2));
+        assert_eq!((e.to_string(), calls), ("receive: injected".into(), 2));
     }
 
     /// Over real IPC: after a failed step, a torque subscriber on the prefix sees the damping
@@ -901,7 +870,7 @@ mod tests {
             .map(|()| true)
         })
         .unwrap_err();
-        assert_eq!(e.detail, "injected");
+        assert_eq!(e.op(), crate::channels::ChannelOp::Receive);
         let m = plant.latest().expect("receive").expect("a torque message");
         assert_eq!(m.flags, TORQUE_FLAG_FALLBACK);
         assert_eq!((m.seq, m.state_step, m.session, m.n), (9, 41, 3, 3));

@@ -3,6 +3,7 @@
 //! (mass, CoM height, support, M_e), which config, simulator and controller take from here.
 //! The iCub-like humanoid is the embedded default; the others name a registry package.
 
+mod config_layers;
 pub mod description;
 pub mod feet;
 pub mod packages;
@@ -234,6 +235,10 @@ impl Robot {
         let mut robot = toml::Table::new();
         robot.insert("mass".into(), toml::Value::Float(d.mass));
         robot.insert("com_height".into(), toml::Value::Float(d.com_height));
+        robot.insert(
+            "gravity".into(),
+            toml::Value::Float(self.model.gravity.norm()),
+        );
         let mut support = toml::Table::new();
         support.insert("x".into(), arr(&d.support[0]));
         support.insert("y".into(), arr(&d.support[1]));

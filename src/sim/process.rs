@@ -37,9 +37,10 @@ use crate::channels::{
 use super::command::{CommandGate, CommandOrigin, CommandStats};
 use super::config::{Mode, Push, SimConfig};
 use super::hold::{CommandClock, HoldStats, Phase, Supervisor};
+use super::physics::{Engine, Physics};
 use super::record::{Recorder, RecorderStats};
 use super::scene::{DoorDrive, default_scene};
-use super::world::{SimError, StepReport, World};
+use super::world::{SimError, StepReport};
 
 /// Errors that end a run.
 #[derive(Debug, thiserror::Error)]
@@ -71,11 +72,16 @@ pub struct RunOptions {
     pub node_name: String,
     /// Lockstep: write the ground truth every `record_period` as CSV here (reproducible bytes).
     pub truth_csv: Option<PathBuf>,
+    /// The physics engine (`--plant`).
+    pub engine: Engine,
 }
 
 /// Step-time histogram (1 µs bins up to 20 ms) and counters of a run.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct RunSummary {
+    /// The physics engine (`upc`, `mujoco`) and its version.
+    pub plant: String,
+    pub plant_version: String,
     pub steps: u64,
     pub sim_time: f64,
     pub wall_time: f64,
@@ -105,6 +111,9 @@ pub struct RunSummary {
     pub ipc_overhead_p50: f64,
     pub ipc_overhead_p99: f64,
     pub ipc_overhead_max: f64,
+    /// What ended the run early (a lockstep timeout, the physics giving up, the channels), if
+    /// anything: the summary is written all the same.
+    pub error: Option<String>,
 }
 
 /// What a state says about the plant besides the world: the run's session, the scenario it
@@ -122,10 +131,10 @@ pub struct PlantInfo {
     pub robot_hash: u64,
 }
 
-/// Fills a [`StateMsg`] from the world (allocation-free).
+/// Fills a [`StateMsg`] from the physics (allocation-free).
 pub fn fill_state(
     m: &mut StateMsg,
-    w: &World,
+    w: &impl Physics,
     info: &PlantInfo,
     zmp: [f64; 2],
     hand_force: [f64; 3],
@@ -162,14 +171,141 @@ struct Endpoints {
     torque_event: crate::channels::Listener,
 }
 
-/// Runs `upc sim` until the configured duration elapses or `stop` is raised.
+/// Runs `upc sim` until the configured duration elapses or `stop` is raised: the scene built
+/// for the chosen engine, then the plant runtime on it.
 pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessError> {
+    let (cfg, robot) = (&opts.config, &opts.robot);
+    match opts.engine {
+        Engine::Upc => {
+            let (scene, scenario) =
+                default_scene(cfg, robot).map_err(|e| ProcessError::Setup(e.to_string()))?;
+            let plant = Plant {
+                physics: scene.world,
+                drive: scene.drive,
+                scenario,
+                carrying: scene.carrying,
+                version: env!("CARGO_PKG_VERSION").into(),
+            };
+            run_plant(opts, plant, stop)
+        }
+        #[cfg(upc_mujoco)]
+        Engine::Mujoco => run_plant(opts, mujoco_plant(cfg, robot)?, stop),
+        #[cfg(not(upc_mujoco))]
+        Engine::Mujoco => Err(ProcessError::Setup(super::mujoco::UNAVAILABLE.into())),
+    }
+}
+
+/// MuJoCo with the scene generated for it, the robot settled onto its contacts.
+#[cfg(upc_mujoco)]
+fn mujoco_plant(
+    cfg: &SimConfig,
+    robot: &crate::robot::Robot,
+) -> Result<Plant<super::mujoco::MujocoPlant>, ProcessError> {
+    let setup = |e: &dyn std::fmt::Display| ProcessError::Setup(e.to_string());
+    let scenario = crate::scenario::Scenario::load(&cfg.scenario)
+        .map_err(|e| setup(&e))?
+        .with_force_scale(robot.force_scale().map_err(|e| setup(&e))?);
+    let scene = super::mujoco::build(robot, cfg, &scenario)?;
+    let physics = super::mujoco::MujocoPlant::new(robot, &scene)?;
+    let version = super::mujoco::version().unwrap_or_default();
+    tracing::info!(
+        "MuJoCo {version}: the robot settled {:.2} mm onto its contacts in {} s",
+        physics.settle_sink() * 1e3,
+        super::mujoco::SETTLE_TIME
+    );
+    Ok(Plant {
+        physics,
+        drive: scene.drive,
+        scenario,
+        carrying: robot.carrying_frames(),
+        version,
+    })
+}
+
+/// A physics engine with the scene it plays.
+pub struct Plant<P> {
+    pub physics: P,
+    pub drive: DoorDrive,
+    pub scenario: crate::scenario::Scenario,
+    /// Frames whose supporting joints carry the body (the hold stiffens them).
+    pub carrying: Vec<usize>,
+    /// The engine's version, for the summary.
+    pub version: String,
+}
+
+/// The plant runtime: state and ground truth published every step, torques gated, the
+/// supervisor's hold in real time, the recording, the summary; any [`Physics`] underneath.
+fn run_plant<P: Physics>(
+    opts: &RunOptions,
+    plant: Plant<P>,
+    stop: &AtomicBool,
+) -> Result<RunSummary, ProcessError> {
     let cfg = &opts.config;
-    let robot = &opts.robot;
-    let (scene, scenario) =
-        default_scene(cfg, robot).map_err(|e| ProcessError::Setup(e.to_string()))?;
-    let carrying = scene.carrying.clone();
-    let (mut world, drive) = (scene.world, scene.drive);
+    let Plant {
+        physics: mut world,
+        drive,
+        scenario,
+        carrying,
+        version,
+    } = plant;
+    check_setup(opts, &world)?;
+    let info = PlantInfo::start(cfg, &scenario, opts.robot.hash);
+    log_start(opts, &world, &version, &scenario, &info);
+    let bus = Bus::open(&cfg.process.prefix, &opts.node_name)?;
+    let ep = Endpoints {
+        state: bus.publisher()?,
+        truth: bus.publisher()?,
+        torques: bus.subscriber()?,
+        state_event: bus.notifier(ServiceKind::State)?,
+        truth_event: bus.notifier(ServiceKind::GroundTruth)?,
+        torque_event: bus.listener(ServiceKind::Torques)?,
+    };
+    let mut recorder = start_recorder(opts, &world)?;
+    let mut looper = Looper::new(opts, &world, info, &carrying, open_truth_csv(opts)?)?;
+    // State 0 before any step (an engine that settles the robot first reports its forces).
+    let first = *world.last_report();
+    if let Some(z) = first.zmp {
+        looper.zmp = z;
+    }
+    looper.hand_force = first.hand_force;
+    looper.publish(&ep, &world, &first, 0.0)?;
+    if let Some(r) = &mut recorder {
+        r.offer(&mut world, &looper.hand_force);
+    }
+    let total_steps = if cfg.duration > 0.0 {
+        (cfg.duration / cfg.dt).round() as u64
+    } else {
+        u64::MAX
+    };
+    let start = Instant::now();
+    let mut run = Run {
+        cfg,
+        ep: &ep,
+        drive: &drive,
+        recorder: &mut recorder,
+        total: total_steps,
+        stop,
+    };
+    let result = match cfg.mode {
+        Mode::Lockstep => looper.lockstep(&mut run, &mut world),
+        Mode::Realtime => looper.realtime(&mut run, &mut world),
+    };
+    let wall = start.elapsed().as_secs_f64();
+    // The CSV first: the recording's flush may take long on a loaded machine.
+    if let Some(w) = &mut looper.truth_csv {
+        use std::io::Write;
+        w.flush()
+            .map_err(|e| ProcessError::Setup(format!("ground-truth CSV: {e}")))?;
+    }
+    let recorder = recorder.map(|r| r.finish()).unwrap_or_default();
+    let summary = looper.summary(opts, &world, version, wall, recorder, result.err());
+    tracing::info!("sim finished: {summary:?}");
+    Ok(summary)
+}
+
+/// What a run is set up with that the contract or the mode cannot carry.
+fn check_setup(opts: &RunOptions, world: &impl Physics) -> Result<(), ProcessError> {
+    let cfg = &opts.config;
     if world.q().len() > MAX_DOF || world.contact_forces().len() != N_CONTACTS {
         return Err(ProcessError::Contract(format!(
             "nq = {} (max {MAX_DOF}), {} contacts (need {N_CONTACTS}): lock the joints the \
@@ -178,22 +314,6 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
             world.contact_forces().len()
         )));
     }
-    let info = PlantInfo {
-        session: crate::channels::new_run_id(),
-        scenario_hash: scenario.content_hash(),
-        scenario: cfg.scenario.clone(),
-        // Lockstep plays the scenario from 0; real time once a controller drives the robot.
-        scenario_start: match cfg.mode {
-            Mode::Lockstep => 0.0,
-            Mode::Realtime => -1.0,
-        },
-        flags: match cfg.mode {
-            Mode::Lockstep => STATE_FLAG_LOCKSTEP,
-            Mode::Realtime => STATE_FLAG_HOLD,
-        },
-        force_scale: scenario.force_scale,
-        robot_hash: robot.hash,
-    };
     if cfg.scenario.len() > crate::channels::SCENARIO_NAME_LEN {
         return Err(ProcessError::Setup(format!(
             "scenario `{}` is longer than the {} bytes a state announces: use a shorter path",
@@ -206,8 +326,44 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
             "--truth-csv is written from the stepping loop: lockstep only".into(),
         ));
     }
+    Ok(())
+}
+
+impl PlantInfo {
+    /// A new plant run of `scenario` for the robot of content hash `robot_hash`.
+    fn start(cfg: &SimConfig, scenario: &crate::scenario::Scenario, robot_hash: u64) -> Self {
+        PlantInfo {
+            session: crate::channels::new_run_id(),
+            scenario_hash: scenario.content_hash(),
+            scenario: cfg.scenario.clone(),
+            // Lockstep plays the scenario from 0; real time once a controller drives the robot.
+            scenario_start: match cfg.mode {
+                Mode::Lockstep => 0.0,
+                Mode::Realtime => -1.0,
+            },
+            flags: match cfg.mode {
+                Mode::Lockstep => STATE_FLAG_LOCKSTEP,
+                Mode::Realtime => STATE_FLAG_HOLD,
+            },
+            force_scale: scenario.force_scale,
+            robot_hash,
+        }
+    }
+}
+
+fn log_start(
+    opts: &RunOptions,
+    world: &impl Physics,
+    version: &str,
+    scenario: &crate::scenario::Scenario,
+    info: &PlantInfo,
+) {
+    let (cfg, robot) = (&opts.config, &opts.robot);
     tracing::info!(
-        "sim: robot `{}` ({:.1} kg, forces × {:.3}), {:?} mode, dt = {} s, duration = {} s, scenario `{}` ({}, hash {:016x}), prefix `{}`, door {}, session {:016x}, hold {:?}",
+        "sim: {} {version}, robot `{}` ({:.1} kg, forces × {:.3}), {:?} mode, dt = {} s, \
+         duration = {} s, scenario `{}` ({}, hash {:016x}), prefix `{}`, door {}, session \
+         {:016x}, hold {:?}",
+        world.engine(),
         robot.name(),
         robot.derived.mass,
         scenario.force_scale,
@@ -222,153 +378,59 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessEr
         info.session,
         cfg.hold.kind
     );
-    let bus = Bus::open(&cfg.process.prefix, &opts.node_name)?;
-    let ep = Endpoints {
-        state: bus.publisher()?,
-        truth: bus.publisher()?,
-        torques: bus.subscriber()?,
-        state_event: bus.notifier(ServiceKind::State)?,
-        truth_event: bus.notifier(ServiceKind::GroundTruth)?,
-        torque_event: bus.listener(ServiceKind::Torques)?,
+}
+
+/// The ground truth's rerun recording, if asked for.
+fn start_recorder(
+    opts: &RunOptions,
+    world: &impl Physics,
+) -> Result<Option<Recorder>, ProcessError> {
+    let Some(path) = &opts.rrd else {
+        return Ok(None);
     };
-    let mut recorder = match &opts.rrd {
-        Some(path) => {
-            let spawn = || {
-                Recorder::spawn(
-                    path,
-                    opts.recording_id.as_deref(),
-                    opts.live.as_deref(),
-                    &world,
-                    robot,
-                )
-            };
-            // Real time: its threads in the idle class, they must not delay the steps. Lockstep
-            // must end on a loaded machine too, where idle-class threads hardly run.
-            let rec = match cfg.mode {
-                Mode::Realtime => crate::control::realtime::in_background(spawn),
-                Mode::Lockstep => spawn(),
-            };
-            Some(rec.map_err(|e| {
-                ProcessError::Setup(format!("rerun recording {}: {e}", path.display()))
-            })?)
-        }
-        None => None,
+    let spawn = || {
+        Recorder::spawn(
+            path,
+            opts.recording_id.as_deref(),
+            opts.live.as_deref(),
+            world,
+            &opts.robot,
+        )
     };
-    let truth_csv = match &opts.truth_csv {
-        Some(p) => {
-            let mut w = std::io::BufWriter::new(std::fs::File::create(p).map_err(|e| {
-                ProcessError::Setup(format!("ground-truth CSV {}: {e}", p.display()))
-            })?);
-            use std::io::Write;
-            writeln!(w, "{TRUTH_CSV_HEADER}")
-                .map_err(|e| ProcessError::Setup(format!("ground-truth CSV: {e}")))?;
-            Some(w)
-        }
-        None => None,
+    // Real time: its threads in the idle class, they must not delay the steps. Lockstep must
+    // end on a loaded machine too, where idle-class threads hardly run.
+    let rec = match opts.config.mode {
+        Mode::Realtime => crate::control::realtime::in_background(spawn),
+        Mode::Lockstep => spawn(),
     };
-    let supervisor = Supervisor::new(
-        world.robot(),
-        world.q(),
-        &carrying,
-        &cfg.hold,
-        cfg.process.safe_damping,
-        cfg.dt,
-    )?;
-    let mut looper = Looper {
-        tau: DVector::zeros(world.n_actuated()),
-        gate: CommandGate::for_session(info.session),
-        info: info.clone(),
-        supervisor,
-        truth_csv,
-        timing: LatencyHistogram::new(),
-        ipc: LatencyHistogram::new(),
-        published_at: Instant::now(),
-        zmp: [0.0; 2],
-        hand_force: [0.0; 3],
-        max_pen: 0.0,
-        max_slip: 0.0,
-        max_loop: 0.0,
-        overruns: 0,
-        last_reject_log: None,
-        record_every: (cfg.record_period / cfg.dt).round().max(1.0) as u64,
-        push_frame: match cfg.push {
-            Push::Hand => Some(
-                robot
-                    .model
-                    .frame_id(&robot.description.hand.frame)
-                    .map_err(SimError::from)?,
-            ),
-            Push::Door | Push::None => None,
-        },
+    rec.map(Some)
+        .map_err(|e| ProcessError::Setup(format!("rerun recording {}: {e}", path.display())))
+}
+
+/// The lockstep ground-truth CSV, its header written, if asked for.
+fn open_truth_csv(
+    opts: &RunOptions,
+) -> Result<Option<std::io::BufWriter<std::fs::File>>, ProcessError> {
+    let Some(p) = &opts.truth_csv else {
+        return Ok(None);
     };
-    // State 0 before any step.
-    looper.publish(&ep, &world, &StepReport::default(), 0.0)?;
-    if let Some(r) = &mut recorder {
-        r.offer(&mut world, &looper.hand_force);
-    }
-    let total_steps = if cfg.duration > 0.0 {
-        (cfg.duration / cfg.dt).round() as u64
-    } else {
-        u64::MAX
-    };
-    let start = Instant::now();
-    let result = match cfg.mode {
-        Mode::Lockstep => looper.lockstep(
-            cfg,
-            &ep,
-            &mut world,
-            &drive,
-            &mut recorder,
-            total_steps,
-            stop,
-        ),
-        Mode::Realtime => looper.realtime(
-            cfg,
-            &ep,
-            &mut world,
-            &drive,
-            &mut recorder,
-            total_steps,
-            stop,
-        ),
-    };
-    let wall = start.elapsed().as_secs_f64();
-    // The CSV first: the recording's flush may take long on a loaded machine.
-    if let Some(w) = &mut looper.truth_csv {
-        use std::io::Write;
-        w.flush()
-            .map_err(|e| ProcessError::Setup(format!("ground-truth CSV: {e}")))?;
-    }
-    let rec_stats = recorder.map(|r| r.finish()).unwrap_or_default();
-    result?;
-    let summary = RunSummary {
-        steps: world.steps(),
-        sim_time: world.time(),
-        wall_time: wall,
-        step_time_p50: looper.timing.quantile(0.5),
-        step_time_p99: looper.timing.quantile(0.99),
-        step_time_max: looper.timing.max(),
-        overruns: looper.overruns,
-        commands: looper.gate.stats,
-        safe_mode_steps: looper.supervisor.stats.damping_steps,
-        hold: looper.supervisor.stats,
-        mode: format!("{:?}", cfg.mode).to_lowercase(),
-        scenario: cfg.scenario.clone(),
-        robot: robot.name().to_string(),
-        force_scale: info.force_scale,
-        scenario_hash: format!("{:016x}", info.scenario_hash),
-        session: format!("{:016x}", info.session),
-        scenario_start: looper.info.scenario_start,
-        max_penetration: looper.max_pen,
-        max_slip_speed: looper.max_slip,
-        max_loop_error: looper.max_loop,
-        recorder: rec_stats,
-        ipc_overhead_p50: looper.ipc.quantile(0.5),
-        ipc_overhead_p99: looper.ipc.quantile(0.99),
-        ipc_overhead_max: looper.ipc.max(),
-    };
-    tracing::info!("sim finished: {summary:?}");
-    Ok(summary)
+    let file = std::fs::File::create(p)
+        .map_err(|e| ProcessError::Setup(format!("ground-truth CSV {}: {e}", p.display())))?;
+    let mut w = std::io::BufWriter::new(file);
+    use std::io::Write;
+    writeln!(w, "{TRUTH_CSV_HEADER}")
+        .map_err(|e| ProcessError::Setup(format!("ground-truth CSV: {e}")))?;
+    Ok(Some(w))
+}
+
+/// What both loops share for a run.
+struct Run<'a> {
+    cfg: &'a SimConfig,
+    ep: &'a Endpoints,
+    drive: &'a DoorDrive,
+    recorder: &'a mut Option<Recorder>,
+    total: u64,
+    stop: &'a AtomicBool,
 }
 
 /// Columns of the lockstep ground-truth CSV (`--truth-csv`).
@@ -417,7 +479,7 @@ fn log_transition(from: Phase, to: Phase, t: f64, cfg: &SimConfig) {
 
 fn write_truth(
     w: &mut impl std::io::Write,
-    world: &World,
+    world: &impl Physics,
     rep: &StepReport,
     zmp: [f64; 2],
     hand: [f64; 3],
@@ -444,6 +506,93 @@ fn write_truth(
 }
 
 impl Looper {
+    fn new(
+        opts: &RunOptions,
+        world: &impl Physics,
+        info: PlantInfo,
+        carrying: &[usize],
+        truth_csv: Option<std::io::BufWriter<std::fs::File>>,
+    ) -> Result<Self, ProcessError> {
+        let (cfg, robot) = (&opts.config, &opts.robot);
+        let supervisor = Supervisor::new(
+            world.robot(),
+            world.q(),
+            carrying,
+            &cfg.hold,
+            cfg.process.safe_damping,
+            cfg.dt,
+        )?;
+        Ok(Looper {
+            tau: DVector::zeros(world.n_actuated()),
+            gate: CommandGate::for_session(info.session),
+            info,
+            supervisor,
+            truth_csv,
+            timing: LatencyHistogram::new(),
+            ipc: LatencyHistogram::new(),
+            published_at: Instant::now(),
+            zmp: [0.0; 2],
+            hand_force: [0.0; 3],
+            max_pen: 0.0,
+            max_slip: 0.0,
+            max_loop: 0.0,
+            overruns: 0,
+            last_reject_log: None,
+            record_every: (cfg.record_period / cfg.dt).round().max(1.0) as u64,
+            push_frame: match cfg.push {
+                Push::Hand => Some(
+                    robot
+                        .model
+                        .frame_id(&robot.description.hand.frame)
+                        .map_err(SimError::from)?,
+                ),
+                Push::Door | Push::None => None,
+            },
+        })
+    }
+
+    /// The run's summary; `error`: what ended it early, if anything.
+    fn summary(
+        &self,
+        opts: &RunOptions,
+        world: &impl Physics,
+        version: String,
+        wall: f64,
+        recorder: RecorderStats,
+        error: Option<ProcessError>,
+    ) -> RunSummary {
+        let cfg = &opts.config;
+        RunSummary {
+            plant: world.engine().into(),
+            plant_version: version,
+            steps: world.steps(),
+            sim_time: world.time(),
+            wall_time: wall,
+            step_time_p50: self.timing.quantile(0.5),
+            step_time_p99: self.timing.quantile(0.99),
+            step_time_max: self.timing.max(),
+            overruns: self.overruns,
+            commands: self.gate.stats,
+            safe_mode_steps: self.supervisor.stats.damping_steps,
+            hold: self.supervisor.stats,
+            mode: format!("{:?}", cfg.mode).to_lowercase(),
+            scenario: cfg.scenario.clone(),
+            robot: opts.robot.name().to_string(),
+            force_scale: self.info.force_scale,
+            scenario_hash: format!("{:016x}", self.info.scenario_hash),
+            session: format!("{:016x}", self.info.session),
+            scenario_start: self.info.scenario_start,
+            max_penetration: self.max_pen,
+            max_slip_speed: self.max_slip,
+            max_loop_error: self.max_loop,
+            recorder,
+            ipc_overhead_p50: self.ipc.quantile(0.5),
+            ipc_overhead_p99: self.ipc.quantile(0.99),
+            ipc_overhead_max: self.ipc.max(),
+            error: error.map(|e| e.to_string()),
+        }
+    }
+
     /// Validates a command; on acceptance copies its torques into `self.tau`.
     fn accept(&mut self, msg: &TorqueMsg, n: usize) -> bool {
         let origin = CommandOrigin {
@@ -472,16 +621,16 @@ impl Looper {
         }
     }
 
-    fn step(
+    fn step<P: Physics>(
         &mut self,
         ep: &Endpoints,
-        world: &mut World,
+        world: &mut P,
         drive: &DoorDrive,
         recorder: &mut Option<Recorder>,
     ) -> Result<(), ProcessError> {
         let t0 = Instant::now();
         let door_torque = if self.info.scenario_start >= 0.0 {
-            drive.torque(world.time() - self.info.scenario_start)
+            drive.torque(world.sample_time(world.time() - self.info.scenario_start))
         } else {
             0.0
         };
@@ -519,7 +668,7 @@ impl Looper {
     fn publish(
         &mut self,
         ep: &Endpoints,
-        world: &World,
+        world: &impl Physics,
         rep: &StepReport,
         step_time: f64,
     ) -> Result<(), ProcessError> {
@@ -558,17 +707,8 @@ impl Looper {
         Ok(())
     }
 
-    #[allow(clippy::too_many_arguments)]
-    fn lockstep(
-        &mut self,
-        cfg: &SimConfig,
-        ep: &Endpoints,
-        world: &mut World,
-        drive: &DoorDrive,
-        recorder: &mut Option<Recorder>,
-        total: u64,
-        stop: &AtomicBool,
-    ) -> Result<(), ProcessError> {
+    fn lockstep<P: Physics>(&mut self, run: &mut Run, world: &mut P) -> Result<(), ProcessError> {
+        let (cfg, ep, total, stop) = (run.cfg, run.ep, run.total, run.stop);
         let n = world.n_actuated();
         while world.steps() < total && !stop.load(Ordering::Relaxed) {
             let want = world.steps();
@@ -635,22 +775,13 @@ impl Looper {
                     ep.state_event.notify()?;
                 }
             }
-            self.step(ep, world, drive, recorder)?;
+            self.step(ep, world, run.drive, run.recorder)?;
         }
         Ok(())
     }
 
-    #[allow(clippy::too_many_arguments)]
-    fn realtime(
-        &mut self,
-        cfg: &SimConfig,
-        ep: &Endpoints,
-        world: &mut World,
-        drive: &DoorDrive,
-        recorder: &mut Option<Recorder>,
-        total: u64,
-        stop: &AtomicBool,
-    ) -> Result<(), ProcessError> {
+    fn realtime<P: Physics>(&mut self, run: &mut Run, world: &mut P) -> Result<(), ProcessError> {
+        let (cfg, ep, total, stop) = (run.cfg, run.ep, run.total, run.stop);
         let n = world.n_actuated();
         let period = Duration::from_secs_f64(cfg.dt);
         let mut clock =
@@ -697,7 +828,7 @@ impl Looper {
                 }
             }
             self.tau.copy_from(&applied);
-            self.step(ep, world, drive, recorder)?;
+            self.step(ep, world, run.drive, run.recorder)?;
             let now = Instant::now();
             if now > next {
                 self.overruns += 1;

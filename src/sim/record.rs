@@ -19,7 +19,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::dynamics::{Model, SE3};
 
-use super::world::World;
+use super::physics::Physics;
 
 /// Newtons to metres for the force arrows.
 const FORCE_SCALE: f32 = 1.0 / 500.0;
@@ -314,7 +314,7 @@ impl Recorder {
         path: &Path,
         recording_id: Option<&str>,
         live: Option<&str>,
-        world: &World,
+        world: &impl Physics,
         robot: &crate::robot::Robot,
     ) -> Result<Recorder, Box<dyn std::error::Error + Send + Sync>> {
         let rec = crate::recording::open(path, recording_id, live)?;
@@ -329,8 +329,8 @@ impl Recorder {
             );
         }
         let robot_links = link_frames(world.robot(), &robot_urdf);
-        let door_links = match world.door() {
-            Some((model, _)) => {
+        let door_links = match world.door_model() {
+            Some(model) => {
                 let door_urdf = crate::dynamics::parse_urdf(crate::dynamics::icub_like::DOOR_URDF)?;
                 log_geometry(&rec, "world/door", &door_urdf, None)?;
                 link_frames(model, &door_urdf)
@@ -354,7 +354,7 @@ impl Recorder {
     }
 
     /// Offers the current state; dropped (and counted) if the logger is behind.
-    pub fn offer(&mut self, world: &mut World, hand_force: &[f64; 3]) {
+    pub fn offer(&mut self, world: &mut impl Physics, hand_force: &[f64; 3]) {
         let Some(tx) = &self.tx else { return };
         let placements = world.robot_frame_placements();
         let robot = self

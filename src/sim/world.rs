@@ -70,6 +70,9 @@ pub enum SimError {
     Diverged(usize),
     #[error("invalid scene: {0}")]
     Scene(String),
+    /// The physics engine gave up (MuJoCo's own divergence warnings).
+    #[error("{0}")]
+    Engine(String),
 }
 
 /// A plane `{x : n·x = offset}` (unit normal `n`, pointing out of the ground).
@@ -171,6 +174,16 @@ pub struct DoorSpec {
     pub handle_frame: String,
     /// Frame of the robot holding the door.
     pub hand_frame: String,
+}
+
+/// Places a fixed-base model's root at `base` (its joints and frames on the world).
+pub(crate) fn rebase(model: &mut Model, base: &SE3) {
+    for j in model.joints.iter_mut().filter(|j| j.parent.is_none()) {
+        j.placement = base.compose(&j.placement);
+    }
+    for f in model.frames.iter_mut().filter(|f| f.parent.is_none()) {
+        f.placement = base.compose(&f.placement);
+    }
 }
 
 /// Everything a [`World`] is built from.
@@ -430,12 +443,7 @@ impl World {
                         "the door model must have a fixed base".into(),
                     ));
                 }
-                for j in model.joints.iter_mut().filter(|j| j.parent.is_none()) {
-                    j.placement = d.base.compose(&j.placement);
-                }
-                for f in model.frames.iter_mut().filter(|f| f.parent.is_none()) {
-                    f.placement = d.base.compose(&f.placement);
-                }
+                rebase(&mut model, &d.base);
                 let handle = point_of(&model, &d.handle_frame)?;
                 let hand = point_of(&robot, &d.hand_frame)?;
                 dof_parents(&model, robot.nv, &mut parents);

@@ -41,7 +41,7 @@ use std::time::Duration;
 use clarabel::solver::{DefaultSettings, SupportedConeT};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Vector3, Vector6};
 
-use super::controller::{FallbackReason, N_CONTACTS, WbcCounters};
+use super::outcome::{FallbackReason, N_CONTACTS, WbcCounters};
 use super::pattern::Pattern;
 use super::qp::QpInstance;
 

@@ -58,11 +58,12 @@
 
 use std::time::{Duration, Instant};
 
-use clarabel::solver::{DefaultSettings, SolverStatus, SupportedConeT};
+use clarabel::solver::{DefaultSettings, SupportedConeT};
 use nalgebra::{DMatrix, DVector, Matrix6, Quaternion, UnitQuaternion, Vector3, Vector6};
 
 use super::com_bias::{com_drift_from_pass, drift_pass, frame_drift_from_pass};
 use super::condensed::{CondensedError, CondensedQp, Problem};
+pub use super::outcome::{CORNERS, FallbackReason, N_CONTACTS, WbcCounters, WbcStatus};
 use super::pattern::Pattern;
 use super::qp::QpInstance;
 use crate::config::{WbcConfig, WbcFormulation};
@@ -75,10 +76,6 @@ use crate::dynamics::{
 
 /// Number of point contacts: 4 sole corners on each of 2 feet, one home for the QP and the
 /// channel contract's arrays.
-pub use crate::channels::N_CONTACTS;
-/// Corner frame suffixes, in the order of [`WbcOutput::contact_forces`] for each foot.
-pub const CORNERS: [&str; 4] = ["fl", "fr", "rl", "rr"];
-const _: () = assert!(N_CONTACTS == 2 * CORNERS.len());
 /// Warnings about fallbacks are emitted at most once per this many ticks.
 const WARN_EVERY_TICKS: u64 = 1000;
 
@@ -129,51 +126,6 @@ enum Path {
     Relaxed,
     /// The full problem with its torque rows.
     Full,
-}
-
-/// Why a tick fell back to the safe torque.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum FallbackReason {
-    /// `q`, `v`, the command or the posture reference is malformed or non-finite.
-    InvalidInput,
-    /// The assembled QP data is not finite.
-    NonFiniteProblem,
-    /// Clarabel refused the problem data (construction or update error).
-    SolverSetup,
-    /// Clarabel ended with this status (not Solved / AlmostSolved).
-    Solver(SolverStatus),
-    /// The solver reported success but the solution is not finite.
-    NonFiniteSolution,
-    /// The solver panicked (caught; the solver is rebuilt by the next tick, which allocates).
-    SolverPanic,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum WbcStatus {
-    /// The QP's solution (clarabel Solved or AlmostSolved).
-    Solved,
-    /// The fallback torque, for this reason.
-    Fallback(FallbackReason),
-}
-
-/// Counters since construction.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct WbcCounters {
-    pub ticks: u64,
-    /// Ticks whose QP was solved (including reduced-accuracy solutions).
-    pub solved: u64,
-    /// Of those, clarabel's AlmostSolved (reduced accuracy).
-    pub almost_solved: u64,
-    pub fallbacks: u64,
-    pub consecutive_fallbacks: u64,
-    /// Clarabel solvers built: at construction (up to 3: condensed, screening, full); any more
-    /// were rebuilt by a tick after a panic or a refused update.
-    pub solver_builds: u64,
-    /// Ticks whose QP needed the torque-limit rows (a limit active at the optimum).
-    pub torque_limited: u64,
-    /// Ticks the condensed problem could not be formed (H or S not positive definite), decided
-    /// by the full problem instead.
-    pub condensation_failures: u64,
 }
 
 /// One tick's result. `tau` and `ddq` borrow the controller's buffers.

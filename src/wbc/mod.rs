@@ -9,12 +9,15 @@
 //! - [`controller`]: [`WholeBodyController`], its command / output / status types, the fallback.
 //! - `condensed`: the same QP condensed onto the 24 contact forces (the default; the full one
 //!   stays as the reference and the fallback).
+//! - [`outcome`]: what both formulations share: the contact layout, a tick's status and
+//!   counters.
 //! - `qp`: one clarabel problem with a fixed sparsity pattern, updated in place each tick.
 //! - [`com_bias`]: `J̇ v` drift of the CoM and of several frames from one forward pass.
 
 pub mod com_bias;
 mod condensed;
 pub mod controller;
+pub mod outcome;
 mod pattern;
 mod qp;
 

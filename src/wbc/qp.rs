@@ -7,7 +7,7 @@ use std::time::Duration;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 use nalgebra::DMatrix;
 
-use super::controller::{FallbackReason, WbcCounters};
+use super::outcome::{FallbackReason, WbcCounters};
 use super::pattern::Pattern;
 
 /// One clarabel problem over the shared dense scratch: its rows, pattern, cones and solver.

@@ -1,7 +1,7 @@
-//! The scene of `upc sim` for MuJoCo: an MJCF model and a plant description (`plant.json`)
-//! generated from the same robot description, URDF, door and scenario as [`super::scene`], for
-//! the MuJoCo plant process (`services/python/mujoco_plant.py`) that speaks the channel
-//! contract in `upc sim`'s place.
+//! The scene of `upc sim --plant mujoco`: an MJCF model and a plant description ([`PlantFile`],
+//! written as `plant.json` by `upc mjcf`) generated from the same robot description, URDF, door
+//! and scenario as [`crate::sim::scene`], for MuJoCo stepped by the plant runtime
+//! ([`super::MujocoPlant`]).
 //!
 //! What carries over, and how:
 //! - bodies, joint placements, axes, inertias, armatures and position limits from the [`Model`]
@@ -31,9 +31,9 @@ use crate::dynamics::{Data, JointKind, Model, SE3, forward_kinematics};
 use crate::robot::Robot;
 use crate::scenario::Scenario;
 
-use super::config::{Cone, HoldKind, Push, SimConfig};
-use super::scene::{DoorDrive, HANDLE_FRAME, PosturePd, place_door};
-use super::world::SimError;
+use crate::sim::config::{Cone, HoldKind, Push, SimConfig};
+use crate::sim::scene::{DoorDrive, HANDLE_FRAME, PlacedDoor, PosturePd, place_door};
+use crate::sim::world::SimError;
 
 /// Radius of the contact spheres (m): small against the foot, large enough for MuJoCo's
 /// sphere–plane collision to be well conditioned.
@@ -45,8 +45,11 @@ const HANDLE_SITE: &str = "handle";
 const DOOR_PREFIX: &str = "door_";
 const BASE_JOINT: &str = "root";
 
-/// `plant.json`: what the MuJoCo plant needs besides the MJCF (format 1, documented in
-/// `services/python/mujoco_plant.py`).
+/// `plant.json`: what the MuJoCo plant needs besides the MJCF (format 2): identifiers, the
+/// step and the loop's timeouts, the hold's gains, the MJCF names of the base, the actuated
+/// joints and the contact spheres (contract order), sites and door hinge, the home
+/// configuration. The plant runtime reads it in memory; `upc mjcf` writes it for a plant of
+/// one's own.
 #[derive(Debug, Clone, Serialize)]
 pub struct PlantFile {
     pub format: u32,
@@ -72,7 +75,6 @@ pub struct PlantFile {
     pub door_joint: Option<String>,
     /// Contract configuration at home: base position, quaternion x y z w, joints.
     pub home: Vec<f64>,
-    pub hinge_torque: HingeTorque,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -99,17 +101,13 @@ pub struct PlantHold {
     pub lost_timeout: f64,
 }
 
-/// The hinge torque at scenario time `k·dt` (N·m); zero past the end.
-#[derive(Debug, Clone, Serialize)]
-pub struct HingeTorque {
-    pub dt: f64,
-    pub values: Vec<f64>,
-}
-
 /// A generated MuJoCo scene.
 pub struct MujocoScene {
     pub mjcf: String,
     pub plant: PlantFile,
+    /// The door as placed in the scene (upc's model of it), and its hinge torque.
+    pub door: Option<PlacedDoor>,
+    pub drive: DoorDrive,
 }
 
 /// Builds the MuJoCo scene of `robot` under `cfg` playing `scenario` (its forces already scaled
@@ -262,14 +260,8 @@ pub fn build(robot: &Robot, cfg: &SimConfig, scenario: &Scenario) -> Result<Mujo
         },
         None => DoorDrive::none(),
     };
-    // Samples until the push ends for good, and a second beyond (the plant reads zero past the
-    // table, as the drive is): an hour's soak scenario is 3.6 million samples, not a table
-    // over the run's nominal length.
-    let horizon = drive.profile.end() + 1.0;
-    let n = (horizon / cfg.dt).ceil() as usize + 1;
-    let values = drive.torques_sampled(cfg.dt, n);
     let plant = PlantFile {
-        format: 1,
+        format: 2,
         robot: robot.name().to_string(),
         robot_hash: format!("{:016x}", robot.hash),
         force_scale: scenario.force_scale,
@@ -313,9 +305,13 @@ pub fn build(robot: &Robot, cfg: &SimConfig, scenario: &Scenario) -> Result<Mujo
         handle_site: cfg.door.then(|| HANDLE_SITE.into()),
         door_joint,
         home: robot.home.iter().copied().collect(),
-        hinge_torque: HingeTorque { dt: cfg.dt, values },
     };
-    Ok(MujocoScene { mjcf: x.s, plant })
+    Ok(MujocoScene {
+        mjcf: x.s,
+        plant,
+        door: placed,
+        drive,
+    })
 }
 
 /// The MJCF being written, and the simulator settings every body shares.

@@ -1,0 +1,293 @@
+//! The controller's view of its plant, as a state machine of its own (no IPC): which received
+//! state is new, which plant run it belongs to (a restarted simulator starts a new one), and
+//! when the plant has gone quiet (a stale period) or away. The loop feeds it what it received
+//! and acts on its [`Verdict`]; what it decides is in `services/FAULTS.md`.
+
+use std::time::{Duration, Instant};
+
+use crate::channels::StateMsg;
+use crate::config::LoopMode;
+
+/// What the loop does after a receive.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Verdict {
+    /// Control from the received state; `restarted`: it is the first of a new plant run (the
+    /// core, the forecast's time line and the metrics latch again from it).
+    Control { restarted: bool },
+    /// Nothing to do this pass: no state yet, a repeated one, or a silence shorter than
+    /// `state_timeout` (or, in lockstep, a silent plant whose process is alive).
+    Idle,
+    /// Real time, no state for `state_timeout`: damping torques for the last state, `step`.
+    Damp { step: u64 },
+    /// No state at all within `startup_timeout` of the start.
+    NeverStarted,
+    /// Lockstep: no state past the reconnect timeout, and the plant's process is gone.
+    Gone,
+}
+
+/// What the link counted over a run.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct LinkCounts {
+    /// Passes without a new state (real time) or with a repeated one.
+    pub stale_states: u64,
+    /// Silences longer than `state_timeout`.
+    pub stale_periods: u64,
+    /// Restarted plants latched onto.
+    pub reconnects: u64,
+    /// Longest wall time between two fresh states (s).
+    pub longest_state_gap: f64,
+}
+
+/// The timeouts of [`PlantLink`] (s), from `[controller]` and the command line.
+#[derive(Clone, Copy, Debug)]
+pub struct LinkTimeouts {
+    pub state: f64,
+    pub reconnect: f64,
+    pub startup: f64,
+}
+
+pub struct PlantLink {
+    mode: LoopMode,
+    timeouts: LinkTimeouts,
+    started: Instant,
+    last_step: Option<u64>,
+    session: u64,
+    last_time: f64,
+    last_state_at: Instant,
+    stale: bool,
+    /// Lockstep: when the plant's liveness was last checked, and whether a wait for a live but
+    /// silent plant was logged in this stale period.
+    liveness_checked: Option<Instant>,
+    waiting_for_live_plant: bool,
+    pub counts: LinkCounts,
+}
+
+impl PlantLink {
+    pub fn new(mode: LoopMode, timeouts: LinkTimeouts) -> Self {
+        let now = Instant::now();
+        PlantLink {
+            mode,
+            timeouts,
+            started: now,
+            last_step: None,
+            session: 0,
+            last_time: 0.0,
+            last_state_at: now,
+            stale: false,
+            liveness_checked: None,
+            waiting_for_live_plant: false,
+            counts: LinkCounts::default(),
+        }
+    }
+
+    /// The step of the last state controlled from (`None` before the first).
+    pub fn last_step(&self) -> Option<u64> {
+        self.last_step
+    }
+
+    /// The plant run (session) of the last state.
+    pub fn session(&self) -> u64 {
+        self.session
+    }
+
+    /// Classifies the newest received state, if any. `plant_alive` is asked (at most every
+    /// 100 ms) in lockstep when the plant has been silent past the reconnect timeout.
+    pub fn classify(
+        &mut self,
+        received: Option<&StateMsg>,
+        plant_alive: impl FnOnce() -> bool,
+    ) -> Verdict {
+        // A new session, or a step that goes back, is a new plant run (a restarted simulator);
+        // the same step again is the lockstep simulator re-sending a state it waits on.
+        let restarted = matches!((received, self.last_step),
+            (Some(st), Some(l)) if st.step < l || (st.session != self.session && st.session != 0));
+        match received {
+            Some(st) if restarted || self.last_step.is_none_or(|l| st.step > l) => {
+                self.accept(st, restarted);
+                Verdict::Control { restarted }
+            }
+            repeated => self.without_state(repeated.is_some(), plant_alive),
+        }
+    }
+
+    /// The state was answered: lockstep waits for the forecast or C2 before the answer are not
+    /// the plant's silence.
+    pub fn answered(&mut self) {
+        self.last_state_at = Instant::now();
+    }
+
+    fn accept(&mut self, state: &StateMsg, restarted: bool) {
+        if let Some(last) = self.last_step {
+            let gap = self.last_state_at.elapsed().as_secs_f64();
+            self.counts.longest_state_gap = self.counts.longest_state_gap.max(gap);
+            if restarted {
+                self.counts.reconnects += 1;
+                tracing::warn!(
+                    "simulator restarted: step {} (t = {:.3} s) after step {last} (t = {:.3} \
+                     s), {gap:.3} s without state; references re-latched, control resumes \
+                     (reconnect {})",
+                    state.step,
+                    state.time,
+                    self.last_time,
+                    self.counts.reconnects
+                );
+            } else if self.stale {
+                tracing::info!(
+                    "state back at step {} after {gap:.3} s: control resumes",
+                    state.step
+                );
+            }
+        }
+        self.stale = false;
+        self.waiting_for_live_plant = false;
+        self.last_step = Some(state.step);
+        self.session = state.session;
+        self.last_time = state.time;
+    }
+
+    fn without_state(&mut self, repeated: bool, plant_alive: impl FnOnce() -> bool) -> Verdict {
+        let Some(last) = self.last_step else {
+            return if self.started.elapsed().as_secs_f64() > self.timeouts.startup {
+                Verdict::NeverStarted
+            } else {
+                Verdict::Idle
+            };
+        };
+        let realtime = self.mode == LoopMode::Realtime;
+        self.counts.stale_states += u64::from(realtime || repeated);
+        let quiet = self.last_state_at.elapsed().as_secs_f64();
+        if quiet <= self.timeouts.state {
+            return Verdict::Idle;
+        }
+        if !self.stale {
+            self.stale = true;
+            self.counts.stale_periods += 1;
+            let t = self.last_time;
+            if realtime {
+                tracing::warn!(
+                    "no state for {quiet:.3} s after step {last} (t = {t:.3} s): damping \
+                     torques until a simulator publishes again"
+                );
+            } else {
+                tracing::warn!(
+                    "no state for {quiet:.3} s after step {last} (t = {t:.3} s): waiting {} s \
+                     for a simulator",
+                    self.timeouts.reconnect
+                );
+            }
+        }
+        if realtime {
+            return Verdict::Damp { step: last };
+        }
+        // A lockstep run is a function of its inputs, not of wall time: a plant that is slow
+        // (starved, stopped in a debugger) is waited for; one whose process is gone ends it.
+        let due = self
+            .liveness_checked
+            .is_none_or(|t| t.elapsed() >= Duration::from_millis(100));
+        if quiet > self.timeouts.state + self.timeouts.reconnect && due {
+            self.liveness_checked = Some(Instant::now());
+            if !plant_alive() {
+                return Verdict::Gone;
+            }
+            if !self.waiting_for_live_plant {
+                self.waiting_for_live_plant = true;
+                tracing::warn!(
+                    "no state for {quiet:.3} s, but the simulator's process is alive: waiting \
+                     for it"
+                );
+            }
+        }
+        Verdict::Idle
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn state(step: u64, session: u64) -> StateMsg {
+        StateMsg {
+            step,
+            session,
+            time: step as f64 * 1e-3,
+            ..StateMsg::default()
+        }
+    }
+
+    fn link(mode: LoopMode, state: f64) -> PlantLink {
+        PlantLink::new(
+            mode,
+            LinkTimeouts {
+                state,
+                reconnect: 0.0,
+                startup: 0.05,
+            },
+        )
+    }
+
+    #[test]
+    fn new_steps_control_repeats_idle_and_a_step_back_or_new_session_restarts() {
+        let mut l = link(LoopMode::Lockstep, 10.0);
+        let alive = || true;
+        assert_eq!(l.classify(None, alive), Verdict::Idle);
+        assert_eq!(
+            l.classify(Some(&state(0, 7)), alive),
+            Verdict::Control { restarted: false }
+        );
+        assert_eq!(l.classify(Some(&state(0, 7)), alive), Verdict::Idle);
+        assert_eq!(l.counts.stale_states, 1, "a repeated state in lockstep");
+        assert_eq!(
+            l.classify(Some(&state(1, 7)), alive),
+            Verdict::Control { restarted: false }
+        );
+        assert_eq!(
+            l.classify(Some(&state(0, 7)), alive),
+            Verdict::Control { restarted: true }
+        );
+        assert_eq!(
+            l.classify(Some(&state(5, 9)), alive),
+            Verdict::Control { restarted: true }
+        );
+        assert_eq!(
+            (l.counts.reconnects, l.session(), l.last_step()),
+            (2, 9, Some(5))
+        );
+    }
+
+    #[test]
+    fn silence_damps_in_real_time_and_ends_lockstep_only_when_the_plant_is_gone() {
+        let mut rt = link(LoopMode::Realtime, 0.0);
+        rt.classify(Some(&state(3, 1)), || true);
+        std::thread::sleep(Duration::from_millis(2));
+        assert_eq!(rt.classify(None, || true), Verdict::Damp { step: 3 });
+        assert_eq!(rt.classify(None, || true), Verdict::Damp { step: 3 });
+        assert_eq!(
+            rt.counts.stale_periods, 1,
+            "one period, however many passes"
+        );
+        let mut ls = link(LoopMode::Lockstep, 0.0);
+        ls.classify(Some(&state(3, 1)), || true);
+        std::thread::sleep(Duration::from_millis(2));
+        assert_eq!(
+            ls.classify(None, || true),
+            Verdict::Idle,
+            "alive: waited for"
+        );
+        std::thread::sleep(Duration::from_millis(110));
+        assert_eq!(ls.classify(None, || false), Verdict::Gone);
+        // Back: the period ends and the gap is measured.
+        assert_eq!(
+            ls.classify(Some(&state(4, 1)), || true),
+            Verdict::Control { restarted: false }
+        );
+        assert!(ls.counts.longest_state_gap >= 0.1);
+    }
+
+    #[test]
+    fn no_state_at_all_is_reported_after_the_startup_timeout() {
+        let mut l = link(LoopMode::Lockstep, 1.0);
+        assert_eq!(l.classify(None, || true), Verdict::Idle);
+        std::thread::sleep(Duration::from_millis(60));
+        assert_eq!(l.classify(None, || true), Verdict::NeverStarted);
+    }
+}

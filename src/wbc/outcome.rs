@@ -1,0 +1,55 @@
+//! What the whole-body QP's formulations share: the contact layout of the contract, and what a
+//! tick's solve can end with and counts (the full problem in `controller.rs`, the condensed
+//! one in `condensed.rs`, clarabel's wrapper in `qp.rs`).
+
+use clarabel::solver::SolverStatus;
+
+pub use crate::channels::N_CONTACTS;
+/// Corner frame suffixes, in the order of [`super::WbcOutput::contact_forces`] for each foot.
+pub const CORNERS: [&str; 4] = ["fl", "fr", "rl", "rr"];
+const _: () = assert!(N_CONTACTS == 2 * CORNERS.len());
+
+/// Why a tick fell back to the safe torque.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FallbackReason {
+    /// `q`, `v`, the command or the posture reference is malformed or non-finite.
+    InvalidInput,
+    /// The assembled QP data is not finite.
+    NonFiniteProblem,
+    /// Clarabel refused the problem data (construction or update error).
+    SolverSetup,
+    /// Clarabel ended with this status (not Solved / AlmostSolved).
+    Solver(SolverStatus),
+    /// The solver reported success but the solution is not finite.
+    NonFiniteSolution,
+    /// The solver panicked (caught; the solver is rebuilt by the next tick, which allocates).
+    SolverPanic,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WbcStatus {
+    /// The QP's solution (clarabel Solved or AlmostSolved).
+    Solved,
+    /// The fallback torque, for this reason.
+    Fallback(FallbackReason),
+}
+
+/// Counters since construction.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct WbcCounters {
+    pub ticks: u64,
+    /// Ticks whose QP was solved (including reduced-accuracy solutions).
+    pub solved: u64,
+    /// Of those, clarabel's AlmostSolved (reduced accuracy).
+    pub almost_solved: u64,
+    pub fallbacks: u64,
+    pub consecutive_fallbacks: u64,
+    /// Clarabel solvers built: at construction (up to 3: condensed, screening, full); any more
+    /// were rebuilt by a tick after a panic or a refused update.
+    pub solver_builds: u64,
+    /// Ticks whose QP needed the torque-limit rows (a limit active at the optimum).
+    pub torque_limited: u64,
+    /// Ticks the condensed problem could not be formed (H or S not positive definite), decided
+    /// by the full problem instead.
+    pub condensation_failures: u64,
+}
