@@ -20,10 +20,10 @@ if [ ${#need[@]} -gt 0 ]; then
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need[@]}"
 fi
 command -v cargo >/dev/null 2>&1 || { echo "cargo not found: install Rust (rustup) first" >&2; exit 1; }
-# Python environment of the Python participants (examples/python's forecasters, the MuJoCo
-# plant of `upc sim --plant mujoco`): iceoryx2's bindings and Zenoh's, the same versions as the
-# Rust crates, MuJoCo (its wheel carries the library) and rerun's viewer (`upc run --viewer`),
-# the version of the Rust SDK.
+# Python environment of the Python participants (examples/python's forecasters) and of MuJoCo:
+# iceoryx2's bindings and Zenoh's, the same versions as the Rust crates; MuJoCo, whose wheel
+# carries the C library and headers that build.rs links for `upc sim --plant mujoco` (so this
+# runs before cargo); rerun's viewer (`upc run --viewer`), the version of the Rust SDK.
 if ! .venv/bin/python -c 'import iceoryx2, mujoco, zenoh, rerun' >/dev/null 2>&1; then
   [ -x .venv/bin/python ] || python3 -m venv .venv
   .venv/bin/pip install -q --disable-pip-version-check "iceoryx2==0.10.0" "mujoco==4.0.0" \

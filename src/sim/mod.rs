@@ -1,13 +1,17 @@
-//! The simulator behind `upc sim`: the humanoid on the ground through its sole corners, the
-//! door on a spherical joint at the right hand, stepped at a fixed `dt` and exchanged with the
-//! controller over iceoryx2 (`crate::channels`).
+//! The plant behind `upc sim`: one runtime over two physics engines. The humanoid on the
+//! ground through its sole corners, the door joined to its right hand, stepped at a fixed `dt`
+//! and exchanged with the controller over iceoryx2 (`crate::channels`).
 //!
-//! - [`world`]: the physics, no IPC ([`World::step`]); [`contact`]: the constraint solver
-//!   (Coulomb cones, spherical joint, joint limits; projected Gauss–Seidel); [`factor`]: the
-//!   tree-sparse `LᵀDL` factorisation of the mass matrix.
-//! - [`scene`]: the default scene (humanoid + door placed at the hand, hinge torque profile).
-//! - [`command`]: validation of torque commands; [`process`]: the lockstep / real-time loop;
+//! - [`process`]: the plant runtime (lockstep / real-time loops, state and ground truth out,
+//!   torques in), written once over [`physics::Physics`]; [`command`]: validation of torque
+//!   commands; [`hold`]: the supervisor (hold, hand-over, damping) and the command clock;
 //!   [`record`]: the rerun `.rrd` of the ground truth; [`config`]: `config/sim.toml`.
+//! - upc's engine: [`world`], the physics, no IPC ([`World::step`]); [`contact`]: the
+//!   constraint solver (Coulomb cones, spherical joint, joint limits; projected Gauss–Seidel);
+//!   [`factor`]: the tree-sparse `LᵀDL` factorisation of the mass matrix; [`scene`]: the default
+//!   scene (humanoid + door placed at the hand, hinge torque profile).
+//! - MuJoCo's engine: [`mujoco`], the scene generated from the same robot and its plant through
+//!   MuJoCo's C library.
 
 pub mod command;
 pub mod config;

@@ -1,5 +1,7 @@
-//! The `upc sim` process: the [`World`] stepped in lockstep with the controller or at wall-clock
-//! rate, its state published over iceoryx2 ([`crate::channels`]) every step.
+//! The `upc sim` process, the plant runtime: a physics engine ([`Physics`]: upc's own
+//! [`super::World`] or MuJoCo) stepped in lockstep with the controller or at wall-clock rate, its
+//! state published over iceoryx2 ([`crate::channels`]) every step. Everything below is the
+//! runtime's, the same for every engine.
 //!
 //! - **Lockstep**: publish state `k`, wait for the [`TorqueMsg`] with `state_step = k`, step.
 //!   Answers to older states are counted as stale and skipped; no answer within
