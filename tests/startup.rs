@@ -62,11 +62,22 @@ fn pause(p: &mut Procs, s: &Scratch, secs: f64) {
 }
 
 /// The robot stands: the CoM within 5 mm of its height in the plant's first state, the feet
-/// not sliding, and the controller (not the plant's hold) drives it.
+/// not sliding away, and the controller (not the plant's hold) drives it.
+///
+/// The slip bound: a real-time start-up's largest contact-point speed depends on how the
+/// processes meet on the machine. In 58 start-ups of these tests on a 2-core machine (this
+/// code and the previous commit's, 2026-11-24) it ranged 0.004–0.060 m/s, above 0.05 in 4;
+/// a robot that slides off or falls moves its loaded points at 1 m/s and more (the soaks'
+/// falls: 1.2 m/s).
+const MAX_STANDING_SLIP: f64 = 0.1;
+
 fn assert_stands(seen: &Seen, what: &str) {
     let drop = seen.com_z0 - seen.com_z_min;
     assert!(drop < 5e-3, "{what}: the CoM dropped {drop} m: {seen:?}");
-    assert!(seen.max_slip < 0.05, "{what}: the feet slid: {seen:?}");
+    assert!(
+        seen.max_slip < MAX_STANDING_SLIP,
+        "{what}: the feet slid: {seen:?}"
+    );
     assert_eq!(
         seen.flags & STATE_FLAG_HOLD,
         0,
