@@ -70,6 +70,40 @@ fn robot_gravity_is_the_whole_controllers() {
     );
 }
 
+/// The reduced model's mass has one home, `robot.mass`: the preview's cart-table reads it as
+/// C2's search does. A robot believed twice as heavy leans half as far into the same forecast
+/// push (the equivalent CoM offset is z_c F / (M g)), measured against C0, which ignores it.
+#[test]
+fn robot_mass_is_the_preview_s() {
+    let robot = upc::robot::Robot::embedded_default().expect("robot");
+    let normal = Config::embedded_default().expect("defaults");
+    let mut layers = Config::layers_for(&robot).expect("layers");
+    layers
+        .push_override(&format!("robot.mass={}", 2.0 * robot.derived.mass))
+        .expect("set");
+    let heavy = layers.build().expect("config");
+    let lean = |config: &Config, kind| {
+        let mut r = rig(config, kind);
+        r.window
+            .offer(&push_forecast(0.0, -60.0), 0.0)
+            .expect("valid forecast");
+        for k in 0..20 {
+            r.state.time = k as f64 * 0.001;
+            r.core
+                .tick(&r.state, &r.window, None, &mut r.tau)
+                .expect("tick");
+        }
+        r.core.last.com_acc_cmd[0]
+    };
+    let lean_normal = lean(&normal, ControllerKind::C1) - lean(&normal, ControllerKind::C0);
+    let lean_heavy = lean(&heavy, ControllerKind::C1) - lean(&heavy, ControllerKind::C0);
+    let ratio = lean_heavy / lean_normal;
+    assert!(
+        lean_normal > 0.1 && (ratio - 0.5).abs() < 0.1,
+        "lean {lean_normal} m/s² at the model's mass, {lean_heavy} at twice it: ratio {ratio}"
+    );
+}
+
 #[test]
 fn c1_leans_into_a_forecast_push_and_c0_does_not() {
     // Over 20 ticks on a frozen state, C1's commanded CoM acceleration turns toward the push

@@ -163,8 +163,11 @@ impl ControllerCore {
         let n = p.horizon;
         let cart = CartTable {
             period: p.period,
+            // The reduced model's parameters have one home, `robot` of the config (the robot's
+            // own by default; set apart on purpose for model-error studies), read alike by the
+            // preview, the observer and C2's search; the whole-body QP uses the model's inertia.
             com_height: config.robot.com_height,
-            mass: model.total_mass(),
+            mass: config.robot.mass,
             gravity: config.robot.gravity,
         };
         let w = &config.wbc;
@@ -313,7 +316,9 @@ impl ControllerCore {
         .lin
     }
 
-    /// One tick. `tau` receives the actuated torques (length nv − 6). Returns the WBC status.
+    /// One tick: read the state → model quantities → horizon inputs (forecast corrected,
+    /// observer) → gain schedule → preview (C0 / C1 on the CoM) → whole-body QP → record.
+    /// `tau` receives the actuated torques (length nv − 6). Returns the WBC status.
     pub fn tick(
         &mut self,
         state: &StateMsg,
@@ -321,6 +326,79 @@ impl ControllerCore {
         c2: Option<&StampedSchedule>,
         tau: &mut [f64],
     ) -> Result<WbcStatus, TickError> {
+        self.read_state(state)?;
+        let t = state.time;
+        // Model quantities: CoM (with velocity), hand placement and velocity, M_e.
+        let (com, vcom) = center_of_mass_velocity(&self.model, &mut self.data, &self.q, &self.v)?;
+        let hand = HandState {
+            pos: self.data.o_m_f[self.hand_frame].trans,
+            vel: self.hand_vel(),
+            acc: self.hand_acc_cmd,
+        };
+        let latched = self.latch(com.z, hand.pos);
+        let m_e = *self.op.compute(&self.model, &mut self.data, &self.q)?;
+        let m_e_ok = self.previewer.set_effective_mass(m_e).is_ok();
+
+        let zref = self.horizon_inputs(t, &latched, forecast, state.hand_force);
+        let f_obs = self.observe([com.x, com.y], [vcom.x, vcom.y], state.zmp);
+        let age = self.take_schedule(t, c2);
+        let x: [AxisState; 2] = [0, 1].map(|a| Vector3::new(com[a], vcom[a], self.com_acc_cmd[a]));
+        let (u, fallback) = self.preview(&x, &hand, m_e_ok, f_obs);
+        for a in 0..2 {
+            self.com_acc_cmd[a] += u[a] * self.dt;
+        }
+        let [kpz, kdz] = self.height_gains;
+        self.com_acc_cmd.z = kpz * (latched.com_height - com.z) - kdz * vcom.z;
+        let (status, iterations, wbc_time) = self.whole_body(state, &latched, &hand, m_e_ok, tau);
+
+        // The ZMP one preview step ahead, for the logs: O(1). The whole plan is rolled out
+        // only when a log record asks for it (`fill_plan`), off the per-tick path.
+        let zmp_pred = self.zmp.next_zmp(&x, u);
+        self.last_x = x;
+        let f_dis = if self.kind == ControllerKind::C0 {
+            [0.0; 3]
+        } else {
+            self.previewer
+                .disturbance()
+                .first()
+                .copied()
+                .unwrap_or([0.0; 3])
+        };
+        let (kp, kd) = (self.schedule.kp[0], self.schedule.kd[0]);
+        self.last = TickRecord {
+            time: t,
+            com: com.into(),
+            com_vel: vcom.into(),
+            com_acc_cmd: self.com_acc_cmd.into(),
+            zmp_ref: zref,
+            zmp_pred,
+            zmp_meas: state.zmp,
+            hand_pos: hand.pos.into(),
+            hand_err: (hand.pos - latched.hand_target).norm(),
+            kp,
+            kd,
+            f_dis,
+            f_ext: self.f_ext[0],
+            wbc_solved: status == WbcStatus::Solved,
+            wbc_iterations: iterations,
+            wbc_time,
+            preview_fallback: fallback,
+            schedule_age: age,
+            support: latched.support,
+            f_meas: state.hand_force,
+            f_raw: forecast.at(t + self.period),
+            correction: self
+                .correction
+                .as_ref()
+                .map(|c| *c.estimate())
+                .unwrap_or_default(),
+            f_obs,
+        };
+        Ok(status)
+    }
+
+    /// Checks the state against the model (sizes, robot, finiteness) and copies q and v.
+    fn read_state(&mut self, state: &StateMsg) -> Result<(), TickError> {
         let (nq, nv) = (self.model.nq, self.model.nv);
         // The message's arrays hold MAX_DOF values: a size beyond them is refused before any
         // slice by it (a model larger than the message would otherwise match it).
@@ -349,13 +427,13 @@ impl ControllerCore {
         }
         self.q.as_mut_slice().copy_from_slice(&state.q[..nq]);
         self.v.as_mut_slice().copy_from_slice(&state.v[..nv]);
-        let t = state.time;
+        Ok(())
+    }
 
-        // Model quantities: CoM (with velocity), hand placement and velocity, M_e.
-        let (com, vcom) = center_of_mass_velocity(&self.model, &mut self.data, &self.q, &self.v)?;
-        let hand_pos = self.data.o_m_f[self.hand_frame].trans;
-        let hand_vel = self.hand_vel();
-        let latched = *self.latched.get_or_insert_with(|| {
+    /// The references latched at the first tick of a session: the support and the ZMP
+    /// reference's centre, the CoM height, the hand target.
+    fn latch(&mut self, com_height: f64, hand_pos: Vector3<f64>) -> Latched {
+        *self.latched.get_or_insert_with(|| {
             // The ZMP reference's centre: the contact points' centroid (the feet centre; the
             // sole frames' midpoint on robots whose sole frame is off the sole's centre).
             let mut support = [[f64::INFINITY, f64::NEG_INFINITY]; 2];
@@ -371,14 +449,21 @@ impl ControllerCore {
             Latched {
                 zmp_center: centre,
                 support,
-                com_height: com.z,
+                com_height,
                 hand_target: hand_pos,
             }
-        });
-        let m_e = *self.op.compute(&self.model, &mut self.data, &self.q)?;
-        let m_e_ok = self.previewer.set_effective_mass(m_e).is_ok();
+        })
+    }
 
-        // Horizon inputs at t + (i+1)·T.
+    /// The horizon's inputs at t + (i+1)·T: ZMP reference, hand set-point and the hand force
+    /// (the forecast, corrected by the measured force `f_meas`). Returns the ZMP reference.
+    fn horizon_inputs(
+        &mut self,
+        t: f64,
+        latched: &Latched,
+        forecast: &ForecastWindow,
+        f_meas: [f64; 3],
+    ) -> [f64; 2] {
         let zref = [
             latched.zmp_center[0] + self.zmp_offset[0],
             latched.zmp_center[1] + self.zmp_offset[1],
@@ -392,8 +477,6 @@ impl ControllerCore {
             self.hand_desired[i] = target;
         }
         // The hand force over the horizon: the forecast, corrected by the measured force.
-        let f_meas = state.hand_force;
-        let f_raw = forecast.at(t + self.period);
         match self.correction.as_mut() {
             Some(c) => {
                 c.update(t, forecast, Some(f_meas));
@@ -405,20 +488,27 @@ impl ControllerCore {
                 }
             }
         }
-        // The CoM observer, against the disturbance the preview modelled at the last tick.
-        let f_obs = match self.observer.as_mut() {
+        zref
+    }
+
+    /// The CoM observer, against the disturbance the preview modelled at the last tick.
+    fn observe(&mut self, com: [f64; 2], vcom: [f64; 2], zmp: [f64; 2]) -> [f64; 2] {
+        match self.observer.as_mut() {
             Some(o) => {
                 let known = if self.kind == ControllerKind::C0 {
                     [0.0; 2]
                 } else {
                     [self.last.f_dis[0], self.last.f_dis[1]]
                 };
-                o.update([com.x, com.y], [vcom.x, vcom.y], state.zmp, known);
+                o.update(com, vcom, zmp, known);
                 o.force()
             }
             None => [0.0; 2],
-        };
-        // The gain schedule: C2's, shifted to now, or the nominal one.
+        }
+    }
+
+    /// The gain schedule: C2's, shifted to now, or the nominal one. Returns C2's age (s).
+    fn take_schedule(&mut self, t: f64, c2: Option<&StampedSchedule>) -> f64 {
         let mut age = 0.0;
         match c2.filter(|s| s.seq > 0 && self.kind == ControllerKind::C2) {
             Some(s) => {
@@ -437,13 +527,17 @@ impl ControllerCore {
             }
         }
 
-        // C0 / C1 on the CoM.
-        let x: [AxisState; 2] = [0, 1].map(|a| Vector3::new(com[a], vcom[a], self.com_acc_cmd[a]));
-        let hand = HandState {
-            pos: hand_pos,
-            vel: hand_vel,
-            acc: self.hand_acc_cmd,
-        };
+        age
+    }
+
+    /// C0 / C1 on the CoM: the jerk u of each axis, and whether C1 fell back to C0.
+    fn preview(
+        &mut self,
+        x: &[AxisState; 2],
+        hand: &HandState,
+        m_e_ok: bool,
+        f_obs: [f64; 2],
+    ) -> ([f64; 2], bool) {
         let mut fallback = false;
         let observed = self.observer.as_ref().map(|o| {
             let decay = (-self.period / o.settings().decay).exp();
@@ -464,16 +558,16 @@ impl ControllerCore {
                 Some(obs) => {
                     add_observed(&[], &mut self.f_dis_total, obs);
                     self.zmp
-                        .solve_c1(&x, &self.zmp_ref, &self.f_dis_total)
-                        .or_else(|_| self.zmp.solve_c0(&x, &self.zmp_ref))
+                        .solve_c1(x, &self.zmp_ref, &self.f_dis_total)
+                        .or_else(|_| self.zmp.solve_c0(x, &self.zmp_ref))
                 }
-                None => self.zmp.solve_c0(&x, &self.zmp_ref),
+                None => self.zmp.solve_c0(x, &self.zmp_ref),
             },
             ControllerKind::C1 | ControllerKind::C2 => {
                 let r: Result<[f64; 2], PreviewError> = if m_e_ok {
                     self.previewer
                         .predict(
-                            &hand,
+                            hand,
                             &self.hand_desired,
                             &self.schedule,
                             &self.f_ext,
@@ -486,11 +580,11 @@ impl ControllerCore {
                                     &mut self.f_dis_total,
                                     obs,
                                 );
-                                self.zmp.solve_c1(&x, &self.zmp_ref, &self.f_dis_total)
+                                self.zmp.solve_c1(x, &self.zmp_ref, &self.f_dis_total)
                             }
                             None => {
                                 self.zmp
-                                    .solve_c1(&x, &self.zmp_ref, self.previewer.disturbance())
+                                    .solve_c1(x, &self.zmp_ref, self.previewer.disturbance())
                             }
                         })
                 } else {
@@ -498,7 +592,7 @@ impl ControllerCore {
                 };
                 r.or_else(|_| {
                     fallback = true;
-                    self.zmp.solve_c0(&x, &self.zmp_ref)
+                    self.zmp.solve_c0(x, &self.zmp_ref)
                 })
             }
         };
@@ -507,11 +601,19 @@ impl ControllerCore {
         if fallback {
             self.preview_fallbacks += 1;
         }
-        for a in 0..2 {
-            self.com_acc_cmd[a] += u[a] * self.dt;
-        }
-        let [kpz, kdz] = self.height_gains;
-        self.com_acc_cmd.z = kpz * (latched.com_height - com.z) - kdz * vcom.z;
+        (u, fallback)
+    }
+
+    /// The whole-body QP for the tick's CoM acceleration and hand impedance law; the torques in
+    /// `tau`. Returns the status, the solver's iterations and the QP's time (s).
+    fn whole_body(
+        &mut self,
+        state: &StateMsg,
+        latched: &Latched,
+        hand: &HandState,
+        m_e_ok: bool,
+        tau: &mut [f64],
+    ) -> (WbcStatus, u32, f64) {
         let (kp, kd) = (self.schedule.kp[0], self.schedule.kd[0]);
         // The measured hand force, when fed back: the QP's equations of motion account for it
         // and the hand task asks for the impedance law's own response to it, eq. (23):
@@ -528,7 +630,7 @@ impl ControllerCore {
         } else {
             Vector3::zeros()
         };
-        self.hand_acc_cmd = (latched.hand_target - hand_pos) * kp - hand_vel * kd + acc_ext;
+        self.hand_acc_cmd = (latched.hand_target - hand.pos) * kp - hand.vel * kd + acc_ext;
 
         // Whole-body QP.
         let cmd = WbcCommand {
@@ -546,51 +648,6 @@ impl ControllerCore {
             .solve(&self.model, &mut self.data, &self.q, &self.v, &cmd);
         let n = out.tau.len().min(tau.len());
         tau[..n].copy_from_slice(&out.tau.as_slice()[..n]);
-        let status = out.status;
-        let (iterations, wbc_time) = (out.iterations, out.tick_time.as_secs_f64());
-
-        // The ZMP one preview step ahead, for the logs: O(1). The whole plan is rolled out
-        // only when a log record asks for it (`fill_plan`), off the per-tick path.
-        let zmp_pred = self.zmp.next_zmp(&x, u);
-        self.last_x = x;
-        let f_dis = if self.kind == ControllerKind::C0 {
-            [0.0; 3]
-        } else {
-            self.previewer
-                .disturbance()
-                .first()
-                .copied()
-                .unwrap_or([0.0; 3])
-        };
-        self.last = TickRecord {
-            time: t,
-            com: com.into(),
-            com_vel: vcom.into(),
-            com_acc_cmd: self.com_acc_cmd.into(),
-            zmp_ref: zref,
-            zmp_pred,
-            zmp_meas: state.zmp,
-            hand_pos: hand_pos.into(),
-            hand_err: (hand_pos - latched.hand_target).norm(),
-            kp,
-            kd,
-            f_dis,
-            f_ext: self.f_ext[0],
-            wbc_solved: status == WbcStatus::Solved,
-            wbc_iterations: iterations,
-            wbc_time,
-            preview_fallback: fallback,
-            schedule_age: age,
-            support: latched.support,
-            f_meas,
-            f_raw,
-            correction: self
-                .correction
-                .as_ref()
-                .map(|c| *c.estimate())
-                .unwrap_or_default(),
-            f_obs,
-        };
-        Ok(status)
+        (out.status, out.iterations, out.tick_time.as_secs_f64())
     }
 }

@@ -8,7 +8,7 @@
 //! min_{q̈, f}  ½ q̈ᵀ H q̈ + gᵀ q̈ + ½ w_f ‖f‖²
 //! s.t.        C q̈ = d₀ + E f,   C = [M_u; J_s],  d₀ = [−h_u; b_s],  E f = [J_c,uᵀ f; 0]
 //!             f ∈ friction cones,  |τ(q̈, f)| ≤ τ_max
-//! H = D + w_com J_comᵀ J_com + w_h J_hᵀ J_h,  g = d − w_com J_comᵀ r_com − w_h J_hᵀ r_h
+//! H = D + Σ_t w_t J_tᵀ J_t,  g = d − Σ_t w_t J_tᵀ r_t     (the point tasks t of `tasks.rs`)
 //! ```
 //!
 //! (D, d: the diagonal posture / base-orientation / regularisation terms; the task residual
@@ -39,11 +39,12 @@
 use std::time::Duration;
 
 use clarabel::solver::{DefaultSettings, SupportedConeT};
-use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Vector3, Vector6};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Vector6};
 
 use super::outcome::{FallbackReason, N_CONTACTS, WbcCounters};
 use super::pattern::Pattern;
 use super::qp::QpInstance;
+use super::tasks::PointTask;
 
 /// Number of contact force variables.
 const NF: usize = 3 * N_CONTACTS;
@@ -68,8 +69,8 @@ pub(crate) struct Problem<'a> {
     /// Diagonal Hessian and linear term of the q̈ cost terms (posture, base, regularisation).
     pub diag: &'a [f64],
     pub lin: &'a [f64],
-    /// Least-squares tasks `½ w ‖J q̈ − r‖²` (CoM, hand): Jacobian (3 × nv), target, weight.
-    pub tasks: [(&'a DMatrix<f64>, Vector3<f64>, f64); 2],
+    /// The point tasks `½ w ‖J q̈ − r‖²` (the task list's, in its order).
+    pub tasks: &'a [PointTask],
     pub w_force: f64,
     pub friction: f64,
     /// Rotation of each sole (its z axis is the contact normal).
@@ -223,13 +224,16 @@ impl CondensedQp {
         let nv = self.nv;
         // H = D + Σ w JᵀJ, lower triangle (all the Cholesky reads).
         {
-            let [(j1, _, w1), (j2, _, w2)] = &pb.tasks;
             let h = self.l_h.as_mut_slice();
             for c in 0..nv {
                 for r in c..nv {
                     let mut x = 0.0;
-                    for k in 0..3 {
-                        x += w1 * j1[(k, r)] * j1[(k, c)] + w2 * j2[(k, r)] * j2[(k, c)];
+                    for t in pb.tasks {
+                        let j = &t.jac;
+                        x += t.weight
+                            * (j[(0, r)] * j[(0, c)]
+                                + j[(1, r)] * j[(1, c)]
+                                + j[(2, r)] * j[(2, c)]);
                     }
                     h[r + c * nv] = x;
                 }
@@ -240,7 +244,8 @@ impl CondensedQp {
         for i in 0..nv {
             self.u[i] = -pb.lin[i];
         }
-        for (j, r, w) in &pb.tasks {
+        for t in pb.tasks {
+            let (j, r, w) = (&t.jac, &t.target, t.weight);
             for c in 0..nv {
                 self.u[c] += w * (j[(0, c)] * r[0] + j[(1, c)] * r[1] + j[(2, c)] * r[2]);
             }

@@ -17,6 +17,9 @@
 //!      ‖(t₁ᵀf_i, t₂ᵀf_i)‖ ≤ μ nᵀ f_i            friction cones, exact               (SOC(3) × 8)
 //! ```
 //!
+//! The tasks are data (`tasks.rs`: a list, and the layout of z and of the rows it implies), read
+//! by this full formulation and the condensed one alike.
+//!
 //! Choices (the paper leaves them open; docs/whole_body_qp.md):
 //! - Contacts: the non-accelerating condition is imposed on each sole as a rigid body (6 rows per
 //!   foot) rather than on the 4 corners (12 rows per foot of rank 6): identical when the foot is
@@ -59,13 +62,16 @@
 use std::time::{Duration, Instant};
 
 use clarabel::solver::{DefaultSettings, SupportedConeT};
-use nalgebra::{DMatrix, DVector, Matrix6, Quaternion, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Quaternion, UnitQuaternion, Vector3, Vector6};
 
 use super::com_bias::{com_drift_from_pass, drift_pass, frame_drift_from_pass};
 use super::condensed::{CondensedError, CondensedQp, Problem};
 pub use super::outcome::{CORNERS, FallbackReason, N_CONTACTS, WbcCounters, WbcStatus};
 use super::pattern::Pattern;
 use super::qp::QpInstance;
+use super::tasks::{
+    BASE_ORIENTATION, COM, Column, HAND, Layout, POSTURE, Point, TaskList, TaskWeights,
+};
 use crate::config::{WbcConfig, WbcFormulation};
 use crate::dynamics::spatial::log3;
 use crate::dynamics::{
@@ -128,6 +134,14 @@ enum Path {
     Full,
 }
 
+/// Where the tick's kinematics put the soles (rotations), the hand (position) and the root
+/// (rotation), world frame.
+struct Pose {
+    feet: [Matrix3<f64>; 2],
+    hand: Vector3<f64>,
+    root: Matrix3<f64>,
+}
+
 /// One tick's result. `tau` and `ddq` borrow the controller's buffers.
 #[derive(Debug)]
 pub struct WbcOutput<'a> {
@@ -151,11 +165,6 @@ pub struct WbcOutput<'a> {
 struct Params {
     friction: f64,
     contact_damping: f64,
-    w_com: f64,
-    w_hand: f64,
-    w_base: f64,
-    w_posture: f64,
-    w_reg_acc: f64,
     w_reg_force: f64,
     base_kp: f64,
     base_kd: f64,
@@ -170,15 +179,11 @@ struct Params {
 pub struct WholeBodyController {
     p: Params,
     settings: DefaultSettings<f64>,
-    nv: usize,
     nq: usize,
-    nz: usize,
-    /// Constraint row offsets: EoM (0), soles, task residuals, torque rows, cones; total rows.
-    row_feet: usize,
-    row_task: usize,
-    row_tau: usize,
-    row_soc: usize,
-    n_rows: usize,
+    /// Where the full problem's variables and rows are (from the task list, decided once).
+    layout: Layout,
+    /// The tasks, their weights, Jacobians and targets (targets set each tick).
+    tasks: TaskList,
     // Model-derived.
     corner_ids: [usize; N_CONTACTS],
     foot_ids: [usize; 2],
@@ -193,8 +198,6 @@ pub struct WholeBodyController {
     jtmp: DMatrix<f64>,
     jc: DMatrix<f64>,
     jfeet: DMatrix<f64>,
-    jh: DMatrix<f64>,
-    jcom: DMatrix<f64>,
     h: DVector<f64>,
     pd: DMatrix<f64>,
     qd: Vec<f64>,
@@ -267,104 +270,29 @@ impl WholeBodyController {
         }
         let hand_id = model.frame_id(&config.hand_frame)?;
 
-        // z = [q̈, f, e_com, e_hand]: the two dense 3-row tasks enter through residual
-        // variables (J q̈ − e = r, cost ½ w ‖e‖²) so that P is diagonal. With JᵀJ in P the
-        // 38×38 block would be dense and the KKT factor nearly dense (≈ 5× slower).
-        let nz = nv + 3 * N_CONTACTS + 6;
-        let row_feet = 6;
-        let row_task = row_feet + 12;
-        let row_tau = row_task + 6;
-        let row_soc = row_tau + 2 * limited.len();
-        let n_rows = row_soc + 3 * N_CONTACTS;
-
-        // Structure: dof a "supports" frame f when its joint is on f's path to the world.
-        let supports = |dof: usize, frame: usize| {
-            model.frames[frame]
-                .parent
-                .is_some_and(|p| model.is_ancestor(model.dof_joint[dof], p))
-        };
-        let m_struct = |a: usize, b: usize| {
-            let (ja, jb) = (model.dof_joint[a], model.dof_joint[b]);
-            model.is_ancestor(ja, jb) || model.is_ancestor(jb, ja)
-        };
-        // P: diagonal (posture, base orientation, regularisation, task residual weights).
-        let p_pattern = Pattern::from_mask(nz, nz, |r, c| r == c);
-        let e0 = nv + 3 * N_CONTACTS;
-        let mut tau_row_dof = vec![usize::MAX; n_rows];
-        for (k, &(dof, _)) in limited.iter().enumerate() {
-            tau_row_dof[row_tau + 2 * k] = dof;
-            tau_row_dof[row_tau + 2 * k + 1] = dof;
-        }
-        let a_pattern = Pattern::from_mask(n_rows, nz, |r, c| {
-            let force = (c >= nv && c < e0).then(|| (c - nv) / 3);
-            if r < row_feet {
-                // Floating-base rows: M_u is dense, every contact acts on the base.
-                c < e0
-            } else if r < row_task {
-                let foot = foot_ids[(r - row_feet) / 6];
-                c < nv && supports(c, foot)
-            } else if r < row_tau {
-                // CoM rows (J_com has every column), then hand rows; −1 on the residual.
-                let t = r - row_task;
-                (c < nv && (t < 3 || supports(c, hand_id))) || c == e0 + t
-            } else if r < row_soc {
-                let dof = tau_row_dof[r];
-                match force {
-                    None if c < nv => m_struct(dof, c),
-                    None => false,
-                    Some(k) => supports(dof, corner_ids[k]),
-                }
-            } else {
-                force == Some((r - row_soc) / 3)
-            }
-        });
-        let socs = || (0..N_CONTACTS).map(|_| SupportedConeT::SecondOrderConeT(3));
-        let mut cones = vec![SupportedConeT::ZeroConeT(row_tau)];
-        if !limited.is_empty() {
-            cones.push(SupportedConeT::NonnegativeConeT(2 * limited.len()));
-        }
-        cones.extend(socs());
-        // Same QP without the torque rows, same dense scratch.
-        let relaxed = (!limited.is_empty()).then(|| {
-            let rows: Vec<usize> = (0..row_tau).chain(row_soc..n_rows).collect();
-            let full_pattern = &a_pattern;
-            let pattern =
-                Pattern::from_mask_rows(n_rows, &rows, nz, |r, c| full_pattern.contains(r, c));
-            let mut cones = vec![SupportedConeT::ZeroConeT(row_tau)];
-            cones.extend(socs());
-            QpInstance::new(pattern, rows, cones)
-        });
-        let full = QpInstance::new(a_pattern, (0..n_rows).collect(), cones);
-
-        let tol = config.tolerance;
-        let settings = DefaultSettings {
-            verbose: false,
-            max_iter: config.max_iterations,
-            tol_gap_abs: tol,
-            tol_gap_rel: tol,
-            tol_feas: tol,
-            // Data updates need the original structure: no presolve, structural zeros kept.
-            presolve_enable: false,
-            input_sparse_dropzeros: false,
-            direct_kkt_solver: true,
-            direct_solve_method: "qdldl".to_string(),
-            // Iterative refinement of the KKT solves costs ≈ 35 % of the tick here and the
-            // tests' accuracy checks (EoM residual, limits, cones) hold without it;
-            // `tune_solver` re-enables it.
-            iterative_refinement_enable: false,
-            ..DefaultSettings::default()
-        };
-
+        let tasks = TaskList::new(
+            nv,
+            hand_id,
+            TaskWeights {
+                com: config.w_com,
+                hand: config.w_hand,
+                base_orientation: config.w_base_orientation,
+                posture: config.w_posture,
+                acceleration: config.w_reg_acceleration,
+            },
+        );
+        let layout = Layout::new(nv, tasks.points.len(), limited.len());
+        // P: diagonal (the joint tasks, the forces' regularisation, the residuals' weights).
+        let p_pattern = Pattern::from_mask(layout.nz, layout.nz, |r, c| r == c);
+        let a_pattern =
+            constraint_pattern(model, &layout, &tasks, &foot_ids, &corner_ids, &limited);
+        let (full, relaxed) = full_problems(&layout, a_pattern, limited.len());
+        let settings = clarabel_settings(config);
         let condensed = CondensedQp::new(nv, model.total_mass() * model.gravity.norm());
         let mut wbc = Self {
             p: Params {
                 friction: config.friction,
                 contact_damping: config.contact_damping,
-                w_com: config.w_com,
-                w_hand: config.w_hand,
-                w_base: config.w_base_orientation,
-                w_posture: config.w_posture,
-                w_reg_acc: config.w_reg_acceleration,
                 w_reg_force: config.w_reg_force,
                 base_kp: config.base_kp,
                 base_kd: config.base_kd,
@@ -375,14 +303,9 @@ impl WholeBodyController {
                 formulation: config.formulation,
             },
             settings,
-            nv,
             nq: model.nq,
-            nz,
-            row_feet,
-            row_task,
-            row_tau,
-            row_soc,
-            n_rows,
+            layout,
+            tasks,
             corner_ids,
             foot_ids,
             hand_id,
@@ -392,13 +315,11 @@ impl WholeBodyController {
             jtmp: DMatrix::zeros(6, nv),
             jc: DMatrix::zeros(3 * N_CONTACTS, nv),
             jfeet: DMatrix::zeros(12, nv),
-            jh: DMatrix::zeros(3, nv),
-            jcom: DMatrix::zeros(3, nv),
             h: DVector::zeros(nv),
-            pd: DMatrix::zeros(nz, nz),
-            qd: vec![0.0; nz],
-            ad: DMatrix::zeros(n_rows, nz),
-            bd: vec![0.0; n_rows],
+            pd: DMatrix::zeros(layout.nz, layout.nz),
+            qd: vec![0.0; layout.nz],
+            ad: DMatrix::zeros(layout.n_rows, layout.nz),
+            bd: vec![0.0; layout.n_rows],
             p_val: vec![0.0; p_pattern.nnz()],
             p_pattern,
             full,
@@ -407,7 +328,7 @@ impl WholeBodyController {
             diag: vec![0.0; nv],
             lin: vec![0.0; nv],
             b_feet: [0.0; 12],
-            x: vec![0.0; nz],
+            x: vec![0.0; layout.nz],
             limits_active: false,
             posture_ref: model.neutral(),
             posture_set: false,
@@ -453,16 +374,16 @@ impl WholeBodyController {
         data: &mut Data,
         q: &DVector<f64>,
     ) -> Result<(), WbcError> {
-        if model.nv != self.nv || model.nq != self.nq {
+        if model.nv != self.layout.nv || model.nq != self.nq {
             return Err(WbcError::Dynamics(DynamicsError::DimensionMismatch {
                 what: "model (not the controller's)",
-                expected: self.nv,
+                expected: self.layout.nv,
                 got: model.nv,
             }));
         }
         forward_kinematics(model, data, q)?;
         let hand = data.o_m_f[self.hand_id].trans;
-        let v = DVector::zeros(self.nv);
+        let v = DVector::zeros(self.layout.nv);
         let posture = q.clone();
         let cmd = WbcCommand {
             hand_pos_des: hand,
@@ -548,8 +469,8 @@ impl WholeBodyController {
     /// Sizes of the QP: (variables, constraint rows, nnz(P), nnz(A)).
     pub fn problem_size(&self) -> (usize, usize, usize, usize) {
         (
-            self.nz,
-            self.n_rows,
+            self.layout.nz,
+            self.layout.n_rows,
             self.p_pattern.nnz(),
             self.full.pattern.nnz(),
         )
@@ -678,8 +599,39 @@ impl WholeBodyController {
         solve_time: &mut Duration,
         iterations: &mut u32,
     ) -> Result<bool, FallbackReason> {
-        use FallbackReason::*;
-        if model.nv != self.nv || model.nq != self.nq {
+        self.check_input(model, v, cmd)?;
+        let pose = self.dynamics(model, data, q, v, cmd)?;
+        self.set_targets(q, v, cmd, &pose)?;
+        let finite = |s: &[f64]| s.iter().all(|x| x.is_finite());
+        if !(finite(&self.diag) && finite(&self.lin) && finite(&self.b_feet)) {
+            return Err(FallbackReason::NonFiniteProblem);
+        }
+        let almost = self.solve_path(&data.m, &pose.feet, forced, solve_time, iterations)?;
+
+        // ---- Outputs: q̈, f, τ = M_a q̈ + h_a − J_c,aᵀ f. ----
+        let (m, x, nv) = (&data.m, &self.x, self.layout.nv);
+        self.ddq.copy_from_slice(&x[..nv]);
+        for c in 0..N_CONTACTS {
+            self.forces[c] = Vector3::new(x[nv + 3 * c], x[nv + 3 * c + 1], x[nv + 3 * c + 2]);
+        }
+        for a in 0..nv - 6 {
+            self.tau[a] = torque(m, &self.h, &self.jc, x, 6 + a);
+        }
+        if !finite(self.tau.as_slice()) {
+            return Err(FallbackReason::NonFiniteSolution);
+        }
+        Ok(almost)
+    }
+
+    /// Sizes, finiteness of the command and of `v`, and the posture reference's validity.
+    fn check_input(
+        &self,
+        model: &Model,
+        v: &DVector<f64>,
+        cmd: &WbcCommand,
+    ) -> Result<(), FallbackReason> {
+        use FallbackReason::InvalidInput;
+        if model.nv != self.layout.nv || model.nq != self.nq {
             return Err(InvalidInput);
         }
         let cmd_finite = [
@@ -699,7 +651,22 @@ impl WholeBodyController {
         if let Some(r) = cmd.posture_ref {
             model.check_q(r).map_err(|_| InvalidInput)?;
         }
-        // Kinematics and dynamics at (q, v). CRBA checks q and leaves the joint Jacobians.
+        Ok(())
+    }
+
+    /// Kinematics and dynamics at (q, v): M in `data.m`, the bias `h` (the known hand force
+    /// included), the contact, sole and point-task Jacobians, each point task's drift `J̇ v`
+    /// subtracted from its target, the soles' right-hand side.
+    fn dynamics(
+        &mut self,
+        model: &Model,
+        data: &mut Data,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        cmd: &WbcCommand,
+    ) -> Result<Pose, FallbackReason> {
+        use FallbackReason::InvalidInput;
+        // CRBA checks q and leaves the joint Jacobians.
         crba(model, data, q).map_err(|_| InvalidInput)?;
         if !self.posture_set && cmd.posture_ref.is_none() {
             // First tick after construction or a reset: latch (a copy, no allocation).
@@ -708,168 +675,168 @@ impl WholeBodyController {
         }
         update_frame_placements(model, data);
         self.build_jacobians(model, data);
-        let hand_pos = data.o_m_f[self.hand_id].trans;
-        let root_rot = data.o_m_i[0].rot;
-        let foot_rot = [
-            data.o_m_f[self.foot_ids[0]].rot,
-            data.o_m_f[self.foot_ids[1]].rot,
-        ];
+        let pose = Pose {
+            feet: [
+                data.o_m_f[self.foot_ids[0]].rot,
+                data.o_m_f[self.foot_ids[1]].rot,
+            ],
+            hand: data.o_m_f[self.hand_id].trans,
+            root: data.o_m_i[0].rot,
+        };
         jacobian_center_of_mass(model, data, q).map_err(|_| InvalidInput)?;
-        self.jcom.copy_from(&data.jcom);
-        // Drifts J̇ v of the hand, both soles and the CoM: one forward pass.
-        let hand_drift = drift_pass(model, data, q, v, self.hand_id)
-            .map_err(|_| InvalidInput)?
-            .lin;
-        let feet_drift = [
-            frame_drift_from_pass(model, data, self.foot_ids[0]).to_vector(),
-            frame_drift_from_pass(model, data, self.foot_ids[1]).to_vector(),
-        ];
-        let com_drift = com_drift_from_pass(model, data);
+        // Drifts J̇ v of the soles and of every point task: one forward pass.
+        drift_pass(model, data, q, v, self.foot_ids[0]).map_err(|_| InvalidInput)?;
+        for t in &mut self.tasks.points {
+            let drift = match t.point {
+                Point::Com => {
+                    t.jac.copy_from(&data.jcom);
+                    com_drift_from_pass(model, data)
+                }
+                Point::Frame(id) => frame_drift_from_pass(model, data, id).lin,
+            };
+            t.target = -drift;
+        }
+        let nv = self.layout.nv;
+        for foot in 0..2 {
+            let drift = frame_drift_from_pass(model, data, self.foot_ids[foot]).to_vector();
+            // Soles at rest: J_s q̈ = −J̇_s v − k J_s v.
+            for i in 0..6 {
+                let jr = 6 * foot + i;
+                let jv: f64 = (0..nv).map(|c| self.jfeet[(jr, c)] * v[c]).sum();
+                self.b_feet[jr] = -drift[i] - self.p.contact_damping * jv;
+            }
+        }
         // Bias h(q, v) last: RNEA overwrites data.v / data.a but not data.m.
         nonlinear_effects(model, data, q, v).map_err(|_| InvalidInput)?;
         self.h.copy_from(&data.tau);
         // A known hand force acts like a bias: M q̈ + (h − J_hᵀ F) = Sᵀτ + J_cᵀ f.
-        for c in 0..self.nv {
-            self.h[c] -= (0..3)
-                .map(|k| self.jh[(k, c)] * cmd.hand_force[k])
-                .sum::<f64>();
+        let jh = &self.tasks.points[HAND].jac;
+        for c in 0..nv {
+            self.h[c] -= (0..3).map(|k| jh[(k, c)] * cmd.hand_force[k]).sum::<f64>();
         }
+        Ok(pose)
+    }
 
-        // ---- Objective terms in q̈: diagonal Hessian `diag`, linear term `lin`; the CoM and
-        // hand tasks as least squares `½ w ‖J q̈ − r‖²`. ----
-        let nv = self.nv;
-        let p = self.p.clone();
-        let r_com = cmd.com_acc - com_drift;
-        let hand_vel = mat3_mul_v(&self.jh, v);
-        let x_cmd = cmd.kp * (cmd.hand_pos_des - hand_pos)
+    /// The tasks' targets at (q, v) for `cmd` (the point tasks' drifts already in theirs, from
+    /// [`Self::dynamics`]), and the joint tasks' diagonal terms.
+    fn set_targets(
+        &mut self,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        cmd: &WbcCommand,
+        pose: &Pose,
+    ) -> Result<(), FallbackReason> {
+        let p = &self.p;
+        let tasks = &mut self.tasks;
+        // CoM: the preview's acceleration. Hand, eq. (17): ẍ_cmd = K_p (x_des − x)
+        // + K_d (ẋ_des − ẋ) + ẍ_des at the hand frame's origin; its task is eq. (18).
+        tasks.points[COM].target += cmd.com_acc;
+        let hand = &mut tasks.points[HAND];
+        let hand_vel = mat3_mul_v(&hand.jac, v);
+        hand.target += cmd.kp * (cmd.hand_pos_des - pose.hand)
             + cmd.kd * (cmd.hand_vel_des - hand_vel)
             + cmd.hand_acc_des;
-        let r_hand = x_cmd - hand_drift;
-        self.diag.fill(p.w_reg_acc);
-        self.lin.fill(0.0);
         // Base orientation: world angular acceleration R ω̇_b (= R q̈[3..6] since d/dt(R ω_b) =
         // R ω̇_b) towards α = K_p log(R_ref Rᵀ) − K_d ω; in body axes the target is Rᵀ α.
         let q_ref = cmd
             .posture_ref
             .or(self.posture_set.then_some(&self.posture_ref))
-            .ok_or(InvalidInput)?;
+            .ok_or(FallbackReason::InvalidInput)?;
         let quat = UnitQuaternion::from_quaternion(Quaternion::new(
             q_ref[6], q_ref[3], q_ref[4], q_ref[5],
         ));
         let r_ref = quat.to_rotation_matrix().into_inner();
+        let root_rot = pose.root;
         let omega_b = Vector3::new(v[3], v[4], v[5]);
         let e_world = log3(&(r_ref * root_rot.transpose()));
         let target_b = p.base_kp * (root_rot.transpose() * e_world) - p.base_kd * omega_b;
-        for k in 0..3 {
-            self.diag[3 + k] += p.w_base;
-            self.lin[3 + k] -= p.w_base * target_b[k];
-        }
+        tasks.joints[BASE_ORIENTATION]
+            .target
+            .copy_from_slice(target_b.as_slice());
         // Posture PD on the joints.
+        let posture = &mut tasks.joints[POSTURE].target;
         for (a, &qi) in self.q_index.iter().enumerate() {
-            let d = 6 + a;
-            let target = p.posture_kp * (q_ref[qi] - q[qi]) - p.posture_kd * v[d];
-            self.diag[d] += p.w_posture;
-            self.lin[d] -= p.w_posture * target;
+            posture[a] = p.posture_kp * (q_ref[qi] - q[qi]) - p.posture_kd * v[6 + a];
         }
-        // Soles at rest: J_s q̈ = −J̇_s v − k J_s v.
-        for foot in 0..2 {
-            for i in 0..6 {
-                let jr = 6 * foot + i;
-                let jv: f64 = (0..nv).map(|c| self.jfeet[(jr, c)] * v[c]).sum();
-                self.b_feet[jr] = -feet_drift[foot][i] - p.contact_damping * jv;
-            }
+        tasks.diagonal(&mut self.diag, &mut self.lin);
+        if tasks.is_finite() {
+            Ok(())
+        } else {
+            Err(FallbackReason::NonFiniteProblem)
         }
-        let finite = |s: &[f64]| s.iter().all(|x| x.is_finite());
-        if !(finite(&self.diag) && finite(&self.lin) && finite(&self.b_feet)) {
-            return Err(NonFiniteProblem);
-        }
+    }
 
-        // The condensed problem (no torque rows), unless the last tick had a torque limit
-        // active: a robot at its limits (pushed hard, falling) stays there for a while, and the
-        // screening solve would be wasted. Its optimum is the tick's when it respects every
-        // limit; otherwise the full problem with its torque rows decides.
-        let mut screen = true;
+    /// Solves the tick's problem into `self.x`: the condensed problem (no torque rows), unless
+    /// the last tick had a torque limit active — a robot at its limits (pushed hard, falling)
+    /// stays there for a while, and the screening solve would be wasted. Its optimum is the
+    /// tick's when it respects every limit; otherwise the full problem with its torque rows
+    /// decides.
+    fn solve_path(
+        &mut self,
+        m: &DMatrix<f64>,
+        foot_rot: &[Matrix3<f64>; 2],
+        forced: Option<Path>,
+        solve_time: &mut Duration,
+        iterations: &mut u32,
+    ) -> Result<bool, FallbackReason> {
+        let finite = |s: &[f64]| s.iter().all(|x| x.is_finite());
         let use_condensed = match forced {
             Some(path) => path == Path::Condensed,
-            None => p.formulation == WbcFormulation::Condensed && !self.limits_active,
+            None => self.p.formulation == WbcFormulation::Condensed && !self.limits_active,
         };
-        let condensed = if use_condensed {
+        // Screen with the full problem without its torque rows first: after a condensed
+        // problem that could not be formed, or as the formulation or `forced` says.
+        let mut screen = match forced {
+            _ if use_condensed => true,
+            Some(path) => path == Path::Relaxed,
+            None => self.p.formulation == WbcFormulation::Full,
+        };
+        if use_condensed {
             let pb = Problem {
-                m: &data.m,
+                m,
                 h: &self.h,
                 jc: &self.jc,
                 jfeet: &self.jfeet,
                 b_feet: &self.b_feet,
                 diag: &self.diag,
                 lin: &self.lin,
-                tasks: [(&self.jcom, r_com, p.w_com), (&self.jh, r_hand, p.w_hand)],
-                w_force: p.w_reg_force,
-                friction: p.friction,
-                foot_rot,
+                tasks: &self.tasks.points,
+                w_force: self.p.w_reg_force,
+                friction: self.p.friction,
+                foot_rot: *foot_rot,
             };
             match self.condensed.solve(
                 &pb,
                 &self.settings,
-                p.reuse_solver,
+                self.p.reuse_solver,
                 &mut self.counters,
                 iterations,
                 solve_time,
             ) {
                 Ok(almost) => {
                     let x = self.condensed.x();
-                    let within = self.limited.iter().all(|&(dof, tmax)| {
-                        torque(&data.m, &self.h, &self.jc, x, dof).abs() <= tmax
-                    });
+                    let within = self
+                        .limited
+                        .iter()
+                        .all(|&(dof, tmax)| torque(m, &self.h, &self.jc, x, dof).abs() <= tmax);
+                    if within && finite(x) {
+                        self.x[..x.len()].copy_from_slice(x);
+                        self.limits_active = false;
+                        return Ok(almost);
+                    }
                     screen = false;
-                    (within && finite(x)).then_some(almost)
                 }
                 // H or S not positive definite (e.g. a singular leg): the full problem, whose
                 // interior-point KKT system is regularised, decides this tick.
-                Err(CondensedError::Factorisation) => {
-                    self.counters.condensation_failures += 1;
-                    None
-                }
+                Err(CondensedError::Factorisation) => self.counters.condensation_failures += 1,
                 Err(CondensedError::Solver(r)) => return Err(r),
             }
-        } else {
-            screen = match forced {
-                Some(path) => path == Path::Relaxed,
-                None => p.formulation == WbcFormulation::Full,
-            };
-            None
-        };
-        let almost = match condensed {
-            Some(almost) => {
-                let x = self.condensed.x();
-                self.x[..x.len()].copy_from_slice(x);
-                self.limits_active = false;
-                almost
-            }
-            None => {
-                let almost = self.solve_full(
-                    &data.m, r_com, r_hand, &foot_rot, screen, solve_time, iterations,
-                )?;
-                // A limit counts as active within 0.1 % of it.
-                self.limits_active = self.limited.iter().any(|&(dof, tmax)| {
-                    torque(&data.m, &self.h, &self.jc, &self.x, dof).abs() >= (1.0 - 1e-3) * tmax
-                });
-                almost
-            }
-        };
-        let m = &data.m;
-        let x = &self.x;
-
-        // ---- Outputs: q̈, f, τ = M_a q̈ + h_a − J_c,aᵀ f. ----
-        self.ddq.copy_from_slice(&x[..nv]);
-        for c in 0..N_CONTACTS {
-            self.forces[c] = Vector3::new(x[nv + 3 * c], x[nv + 3 * c + 1], x[nv + 3 * c + 2]);
         }
-        for a in 0..nv - 6 {
-            self.tau[a] = torque(m, &self.h, &self.jc, x, 6 + a);
-        }
-        if !finite(self.tau.as_slice()) {
-            return Err(NonFiniteSolution);
-        }
+        let almost = self.solve_full(m, foot_rot, screen, solve_time, iterations)?;
+        // A limit counts as active within 0.1 % of it.
+        self.limits_active = self.limited.iter().any(|&(dof, tmax)| {
+            torque(m, &self.h, &self.jc, &self.x, dof).abs() >= (1.0 - 1e-3) * tmax
+        });
         Ok(almost)
     }
 
@@ -880,30 +847,38 @@ impl WholeBodyController {
     fn solve_full(
         &mut self,
         m: &DMatrix<f64>,
-        r_com: Vector3<f64>,
-        r_hand: Vector3<f64>,
-        foot_rot: &[nalgebra::Matrix3<f64>; 2],
+        foot_rot: &[Matrix3<f64>; 2],
         screen: bool,
         solve_time: &mut Duration,
         iterations: &mut u32,
     ) -> Result<bool, FallbackReason> {
-        use FallbackReason::*;
-        let nv = self.nv;
-        let p = self.p.clone();
-        let e0 = nv + 3 * N_CONTACTS;
+        self.assemble_full(m, foot_rot)?;
+        self.run_full(m, screen, solve_time, iterations)
+    }
+
+    /// The dense P, q, A, b of the full problem, in the [`Layout`] the task list decided.
+    fn assemble_full(
+        &mut self,
+        m: &DMatrix<f64>,
+        foot_rot: &[Matrix3<f64>; 2],
+    ) -> Result<(), FallbackReason> {
+        let l = self.layout;
+        let nv = l.nv;
         self.pd.fill(0.0);
         self.qd.fill(0.0);
         for d in 0..nv {
             self.pd[(d, d)] = self.diag[d];
             self.qd[d] = self.lin[d];
         }
-        for d in nv..e0 {
-            self.pd[(d, d)] = p.w_reg_force;
+        for d in l.force0..l.residual0 {
+            self.pd[(d, d)] = self.p.w_reg_force;
         }
-        // CoM and hand tasks: weights on their residual variables (rows below).
-        for k in 0..3 {
-            self.pd[(e0 + k, e0 + k)] = p.w_com;
-            self.pd[(e0 + 3 + k, e0 + 3 + k)] = p.w_hand;
+        // Point tasks: weights on their residual variables (rows below).
+        for (t, task) in self.tasks.points.iter().enumerate() {
+            for k in 0..3 {
+                let e = l.residual(t, k);
+                self.pd[(e, e)] = task.weight;
+            }
         }
 
         // ---- Constraints A z + s = b, s ∈ K. ----
@@ -921,27 +896,26 @@ impl WholeBodyController {
         }
         // Soles at rest: J_s q̈ = b_s.
         for jr in 0..12 {
-            let row = self.row_feet + jr;
+            let row = l.row_feet + jr;
             for c in 0..nv {
                 ad[(row, c)] = self.jfeet[(jr, c)];
             }
             self.bd[row] = self.b_feet[jr];
         }
-        // Task residuals: J_com q̈ − e_com = a_com − J̇_com v, J_h q̈ − e_h = ẍ_cmd − J̇_h v.
-        for k in 0..3 {
-            let (rc, rh) = (self.row_task + k, self.row_task + 3 + k);
-            for c in 0..nv {
-                ad[(rc, c)] = self.jcom[(k, c)];
-                ad[(rh, c)] = self.jh[(k, c)];
+        // Point tasks' residuals: J q̈ − e = a* − J̇ v.
+        for (t, task) in self.tasks.points.iter().enumerate() {
+            for k in 0..3 {
+                let row = l.row_task + 3 * t + k;
+                for c in 0..nv {
+                    ad[(row, c)] = task.jac[(k, c)];
+                }
+                ad[(row, l.residual(t, k))] = -1.0;
+                self.bd[row] = task.target[k];
             }
-            ad[(rc, e0 + k)] = -1.0;
-            ad[(rh, e0 + 3 + k)] = -1.0;
-            self.bd[rc] = r_com[k];
-            self.bd[rh] = r_hand[k];
         }
         // Torque limits: ±(M_a q̈ + h_a − J_c,aᵀ f) ≤ τ_max.
         for (k, &(dof, tmax)) in self.limited.iter().enumerate() {
-            let row = self.row_tau + 2 * k;
+            let row = l.row_tau + 2 * k;
             for c in 0..nv {
                 let x = m[(dof, c)];
                 ad[(row, c)] = x;
@@ -958,9 +932,9 @@ impl WholeBodyController {
         // Friction cones: s = (μ nᵀf, t₁ᵀf, t₂ᵀf) ∈ SOC(3), b = 0.
         for c in 0..N_CONTACTS {
             let rot = &foot_rot[c / 4];
-            let row = self.row_soc + 3 * c;
+            let row = l.row_soc + 3 * c;
             for a in 0..3 {
-                ad[(row, nv + 3 * c + a)] = -p.friction * rot[(a, 2)];
+                ad[(row, nv + 3 * c + a)] = -self.p.friction * rot[(a, 2)];
                 ad[(row + 1, nv + 3 * c + a)] = -rot[(a, 0)];
                 ad[(row + 2, nv + 3 * c + a)] = -rot[(a, 1)];
             }
@@ -976,10 +950,23 @@ impl WholeBodyController {
             && finite(self.ad.as_slice())
             && finite(&self.bd))
         {
-            return Err(NonFiniteProblem);
+            return Err(FallbackReason::NonFiniteProblem);
         }
+        Ok(())
+    }
 
-        // ---- Solve. Constraint screening: the QP without the torque rows is much cheaper
+    /// Solves the assembled full problem into `self.x`, first without its torque rows when
+    /// `screen`.
+    fn run_full(
+        &mut self,
+        m: &DMatrix<f64>,
+        screen: bool,
+        solve_time: &mut Duration,
+        iterations: &mut u32,
+    ) -> Result<bool, FallbackReason> {
+        let finite = |s: &[f64]| s.iter().all(|x| x.is_finite());
+        let nz = self.layout.nz;
+        // ---- Constraint screening: the QP without the torque rows is much cheaper
         // (its KKT factor is far sparser); when its optimum satisfies every torque limit it is
         // also the optimum of the full QP (dropping inactive constraints does not move the
         // optimum of a convex problem). Otherwise the full QP is solved. ----
@@ -1004,7 +991,7 @@ impl WholeBodyController {
                     let t = torque(m, &self.h, &self.jc, x, dof);
                     t.abs() <= tmax
                 });
-                if within && x.len() == self.nz && finite(x) {
+                if within && x.len() == nz && finite(x) {
                     self.x.copy_from_slice(x);
                     almost = a;
                     accepted = true;
@@ -1027,8 +1014,8 @@ impl WholeBodyController {
             *solve_time += self.full.solve_time();
             almost = run?;
             let x = self.full.x();
-            if x.len() != self.nz || !finite(x) {
-                return Err(NonFiniteSolution);
+            if x.len() != nz || !finite(x) {
+                return Err(FallbackReason::NonFiniteSolution);
             }
             self.x.copy_from_slice(x);
         }
@@ -1056,8 +1043,12 @@ impl WholeBodyController {
             let _ = get_frame_jacobian(model, data, id, lwa, &mut self.jtmp);
             self.jfeet.rows_mut(6 * k, 6).copy_from(&self.jtmp);
         }
-        let _ = get_frame_jacobian(model, data, self.hand_id, lwa, &mut self.jtmp);
-        self.jh.copy_from(&self.jtmp.rows(0, 3));
+        for t in &mut self.tasks.points {
+            if let Point::Frame(id) = t.point {
+                let _ = get_frame_jacobian(model, data, id, lwa, &mut self.jtmp);
+                t.jac.copy_from(&self.jtmp.rows(0, 3));
+            }
+        }
     }
 
     /// The safe torque, written to the output buffers: gravity compensation through the
@@ -1075,10 +1066,10 @@ impl WholeBodyController {
         v: &DVector<f64>,
     ) -> Result<&DVector<f64>, WbcError> {
         model.check_v("v", v)?;
-        if model.nv != self.nv {
+        if model.nv != self.layout.nv {
             return Err(WbcError::Dynamics(DynamicsError::DimensionMismatch {
                 what: "model (not the controller's)",
-                expected: self.nv,
+                expected: self.layout.nv,
                 got: model.nv,
             }));
         }
@@ -1108,7 +1099,7 @@ impl WholeBodyController {
         for (j, fj) in f.iter_mut().enumerate() {
             *fj = (0..6).map(|r| self.jc[(j, r)] * y[r]).sum();
         }
-        for a in 0..self.nv - 6 {
+        for a in 0..self.layout.nv - 6 {
             let d = 6 + a;
             let mut t = g[d] - self.p.fallback_damping * v[d];
             for (j, fj) in f.iter().enumerate() {
@@ -1145,6 +1136,109 @@ impl WholeBodyController {
             self.forces = [Vector3::zeros(); N_CONTACTS];
         }
     }
+}
+
+/// The full problem with its torque rows, and without them (the screening solve, when some
+/// joint has a torque limit), over the same dense scratch.
+fn full_problems(
+    layout: &Layout,
+    a_pattern: Pattern,
+    limited: usize,
+) -> (QpInstance, Option<QpInstance>) {
+    let socs = || (0..N_CONTACTS).map(|_| SupportedConeT::SecondOrderConeT(3));
+    let mut cones = vec![SupportedConeT::ZeroConeT(layout.row_tau)];
+    if limited > 0 {
+        cones.push(SupportedConeT::NonnegativeConeT(2 * limited));
+    }
+    cones.extend(socs());
+    let relaxed = (limited > 0).then(|| {
+        let rows: Vec<usize> = (0..layout.row_tau)
+            .chain(layout.row_soc..layout.n_rows)
+            .collect();
+        let pattern = Pattern::from_mask_rows(layout.n_rows, &rows, layout.nz, |r, c| {
+            a_pattern.contains(r, c)
+        });
+        let mut cones = vec![SupportedConeT::ZeroConeT(layout.row_tau)];
+        cones.extend(socs());
+        QpInstance::new(pattern, rows, cones)
+    });
+    let full = QpInstance::new(a_pattern, (0..layout.n_rows).collect(), cones);
+    (full, relaxed)
+}
+
+/// Clarabel's settings for in-place data updates between ticks.
+fn clarabel_settings(config: &WbcConfig) -> DefaultSettings<f64> {
+    let tol = config.tolerance;
+    DefaultSettings {
+        verbose: false,
+        max_iter: config.max_iterations,
+        tol_gap_abs: tol,
+        tol_gap_rel: tol,
+        tol_feas: tol,
+        // Data updates need the original structure: no presolve, structural zeros kept.
+        presolve_enable: false,
+        input_sparse_dropzeros: false,
+        direct_kkt_solver: true,
+        direct_solve_method: "qdldl".to_string(),
+        // Iterative refinement of the KKT solves costs ≈ 35 % of the tick here and the
+        // tests' accuracy checks (EoM residual, limits, cones) hold without it;
+        // `tune_solver` re-enables it.
+        iterative_refinement_enable: false,
+        ..DefaultSettings::default()
+    }
+}
+
+/// The full problem's constraint sparsity, from the model's structure (structural zeros
+/// included, so the pattern never changes): a dof acts on a frame when its joint is on the
+/// frame's path to the world, and two dofs couple in M when one's joint is the other's ancestor.
+fn constraint_pattern(
+    model: &Model,
+    layout: &Layout,
+    tasks: &TaskList,
+    foot_ids: &[usize; 2],
+    corner_ids: &[usize; N_CONTACTS],
+    limited: &[(usize, f64)],
+) -> Pattern {
+    let supports = |dof: usize, frame: usize| {
+        model.frames[frame]
+            .parent
+            .is_some_and(|p| model.is_ancestor(model.dof_joint[dof], p))
+    };
+    let m_struct = |a: usize, b: usize| {
+        let (ja, jb) = (model.dof_joint[a], model.dof_joint[b]);
+        model.is_ancestor(ja, jb) || model.is_ancestor(jb, ja)
+    };
+    let l = *layout;
+    Pattern::from_mask(l.n_rows, l.nz, |r, c| {
+        let col = l.column(c);
+        if r < l.row_feet {
+            // Floating-base rows: M_u is dense, every contact acts on the base.
+            !matches!(col, Column::Residual(_))
+        } else if r < l.row_task {
+            let foot = foot_ids[(r - l.row_feet) / 6];
+            matches!(col, Column::Acceleration(d) if supports(d, foot))
+        } else if r < l.row_tau {
+            // A point task's rows: its Jacobian's columns, −1 on its residual.
+            let i = r - l.row_task;
+            match col {
+                Column::Acceleration(d) => match tasks.points[i / 3].point {
+                    Point::Com => true,
+                    Point::Frame(f) => supports(d, f),
+                },
+                Column::Force(_) => false,
+                Column::Residual(e) => e == i,
+            }
+        } else if r < l.row_soc {
+            let dof = limited[(r - l.row_tau) / 2].0;
+            match col {
+                Column::Acceleration(d) => m_struct(dof, d),
+                Column::Force(k) => supports(dof, corner_ids[k]),
+                Column::Residual(_) => false,
+            }
+        } else {
+            col == Column::Force((r - l.row_soc) / 3)
+        }
+    })
 }
 
 /// The neutral configuration with every bounded 1-DoF joint at the middle of its range.

@@ -11,6 +11,8 @@
 //!   stays as the reference and the fallback).
 //! - [`outcome`]: what both formulations share: the contact layout, a tick's status and
 //!   counters.
+//! - `tasks`: the QP's tasks as data and the layout of its variables and rows, decided once
+//!   and read by both formulations.
 //! - `qp`: one clarabel problem with a fixed sparsity pattern, updated in place each tick.
 //! - [`com_bias`]: `J̇ v` drift of the CoM and of several frames from one forward pass.
 
@@ -20,6 +22,7 @@ pub mod controller;
 pub mod outcome;
 mod pattern;
 mod qp;
+mod tasks;
 
 pub use controller::{
     CORNERS, FallbackReason, N_CONTACTS, WbcCommand, WbcCounters, WbcError, WbcOutput, WbcStatus,
