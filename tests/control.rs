@@ -70,6 +70,22 @@ fn robot_gravity_is_the_whole_controllers() {
     );
 }
 
+/// The commanded CoM acceleration along x after 20 ticks on a frozen state, with a −60 N push
+/// along x forecast from now.
+fn lean_into_push(config: &Config, kind: ControllerKind) -> f64 {
+    let mut r = rig(config, kind);
+    r.window
+        .offer(&push_forecast(0.0, -60.0), 0.0)
+        .expect("valid forecast");
+    for k in 0..20 {
+        r.state.time = k as f64 * 0.001;
+        r.core
+            .tick(&r.state, &r.window, None, &mut r.tau)
+            .expect("tick");
+    }
+    r.core.last.com_acc_cmd[0]
+}
+
 /// The reduced model's mass has one home, `robot.mass`: the preview's cart-table reads it as
 /// C2's search does. A robot believed twice as heavy leans half as far into the same forecast
 /// push (the equivalent CoM offset is z_c F / (M g)), measured against C0, which ignores it.
@@ -82,19 +98,7 @@ fn robot_mass_is_the_preview_s() {
         .push_override(&format!("robot.mass={}", 2.0 * robot.derived.mass))
         .expect("set");
     let heavy = layers.build().expect("config");
-    let lean = |config: &Config, kind| {
-        let mut r = rig(config, kind);
-        r.window
-            .offer(&push_forecast(0.0, -60.0), 0.0)
-            .expect("valid forecast");
-        for k in 0..20 {
-            r.state.time = k as f64 * 0.001;
-            r.core
-                .tick(&r.state, &r.window, None, &mut r.tau)
-                .expect("tick");
-        }
-        r.core.last.com_acc_cmd[0]
-    };
+    let lean = lean_into_push;
     let lean_normal = lean(&normal, ControllerKind::C1) - lean(&normal, ControllerKind::C0);
     let lean_heavy = lean(&heavy, ControllerKind::C1) - lean(&heavy, ControllerKind::C0);
     let ratio = lean_heavy / lean_normal;
@@ -109,20 +113,7 @@ fn c1_leans_into_a_forecast_push_and_c0_does_not() {
     // Over 20 ticks on a frozen state, C1's commanded CoM acceleration turns toward the push
     // (+x against a −x force) well beyond what C0 commands to centre the CoM on the feet.
     let config = Config::embedded_default().expect("defaults");
-    let mut acc = Vec::new();
-    for kind in [ControllerKind::C0, ControllerKind::C1] {
-        let mut r = rig(&config, kind);
-        r.window
-            .offer(&push_forecast(0.0, -60.0), 0.0)
-            .expect("valid forecast");
-        for k in 0..20 {
-            r.state.time = k as f64 * 0.001;
-            r.core
-                .tick(&r.state, &r.window, None, &mut r.tau)
-                .expect("tick");
-        }
-        acc.push(r.core.last.com_acc_cmd[0]);
-    }
+    let acc = [ControllerKind::C0, ControllerKind::C1].map(|k| lean_into_push(&config, k));
     eprintln!(
         "commanded CoM acceleration along x: C0 {} C1 {}",
         acc[0], acc[1]
