@@ -4,10 +4,10 @@
 use std::hint::black_box;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 use upc::config::{Config, GainSolverKind, LqSolverKind};
 use upc::preview::gain_search::{GainSearch, GainSearchInputs};
-use upc::preview::{CartTable, GainSchedule, HandPreviewer, HandState, ZmpPreview};
+use upc::preview::{CartTable, GainSchedule, HandPreviewer, HandState, ReducedModel, ZmpPreview};
 use upc::scenario::Scenario;
 
 fn config(sets: &[String]) -> Config {
@@ -18,13 +18,14 @@ fn config(sets: &[String]) -> Config {
     l.build().expect("valid config")
 }
 
+/// The iCub-like's reduced models (computed from its model once).
+fn robot() -> ReducedModel {
+    static ROBOT: std::sync::OnceLock<ReducedModel> = std::sync::OnceLock::new();
+    *ROBOT.get_or_init(|| upc::robot::Robot::embedded_default().unwrap().reduced())
+}
+
 fn model(c: &Config) -> CartTable {
-    CartTable {
-        period: c.preview.period,
-        com_height: c.robot.com_height,
-        mass: c.robot.mass,
-        gravity: c.robot.gravity,
-    }
+    robot().cart_table(c.preview.period, c.robot.gravity)
 }
 
 fn lq(c: &mut Criterion) {
@@ -80,7 +81,7 @@ fn lq(c: &mut Criterion) {
 fn hand(c: &mut Criterion) {
     let cfg = config(&[]);
     let n = cfg.preview.horizon;
-    let m_e = Matrix3::from_fn(|i, j| cfg.hand.effective_mass[i][j]);
+    let m_e = robot().effective_mass;
     let mut hp = HandPreviewer::new(cfg.preview.period, m_e, n).expect("SPD M_e");
     let gains = GainSchedule::constant(n, cfg.hand.kp, cfg.nominal_kd(cfg.hand.kp));
     let des = HandState::default();
@@ -104,7 +105,7 @@ fn gain_search(c: &mut Criterion) {
         // At the impact onset: the hardest moment for the gain search.
         scenario.force.sample_into(1.0 + t, t, &mut f);
         let des = HandState {
-            pos: Vector3::from(cfg.hand.desired_position),
+            pos: robot().hand_position,
             ..Default::default()
         };
         let desired = vec![des; n];
@@ -121,7 +122,7 @@ fn gain_search(c: &mut Criterion) {
             ("gauss_newton", GainSolverKind::GaussNewton),
             ("nelder_mead", GainSolverKind::NelderMead),
         ] {
-            let mut s = GainSearch::with_solver(&cfg, kind).expect("gain search");
+            let mut s = GainSearch::with_solver(&cfg, &robot(), kind).expect("gain search");
             let report = s.search(&inputs, 1).expect("search");
             eprintln!(
                 "{name} N={n}: cold cost {:.4e} (nominal {:.4e}), {} iterations, {} evaluations, {:?}",

@@ -37,6 +37,13 @@ fn state(
     (q, v, com)
 }
 
+/// The iCub-like's contact, sole and hand frames (its description names them).
+fn frames() -> upc::wbc::BodyFrames {
+    upc::robot::Robot::embedded_default()
+        .expect("robot")
+        .frames()
+}
+
 fn percentiles(mut t: Vec<Duration>) -> (Duration, Duration, Duration) {
     t.sort();
     let p = |f: f64| t[((t.len() as f64 - 1.0) * f).round() as usize];
@@ -52,12 +59,12 @@ fn tail_report(label: &str, cfg: &WbcConfig, amp: f64, n: usize) {
     let mut data = Data::new(&model);
     forward_kinematics(&model, &mut data, &home).unwrap();
     let hand = data.o_m_f[model.frame_id("r_hand").unwrap()].trans;
-    let mut wbc = WholeBodyController::new(&model, cfg).unwrap();
+    let mut wbc = WholeBodyController::new(&model, cfg, &frames()).unwrap();
     wbc.set_posture_reference(&model, &home).unwrap();
     let mut ref_cfg = cfg.clone();
     ref_cfg.formulation = WbcFormulation::Full;
     ref_cfg.tolerance = 1e-9;
-    let mut reference = WholeBodyController::new(&model, &ref_cfg).unwrap();
+    let mut reference = WholeBodyController::new(&model, &ref_cfg, &frames()).unwrap();
     reference.set_posture_reference(&model, &home).unwrap();
     let mut times = Vec::with_capacity(n);
     let mut iters = Vec::with_capacity(n);
@@ -126,7 +133,7 @@ fn bench(c: &mut Criterion) {
         tail_report(&label, &with(f, cfg.tolerance, false), 0.02, 300);
     }
     let model = icub_like::load().unwrap();
-    let size = WholeBodyController::new(&model, &with(full, 1e-6, true))
+    let size = WholeBodyController::new(&model, &with(full, 1e-6, true), &frames())
         .unwrap()
         .problem_size();
     eprintln!(
@@ -152,7 +159,8 @@ fn bench(c: &mut Criterion) {
     let zero = DVector::zeros(model.nv);
     let states: Vec<_> = (0..64).map(|k| state(&model, &home, k, 0.05)).collect();
     for (name, f) in [("", condensed), ("_full", full)] {
-        let mut wbc = WholeBodyController::new(&model, &with(f, cfg.tolerance, true)).unwrap();
+        let mut wbc =
+            WholeBodyController::new(&model, &with(f, cfg.tolerance, true), &frames()).unwrap();
         wbc.set_posture_reference(&model, &home).unwrap();
         g.bench_function(format!("tick_home{name}"), |b| {
             b.iter(|| {
@@ -175,7 +183,8 @@ fn bench(c: &mut Criterion) {
         });
     }
     let mut cold =
-        WholeBodyController::new(&model, &with(condensed, cfg.tolerance, false)).unwrap();
+        WholeBodyController::new(&model, &with(condensed, cfg.tolerance, false), &frames())
+            .unwrap();
     cold.set_posture_reference(&model, &home).unwrap();
     g.bench_function("tick_home_new_solver", |b| {
         b.iter(|| {

@@ -3,23 +3,19 @@
 
 mod support;
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 use support::counting_alloc::allocations;
 use upc::config::{Config, LqSolverKind};
-use upc::preview::{CartTable, GainSchedule, HandPreviewer, HandState, PreviewPlan, ZmpPreview};
+use upc::preview::{GainSchedule, HandPreviewer, HandState, PreviewPlan, ZmpPreview};
 
 #[test]
 fn per_tick_preview_path_does_not_allocate() {
     let c = Config::embedded_default().unwrap();
     let n = c.preview.horizon;
-    let model = CartTable {
-        period: c.preview.period,
-        com_height: c.robot.com_height,
-        mass: c.robot.mass,
-        gravity: c.robot.gravity,
-    };
+    let robot = upc::robot::Robot::embedded_default().unwrap().reduced();
+    let model = robot.cart_table(c.preview.period, c.robot.gravity);
     let mut zmp = ZmpPreview::new(model, c.preview.q_e, c.preview.r, n, LqSolverKind::Riccati);
-    let m_e = Matrix3::from_fn(|i, j| c.hand.effective_mass[i][j]);
+    let m_e = robot.effective_mass;
     let mut hand = HandPreviewer::new(c.preview.period, m_e, n).unwrap();
     let gains = GainSchedule::constant(n, c.hand.kp, c.nominal_kd(c.hand.kp));
     let des = HandState {

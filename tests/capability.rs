@@ -15,16 +15,19 @@ use upc::config::Config;
 #[test]
 fn reduced_capability_brackets_the_threshold_and_c1_exceeds_c0() {
     let config = Config::embedded_default().expect("config");
+    let robot = upc::robot::Robot::embedded_default()
+        .expect("robot")
+        .reduced();
     let cap = |v: Variant| {
         bisect(300.0, 1.0, |a| {
-            survives_reduced(&config, v, a, 0.3, Direction::X)
+            survives_reduced(&config, robot, v, a, 0.3, Direction::X)
         })
         .expect("run")
     };
     let c0 = cap(Variant::C0);
     let failed = c0.failed.expect("C0 falls below 300 N");
-    assert!(survives_reduced(&config, Variant::C0, c0.survived, 0.3, Direction::X).unwrap());
-    assert!(!survives_reduced(&config, Variant::C0, failed, 0.3, Direction::X).unwrap());
+    assert!(survives_reduced(&config, robot, Variant::C0, c0.survived, 0.3, Direction::X).unwrap());
+    assert!(!survives_reduced(&config, robot, Variant::C0, failed, 0.3, Direction::X).unwrap());
     assert!(failed - c0.survived <= 1.0);
     let c1 = cap(Variant::C1);
     assert!(c1.survived > 3.0 * c0.survived, "C0 {c0:?}, C1 {c1:?}");

@@ -5,9 +5,10 @@ mod support;
 
 use std::time::{Duration, Instant};
 
-use support::humanoid::{push_forecast, rig};
+use support::humanoid::{push_forecast, rig, rig_of};
 use upc::config::{Config, ControllerKind};
 use upc::control::GainHandoff;
+use upc::robot::Robot;
 
 #[test]
 fn a_tick_at_home_gives_finite_torques_for_each_controller() {
@@ -46,14 +47,11 @@ fn a_tick_at_home_gives_finite_torques_for_each_controller() {
 #[test]
 fn robot_gravity_is_the_whole_controllers() {
     let earth = Config::embedded_default().expect("defaults");
-    let robot = upc::robot::Robot::embedded_default().expect("robot");
+    let robot = Robot::embedded_default().expect("robot");
     let mut layers = Config::layers_for(&robot).expect("layers");
     layers.push_override("robot.gravity=1.62").expect("set");
     let moon = layers.build().expect("config");
-    assert_eq!(
-        earth.robot.gravity, 9.81,
-        "the model's gravity, from the robot's layer"
-    );
+    assert_eq!(earth.robot.gravity, 9.81, "config/default.toml's gravity");
     let torque = |config: &Config| {
         let mut r = rig(config, ControllerKind::C1);
         assert_eq!(r.core.model.gravity.z, -config.robot.gravity);
@@ -72,8 +70,8 @@ fn robot_gravity_is_the_whole_controllers() {
 
 /// The commanded CoM acceleration along x after 20 ticks on a frozen state, with a −60 N push
 /// along x forecast from now.
-fn lean_into_push(config: &Config, kind: ControllerKind) -> f64 {
-    let mut r = rig(config, kind);
+fn lean_into_push(robot: &Robot, config: &Config, kind: ControllerKind) -> f64 {
+    let mut r = rig_of(robot, config, kind);
     r.window
         .offer(&push_forecast(0.0, -60.0), 0.0)
         .expect("valid forecast");
@@ -86,19 +84,17 @@ fn lean_into_push(config: &Config, kind: ControllerKind) -> f64 {
     r.core.last.com_acc_cmd[0]
 }
 
-/// The reduced model's mass has one home, `robot.mass`: the preview's cart-table reads it as
-/// C2's search does. A robot believed twice as heavy leans half as far into the same forecast
-/// push (the equivalent CoM offset is z_c F / (M g)), measured against C0, which ignores it.
+/// The reduced model's mass has one home, the robot's (computed from its model): the preview's
+/// cart-table reads it as C2's search does. A robot whose mass is found twice as large leans
+/// half as far into the same forecast push (the equivalent CoM offset is z_c F / (M g)),
+/// measured against C0, which ignores it. No config key can set it apart.
 #[test]
 fn robot_mass_is_the_preview_s() {
-    let robot = upc::robot::Robot::embedded_default().expect("robot");
-    let normal = Config::embedded_default().expect("defaults");
-    let mut layers = Config::layers_for(&robot).expect("layers");
-    layers
-        .push_override(&format!("robot.mass={}", 2.0 * robot.derived.mass))
-        .expect("set");
-    let heavy = layers.build().expect("config");
-    let lean = lean_into_push;
+    let normal = Robot::embedded_default().expect("robot");
+    let mut heavy = normal.clone();
+    heavy.derived.mass *= 2.0;
+    let config = Config::embedded_default().expect("defaults");
+    let lean = |r: &Robot, kind| lean_into_push(r, &config, kind);
     let lean_normal = lean(&normal, ControllerKind::C1) - lean(&normal, ControllerKind::C0);
     let lean_heavy = lean(&heavy, ControllerKind::C1) - lean(&heavy, ControllerKind::C0);
     let ratio = lean_heavy / lean_normal;
@@ -113,7 +109,8 @@ fn c1_leans_into_a_forecast_push_and_c0_does_not() {
     // Over 20 ticks on a frozen state, C1's commanded CoM acceleration turns toward the push
     // (+x against a −x force) well beyond what C0 commands to centre the CoM on the feet.
     let config = Config::embedded_default().expect("defaults");
-    let acc = [ControllerKind::C0, ControllerKind::C1].map(|k| lean_into_push(&config, k));
+    let robot = Robot::embedded_default().expect("robot");
+    let acc = [ControllerKind::C0, ControllerKind::C1].map(|k| lean_into_push(&robot, &config, k));
     eprintln!(
         "commanded CoM acceleration along x: C0 {} C1 {}",
         acc[0], acc[1]
@@ -195,11 +192,11 @@ fn reset_latches_the_posture_of_a_new_session() {
 #[test]
 fn a_state_larger_than_a_message_is_an_error() {
     use upc::channels::{MAX_DOF, StateMsg};
-    let model = larger_than_a_message();
-    assert!(model.nq > MAX_DOF && model.nv > MAX_DOF);
-    let (nq, nv) = (model.nq, model.nv);
+    let robot = larger_than_a_message();
+    let (nq, nv) = (robot.model.nq, robot.model.nv);
+    assert!(nq > MAX_DOF && nv > MAX_DOF);
     let mut core = upc::control::ControllerCore::new(
-        model,
+        &robot,
         &Config::embedded_default().expect("defaults"),
         ControllerKind::C0,
         0.001,
@@ -223,9 +220,10 @@ fn a_state_larger_than_a_message_is_an_error() {
 
 /// The humanoid with a chain of extra joints on its last body: nv = MAX_DOF + 12 (more than a
 /// state or torque message holds).
-fn larger_than_a_message() -> upc::dynamics::Model {
-    use upc::dynamics::{Inertia, JointKind, SE3, icub_like};
-    let mut model = icub_like::load().expect("model");
+fn larger_than_a_message() -> Robot {
+    use upc::dynamics::{Inertia, JointKind, SE3};
+    let mut robot = Robot::embedded_default().expect("robot");
+    let model = &mut robot.model;
     let mut parent = model.joints.len() - 1;
     let extra = upc::channels::MAX_DOF + 12 - model.nv;
     for i in 0..extra {
@@ -246,7 +244,7 @@ fn larger_than_a_message() -> upc::dynamics::Model {
             )
             .expect("extra joint");
     }
-    model
+    robot
 }
 
 /// The server refuses such a model before its loop (which slices its MAX_DOF buffers by the
@@ -272,7 +270,7 @@ fn the_server_refuses_a_model_larger_than_a_message() {
     let config = Config::embedded_default().expect("defaults");
     let e = run_server(
         &config,
-        larger_than_a_message(),
+        &larger_than_a_message(),
         &opts,
         Arc::new(AtomicBool::new(false)),
     )
@@ -296,7 +294,8 @@ fn c2_thread_hands_over_time_stamped_schedules_without_blocking() {
     r.core
         .tick(&r.state, &r.window, None, &mut r.tau)
         .expect("tick");
-    let mut handoff = GainHandoff::spawn(&config).expect("thread");
+    let robot = Robot::embedded_default().expect("robot").reduced();
+    let mut handoff = GainHandoff::spawn(&config, &robot).expect("thread");
     assert_eq!(
         handoff.latest().seq,
         0,

@@ -16,7 +16,6 @@ use upc::config::{Config, ControllerKind, LoopMode};
 use upc::control::GainHandoff;
 use upc::control::gain_thread::{GainSnapshot, GainSolver, StampedSchedule};
 use upc::control::server::{ServerOptions, ServerSummary, run_server_with};
-use upc::dynamics::icub_like;
 use upc::preview::PreviewError;
 
 static SERIAL: Mutex<()> = Mutex::new(());
@@ -271,9 +270,9 @@ fn run(
         robot_hash: None,
         robot_name: "icub_like".into(),
     };
-    let model = icub_like::load().expect("model");
+    let robot = upc::robot::Robot::embedded_default().expect("robot");
     let stop = Arc::new(AtomicBool::new(false));
-    let summary = run_server_with(config, model, &opts, stop, Some(solver)).expect("run");
+    let summary = run_server_with(config, &robot, &opts, stop, Some(solver)).expect("run");
     let text = std::fs::read_to_string(&csv).expect("csv");
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().expect("header").split(',').collect();

@@ -12,7 +12,10 @@ use upc::offline::ReducedLoop;
 /// Mean K_p of C2 over the impact (its 0.1 s) and the half second before it.
 fn kp_during_and_before(config: &Config) -> (f64, f64) {
     let scenario = impact_scenario(250.0, 0.1, Direction::X);
-    let run = ReducedLoop::new(config, &scenario, ControllerKind::C2)
+    let robot = upc::robot::Robot::embedded_default()
+        .expect("robot")
+        .reduced();
+    let run = ReducedLoop::new(config, robot, &scenario, ControllerKind::C2)
         .run()
         .expect("reduced loop");
     let mean = |a: f64, b: f64| {

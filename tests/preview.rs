@@ -9,7 +9,7 @@ use upc::preview::dense::CondensedHorizon;
 use upc::preview::gain_search::{GainSearch, GainSearchInputs};
 use upc::preview::{
     AxisState, CartTable, GainSchedule, HandPreviewer, HandState, PreviewError, PreviewPlan,
-    Riccati, ZmpPreview,
+    ReducedModel, Riccati, ZmpPreview,
 };
 use upc::scenario::{ForceProfile, Impact, Scenario};
 
@@ -21,13 +21,14 @@ fn config_with(sets: &[&str]) -> Config {
     l.build().unwrap()
 }
 
+/// The iCub-like's reduced models (computed from its model once).
+fn robot() -> ReducedModel {
+    static ROBOT: std::sync::OnceLock<ReducedModel> = std::sync::OnceLock::new();
+    *ROBOT.get_or_init(|| upc::robot::Robot::embedded_default().unwrap().reduced())
+}
+
 fn model(c: &Config) -> CartTable {
-    CartTable {
-        period: c.preview.period,
-        com_height: c.robot.com_height,
-        mass: c.robot.mass,
-        gravity: c.robot.gravity,
-    }
+    robot().cart_table(c.preview.period, c.robot.gravity)
 }
 
 fn preview(c: &Config, n: usize, solver: LqSolverKind) -> ZmpPreview {
@@ -281,11 +282,11 @@ fn constant_lateral_force_shifts_the_zmp_by_the_analytic_amount() {
     let c = config_with(&[]);
     let f = [0.0, 25.0, 40.0];
     let scenario = constant_force_scenario(f);
-    let shift = c.robot.com_height * f[1] / (c.robot.mass * c.robot.gravity - f[2]);
-    let c0 = ReducedLoop::new(&c, &scenario, ControllerKind::C0)
+    let shift = robot().com_height * f[1] / (robot().mass * c.robot.gravity - f[2]);
+    let c0 = ReducedLoop::new(&c, robot(), &scenario, ControllerKind::C0)
         .run()
         .unwrap();
-    let c1 = ReducedLoop::new(&c, &scenario, ControllerKind::C1)
+    let c1 = ReducedLoop::new(&c, robot(), &scenario, ControllerKind::C1)
         .run()
         .unwrap();
     let (l0, l1) = (c0.rows.last().unwrap(), c1.rows.last().unwrap());
@@ -307,7 +308,7 @@ fn constant_lateral_force_shifts_the_zmp_by_the_analytic_amount() {
 #[test]
 fn hand_at_rest_transmits_the_external_force() {
     let c = config_with(&[]);
-    let m_e = Matrix3::from_fn(|i, j| c.hand.effective_mass[i][j]);
+    let m_e = robot().effective_mass;
     let n = 200;
     let mut hp = HandPreviewer::new(c.preview.period, m_e, n).unwrap();
     let f = Vector3::new(-30.0, 7.0, 4.0);
@@ -344,7 +345,7 @@ fn hand_at_rest_transmits_the_external_force() {
 #[test]
 fn softer_stiffness_delays_and_lowers_the_disturbance_peak() {
     let c = config_with(&[]);
-    let m_e = Matrix3::from_fn(|i, j| c.hand.effective_mass[i][j]);
+    let m_e = robot().effective_mass;
     let t = c.preview.period;
     let n = 400;
     let impact = ForceProfile::Impacts(vec![Impact {
@@ -490,7 +491,7 @@ fn bad_inputs_are_errors_not_panics() {
     let n = 100;
     let (state, refs) = busy_problem(n);
     let mut p = preview(&c, n, LqSolverKind::Riccati);
-    let weight = c.robot.mass * c.robot.gravity;
+    let weight = robot().mass * c.robot.gravity;
     let mut lift = vec![[0.0; 3]; n];
     lift[17][2] = weight + 1.0;
     assert!(matches!(
@@ -595,7 +596,7 @@ fn eq26_snapshot(
     let mut f = vec![[0.0; 3]; n];
     scenario.force.sample_into(time + t, t, &mut f);
     let des = HandState {
-        pos: Vector3::from(c.hand.desired_position),
+        pos: robot().hand_position,
         ..Default::default()
     };
     (vec![scenario.zmp_reference; n], vec![des; n], f)
@@ -629,7 +630,7 @@ fn gauss_newton_gradient_matches_finite_differences() {
             f_ext: &f,
             applied: [c.hand.kp, c.nominal_kd(c.hand.kp)],
         };
-        let mut search = GainSearch::from_config(&c).unwrap();
+        let mut search = GainSearch::from_config(&c, &robot()).unwrap();
         let (problem, knots) = search.problem_mut();
         let theta: Vec<f64> = (0..knots.dim()).map(|j| 300.0 + 40.0 * j as f64).collect();
         let theta: Vec<f64> = theta
@@ -685,8 +686,10 @@ fn c2_default_beats_nominal_gains_and_the_nelder_mead_baseline() {
                     f_ext: &f,
                     applied: [c.hand.kp, c.nominal_kd(c.hand.kp)],
                 };
-                let mut gn = GainSearch::with_solver(&c, GainSolverKind::GaussNewton).unwrap();
-                let mut nm = GainSearch::with_solver(&c, GainSolverKind::NelderMead).unwrap();
+                let mut gn =
+                    GainSearch::with_solver(&c, &robot(), GainSolverKind::GaussNewton).unwrap();
+                let mut nm =
+                    GainSearch::with_solver(&c, &robot(), GainSolverKind::NelderMead).unwrap();
                 let r_gn = gn.search(&inp, 1).unwrap();
                 let r_nm = nm.search(&inp, 1).unwrap();
                 assert!(
@@ -712,7 +715,7 @@ fn c2_closed_loop_never_costs_more_than_c1_per_solve() {
     let c = config_with(&["preview.horizon=200"]);
     let mut scenario = Scenario::load("single_impact").unwrap();
     scenario.duration = 2.5;
-    let run = ReducedLoop::new(&c, &scenario, ControllerKind::C2)
+    let run = ReducedLoop::new(&c, robot(), &scenario, ControllerKind::C2)
         .run()
         .unwrap();
     assert!(!run.gain_search.is_empty());
@@ -729,23 +732,21 @@ fn c2_closed_loop_never_costs_more_than_c1_per_solve() {
 
 #[test]
 fn zmp_constraints_keep_the_predicted_zmp_inside_where_c1_cannot() {
-    // With support bounds tightened to ±1 cm in x and a heavier jerk weight, unconstrained C1
-    // (which only weighs ZMP error against jerk) lets the ZMP out during the impact; the
-    // constrained QP keeps it inside.
-    let tight = [
-        "support.x=[-0.01, 0.01]",
-        "preview.horizon=150",
-        "preview.r=1e-4",
-    ];
+    // With support bounds tightened to ±1 cm in x (a robot with short feet) and a heavier jerk
+    // weight, unconstrained C1 (which only weighs ZMP error against jerk) lets the ZMP out
+    // during the impact; the constrained QP keeps it inside.
+    let mut narrow = robot();
+    narrow.support[0] = [-0.01, 0.01];
+    let tight = ["preview.horizon=150", "preview.r=1e-4"];
     let c = config_with(&tight);
     let mut cq = config_with(&tight);
     cq.preview.zmp_constraints = true;
     let mut scenario = Scenario::load("single_impact").unwrap();
     scenario.duration = 2.6;
-    let free = ReducedLoop::new(&c, &scenario, ControllerKind::C1)
+    let free = ReducedLoop::new(&c, narrow, &scenario, ControllerKind::C1)
         .run()
         .unwrap();
-    let bound = ReducedLoop::new(&cq, &scenario, ControllerKind::C1)
+    let bound = ReducedLoop::new(&cq, narrow, &scenario, ControllerKind::C1)
         .run()
         .unwrap();
     assert!(
@@ -783,12 +784,17 @@ fn config_errors_name_the_key_and_the_file() {
         "{e}"
     );
     let mut l = upc::config::Config::default_layers().unwrap();
-    l.push_override("robot.mass=-3").unwrap();
+    l.push_override("robot.gravity=-3").unwrap();
     let e = l.build().unwrap_err().to_string();
     assert!(
-        e.contains("robot.mass") && e.contains("--set") && e.contains("> 0"),
+        e.contains("robot.gravity") && e.contains("--set") && e.contains("> 0"),
         "{e}"
     );
+    // The robot's own facts are no settings: a key for one is refused by name.
+    let mut l = upc::config::Config::default_layers().unwrap();
+    l.push_override("robot.mass=31").unwrap();
+    let e = l.build().unwrap_err().to_string();
+    assert!(e.contains("mass"), "{e}");
     let e = Scenario::load("does/not/exist.toml")
         .unwrap_err()
         .to_string();

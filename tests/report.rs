@@ -331,8 +331,11 @@ fn the_reduced_section_holds_the_metrics_of_reduced_loop() {
     layers.push_table("scenario", scenario.config.clone().expect("[config]"));
     let config = layers.build().expect("config");
     assert_eq!(config.preview.horizon, 60);
+    let robot = upc::robot::Robot::embedded_default()
+        .expect("robot")
+        .reduced();
     for kind in [ControllerKind::C0, ControllerKind::C1, ControllerKind::C2] {
-        let r = ReducedLoop::new(&config, &scenario, kind)
+        let r = ReducedLoop::new(&config, robot, &scenario, kind)
             .run()
             .expect("reduced loop");
         assert_eq!(r.rows.len(), 120);

@@ -13,7 +13,8 @@ fn reduced(scenario: &str, duration: f64, kind: ControllerKind) -> RunResult {
     s.duration = duration;
     // The embedded scenarios carry no [config] table: the defaults apply.
     let c = Config::embedded_default().unwrap();
-    ReducedLoop::new(&c, &s, kind).run().unwrap()
+    let robot = upc::robot::Robot::embedded_default().unwrap().reduced();
+    ReducedLoop::new(&c, robot, &s, kind).run().unwrap()
 }
 
 #[test]

@@ -46,29 +46,43 @@ fn the_default_robot_computes_what_was_typed_before() {
     assert!(c.norm() < 1e-12);
 }
 
+/// What follows from the robot is a value computed from its model, never a config layer: the
+/// reduced models and the frames come from the robot, its config layers are its description's
+/// `[config]` only, and no config key can set a robot fact apart.
 #[test]
-fn config_takes_the_robot_values_and_set_still_overrides() {
+fn robot_facts_are_values_not_config_layers() {
     let r = Robot::embedded_default().expect("robot");
-    let c = Config::embedded_default().expect("config");
-    assert_eq!(c.robot.mass, r.derived.mass);
-    assert_eq!(c.robot.com_height, r.derived.com_height);
-    assert_eq!(c.support.x, r.derived.support[0]);
-    assert_eq!(c.support.y, r.derived.support[1]);
-    assert_eq!(c.wbc.feet, ["l_sole".to_string(), "r_sole".to_string()]);
-    assert_eq!(c.wbc.hand_frame, "r_hand");
-    assert_eq!(c.wbc.hand_chain_root, "chest");
-    for i in 0..3 {
-        assert_eq!(c.hand.desired_position[i], r.derived.hand_position[i]);
-        for j in 0..3 {
-            assert_eq!(
-                c.hand.effective_mass[i][j],
-                r.derived.effective_mass[(i, j)]
-            );
-        }
+    let m = r.reduced();
+    assert_eq!(m.mass, r.model.total_mass());
+    assert_eq!(m.com_height, r.derived.com_height);
+    assert_eq!(m.support, r.derived.support);
+    assert_eq!(m.effective_mass, r.derived.effective_mass);
+    assert_eq!(m.hand_position, r.derived.hand_position);
+    let f = r.frames();
+    assert_eq!(f.feet, ["l_sole".to_string(), "r_sole".to_string()]);
+    assert_eq!(
+        (f.hand.as_str(), f.hand_chain_root.as_str()),
+        ("r_hand", "chest")
+    );
+    assert!(r.config_layers().is_empty(), "{:?}", r.config_layers());
+    let tuned = Robot::parse(
+        "extends = \"icub_like\"\nname = \"tuned\"\n[config]\npreview.horizon = 400\n",
+        "tuned.toml",
+        None,
+    )
+    .expect("a description with a [config] table");
+    let layers = tuned.config_layers();
+    assert_eq!(layers.len(), 1);
+    assert_eq!(layers[0].1.keys().collect::<Vec<_>>(), ["preview"]);
+    for key in [
+        "robot.mass=31",
+        "robot.com_height=0.5",
+        "support.x=[-0.1, 0.1]",
+    ] {
+        let mut l = Config::layers_for(&r).expect("layers");
+        l.push_override(key).expect("parses");
+        assert!(l.build().is_err(), "{key} is no setting");
     }
-    let mut layers = Config::layers_for(&r).expect("layers");
-    layers.push_override("robot.mass=31.0").expect("override");
-    assert_eq!(layers.build().expect("config").robot.mass, 31.0);
 }
 
 #[test]
@@ -250,8 +264,8 @@ fn the_package_robots_stand_flat_facing_x_with_their_published_mass() {
             d.com_offset[0].abs() < 0.05 && d.com_offset[1].abs() < 0.03,
             "{name}"
         );
-        let c = Config::for_robot(&r).expect("config");
-        assert_eq!(c.robot.mass, d.mass);
+        Config::for_robot(&r).expect("config");
+        assert_eq!(r.reduced().mass, d.mass);
         // Pushed by its mass, capped by what its arm holds, relative to the default robot.
         let (m0, c0) = upc::robot::reference().expect("reference");
         let scale = r.force_scale().expect("scale");

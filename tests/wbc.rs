@@ -19,6 +19,13 @@ fn config() -> WbcConfig {
     Config::embedded_default().unwrap().wbc
 }
 
+/// The iCub-like's contact, sole and hand frames (its description names them).
+fn frames() -> upc::wbc::BodyFrames {
+    upc::robot::Robot::embedded_default()
+        .expect("robot")
+        .frames()
+}
+
 struct Setup {
     model: Model,
     data: Data,
@@ -30,7 +37,7 @@ struct Setup {
 fn setup_with(cfg: &WbcConfig) -> Setup {
     let model = icub_like::load().unwrap();
     let data = Data::new(&model);
-    let wbc = WholeBodyController::new(&model, cfg).unwrap();
+    let wbc = WholeBodyController::new(&model, cfg, &frames()).unwrap();
     let q = upc::robot::Robot::embedded_default().expect("robot").home;
     let v = DVector::zeros(model.nv);
     Setup {
@@ -573,7 +580,7 @@ fn com_and_frame_drifts_match_finite_differences() {
 #[test]
 fn config_section_is_checked_by_key() {
     let c = config();
-    assert_eq!(c.feet, ["l_sole".to_string(), "r_sole".to_string()]);
+    assert_eq!(frames().feet, ["l_sole".to_string(), "r_sole".to_string()]);
     assert!(c.reuse_solver);
     for (set, key) in [
         ("wbc.friction=-0.5", "wbc.friction"),
@@ -587,9 +594,9 @@ fn config_section_is_checked_by_key() {
         assert!(e.contains(key), "{set}: {e}");
     }
     let model = icub_like::load().unwrap();
-    let mut bad = config();
-    bad.hand_frame = "no_such_frame".into();
-    let e = WholeBodyController::new(&model, &bad)
+    let mut bad = frames();
+    bad.hand = "no_such_frame".into();
+    let e = WholeBodyController::new(&model, &config(), &bad)
         .err()
         .unwrap()
         .to_string();

@@ -9,6 +9,13 @@ use upc::config::{Config, WbcFormulation};
 use upc::dynamics::{Data, forward_kinematics, icub_like};
 use upc::wbc::{WbcCommand, WbcStatus, WholeBodyController};
 
+/// The iCub-like's contact, sole and hand frames (its description names them).
+fn frames() -> upc::wbc::BodyFrames {
+    upc::robot::Robot::embedded_default()
+        .expect("robot")
+        .frames()
+}
+
 #[test]
 fn wbc_tick_allocations_after_the_first() {
     let cfg = Config::embedded_default().unwrap().wbc;
@@ -17,7 +24,7 @@ fn wbc_tick_allocations_after_the_first() {
     let mut data = Data::new(&model);
     forward_kinematics(&model, &mut data, &q).unwrap();
     let hand = data.o_m_f[model.frame_id("r_hand").unwrap()].trans;
-    let mut wbc = WholeBodyController::new(&model, &cfg).unwrap();
+    let mut wbc = WholeBodyController::new(&model, &cfg, &frames()).unwrap();
     let v = DVector::zeros(model.nv);
     let mut cmd = WbcCommand {
         hand_pos_des: hand,
@@ -62,7 +69,7 @@ fn no_tick_builds_a_solver_torque_limited_or_full() {
     for formulation in [WbcFormulation::Condensed, WbcFormulation::Full] {
         let mut cfg = Config::embedded_default().unwrap().wbc;
         cfg.formulation = formulation;
-        let mut wbc = WholeBodyController::new(&model, &cfg).unwrap();
+        let mut wbc = WholeBodyController::new(&model, &cfg, &frames()).unwrap();
         let built = wbc.counters().solver_builds;
         let mut cmd = WbcCommand {
             hand_pos_des: hand,

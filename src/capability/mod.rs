@@ -12,7 +12,7 @@
 
 use crate::config::{Config, ControllerKind};
 use crate::offline::ReducedLoop;
-use crate::preview::PreviewError;
+use crate::preview::{PreviewError, ReducedModel};
 use crate::scenario::{ForceProfile, Impact, Scenario};
 
 /// Time of the impact's start (s): the controller has settled by then.
@@ -226,10 +226,11 @@ pub fn bisect<E>(
     })
 }
 
-/// Whether `variant` survives the impact on the reduced models (`config`: the robot's, without
-/// the variant's own override, which is applied here).
+/// Whether `variant` survives the impact on `robot`'s reduced models (`config`: the robot's,
+/// without the variant's own override, which is applied here).
 pub fn survives_reduced(
     config: &Config,
+    robot: ReducedModel,
     variant: Variant,
     amplitude: f64,
     duration: f64,
@@ -240,7 +241,7 @@ pub fn survives_reduced(
         config.preview.zmp_constraints = true;
     }
     let scenario = impact_scenario(amplitude, duration, direction);
-    let result = ReducedLoop::new(&config, &scenario, variant.kind()).run()?;
+    let result = ReducedLoop::new(&config, robot, &scenario, variant.kind()).run()?;
     Ok(result.metrics.time_outside_support == 0.0)
 }
 

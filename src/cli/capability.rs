@@ -136,6 +136,7 @@ pub fn run(args: CapabilityArgs) -> CliResult {
     };
     let robot = args.robot.load()?;
     let config = Config::for_robot(&robot)?;
+    let reduced = robot.reduced();
     let out = args.out.clone().unwrap_or_else(|| {
         let secs = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
@@ -192,6 +193,7 @@ pub fn run(args: CapabilityArgs) -> CliResult {
                         match case.model {
                             Model::Reduced => Ok(survives_reduced(
                                 &config,
+                                reduced,
                                 case.variant,
                                 a,
                                 case.duration,

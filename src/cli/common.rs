@@ -20,7 +20,7 @@ pub struct ConfigArgs {
 }
 
 impl ConfigArgs {
-    /// Defaults ← the robot's (computed, then its `[config]`) ← config files ← the scenario's
+    /// Defaults ← the robot description's `[config]` ← config files ← the scenario's
     /// `[config]` ← `extra` ← `--set`.
     pub fn load(
         &self,

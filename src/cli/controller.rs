@@ -111,7 +111,7 @@ pub fn run(args: ControllerArgs) -> CliResult {
         args.prefix,
         config.controller.rate_hz
     );
-    let summary = run_server(&config, robot.model.clone(), &opts, stop_flag())?;
+    let summary = run_server(&config, &robot, &opts, stop_flag())?;
     tracing::info!(
         "controller stopped ({}): {} ticks, tick p50 {:.1} µs p99 {:.1} µs",
         summary.stopped_by,

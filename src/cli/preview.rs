@@ -81,8 +81,8 @@ pub fn run(args: PreviewArgs) -> CliResult {
     println!(
         "robot {} (M = {:.2} kg, z_c = {:.3} m, forces × {:.3}); scenario {} — {} ({} s); T = {} s, N = {} ({:.2} s preview), R/Q_e = {:e}",
         robot.name(),
-        config.robot.mass,
-        config.robot.com_height,
+        robot.derived.mass,
+        robot.derived.com_height,
         scenario.force_scale,
         scenario.name,
         scenario.description,
@@ -94,7 +94,7 @@ pub fn run(args: PreviewArgs) -> CliResult {
     );
     let mut results = Vec::new();
     for &kind in controllers {
-        let result = ReducedLoop::new(&config, &scenario, kind).run()?;
+        let result = ReducedLoop::new(&config, robot.reduced(), &scenario, kind).run()?;
         if let Some(out) = &args.out {
             let path = if controllers.len() > 1 {
                 suffixed(out, kind.name())

@@ -9,7 +9,6 @@ use super::{ConfigError, Layers};
 #[serde(deny_unknown_fields)]
 pub struct Config {
     pub robot: RobotConfig,
-    pub support: SupportConfig,
     pub preview: PreviewConfig,
     pub hand: HandConfig,
     pub gain_search: GainSearchConfig,
@@ -17,24 +16,14 @@ pub struct Config {
     pub controller: ControllerConfig,
 }
 
-/// Reduced-model parameters of the robot (docs/reduced_models.md, eq. (1)–(3), (10)).
+/// The world the controller believes the robot in. What follows from the robot itself (mass,
+/// CoM height, support, M_e, frames) is no setting: it comes from the robot's model
+/// ([`crate::preview::ReducedModel`], `crate::robot::Robot`).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RobotConfig {
-    /// Total mass M (kg).
-    pub mass: f64,
-    /// Constant CoM height z_c above the soles (m).
-    pub com_height: f64,
-    /// Gravity g (m/s²).
+    /// Gravity g (m/s²): the cart-table's and the controller's whole-body dynamics'.
     pub gravity: f64,
-}
-
-/// The support interval of the ZMP along each ground axis (m, in the feet frame).
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SupportConfig {
-    pub x: [f64; 2],
-    pub y: [f64; 2],
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -77,9 +66,6 @@ pub enum DampingMode {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct HandConfig {
-    /// Operational-space inertia M_e of the chest→hand chain (kg, 3×3 SPD), used by the reduced
-    /// models; the whole-body controller computes it from the robot model instead.
-    pub effective_mass: [[f64; 3]; 3],
     /// Nominal stiffness K_p (1/s²), the fixed gain of C0 and C1.
     pub kp: f64,
     pub damping: DampingMode,
@@ -87,8 +73,6 @@ pub struct HandConfig {
     pub damping_ratio: f64,
     /// Nominal K_d (1/s) for `damping = "free"`.
     pub kd: f64,
-    /// Desired hand position (m), held while the door pushes.
-    pub desired_position: [f64; 3],
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -128,14 +112,6 @@ pub struct GainSearchConfig {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct WbcConfig {
-    /// Sole frames of the two feet; the contact points are the frames `<foot>_fl`, `_fr`, `_rl`,
-    /// `_rr` (the sole corners), the contact normal is the sole frame's z axis.
-    pub feet: [String; 2],
-    /// Frame of the hand impedance task.
-    pub hand_frame: String,
-    /// The body the hand's arm chain starts from (M_e of the chain root → hand,
-    /// docs/hand_previewer.md, eq. (21)–(23)).
-    pub hand_chain_root: String,
     /// Coulomb friction coefficient μ of the friction cones.
     pub friction: f64,
     /// Fraction of the URDF effort limits the QP may use, in (0, 1].
@@ -212,11 +188,7 @@ impl Config {
                 Err(l.range_error(key, format!("must be [min, max] with min < max, got {b:?}")))
             }
         };
-        pos("robot.mass", self.robot.mass)?;
-        pos("robot.com_height", self.robot.com_height)?;
         pos("robot.gravity", self.robot.gravity)?;
-        interval("support.x", self.support.x)?;
-        interval("support.y", self.support.y)?;
         pos("preview.period", self.preview.period)?;
         if !(2..=20_000).contains(&self.preview.horizon) {
             return Err(l.range_error(
@@ -226,24 +198,9 @@ impl Config {
         }
         pos("preview.q_e", self.preview.q_e)?;
         pos("preview.r", self.preview.r)?;
-        let m = &self.hand.effective_mass;
-        let sym = (0..3)
-            .all(|i| (0..3).all(|j| (m[i][j] - m[j][i]).abs() <= 1e-9 * (1.0 + m[i][j].abs())));
-        let spd = nalgebra::Matrix3::from_fn(|i, j| m[i][j])
-            .cholesky()
-            .is_some();
-        if !sym || !spd || m.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(l.range_error(
-                "hand.effective_mass",
-                "must be a finite symmetric positive-definite 3×3 matrix",
-            ));
-        }
         pos("hand.kp", self.hand.kp)?;
         pos("hand.damping_ratio", self.hand.damping_ratio)?;
         pos("hand.kd", self.hand.kd)?;
-        if self.hand.desired_position.iter().any(|v| !v.is_finite()) {
-            return Err(l.range_error("hand.desired_position", "must be finite"));
-        }
         let g = &self.gain_search;
         for (i, q) in g.q_t.iter().enumerate() {
             nonneg(&format!("gain_search.q_t[{i}]"), *q)?;

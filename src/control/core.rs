@@ -30,9 +30,9 @@ use crate::dynamics::{
     frame_velocity,
 };
 use crate::preview::{
-    AxisState, CartTable, GainSchedule, HandPreviewer, HandState, PreviewError, PreviewPlan,
-    ZmpPreview,
+    AxisState, GainSchedule, HandPreviewer, HandState, PreviewError, PreviewPlan, ZmpPreview,
 };
+use crate::robot::Robot;
 use crate::wbc::{WbcCommand, WbcStatus, WholeBodyController};
 
 /// Errors of a tick: the state message does not fit the model.
@@ -147,8 +147,10 @@ struct Latched {
 }
 
 impl ControllerCore {
+    /// The controller of `robot`: its model (whole-body dynamics), its reduced models
+    /// ([`Robot::reduced`]: the preview's cart-table) and its frames.
     pub fn new(
-        model: Model,
+        robot: &Robot,
         config: &Config,
         kind: ControllerKind,
         control_period: f64,
@@ -157,23 +159,18 @@ impl ControllerCore {
     ) -> Result<Self, Box<dyn std::error::Error + Send + Sync>> {
         // One gravity for the controller: the cart-table's, the forecast window's weight and
         // the whole-body dynamics' (RNEA, the QP) are all `robot.gravity` of the config.
-        let mut model = model;
+        let mut model = robot.model.clone();
         model.gravity = nalgebra::Vector3::new(0.0, 0.0, -config.robot.gravity);
         let p = &config.preview;
         let n = p.horizon;
-        let cart = CartTable {
-            period: p.period,
-            // The reduced model's parameters have one home, `robot` of the config (the robot's
-            // own by default; set apart on purpose for model-error studies), read alike by the
-            // preview, the observer and C2's search; the whole-body QP uses the model's inertia.
-            com_height: config.robot.com_height,
-            mass: config.robot.mass,
-            gravity: config.robot.gravity,
-        };
-        let w = &config.wbc;
-        let op = OpSpaceWorkspace::new(&model, &w.hand_chain_root, &w.hand_frame)?;
-        let wbc = WholeBodyController::new(&model, w)?;
-        let hand_frame = model.frame_id(&w.hand_frame)?;
+        // The reduced model's parameters have one home, the robot's (computed from its model),
+        // read alike by the preview, the observer and C2's search; the whole-body QP uses the
+        // model's inertia.
+        let cart = robot.reduced().cart_table(p.period, config.robot.gravity);
+        let frames = robot.frames();
+        let op = OpSpaceWorkspace::new(&model, &frames.hand_chain_root, &frames.hand)?;
+        let wbc = WholeBodyController::new(&model, &config.wbc, &frames)?;
+        let hand_frame = model.frame_id(&frames.hand)?;
         let nominal = GainSchedule::constant(n, config.hand.kp, config.nominal_kd(config.hand.kp));
         let cc = &config.controller;
         let correction = (cc.forecast_correction.enabled && kind != ControllerKind::C0)

@@ -160,9 +160,13 @@ pub struct GainHandoff {
 }
 
 impl GainHandoff {
-    /// Start the worker thread with a gain search configured from `config`.
-    pub fn spawn(config: &Config) -> Result<Self, crate::preview::PreviewError> {
-        Self::spawn_with(config, Box::new(GainSearch::from_config(config)?))
+    /// Start the worker thread with a gain search on `robot`'s reduced models configured from
+    /// `config`.
+    pub fn spawn(
+        config: &Config,
+        robot: &crate::preview::ReducedModel,
+    ) -> Result<Self, crate::preview::PreviewError> {
+        Self::spawn_with(config, Box::new(GainSearch::from_config(config, robot)?))
     }
 
     /// Start the worker thread with `solver` (horizon and nominal gains from `config`).

@@ -37,7 +37,8 @@ use crate::channels::{
     ServiceKind, StateMsg, Subscriber, TORQUE_FLAG_FALLBACK, TorqueMsg,
 };
 use crate::config::{Config, ControllerKind, LoopMode};
-use crate::dynamics::Model;
+use crate::preview::ReducedModel;
+use crate::robot::Robot;
 
 /// How to run, beyond the config.
 #[derive(Debug, Clone)]
@@ -126,23 +127,23 @@ fn not_reproducible(reason: &mut Option<&'static str>, why: &'static str) {
 
 pub fn run_server(
     config: &Config,
-    model: Model,
+    robot: &Robot,
     opts: &ServerOptions,
     stop: Arc<AtomicBool>,
 ) -> Result<ServerSummary, Box<dyn std::error::Error + Send + Sync>> {
-    run_server_with(config, model, opts, stop, None)
+    run_server_with(config, robot, opts, stop, None)
 }
 
 /// [`run_server`] with C2's gain search replaced by `c2_solver` (when the controller is C2):
 /// for tests that make C2 fail, panic or lag. Not reachable from the command line.
 pub fn run_server_with(
     config: &Config,
-    model: Model,
+    robot: &Robot,
     opts: &ServerOptions,
     stop: Arc<AtomicBool>,
     c2_solver: Option<Box<dyn GainSolver>>,
 ) -> Result<ServerSummary, Box<dyn std::error::Error + Send + Sync>> {
-    ControlLoop::open(config, model, opts, c2_solver)?.run(&stop)
+    ControlLoop::open(config, robot, opts, c2_solver)?.run(&stop)
 }
 
 /// The loop's iceoryx2 ports to the plant.
@@ -203,14 +204,14 @@ struct Inputs {
 impl<'a> ControlLoop<'a> {
     fn open(
         config: &'a Config,
-        model: Model,
+        robot: &Robot,
         opts: &'a ServerOptions,
         c2_solver: Option<Box<dyn GainSolver>>,
     ) -> Result<Self, Box<dyn std::error::Error + Send + Sync>> {
         let cc = &config.controller;
         let (kind, dt) = (cc.kind, 1.0 / cc.rate_hz);
         let lockstep = cc.mode == LoopMode::Lockstep;
-        let robot_mass = model.total_mass();
+        let (model, robot_mass) = (&robot.model, robot.derived.mass);
         // Every state and torque message holds at most MAX_DOF values, and the loop slices its
         // buffers by the model's sizes: a larger model could never be served.
         if model.nq > MAX_DOF || model.nv > MAX_DOF {
@@ -232,7 +233,7 @@ impl<'a> ControlLoop<'a> {
         // order from one run to the next, and on two cores rayon's workers compete with the loop.
         faer::set_global_parallelism(faer::Par::Seq);
         let core = ControllerCore::new(
-            model,
+            robot,
             config,
             kind,
             dt,
@@ -243,7 +244,7 @@ impl<'a> ControlLoop<'a> {
         let n_tau = core.model.nv - 6;
         let horizon_time = config.preview.horizon as f64 * config.preview.period;
         let intake = forecast_intake(config, &bus, robot_mass, horizon_time)?;
-        let c2 = start_c2(config, c2_solver)?;
+        let c2 = start_c2(config, &robot.reduced(), c2_solver)?;
         let logger = start_logger(config, opts)?;
         let status_every = Duration::from_secs_f64(cc.status_every);
         Ok(ControlLoop {
@@ -731,11 +732,12 @@ impl<'a> ControlLoop<'a> {
 /// C2's gain search in its thread, for C2 (`solver`: a test's stand-in).
 fn start_c2(
     config: &Config,
+    robot: &ReducedModel,
     solver: Option<Box<dyn GainSolver>>,
 ) -> Result<Option<GainHandoff>, Box<dyn std::error::Error + Send + Sync>> {
     Ok(match (config.controller.kind, solver) {
         (ControllerKind::C2, Some(solver)) => Some(GainHandoff::spawn_with(config, solver)?),
-        (ControllerKind::C2, None) => Some(GainHandoff::spawn(config)?),
+        (ControllerKind::C2, None) => Some(GainHandoff::spawn(config, robot)?),
         _ => None,
     })
 }

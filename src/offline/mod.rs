@@ -7,7 +7,7 @@ mod metrics;
 
 use std::time::Instant;
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 
 pub use metrics::{Metrics, Row};
 
@@ -15,7 +15,7 @@ use crate::config::{Config, ControllerKind};
 use crate::preview::constrained::ConstrainedPreview;
 use crate::preview::gain_search::{GainSearch, GainSearchInputs, GainSearchReport};
 use crate::preview::{
-    AxisState, CartTable, GainSchedule, HandPreviewer, HandState, PreviewError, ZmpPreview,
+    AxisState, GainSchedule, HandPreviewer, HandState, PreviewError, ReducedModel, ZmpPreview,
 };
 use crate::scenario::Scenario;
 
@@ -32,14 +32,22 @@ pub struct RunResult {
 /// Closed loop of the reduced models.
 pub struct ReducedLoop<'a> {
     config: &'a Config,
+    robot: ReducedModel,
     scenario: &'a Scenario,
     controller: ControllerKind,
 }
 
 impl<'a> ReducedLoop<'a> {
-    pub fn new(config: &'a Config, scenario: &'a Scenario, controller: ControllerKind) -> Self {
+    /// The loop of `robot`'s reduced models ([`crate::robot::Robot::reduced`]).
+    pub fn new(
+        config: &'a Config,
+        robot: ReducedModel,
+        scenario: &'a Scenario,
+        controller: ControllerKind,
+    ) -> Self {
         Self {
             config,
+            robot,
             scenario,
             controller,
         }
@@ -57,27 +65,23 @@ impl<'a> ReducedLoop<'a> {
         let c = self.config;
         let p = &c.preview;
         let (n, t) = (p.horizon, p.period);
-        let model = CartTable {
-            period: t,
-            com_height: c.robot.com_height,
-            mass: c.robot.mass,
-            gravity: c.robot.gravity,
-        };
-        let m_e = Matrix3::from_fn(|i, j| c.hand.effective_mass[i][j]);
+        let r = &self.robot;
+        let model = r.cart_table(t, c.robot.gravity);
+        let m_e = r.effective_mass;
         let mut zmp = ZmpPreview::new(model, p.q_e, p.r, n, p.solver);
         let mut constrained = p
             .zmp_constraints
-            .then(|| ConstrainedPreview::new(model, p.q_e, p.r, n, [c.support.x, c.support.y]));
+            .then(|| ConstrainedPreview::new(model, p.q_e, p.r, n, r.support));
         let mut previewer = HandPreviewer::new(t, m_e, n)?;
         let plant_hand = HandPreviewer::new(t, m_e, 1)?;
         let mut search = match self.controller {
-            ControllerKind::C2 => Some(GainSearch::from_config(c)?),
+            ControllerKind::C2 => Some(GainSearch::from_config(c, r)?),
             _ => None,
         };
         let nominal = GainSchedule::constant(n, c.hand.kp, c.nominal_kd(c.hand.kp));
 
         let desired = HandState {
-            pos: Vector3::from(c.hand.desired_position),
+            pos: r.hand_position,
             ..Default::default()
         };
         let hand_desired = vec![desired; n];
@@ -152,7 +156,7 @@ impl<'a> ReducedLoop<'a> {
             });
             progress(k + 1, steps);
         }
-        let metrics = Metrics::from_rows(&rows, t, [c.support.x, c.support.y]);
+        let metrics = Metrics::from_rows(&rows, t, self.robot.support);
         Ok(RunResult {
             controller: self.controller,
             rows,

@@ -8,6 +8,7 @@ use super::reduced::min_support_margin;
 use super::rundir::RunDir;
 use super::series::{Quantity, ReducedRun, SeriesSource};
 use crate::config::Config;
+use crate::preview::ReducedModel;
 use crate::scenario::{ForceProfile, Scenario};
 
 /// `v` with `prec` decimals, "–" when unknown or not finite.
@@ -289,24 +290,24 @@ pub fn reduced_metrics_table(runs: &[ReducedRun]) -> String {
 }
 
 /// The reduced models' parameters, one line.
-pub fn reduced_config_line(config: &Config, scenario: &Scenario) -> String {
+pub fn reduced_config_line(config: &Config, robot: &ReducedModel, scenario: &Scenario) -> String {
     let p = &config.preview;
     format!(
         "Reduced models: cart-table CoM (M = {:.2} kg, z_c = {:.3} m) and hand impedance model, \
          {:.2} s of the scenario, T = {} s, N = {} ({:.2} s preview), R/Q_e = {:e}, nominal \
          K_p = {}, support x ∈ [{:.3}, {:.3}] m, y ∈ [{:.3}, {:.3}] m.\n",
-        config.robot.mass,
-        config.robot.com_height,
+        robot.mass,
+        robot.com_height,
         scenario.duration,
         p.period,
         p.horizon,
         p.period * p.horizon as f64,
         p.r / p.q_e,
         config.hand.kp,
-        config.support.x[0],
-        config.support.x[1],
-        config.support.y[0],
-        config.support.y[1],
+        robot.support[0][0],
+        robot.support[0][1],
+        robot.support[1][0],
+        robot.support[1][1],
     )
 }
 

@@ -284,8 +284,8 @@ pub fn compare(runs: &[PathBuf], opts: &CompareOptions) -> Result<CompareOutput,
             scenario.name,
             scenario.duration
         );
-        let reduced = reduced::run_reduced(&config, &scenario)?;
-        md += &markdown::reduced_config_line(&config, &scenario);
+        let reduced = reduced::run_reduced(&config, robot.reduced(), &scenario)?;
+        md += &markdown::reduced_config_line(&config, &robot.reduced(), &scenario);
         md += "\n";
         md += &markdown::reduced_metrics_table(&reduced);
         md += "\n";

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use super::ReportError;
 use super::series::ReducedRun;
 use crate::config::{Config, ControllerKind};
+use crate::preview::ReducedModel;
 use crate::robot::Robot;
 use crate::scenario::Scenario;
 
@@ -33,15 +34,18 @@ impl ConfigLayers {
     }
 }
 
-/// C0, C1 and C2 on the reduced models, in that order.
-pub fn run_reduced(config: &Config, scenario: &Scenario) -> Result<Vec<ReducedRun>, ReportError> {
-    let support = [config.support.x, config.support.y];
+/// C0, C1 and C2 on `robot`'s reduced models, in that order.
+pub fn run_reduced(
+    config: &Config,
+    robot: ReducedModel,
+    scenario: &Scenario,
+) -> Result<Vec<ReducedRun>, ReportError> {
     [ControllerKind::C0, ControllerKind::C1, ControllerKind::C2]
         .into_iter()
         .map(|kind| {
-            crate::offline::ReducedLoop::new(config, scenario, kind)
+            crate::offline::ReducedLoop::new(config, robot, scenario, kind)
                 .run()
-                .map(|r| ReducedRun::new(r, support))
+                .map(|r| ReducedRun::new(r, robot.support))
                 .map_err(|source| ReportError::Preview {
                     scenario: scenario.name.clone(),
                     controller: kind.name().to_uppercase(),

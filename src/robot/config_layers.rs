@@ -1,6 +1,6 @@
-//! The config every command starts from for a robot: the embedded defaults, then what follows
-//! from the robot's model and its description's `[config]` ([`Robot::config_layers`]). Here,
-//! not in `crate::config`, so that the config knows nothing of robots.
+//! The config every command starts from for a robot: the embedded defaults, then its
+//! description's `[config]` ([`Robot::config_layers`]). Here, not in `crate::config`, so that
+//! the config knows nothing of robots.
 
 use super::Robot;
 use crate::config::{Config, ConfigError, DEFAULT_TOML, Layers};
@@ -19,7 +19,7 @@ impl Config {
         Self::layers_for(&robot)
     }
 
-    /// The embedded defaults with `robot`'s layers (computed values, then its `[config]`).
+    /// The embedded defaults with `robot`'s `[config]`.
     pub fn for_robot(robot: &Robot) -> Result<Config, ConfigError> {
         Self::layers_for(robot)?.build()
     }

@@ -1,6 +1,7 @@
 //! Robots: a description ([`RobotDescription`], `config/robots/<name>.toml`) resolved into the
 //! model with its sole and contact frames, the home configuration, and what follows from them
-//! (mass, CoM height, support, M_e), which config, simulator and controller take from here.
+//! (mass, CoM height, support, M_e): values the simulator and the controller take from here, never
+//! config keys.
 //! The iCub-like humanoid is the embedded default; the others name a registry package.
 
 mod config_layers;
@@ -19,7 +20,9 @@ use crate::config::{ConfigError, Layers};
 use crate::dynamics::{
     BaseJoint, Data, DynamicsError, Model, OpSpaceWorkspace, center_of_mass, forward_kinematics,
 };
+use crate::preview::ReducedModel;
 use crate::scenario::ContentHash;
+use crate::wbc::BodyFrames;
 
 /// The robot every process uses without `--robot`.
 pub const DEFAULT: &str = "icub_like";
@@ -226,54 +229,36 @@ impl Robot {
         &self.description.name
     }
 
-    /// The config layer of this robot: what follows from its model, then its description's
-    /// `[config]` table (layered in that order over `config/default.toml`).
-    pub fn config_layers(&self) -> Vec<(String, toml::Table)> {
+    /// What the reduced models take from this robot ([`ReducedModel`]): computed from its
+    /// model at home, never a config key.
+    pub fn reduced(&self) -> ReducedModel {
         let d = &self.derived;
-        let arr =
-            |v: &[f64]| toml::Value::Array(v.iter().map(|x| toml::Value::Float(*x)).collect());
-        let mut robot = toml::Table::new();
-        robot.insert("mass".into(), toml::Value::Float(d.mass));
-        robot.insert("com_height".into(), toml::Value::Float(d.com_height));
-        robot.insert(
-            "gravity".into(),
-            toml::Value::Float(self.model.gravity.norm()),
-        );
-        let mut support = toml::Table::new();
-        support.insert("x".into(), arr(&d.support[0]));
-        support.insert("y".into(), arr(&d.support[1]));
-        let mut hand = toml::Table::new();
-        let m = &d.effective_mass;
-        hand.insert(
-            "effective_mass".into(),
-            toml::Value::Array(
-                (0..3)
-                    .map(|i| arr(&[m[(i, 0)], m[(i, 1)], m[(i, 2)]]))
-                    .collect(),
-            ),
-        );
-        hand.insert("desired_position".into(), arr(d.hand_position.as_slice()));
-        let mut wbc = toml::Table::new();
-        let text = |s: &str| toml::Value::String(s.into());
-        wbc.insert(
-            "feet".into(),
-            toml::Value::Array(self.soles.iter().map(|s| text(s)).collect()),
-        );
-        wbc.insert("hand_frame".into(), text(&self.description.hand.frame));
-        wbc.insert(
-            "hand_chain_root".into(),
-            text(&self.description.hand.chain_root),
-        );
-        let mut derived = toml::Table::new();
-        derived.insert("robot".into(), toml::Value::Table(robot));
-        derived.insert("support".into(), toml::Value::Table(support));
-        derived.insert("hand".into(), toml::Value::Table(hand));
-        derived.insert("wbc".into(), toml::Value::Table(wbc));
-        let mut out = vec![(format!("<robot {} (computed)>", self.name()), derived)];
-        if let Some(c) = &self.description.config {
-            out.push((format!("{} [config]", self.origin), c.clone()));
+        ReducedModel {
+            mass: d.mass,
+            com_height: d.com_height,
+            support: d.support,
+            effective_mass: d.effective_mass,
+            hand_position: d.hand_position,
         }
-        out
+    }
+
+    /// The frames the whole-body QP's contacts and hand task act on.
+    pub fn frames(&self) -> BodyFrames {
+        BodyFrames {
+            feet: self.soles.clone(),
+            hand: self.description.hand.frame.clone(),
+            hand_chain_root: self.description.hand.chain_root.clone(),
+        }
+    }
+
+    /// The config layer of this robot: its description's `[config]` table (layered over
+    /// `config/default.toml`), settings tuned for it. What follows from its model is no layer:
+    /// [`Robot::reduced`], [`Robot::frames`].
+    pub fn config_layers(&self) -> Vec<(String, toml::Table)> {
+        let c = self.description.config.as_ref();
+        c.map(|c| (format!("{} [config]", self.origin), c.clone()))
+            .into_iter()
+            .collect()
     }
 
     /// Push [`Robot::config_layers`] onto `layers`.

@@ -66,7 +66,7 @@ use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Quaternion, UnitQuaternion, V
 
 use super::com_bias::{com_drift_from_pass, drift_pass, frame_drift_from_pass};
 use super::condensed::{CondensedError, CondensedQp, Problem};
-pub use super::outcome::{CORNERS, FallbackReason, N_CONTACTS, WbcCounters, WbcStatus};
+pub use super::outcome::{BodyFrames, CORNERS, FallbackReason, N_CONTACTS, WbcCounters, WbcStatus};
 use super::pattern::Pattern;
 use super::qp::QpInstance;
 use super::tasks::{
@@ -233,11 +233,11 @@ pub struct WholeBodyController {
 }
 
 impl WholeBodyController {
-    /// Resolves the contact, foot and hand frames, decides the fixed sparsity pattern, the cones
-    /// and clarabel's settings, preallocates every buffer and builds the clarabel solvers
-    /// ([`Self::prepare`] with every joint at the middle of its range, else at the neutral
+    /// Resolves `frames` (the contact, foot and hand frames), decides the fixed sparsity
+    /// pattern, the cones and clarabel's settings, preallocates every buffer and builds the
+    /// clarabel solvers ([`Self::prepare`] with every joint at the middle of its range, else at the neutral
     /// configuration), so that no tick allocates one.
-    pub fn new(model: &Model, config: &WbcConfig) -> Result<Self, WbcError> {
+    pub fn new(model: &Model, config: &WbcConfig, frames: &BodyFrames) -> Result<Self, WbcError> {
         if !model.has_floating_base() || model.joints[0].kind != JointKind::FreeFlyer {
             return Err(WbcError::NoFloatingBase);
         }
@@ -259,16 +259,16 @@ impl WholeBodyController {
             }
         }
         let foot_ids = [
-            model.frame_id(&config.feet[0])?,
-            model.frame_id(&config.feet[1])?,
+            model.frame_id(&frames.feet[0])?,
+            model.frame_id(&frames.feet[1])?,
         ];
         let mut corner_ids = [0; N_CONTACTS];
-        for (k, foot) in config.feet.iter().enumerate() {
+        for (k, foot) in frames.feet.iter().enumerate() {
             for (s, suffix) in CORNERS.iter().enumerate() {
                 corner_ids[4 * k + s] = model.frame_id(&format!("{foot}_{suffix}"))?;
             }
         }
-        let hand_id = model.frame_id(&config.hand_frame)?;
+        let hand_id = model.frame_id(&frames.hand)?;
 
         let tasks = TaskList::new(
             nv,

@@ -25,6 +25,6 @@ mod qp;
 mod tasks;
 
 pub use controller::{
-    CORNERS, FallbackReason, N_CONTACTS, WbcCommand, WbcCounters, WbcError, WbcOutput, WbcStatus,
-    WholeBodyController,
+    BodyFrames, CORNERS, FallbackReason, N_CONTACTS, WbcCommand, WbcCounters, WbcError, WbcOutput,
+    WbcStatus, WholeBodyController,
 };

@@ -9,6 +9,20 @@ pub use crate::channels::N_CONTACTS;
 pub const CORNERS: [&str; 4] = ["fl", "fr", "rl", "rr"];
 const _: () = assert!(N_CONTACTS == 2 * CORNERS.len());
 
+/// The frames the QP's contacts and hand task act on, named by the robot's description
+/// (`crate::robot::Robot::frames`), not by the config.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct BodyFrames {
+    /// Sole frames of the two feet; the contact points are the frames `<foot>_fl`, `_fr`, `_rl`,
+    /// `_rr` (the sole corners), the contact normal is the sole frame's z axis.
+    pub feet: [String; 2],
+    /// Frame of the hand impedance task.
+    pub hand: String,
+    /// The body the hand's arm chain starts from (M_e of the chain root → hand,
+    /// docs/hand_previewer.md, eq. (21)–(23)).
+    pub hand_chain_root: String,
+}
+
 /// Why a tick fell back to the safe torque.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FallbackReason {

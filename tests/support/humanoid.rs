@@ -3,7 +3,7 @@
 use upc::channels::{ForecastMsg, StateMsg};
 use upc::config::{Config, ControllerKind};
 use upc::control::{ControllerCore, ForecastWindow};
-use upc::dynamics::icub_like;
+use upc::robot::Robot;
 
 /// A controller core with the humanoid standing at home, its state message, an empty forecast
 /// window and a torque buffer.
@@ -15,8 +15,12 @@ pub struct Rig {
 }
 
 pub fn rig(config: &Config, kind: ControllerKind) -> Rig {
-    let model = icub_like::load().expect("model");
-    let q = upc::robot::Robot::embedded_default().expect("robot").home;
+    rig_of(&Robot::embedded_default().expect("robot"), config, kind)
+}
+
+/// [`rig`] for `robot` (its model, its reduced models, its frames).
+pub fn rig_of(robot: &Robot, config: &Config, kind: ControllerKind) -> Rig {
+    let (model, q) = (&robot.model, &robot.home);
     let mut state = StateMsg {
         nq: model.nq as u32,
         nv: model.nv as u32,
@@ -25,7 +29,7 @@ pub fn rig(config: &Config, kind: ControllerKind) -> Rig {
     state.q[..model.nq].copy_from_slice(q.as_slice());
     let tau = vec![0.0; model.nv - 6];
     let core =
-        ControllerCore::new(model, config, kind, 0.001, [100.0, 20.0], [0.0, 0.0]).expect("core");
+        ControllerCore::new(robot, config, kind, 0.001, [100.0, 20.0], [0.0, 0.0]).expect("core");
     Rig {
         core,
         state,

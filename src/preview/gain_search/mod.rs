@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 pub use cost::{Eq26, Eq26Weights, GainSearchInputs};
 pub use schedule::KnotSchedule;
 
-use super::{CartTable, GainSchedule, HandPreviewer, PreviewError, ZmpPreview};
+use super::{GainSchedule, HandPreviewer, PreviewError, ReducedModel, ZmpPreview};
 use crate::config::{Config, GainSolverKind};
 
 /// What one solver run reports.
@@ -57,21 +57,21 @@ pub struct GainSearch {
 }
 
 impl GainSearch {
-    /// A gain search configured from `config` (solver kind, weights, bounds, knots).
-    pub fn from_config(config: &Config) -> Result<Self, PreviewError> {
-        Self::with_solver(config, config.gain_search.solver)
+    /// A gain search on `robot`'s reduced models configured from `config` (solver kind,
+    /// weights, bounds, knots).
+    pub fn from_config(config: &Config, robot: &ReducedModel) -> Result<Self, PreviewError> {
+        Self::with_solver(config, robot, config.gain_search.solver)
     }
 
     /// The same with an explicit solver (to compare the two on one problem).
-    pub fn with_solver(config: &Config, solver: GainSolverKind) -> Result<Self, PreviewError> {
+    pub fn with_solver(
+        config: &Config,
+        robot: &ReducedModel,
+        solver: GainSolverKind,
+    ) -> Result<Self, PreviewError> {
         let p = &config.preview;
         let g = &config.gain_search;
-        let model = CartTable {
-            period: p.period,
-            com_height: config.robot.com_height,
-            mass: config.robot.mass,
-            gravity: config.robot.gravity,
-        };
+        let model = robot.cart_table(p.period, config.robot.gravity);
         // C2 evaluates many schedules: always the O(N) solver, whatever the C1 setting.
         let zmp = ZmpPreview::new(
             model,
@@ -80,8 +80,7 @@ impl GainSearch {
             p.horizon,
             crate::config::LqSolverKind::Riccati,
         );
-        let m_e = nalgebra::Matrix3::from_fn(|i, j| config.hand.effective_mass[i][j]);
-        let hand = HandPreviewer::new(p.period, m_e, p.horizon)?;
+        let hand = HandPreviewer::new(p.period, robot.effective_mass, p.horizon)?;
         let n_knots = match solver {
             GainSolverKind::GaussNewton => g.knots,
             GainSolverKind::NelderMead => g.nm_knots,
