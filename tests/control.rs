@@ -328,3 +328,65 @@ fn c2_thread_hands_over_time_stamped_schedules_without_blocking() {
         .expect("tick");
     assert!((r.core.last.kp - s.schedule.kp[0]).abs() < 1e-9);
 }
+
+/// A fallen robot (its CoM sunk by more than `controller.fall_drop` of its height) gets joint
+/// damping without preview or QP, counted, until the plant restarts: a fallen robot's QP is
+/// mostly infeasible and costly, and its controller must not starve the machine.
+#[test]
+fn a_fallen_robot_is_held_in_joint_damping_until_the_plant_restarts() {
+    use upc::wbc::{FallbackReason, WbcStatus};
+    let config = Config::embedded_default().expect("defaults");
+    let mut r = rig(&config, ControllerKind::C1);
+    let standing = r.state.q[2];
+    let status = r.core.tick(&r.state, &r.window, None, &mut r.tau);
+    assert_eq!(status.expect("tick"), WbcStatus::Solved);
+    let solves = r.core.wbc_counters().ticks;
+    // Sunk by 40 % of the CoM height (the threshold is 25 %), moving.
+    let height = r.core.last.com[2];
+    r.state.q[2] = standing - 0.4 * height;
+    r.state.time = 0.001;
+    for (i, v) in r.state.v.iter_mut().enumerate().take(r.tau.len() + 6) {
+        *v = 0.1 * (i as f64).sin();
+    }
+    let damping = config.wbc.fallback_damping;
+    for k in 0..3 {
+        // Back at the standing height from the second tick: still fallen (latched).
+        if k == 1 {
+            r.state.q[2] = standing;
+        }
+        let status = r.core.tick(&r.state, &r.window, None, &mut r.tau);
+        assert_eq!(
+            status.expect("tick"),
+            WbcStatus::Fallback(FallbackReason::Fallen)
+        );
+        for (i, t) in r.tau.iter().enumerate() {
+            assert_eq!(*t, -damping * r.state.v[6 + i], "joint {i}");
+        }
+        assert!(r.core.last.fallen);
+    }
+    assert_eq!((r.core.falls, r.core.fallen_ticks), (1, 3));
+    assert_eq!(r.core.wbc_counters().ticks, solves, "no QP while fallen");
+    // A plant restart (a new session) stands it up again: balance control resumes.
+    r.core.reset();
+    r.state.v.iter_mut().for_each(|v| *v = 0.0);
+    let status = r.core.tick(&r.state, &r.window, None, &mut r.tau);
+    assert_eq!(status.expect("tick"), WbcStatus::Solved);
+    assert_eq!(r.core.falls, 1);
+}
+
+/// `controller.fall_drop = 0` turns the detector off: the same sunk state runs the QP.
+#[test]
+fn the_fall_detector_can_be_turned_off() {
+    let mut config = Config::embedded_default().expect("defaults");
+    config.controller.fall_drop = 0.0;
+    let mut r = rig(&config, ControllerKind::C1);
+    r.core
+        .tick(&r.state, &r.window, None, &mut r.tau)
+        .expect("tick");
+    r.state.q[2] -= 0.4 * r.core.last.com[2];
+    r.core
+        .tick(&r.state, &r.window, None, &mut r.tau)
+        .expect("tick");
+    assert_eq!(r.core.falls, 0);
+    assert!(!r.core.last.fallen);
+}

@@ -260,6 +260,7 @@ pub fn survived_full(summary: &serde_json::Value, criteria: &Criteria) -> bool {
         && edge <= criteria.max_edge_time
         && fallbacks == 0.0
         && errors == 0.0
+        && num("falls").unwrap_or(0.0) == 0.0
 }
 
 #[cfg(test)]

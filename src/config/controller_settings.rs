@@ -51,6 +51,10 @@ pub struct CorrectionSettings {
     pub offset_decay: f64,
     /// |κ̂ − 1| beyond this, with the window's evidence, is a contradicted forecast.
     pub contradiction: f64,
+    /// The corrected horizon's upward force is capped at this fraction of the robot's weight
+    /// M g: the hand force of a robot tipping over (or a biased sensor) must not preview as a
+    /// force lifting it (eq. (10) needs M g − F_z > 0), which the forecast intake refuses too.
+    pub max_lift: f64,
 }
 
 impl Default for CorrectionSettings {
@@ -70,6 +74,7 @@ impl Default for CorrectionSettings {
             offset_time_constant: 0.05,
             offset_decay: 0.3,
             contradiction: 0.5,
+            max_lift: 0.5,
         }
     }
 }
@@ -96,6 +101,12 @@ impl CorrectionSettings {
         }
         if !(self.max_shift.is_finite() && self.max_shift >= 0.0) {
             return Err(("max_shift", format!("must be ≥ 0, got {}", self.max_shift)));
+        }
+        if !(self.max_lift > 0.0 && self.max_lift < 1.0) {
+            return Err((
+                "max_lift",
+                format!("must be in (0, 1), got {}", self.max_lift),
+            ));
         }
         let [lo, hi] = self.factor_bounds;
         if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo < hi) {

@@ -345,6 +345,10 @@ pub struct ControllerConfig {
     /// PD on the CoM height (1/s², 1/s).
     pub com_height_kp: f64,
     pub com_height_kd: f64,
+    /// A fall: the CoM sank below its height latched at the session's start by this fraction
+    /// of it. The controller then holds joint damping without the QP until the plant restarts
+    /// (a fallen robot's QP is mostly infeasible and costly). 0: never.
+    pub fall_drop: f64,
     /// Forecast windows starting more than this before / after the current time are rejected (s).
     pub forecast_max_age: f64,
     pub forecast_max_lead: f64,
@@ -403,6 +407,15 @@ impl ControllerConfig {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(l.range_error(key, format!("must be finite and ≥ 0, got {v}")));
             }
+        }
+        if !(0.0..1.0).contains(&self.fall_drop) {
+            return Err(l.range_error(
+                "controller.fall_drop",
+                format!(
+                    "must be in [0, 1) (a fraction of the CoM height), got {}",
+                    self.fall_drop
+                ),
+            ));
         }
         if self.c2_every == 0 || self.log_every == 0 {
             return Err(l.range_error("controller.c2_every", "c2_every and log_every must be ≥ 1"));

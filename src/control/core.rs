@@ -33,7 +33,7 @@ use crate::preview::{
     AxisState, GainSchedule, HandPreviewer, HandState, PreviewError, PreviewPlan, ZmpPreview,
 };
 use crate::robot::Robot;
-use crate::wbc::{WbcCommand, WbcStatus, WholeBodyController};
+use crate::wbc::{FallbackReason, WbcCommand, WbcStatus, WholeBodyController};
 
 /// Errors of a tick: the state message does not fit the model.
 #[derive(Debug, Clone, thiserror::Error)]
@@ -93,6 +93,8 @@ pub struct TickRecord {
     pub correction: CorrectionEstimate,
     /// The CoM observer's force (N, x and y; zero when off).
     pub f_obs: [f64; 2],
+    /// The robot is fallen: this tick held joint damping, without preview or QP.
+    pub fallen: bool,
 }
 
 /// The controller's state between ticks.
@@ -134,6 +136,14 @@ pub struct ControllerCore {
     f_dis_total: Vec<[f64; 3]>,
     /// Ticks where the disturbance forecast was invalid and C0 ran instead.
     pub preview_fallbacks: u64,
+    /// The fall detector: the drop (fraction of the latched CoM height) that means a fall
+    /// (0: off), the joint damping held then, whether the robot is fallen in this session, the
+    /// falls detected and the ticks held fallen.
+    fall_drop: f64,
+    fallen_damping: f64,
+    fallen: bool,
+    pub falls: u64,
+    pub fallen_ticks: u64,
     pub last: TickRecord,
 }
 
@@ -173,8 +183,11 @@ impl ControllerCore {
         let hand_frame = model.frame_id(&frames.hand)?;
         let nominal = GainSchedule::constant(n, config.hand.kp, config.nominal_kd(config.hand.kp));
         let cc = &config.controller;
-        let correction = (cc.forecast_correction.enabled && kind != ControllerKind::C0)
-            .then(|| ForecastCorrector::new(cc.forecast_correction, p.period, control_period));
+        let correction =
+            (cc.forecast_correction.enabled && kind != ControllerKind::C0).then(|| {
+                let weight = cart.mass * cart.gravity;
+                ForecastCorrector::new(cc.forecast_correction, p.period, control_period, weight)
+            });
         let observer = cc.com_observer.enabled.then(|| {
             ComObserver::new(
                 cc.com_observer,
@@ -215,6 +228,11 @@ impl ControllerCore {
             observer,
             f_dis_total: vec![[0.0; 3]; n],
             preview_fallbacks: 0,
+            fall_drop: config.controller.fall_drop,
+            fallen_damping: config.wbc.fallback_damping,
+            fallen: false,
+            falls: 0,
+            fallen_ticks: 0,
             last: TickRecord::default(),
             model,
         })
@@ -247,6 +265,7 @@ impl ControllerCore {
     /// orientation is the base-orientation target) is latched again too. Allocation-free.
     pub fn reset(&mut self) {
         self.latched = None;
+        self.fallen = false;
         self.wbc.reset();
         self.com_acc_cmd = Vector3::zeros();
         self.hand_acc_cmd = Vector3::zeros();
@@ -333,6 +352,9 @@ impl ControllerCore {
             acc: self.hand_acc_cmd,
         };
         let latched = self.latch(com.z, hand.pos);
+        if self.detect_fall(t, latched.com_height - com.z, latched.com_height) {
+            return Ok(self.hold_fallen(state, [com, vcom], &hand, &latched, tau));
+        }
         let m_e = *self.op.compute(&self.model, &mut self.data, &self.q)?;
         let m_e_ok = self.previewer.set_effective_mass(m_e).is_ok();
 
@@ -390,8 +412,56 @@ impl ControllerCore {
                 .map(|c| *c.estimate())
                 .unwrap_or_default(),
             f_obs,
+            fallen: false,
         };
         Ok(status)
+    }
+
+    /// Whether the robot is fallen: its CoM `drop` (m) below the height latched at the
+    /// session's start is more than `fall_drop` of that height. Once fallen, fallen until the
+    /// plant restarts ([`Self::reset`]): a fallen humanoid does not stand up by itself, and its
+    /// QP (contacts that no longer hold) is mostly infeasible and costly to try.
+    fn detect_fall(&mut self, t: f64, drop: f64, height: f64) -> bool {
+        if !self.fallen && self.fall_drop > 0.0 && drop > self.fall_drop * height {
+            self.fallen = true;
+            self.falls += 1;
+            tracing::error!(
+                "the robot has fallen at t = {t:.3} s (CoM {:.0} mm below its height of {:.0} mm): \
+                 joint damping, no balance control, until the plant restarts",
+                drop * 1e3,
+                height * 1e3
+            );
+        }
+        self.fallen
+    }
+
+    /// A fallen robot's tick: joint damping toward rest (`wbc.fallback_damping`), no preview,
+    /// no QP; the record keeps what was measured.
+    fn hold_fallen(
+        &mut self,
+        state: &StateMsg,
+        [com, vcom]: [Vector3<f64>; 2],
+        hand: &HandState,
+        latched: &Latched,
+        tau: &mut [f64],
+    ) -> WbcStatus {
+        self.fallen_ticks += 1;
+        for (t, v) in tau.iter_mut().zip(self.v.iter().skip(6)) {
+            *t = -self.fallen_damping * v;
+        }
+        self.last = TickRecord {
+            time: state.time,
+            com: com.into(),
+            com_vel: vcom.into(),
+            zmp_meas: state.zmp,
+            hand_pos: hand.pos.into(),
+            hand_err: (hand.pos - latched.hand_target).norm(),
+            support: latched.support,
+            f_meas: state.hand_force,
+            fallen: true,
+            ..TickRecord::default()
+        };
+        WbcStatus::Fallback(FallbackReason::Fallen)
     }
 
     /// Checks the state against the model (sizes, robot, finiteness) and copies q and v.

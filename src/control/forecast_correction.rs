@@ -57,6 +57,8 @@ pub struct CorrectionCounts {
     /// Smallest and largest κ̂ seen.
     pub factor_min: f64,
     pub factor_max: f64,
+    /// Ticks whose corrected horizon asked for more upward force than `max_lift` M g (capped).
+    pub lift_capped: u64,
 }
 
 type V3 = [f64; 3];
@@ -87,6 +89,8 @@ pub struct ForecastCorrector {
     bin_ticks: usize,
     /// Control period (s).
     dt: f64,
+    /// Largest upward force of the corrected horizon (N): `max_lift` M g.
+    lift_cap: f64,
     /// Window bins n_W and shift bins M (candidates τ = m T_b, m = −M…M).
     n_w: usize,
     m: usize,
@@ -119,8 +123,9 @@ pub struct ForecastCorrector {
 }
 
 impl ForecastCorrector {
-    /// `bin`: the preview period (s); `dt`: the control period (s).
-    pub fn new(settings: CorrectionSettings, bin: f64, dt: f64) -> Self {
+    /// `bin`: the preview period (s); `dt`: the control period (s); `weight`: the robot's M g
+    /// (N).
+    pub fn new(settings: CorrectionSettings, bin: f64, dt: f64, weight: f64) -> Self {
         let bin_ticks = ((bin / dt).round() as usize).max(1);
         let bin = bin_ticks as f64 * dt;
         let n_w = ((settings.window / bin).round() as usize).max(2);
@@ -132,6 +137,7 @@ impl ForecastCorrector {
             bin,
             bin_ticks,
             dt,
+            lift_cap: settings.max_lift * weight,
             n_w,
             m,
             meas: vec![[0.0; 3]; n_w],
@@ -420,15 +426,33 @@ impl ForecastCorrector {
     }
 
     /// The corrected hand force over the horizon (FC-4): `out[i]` for t + (i + 1) `period`.
-    pub fn fill(&self, t: f64, period: f64, window: &ForecastWindow, out: &mut [V3]) {
-        let e = &self.est;
+    pub fn fill(&mut self, t: f64, period: f64, window: &ForecastWindow, out: &mut [V3]) {
+        let e = self.est;
         let decay = (-period / self.s.offset_decay).exp();
         let mut w = 1.0;
+        let mut capped = false;
         for (i, f) in out.iter_mut().enumerate() {
             w *= decay;
             let s = (i + 1) as f64 * period;
             let p = self.forecast_at(window, t + s - e.shift);
             *f = [0, 1, 2].map(|c| e.factor * p[c] + e.offset[c] * w);
+            // Never a force that lifts the robot (a tipping robot's hand, a biased sensor).
+            if f[2] > self.lift_cap {
+                f[2] = self.lift_cap;
+                capped = true;
+            }
+        }
+        if capped {
+            self.counts.lift_capped += 1;
+            if self.counts.lift_capped.is_power_of_two() {
+                tracing::warn!(
+                    "the corrected hand force would lift the robot (offset d̂_z = {:.0} N): \
+                     capped at {:.0} N ({} ticks so far)",
+                    e.offset[2],
+                    self.lift_cap,
+                    self.counts.lift_capped
+                );
+            }
         }
     }
 }
@@ -481,7 +505,7 @@ mod tests {
         let dt = 1e-3;
         let start = 1.0;
         let amp = 60.0;
-        let mut corr = ForecastCorrector::new(CorrectionSettings::default(), 0.005, dt);
+        let mut corr = ForecastCorrector::new(CorrectionSettings::default(), 0.005, dt, 300.0);
         let mut window = ForecastWindow::new(1.0, 1.0, 0.2, 1e4);
         let mut msg: Box<ForecastMsg> = Box::default();
         let mut noise = Noise(seed);
@@ -607,7 +631,7 @@ mod tests {
 
     #[test]
     fn without_a_forecast_the_measurement_is_held_and_decays() {
-        let mut corr = ForecastCorrector::new(CorrectionSettings::default(), 0.005, 1e-3);
+        let mut corr = ForecastCorrector::new(CorrectionSettings::default(), 0.005, 1e-3, 300.0);
         let window = ForecastWindow::new(1.0, 1.0, 0.2, 1e4);
         for k in 0..500 {
             corr.update(k as f64 * 1e-3, &window, Some([-20.0, 4.0, 0.0]));
@@ -625,5 +649,26 @@ mod tests {
             "{:?}",
             out[59]
         );
+        assert_eq!(corr.counts.lift_capped, 0);
+    }
+
+    /// A robot tipping over pulls on its hand: a measured upward force beyond its weight must
+    /// not preview as a force lifting it (eq. (10) needs M g − F_z > 0). The horizon is capped
+    /// at `max_lift` M g, counted; the other axes are left alone.
+    #[test]
+    fn the_corrected_horizon_never_lifts_the_robot() {
+        let weight = 300.0;
+        let mut corr = ForecastCorrector::new(CorrectionSettings::default(), 0.005, 1e-3, weight);
+        let window = ForecastWindow::new(1.0, 1.0, 0.2, 1e4);
+        for k in 0..500 {
+            corr.update(k as f64 * 1e-3, &window, Some([-20.0, 0.0, 1.5 * weight]));
+        }
+        let mut out = vec![[0.0; 3]; 300];
+        corr.fill(0.5, 0.005, &window, &mut out);
+        let cap = CorrectionSettings::default().max_lift * weight;
+        assert!(out.iter().all(|f| f[2] <= cap), "{:?}", out[0]);
+        assert_eq!(out[0][2], cap, "the measured lift, held, is capped");
+        assert!(out[0][0] < -19.0, "{:?}", out[0]);
+        assert_eq!(corr.counts.lift_capped, 1);
     }
 }

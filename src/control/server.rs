@@ -39,6 +39,7 @@ use crate::channels::{
 use crate::config::{Config, ControllerKind, LoopMode};
 use crate::preview::ReducedModel;
 use crate::robot::Robot;
+use crate::wbc::{FallbackReason, WbcStatus};
 
 /// How to run, beyond the config.
 #[derive(Debug, Clone)]
@@ -516,7 +517,8 @@ impl<'a> ControlLoop<'a> {
             schedule.map(|sch| (sch.cost, sch.nominal_cost, sch.iterations, sch.solve_time));
         let tau = &mut self.tau[..self.n_tau];
         match self.core.tick(state, &self.intake.window, schedule, tau) {
-            Ok(crate::wbc::WbcStatus::Solved) => 0,
+            Ok(WbcStatus::Solved) => 0,
+            Ok(WbcStatus::Fallback(FallbackReason::Fallen)) => TORQUE_FLAG_FALLBACK,
             Ok(_) => {
                 self.s.wbc_fallbacks += 1;
                 TORQUE_FLAG_FALLBACK
@@ -684,6 +686,7 @@ impl<'a> ControlLoop<'a> {
             s.deadline_misses = t.missed;
         }
         s.preview_fallbacks = self.core.preview_fallbacks;
+        (s.falls, s.fallen_ticks) = (self.core.falls, self.core.fallen_ticks);
         s.forecast_correction = self.core.correction_counts().map(|c| {
             let e = self.core.last.correction;
             CorrectionSummary {
@@ -696,6 +699,7 @@ impl<'a> ControlLoop<'a> {
                 offset_last: e.offset,
                 estimations: c.estimations,
                 bad_measurements: c.bad_measurements,
+                lift_capped: c.lift_capped,
             }
         });
         let wc = self.core.wbc_counters();

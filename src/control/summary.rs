@@ -46,6 +46,12 @@ pub struct ServerSummary {
     #[serde(default)]
     pub wbc_condensation_failures: u64,
     pub preview_fallbacks: u64,
+    /// Falls the controller detected (`controller.fall_drop`), and the ticks it then held joint
+    /// damping without preview or QP (until the plant restarted).
+    #[serde(default)]
+    pub falls: u64,
+    #[serde(default)]
+    pub fallen_ticks: u64,
     pub forecasts_accepted: u64,
     pub forecasts_rejected: u64,
     pub forecasts_rejected_by: RejectionCounts,
@@ -123,4 +129,7 @@ pub struct CorrectionSummary {
     /// Estimations of κ̂, τ̂; ticks whose measured force was not finite.
     pub estimations: u64,
     pub bad_measurements: u64,
+    /// Ticks whose corrected horizon was capped at `max_lift` M g upward.
+    #[serde(default)]
+    pub lift_capped: u64,
 }

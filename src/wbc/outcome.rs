@@ -38,6 +38,8 @@ pub enum FallbackReason {
     NonFiniteSolution,
     /// The solver panicked (caught; the solver is rebuilt by the next tick, which allocates).
     SolverPanic,
+    /// The controller found the robot fallen (`controller.fall_drop`): joint damping, no QP.
+    Fallen,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
