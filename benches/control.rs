@@ -46,7 +46,39 @@ fn bench(c: &mut Criterion) {
             })
         });
     }
+    offers(&mut g);
     g.finish();
+}
+
+/// What the forecast intake costs per window: a valid one taken (its samples copied), and bad
+/// ones refused (a NaN force found at the last sample, a lift-off, a window far in the future):
+/// a rejection must cost no more than a take, so that a flood of bad windows leaves the tick
+/// alone (`tests/faults.rs`, `bad_forecasts_are_rejected_…`).
+fn offers(g: &mut criterion::BenchmarkGroup<criterion::measurement::WallTime>) {
+    let valid = humanoid::push_forecast(0.0, -40.0);
+    let mut nan = valid.clone();
+    let last = nan.len as usize - 1;
+    nan.forces[last][0] = f64::NAN;
+    let mut lift = valid.clone();
+    lift.forces[last][2] = 1e4;
+    let mut future = valid.clone();
+    future.t0 = 100.0;
+    let mut window = upc::control::ForecastWindow::new(1.0, 1.0, 0.2, 300.0);
+    for (name, msg) in [
+        ("forecast_offer_valid", &valid),
+        ("forecast_offer_rejected_nan", &nan),
+        ("forecast_offer_rejected_lift", &lift),
+        ("forecast_offer_rejected_future", &future),
+    ] {
+        // A new seq each time: a valid window is taken, never refused as a replay.
+        let mut m = msg.clone();
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                m.seq += 1;
+                black_box(window.offer(black_box(&m), 0.0).is_ok())
+            })
+        });
+    }
 }
 
 criterion_group!(benches, bench);

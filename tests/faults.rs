@@ -384,25 +384,14 @@ fn bad_forecasts_are_rejected_counted_logged_and_leave_the_loop_alone() {
     // Rate-limited: a log line at the 1st, 2nd, 4th… rejection, not one per message.
     let lines = bad_log.matches("forecast rejected").count() as u64;
     assert!(lines <= 2 + rejected.ilog2() as u64, "{lines} log lines");
-    // The loop's timing is unaffected: no more late ticks than noise, same tick times and counts.
-    // Late ticks are counted as events (`deadline_overruns`), not as skipped periods: one stall
-    // of the whole machine (both processes' state gap grows with it) skips tens of periods, and
-    // its length is the machine's, not the forecasts'. A rejection that cost a period would make
-    // every other forecast (one per 2.5 ticks) a late tick: a rate of ~0.4.
+    // The loop is unaffected: no tick error, no stale period, about as many ticks. What a
+    // rejection costs in time is measured by a criterion bench (`cargo bench --bench control`:
+    // `forecast_offer_*`), not asserted here: a timed assertion in a real-time test fails on a
+    // loaded machine without any fault.
     for v in [&clean, &bad] {
         assert_eq!(u(v, "tick_errors"), 0, "{v}");
         assert_eq!(u(v, "stale_periods"), 0, "{v}");
     }
-    let late_rate = |v: &Value| u(v, "deadline_overruns") as f64 / u(v, "ticks").max(1) as f64;
-    assert!(
-        late_rate(&bad) <= 2.0 * late_rate(&clean) + 0.05,
-        "late ticks: clean {clean}, bad {bad}"
-    );
-    let p50 = |v: &Value| v["tick_p50_us"].as_f64().unwrap_or(f64::NAN);
-    assert!(
-        p50(&bad) <= 1.5 * p50(&clean) + 50.0,
-        "tick p50: clean {clean}, bad {bad}"
-    );
     let ticks = |v: &Value| u(v, "ticks") as f64;
     assert!(
         ticks(&bad) > 0.7 * ticks(&clean),
