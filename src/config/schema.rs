@@ -339,6 +339,9 @@ pub struct ControllerConfig {
     /// Lockstep: poll for the next state this long (µs) before sleeping on its event (see
     /// `Listener::wait_until`); 0 sleeps at once.
     pub ipc_spin_us: f64,
+    /// Real time: after a deadline finds no new state, wait up to this fraction of the period
+    /// for the plant's, so that the loop runs in step with the plant's cycle (0: never wait).
+    pub state_grace: f64,
     /// Feed the hand force measured by the simulator (a wrist force sensor on a robot) to the
     /// whole-body QP, so that the arm behaves as the hand impedance model (eq. 23) says.
     pub hand_force_feedback: bool,
@@ -407,6 +410,15 @@ impl ControllerConfig {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(l.range_error(key, format!("must be finite and ≥ 0, got {v}")));
             }
+        }
+        if !(0.0..0.8).contains(&self.state_grace) {
+            return Err(l.range_error(
+                "controller.state_grace",
+                format!(
+                    "must be in [0, 0.8) (a fraction of the period, leaving time for the tick), got {}",
+                    self.state_grace
+                ),
+            ));
         }
         if !(0.0..1.0).contains(&self.fall_drop) {
             return Err(l.range_error(

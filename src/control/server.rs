@@ -360,6 +360,21 @@ impl<'a> ControlLoop<'a> {
             return self.or_safe_torques(woken).map(|_| ());
         };
         t.wait();
+        // The plant's clock and this ticker run apart. When the plant publishes just after this
+        // deadline, the state would wait a period and the next deadline's newer one would drop
+        // it: measured, one stall that shifted the ticker's phase there cost 18 % of the states
+        // for the rest of an hour. Waiting a part of the period for it runs the loop in step
+        // with the plant's cycle, as a robot's controller runs on its bus cycle; a silent plant
+        // costs only that wait before the stale-state handling.
+        let grace = t.period().mul_f64(self.config.controller.state_grace);
+        if !grace.is_zero() && !self.ports.states.has_samples() {
+            let states = &self.ports.states;
+            let woken = self
+                .ports
+                .state_events
+                .wait_until(grace, Duration::ZERO, || states.has_samples());
+            self.or_safe_torques(woken)?;
+        }
         Ok(())
     }
 
