@@ -408,7 +408,9 @@ impl<'a> ControlLoop<'a> {
         let tick_time = tick_start.elapsed().saturating_sub(inputs.waited);
         self.metrics
             .tick(&self.core.last, self.core.support(), tick_time);
+        // No search for a fallen robot: its schedule would never be used (nor waited for).
         if let Some(h) = self.c2.as_mut()
+            && !self.core.last.fallen
             && self
                 .metrics
                 .ticks
