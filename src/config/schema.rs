@@ -411,23 +411,14 @@ impl ControllerConfig {
                 return Err(l.range_error(key, format!("must be finite and ≥ 0, got {v}")));
             }
         }
-        if !(0.0..0.8).contains(&self.state_grace) {
-            return Err(l.range_error(
-                "controller.state_grace",
-                format!(
-                    "must be in [0, 0.8) (a fraction of the period, leaving time for the tick), got {}",
-                    self.state_grace
-                ),
-            ));
-        }
-        if !(0.0..1.0).contains(&self.fall_drop) {
-            return Err(l.range_error(
-                "controller.fall_drop",
-                format!(
-                    "must be in [0, 1) (a fraction of the CoM height), got {}",
-                    self.fall_drop
-                ),
-            ));
+        // Fractions: of the period (leaving time for the tick), of the CoM height.
+        for (key, v, hi) in [
+            ("controller.state_grace", self.state_grace, 0.8),
+            ("controller.fall_drop", self.fall_drop, 1.0),
+        ] {
+            if !(0.0..hi).contains(&v) {
+                return Err(l.range_error(key, format!("must be in [0, {hi}), got {v}")));
+            }
         }
         if self.c2_every == 0 || self.log_every == 0 {
             return Err(l.range_error("controller.c2_every", "c2_every and log_every must be ≥ 1"));
