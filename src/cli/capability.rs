@@ -13,7 +13,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use upc::capability::{
     Capability, Criteria, Direction, Variant, bisect, impact_toml, survived_full, survives_reduced,
 };
-use upc::config::{Config, ControllerKind};
+use upc::config::ControllerKind;
 use upc::report::figures::{Figure, Line, Panel, write_figure};
 use upc::report::series::{Quantity, Series, SeriesSource};
 
@@ -71,6 +71,9 @@ pub struct CapabilityArgs {
     pub quiet: bool,
     #[command(flatten)]
     pub robot: RobotArg,
+    /// Config files and `--set` keys for every case's controller (the variant's own key last).
+    #[command(flatten)]
+    pub config: ConfigArgs,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -135,7 +138,7 @@ pub fn run(args: CapabilityArgs) -> CliResult {
         max_com_drop: args.com_drop,
     };
     let robot = args.robot.load()?;
-    let config = Config::for_robot(&robot)?;
+    let config = args.config.load(&robot, None, &[])?;
     let reduced = robot.reduced();
     let out = args.out.clone().unwrap_or_else(|| {
         let secs = std::time::SystemTime::now()
@@ -208,6 +211,7 @@ pub fn run(args: CapabilityArgs) -> CliResult {
                                     duration: case.duration,
                                     direction: case.direction,
                                     forecast: ForecastCase::EXACT,
+                                    config: &args.config,
                                 },
                                 &out,
                                 a,
@@ -315,6 +319,8 @@ pub(super) struct FullCase<'a> {
     pub duration: f64,
     pub direction: Direction,
     pub forecast: ForecastCase,
+    /// The user's config files and `--set` keys.
+    pub config: &'a ConfigArgs,
 }
 
 /// What a full-simulation case gave: survived, and the controller's summary when it wrote one.
@@ -375,12 +381,13 @@ pub(super) fn full_case(
         forecast_error_scale: f.scale,
         forecast_error_shift: f.shift,
         config: ConfigArgs {
-            configs: vec![],
+            configs: case.config.configs.clone(),
             sets: case
-                .variant
-                .config_set()
-                .map(str::to_owned)
-                .into_iter()
+                .config
+                .sets
+                .iter()
+                .cloned()
+                .chain(case.variant.config_set().map(str::to_owned))
                 .collect(),
         },
         sim_sets,

@@ -14,7 +14,7 @@ use upc::capability::{Capability, Criteria, Direction, Variant, bisect};
 
 use super::CliResult;
 use super::capability::{BoxError, ForecastCase, FullCase, full_case, runs_bar};
-use super::common::RobotArg;
+use super::common::{ConfigArgs, RobotArg};
 use super::sim::PlantChoice;
 
 #[derive(clap::Args, Debug)]
@@ -67,6 +67,9 @@ pub struct RobustnessArgs {
     pub quiet: bool,
     #[command(flatten)]
     pub robot: RobotArg,
+    /// Config files and `--set` keys for every case's controller (the variant's own key last).
+    #[command(flatten)]
+    pub config: ConfigArgs,
 }
 
 /// One bisection of the sweep.
@@ -207,6 +210,7 @@ pub fn run(args: RobustnessArgs) -> CliResult {
                             duration: cell.duration,
                             direction: Direction::X,
                             forecast: cell.forecast,
+                            config: &args.config,
                         };
                         let mut at_max = None;
                         let r = bisect(max, args.tol, |a| -> Result<bool, BoxError> {
@@ -392,6 +396,13 @@ fn write_outputs(
         args.tol,
         args.phantom_com_drop * 1e3
     );
+    // What the user layered over the defaults, so a table is never read as the defaults'.
+    for f in &args.config.configs {
+        let _ = writeln!(md, "Config file: `{}`\n", f.display());
+    }
+    for kv in &args.config.sets {
+        let _ = writeln!(md, "Config: `--set {kv}`\n");
+    }
     for &d in &args.durations {
         let _ = writeln!(md, "## {d} s impact\n");
         let c0 = |label: &str| {
