@@ -266,6 +266,7 @@ fn the_server_refuses_a_model_larger_than_a_message() {
         scenario_hash: None,
         robot_hash: None,
         robot_name: "big".into(),
+        held_mass: nalgebra::Matrix3::zeros(),
     };
     let config = Config::embedded_default().expect("defaults");
     let e = run_server(

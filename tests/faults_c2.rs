@@ -269,6 +269,7 @@ fn run(
         scenario_hash: None,
         robot_hash: None,
         robot_name: "icub_like".into(),
+        held_mass: nalgebra::Matrix3::zeros(),
     };
     let robot = upc::robot::Robot::embedded_default().expect("robot");
     let stop = Arc::new(AtomicBool::new(false));

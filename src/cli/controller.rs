@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use upc::channels::DEFAULT_PREFIX;
-use upc::config::ControllerKind;
+use upc::config::{ControllerKind, HeldObject};
 use upc::control::server::{ServerOptions, run_server};
 use upc::scenario::Scenario;
 use upc::shutdown::stop_flag;
@@ -102,6 +102,10 @@ pub fn run(args: ControllerArgs) -> CliResult {
         scenario_hash: Some(scenario.content_hash()),
         robot_hash: Some(robot.hash),
         robot_name: robot.name().to_string(),
+        held_mass: match config.controller.held_object {
+            HeldObject::Door => upc::sim::scene::place_door(&robot)?.apparent_mass()?,
+            HeldObject::None => nalgebra::Matrix3::zeros(),
+        },
     };
     tracing::info!(
         "controller {} ({:?}) for robot `{}` on {}/*, {} Hz",

@@ -448,6 +448,13 @@ impl Launch<'_> {
         if args.no_forecaster {
             sets.push("controller.lockstep_forecast_wait=0".into());
         }
+        // A plant without the door in the hand (none, or the push applied at the hand) holds
+        // nothing whose inertia the wrist sensor feels; the user's --set still has the last word.
+        let held = upc::sim::SimConfig::load(&[], &args.sim_sets)
+            .is_ok_and(|s| s.door && s.push != upc::sim::Push::Hand);
+        if !held {
+            sets.insert(0, "controller.held_object=\"none\"".into());
+        }
         ControllerArgs {
             scenario: args.scenario.clone(),
             controller: Some(kind),

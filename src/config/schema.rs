@@ -310,6 +310,18 @@ impl ControllerKind {
     }
 }
 
+/// What the hand holds, whose inertia the wrist force sensor feels as the hand moves
+/// (docs/forecast_correction.md, FC-1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum HeldObject {
+    /// The scene's door (`assets/door/door.urdf`) placed at the robot's hand as the plants
+    /// place it: its apparent mass at the handle is computed from its model.
+    Door,
+    /// Nothing (a free hand, or a push applied at the hand).
+    None,
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum LoopMode {
@@ -345,6 +357,10 @@ pub struct ControllerConfig {
     /// Feed the hand force measured by the simulator (a wrist force sensor on a robot) to the
     /// whole-body QP, so that the arm behaves as the hand impedance model (eq. 23) says.
     pub hand_force_feedback: bool,
+    /// What the hand holds: its inertia is taken out of the measured hand force before the
+    /// force is compared with the forecast (a forecast announces the push, not the push less
+    /// what the door takes to accelerate).
+    pub held_object: HeldObject,
     /// PD on the CoM height (1/s², 1/s).
     pub com_height_kp: f64,
     pub com_height_kd: f64,

@@ -245,6 +245,14 @@ impl ControllerCore {
         self
     }
 
+    /// The held object's apparent mass at the hand (world, kg; [`crate::sim::scene::PlacedDoor::apparent_mass`]),
+    /// taken out of the measured hand force by the forecast correction (FC-1).
+    pub fn with_held_mass(mut self, held_mass: Matrix3<f64>) -> Self {
+        let rows = [0, 1, 2].map(|r| [0, 1, 2].map(|c| held_mass[(r, c)]));
+        self.correction = self.correction.map(|c| c.with_held_mass(rows));
+        self
+    }
+
     pub fn horizon(&self) -> usize {
         self.horizon
     }
@@ -358,7 +366,7 @@ impl ControllerCore {
         let m_e = *self.op.compute(&self.model, &mut self.data, &self.q)?;
         let m_e_ok = self.previewer.set_effective_mass(m_e).is_ok();
 
-        let zref = self.horizon_inputs(t, &latched, forecast, state.hand_force);
+        let zref = self.horizon_inputs(t, &latched, forecast, state.hand_force, hand.vel.into());
         let f_obs = self.observe([com.x, com.y], [vcom.x, vcom.y], state.zmp);
         let age = self.take_schedule(t, c2);
         let x: [AxisState; 2] = [0, 1].map(|a| Vector3::new(com[a], vcom[a], self.com_acc_cmd[a]));
@@ -523,13 +531,15 @@ impl ControllerCore {
     }
 
     /// The horizon's inputs at t + (i+1)·T: ZMP reference, hand set-point and the hand force
-    /// (the forecast, corrected by the measured force `f_meas`). Returns the ZMP reference.
+    /// (the forecast, corrected by the measured force `f_meas` with the hand moving at
+    /// `hand_vel`). Returns the ZMP reference.
     fn horizon_inputs(
         &mut self,
         t: f64,
         latched: &Latched,
         forecast: &ForecastWindow,
         f_meas: [f64; 3],
+        hand_vel: [f64; 3],
     ) -> [f64; 2] {
         let zref = [
             latched.zmp_center[0] + self.zmp_offset[0],
@@ -546,7 +556,7 @@ impl ControllerCore {
         // The hand force over the horizon: the forecast, corrected by the measured force.
         match self.correction.as_mut() {
             Some(c) => {
-                c.update(t, forecast, Some(f_meas));
+                c.update(t, forecast, Some(f_meas), hand_vel);
                 c.fill(t, self.period, forecast, &mut self.f_ext);
             }
             None => {

@@ -1,11 +1,13 @@
 //! Forecast correction from the measured hand force (docs/forecast_correction.md): between the
-//! forecast intake and the hand previewer, the forecast is read as the hand force to come up to
-//! an amplitude factor κ, a time shift τ and an offset d,
+//! forecast intake and the hand previewer, the forecast is read as the push to come up to an
+//! amplitude factor κ, a time shift τ and an offset d. The wrist sensor measures the push less
+//! what the held object (the door) takes to move with the hand, of apparent mass Λ at the hand:
 //!
-//!   f_meas(t) ≈ κ f_fc(t − τ) + d,                                          (FC-1)
+//!   f_meas(t) + Λ ẍ_h(t) ≈ κ f_fc(t − τ) + d,                               (FC-1)
 //!
-//! κ and τ estimated from a short window of measured force against the forecast's past, d by an
-//! observer on what κ and τ leave unexplained. The horizon the previewer sees is
+//! ẍ_h the hand's acceleration (its measured velocity's change over a bin). κ and τ estimated
+//! from a short window of the measured push against the forecast's past, d by an observer on
+//! what κ and τ leave unexplained. The horizon the previewer sees is
 //!
 //!   f̂(t + s) = κ̂ f_fc(t + s − τ̂) + d̂ e^{−s/T_d}.                         (FC-4)
 //!
@@ -105,6 +107,12 @@ pub struct ForecastCorrector {
     acc_meas: V3,
     acc_fc: V3,
     acc_n: usize,
+    /// Λ: the held object's apparent mass at the hand (world, kg; zero: nothing held).
+    held_mass: [V3; 3],
+    /// The hand's velocity at the previous bin's last tick, and the newest bin's mean
+    /// acceleration (its velocity's change over the bin).
+    bin_end_vel: Option<V3>,
+    last_acc: V3,
     /// Scratch: the forecast timeline g over [t_b − (n_W − 1 + M) T_b, t_b + M T_b] and its
     /// prefix sums (Σ|g|², Σg).
     g: Vec<V3>,
@@ -147,6 +155,9 @@ impl ForecastCorrector {
             acc_meas: [0.0; 3],
             acc_fc: [0.0; 3],
             acc_n: 0,
+            held_mass: [[0.0; 3]; 3],
+            bin_end_vel: None,
+            last_acc: [0.0; 3],
             g: vec![[0.0; 3]; timeline],
             p2: vec![0.0; timeline + 1],
             p1: vec![[0.0; 3]; timeline + 1],
@@ -161,6 +172,18 @@ impl ForecastCorrector {
                 ..Default::default()
             },
         }
+    }
+
+    /// Λ, the held object's apparent mass at the hand (world, kg, symmetric): its inertia force
+    /// −Λ ẍ_h is taken out of the measured force (FC-1).
+    pub fn with_held_mass(mut self, held_mass: [V3; 3]) -> Self {
+        self.held_mass = held_mass;
+        self
+    }
+
+    /// The push the measured force `y` says, with the hand accelerating at `acc`: y + Λ acc.
+    fn push(&self, y: &V3, acc: &V3) -> V3 {
+        [0, 1, 2].map(|r| y[r] + dot(&self.held_mass[r], acc))
     }
 
     pub fn settings(&self) -> &CorrectionSettings {
@@ -178,6 +201,8 @@ impl ForecastCorrector {
         self.acc_meas = [0.0; 3];
         self.acc_fc = [0.0; 3];
         self.acc_n = 0;
+        self.bin_end_vel = None;
+        self.last_acc = [0.0; 3];
         self.est = CorrectionEstimate::default();
         self.prior_factor = 1.0;
         self.prior_shift = 0.0;
@@ -219,9 +244,11 @@ impl ForecastCorrector {
     }
 
     /// One control tick at plant time `t` with the force measured at the hand (`None`: no
-    /// measurement this tick). Updates the offset observer every tick and κ̂, τ̂ once a bin.
-    pub fn update(&mut self, t: f64, window: &ForecastWindow, measured: Option<V3>) {
-        let Some(y) = measured.filter(|y| y.iter().all(|v| v.is_finite())) else {
+    /// measurement this tick) and the hand's measured velocity (world). Updates the offset
+    /// observer every tick and κ̂, τ̂ once a bin.
+    pub fn update(&mut self, t: f64, window: &ForecastWindow, measured: Option<V3>, hand_vel: V3) {
+        let finite = |y: &V3| y.iter().all(|v| v.is_finite());
+        let Some(y) = measured.filter(|y| finite(y) && finite(&hand_vel)) else {
             if measured.is_some() {
                 self.counts.bad_measurements += 1;
             }
@@ -229,11 +256,13 @@ impl ForecastCorrector {
         };
         let now = window.at(t);
         // Offset observer (FC-3): a disturbance state driven by what κ̂, τ̂ leave unexplained,
-        // d̂ ← d̂ + L (y − κ̂ f_fc(t − τ̂) − d̂), L = 1 − e^{−dt/T_o}.
+        // d̂ ← d̂ + L (y + Λ ẍ_h − κ̂ f_fc(t − τ̂) − d̂), L = 1 − e^{−dt/T_o}, with the newest
+        // bin's acceleration (one tick's velocity difference is mostly noise).
         let explained = self.forecast_at(window, t - self.est.shift);
         let l = 1.0 - (-self.dt / self.s.offset_time_constant).exp();
+        let push = self.push(&y, &self.last_acc);
         for c in 0..3 {
-            let r = y[c] - self.est.factor * explained[c];
+            let r = push[c] - self.est.factor * explained[c];
             self.est.offset[c] += l * (r - self.est.offset[c]);
         }
         if self.est.contradicted {
@@ -249,7 +278,14 @@ impl ForecastCorrector {
         let inv = 1.0 / self.acc_n as f64;
         let i_m = self.bins as usize % self.meas.len();
         let i_f = self.bins as usize % self.fc.len();
-        self.meas[i_m] = self.acc_meas.map(|v| v * inv);
+        // The bin's push (FC-1): its mean measured force plus Λ times its mean acceleration, the
+        // hand velocity's change over the bin (none known for a session's first bin).
+        self.last_acc = match self.bin_end_vel {
+            Some(v0) => [0, 1, 2].map(|c| (hand_vel[c] - v0[c]) / self.bin),
+            None => [0.0; 3],
+        };
+        self.bin_end_vel = Some(hand_vel);
+        self.meas[i_m] = self.push(&self.acc_meas.map(|v| v * inv), &self.last_acc);
         self.fc[i_f] = self.acc_fc.map(|v| v * inv);
         self.acc_meas = [0.0; 3];
         self.acc_fc = [0.0; 3];
@@ -536,7 +572,7 @@ mod tests {
                 impact(t, start, amp)
             };
             let y = [0, 1, 2].map(|c| real[c] + bias + sigma * noise.gauss());
-            corr.update(t, &window, Some(y));
+            corr.update(t, &window, Some(y), [0.0; 3]);
             corr.fill(t, 0.005, &window, &mut out);
             let e = *corr.estimate();
             let onset = start;
@@ -620,6 +656,78 @@ mod tests {
         }
     }
 
+    /// The hand held by an impedance (M_h ẍ = f − K x − C ẋ) on a door of apparent mass Λ
+    /// pushed by F: the sensor measures f = F − Λ ẍ. Returns the largest |κ̂ − κ| and |τ̂| from
+    /// 0.2 s after the push's onset to its end, with the correction told Λ (`known`) or not.
+    fn run_on_door(scale: f64, known: bool) -> (f64, f64) {
+        let (dt, start, amp) = (1e-3, 1.0, 60.0);
+        let (m_h, lambda) = (1.5, 5.1);
+        let (k, c) = (600.0 * m_h, 2.0 * 600f64.sqrt() * m_h);
+        let mut held = [[0.0; 3]; 3];
+        held[0][0] = lambda;
+        let mut corr = ForecastCorrector::new(CorrectionSettings::default(), 0.005, dt, 300.0);
+        if known {
+            corr = corr.with_held_mass(held);
+        }
+        let mut window = ForecastWindow::new(1.0, 1.0, 0.2, 1e4);
+        let mut msg: Box<ForecastMsg> = Box::default();
+        let (mut x, mut v) = (0.0, 0.0);
+        let (mut worst_k, mut worst_t) = (0.0f64, 0.0f64);
+        for step in 0..2200 {
+            let t = step as f64 * dt;
+            if step % 100 == 0 {
+                msg.seq += 1;
+                msg.t0 = t;
+                msg.dt = 0.005;
+                msg.len = 400;
+                msg.period = 0.1;
+                for i in 0..400 {
+                    msg.forces[i] = impact(t + i as f64 * 0.005, start, amp).map(|f| f * scale);
+                }
+                window.offer(&msg, t).unwrap();
+            }
+            // Semi-implicit Euler of (M_h + Λ) ẍ = F − K x − C ẋ; the sensor between hand and door.
+            let push = impact(t, start, amp)[0];
+            let acc = (push - k * x - c * v) / (m_h + lambda);
+            let measured = push - lambda * acc;
+            v += acc * dt;
+            x += v * dt;
+            corr.update(t, &window, Some([measured, 0.0, 0.0]), [v, 0.0, 0.0]);
+            if t >= start + 0.2 && t < start + 1.0 {
+                let e = corr.estimate();
+                worst_k = worst_k.max((e.factor - 1.0 / scale).abs());
+                worst_t = worst_t.max(e.shift.abs());
+            }
+        }
+        (worst_k, worst_t)
+    }
+
+    /// The door's inertia is no forecast error once the correction knows it (FC-1): an exact
+    /// forecast stays exact through the push, and a ×1.5 one is read as such. Without Λ the
+    /// same push reads as a late and too strong forecast (what C2 lost its margin to).
+    #[test]
+    fn the_held_doors_inertia_is_not_read_as_a_forecast_error() {
+        for (scale, known) in [(1.0, true), (1.0, false), (1.5, true), (1.5, false)] {
+            let (dk, dt) = run_on_door(scale, known);
+            eprintln!(
+                "×{scale}, Λ known {known}: max |κ̂ − κ| {dk:.3}, max |τ̂| {:.1} ms",
+                dt * 1e3
+            );
+        }
+        let (dk, dt) = run_on_door(1.0, true);
+        assert!(
+            dk < 0.03 && dt < 0.004,
+            "known Λ: |κ̂ − 1| {dk:.3}, |τ̂| {dt:.4} s"
+        );
+        let (dk, dt) = run_on_door(1.0, false);
+        assert!(
+            dk > 0.1 && dt > 0.02,
+            "unknown Λ: |κ̂ − 1| {dk:.3}, |τ̂| {dt:.4} s"
+        );
+        let (dk, _) = run_on_door(1.5, true);
+        assert!(dk < 0.05, "×1.5 with known Λ: |κ̂ − 2/3| {dk:.3}");
+    }
+
     #[test]
     fn a_phantom_push_is_refused() {
         let r = run(1.0, 0.0, 5.0, 2.0, 5, true);
@@ -634,7 +742,7 @@ mod tests {
         let mut corr = ForecastCorrector::new(CorrectionSettings::default(), 0.005, 1e-3, 300.0);
         let window = ForecastWindow::new(1.0, 1.0, 0.2, 1e4);
         for k in 0..500 {
-            corr.update(k as f64 * 1e-3, &window, Some([-20.0, 4.0, 0.0]));
+            corr.update(k as f64 * 1e-3, &window, Some([-20.0, 4.0, 0.0]), [0.0; 3]);
         }
         let mut out = vec![[0.0; 3]; 300];
         corr.fill(0.5, 0.005, &window, &mut out);
@@ -661,7 +769,12 @@ mod tests {
         let mut corr = ForecastCorrector::new(CorrectionSettings::default(), 0.005, 1e-3, weight);
         let window = ForecastWindow::new(1.0, 1.0, 0.2, 1e4);
         for k in 0..500 {
-            corr.update(k as f64 * 1e-3, &window, Some([-20.0, 0.0, 1.5 * weight]));
+            corr.update(
+                k as f64 * 1e-3,
+                &window,
+                Some([-20.0, 0.0, 1.5 * weight]),
+                [0.0; 3],
+            );
         }
         let mut out = vec![[0.0; 3]; 300];
         corr.fill(0.5, 0.005, &window, &mut out);

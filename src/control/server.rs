@@ -65,6 +65,9 @@ pub struct ServerOptions {
     pub robot_hash: Option<u64>,
     /// The robot's name, for the summary.
     pub robot_name: String,
+    /// What the hand holds: its apparent mass at the hand (world, kg; zero: nothing), from the
+    /// scene ([`crate::config::HeldObject`]).
+    pub held_mass: nalgebra::Matrix3<f64>,
 }
 
 /// The damping torques [`send_damping`] publishes: `−damping · qd`, for state `step`.
@@ -241,7 +244,8 @@ impl<'a> ControlLoop<'a> {
             [cc.com_height_kp, cc.com_height_kd],
             opts.zmp_offset,
         )?
-        .with_robot_hash(opts.robot_hash.unwrap_or(0));
+        .with_robot_hash(opts.robot_hash.unwrap_or(0))
+        .with_held_mass(opts.held_mass);
         let n_tau = core.model.nv - 6;
         let horizon_time = config.preview.horizon as f64 * config.preview.period;
         let intake = forecast_intake(config, &bus, robot_mass, horizon_time)?;

@@ -15,9 +15,9 @@
 //! reaction: `τ(t) = ((p_handle − p_hinge) × F(t)) · z`, with the lever taken at the home
 //! placement (0.72 m). A force towards the robot (−x) is a negative (closing) torque.
 
-use nalgebra::{DVector, Vector3};
+use nalgebra::{DVector, Matrix3, Vector3};
 
-use crate::dynamics::{BaseJoint, Data, Model, SE3, forward_kinematics, icub_like};
+use crate::dynamics::{BaseJoint, Data, Model, SE3, crba, forward_kinematics, icub_like};
 use crate::robot::Robot;
 use crate::scenario::{ForceProfile, Scenario};
 
@@ -122,6 +122,26 @@ pub struct PlacedDoor {
     pub base: SE3,
     pub lever: Vector3<f64>,
     pub axis: Vector3<f64>,
+}
+
+impl PlacedDoor {
+    /// The door's apparent mass at the handle (world, kg): what its inertia opposes to the
+    /// hand's acceleration a, f = −Λ a. The leaf turns about its hinge only, so the handle moves
+    /// along e = axis × lever / r and Λ = I_hinge / r² e eᵀ (I_hinge from the composite-rigid-body
+    /// algorithm at the door's neutral angle, r the lever). Used by the controller's forecast
+    /// correction (docs/forecast_correction.md, FC-1).
+    pub fn apparent_mass(&self) -> Result<Matrix3<f64>, SimError> {
+        let mut data = Data::new(&self.model);
+        let inertia = crba(&self.model, &mut data, &self.model.neutral())?[(0, 0)];
+        let r2 = self.lever.norm_squared();
+        if r2 <= 1e-12 {
+            return Err(SimError::Scene(
+                "the door's handle is on its hinge axis".into(),
+            ));
+        }
+        let e = self.axis.cross(&self.lever) / r2.sqrt();
+        Ok(e * e.transpose() * (inertia / r2))
+    }
 }
 
 /// Places the door (`assets/door/door.urdf`) so that its handle is on `robot`'s hand at home.
@@ -336,5 +356,28 @@ impl PosturePd {
         for i in 0..out.len() {
             out[i] = self.kp[i] * (self.q_ref[sq + i] - q[sq + i]) - self.kd[i] * v[sv + i];
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Λ from the door's URDF by hand: the leaf (12 kg, I_zz 0.6416 kg·m² at 0.4 m from the
+    /// hinge) and the handle (0.2 kg at (0.72, −0.045) m, I_zz 1.7e-4), over r² of the handle
+    /// frame at (0.72, −0.07) m. Rank one, along the handle's path (x at the home placement).
+    #[test]
+    fn the_doors_apparent_mass_at_the_handle_is_its_hinge_inertia_over_r_squared() {
+        let robot = Robot::embedded_default().unwrap();
+        let door = place_door(&robot).unwrap();
+        let lambda = door.apparent_mass().unwrap();
+        let inertia =
+            0.6416 + 12.0 * 0.4f64.powi(2) + 1.7e-4 + 0.2 * (0.72f64.powi(2) + 0.045f64.powi(2));
+        let r2 = 0.72f64.powi(2) + 0.07f64.powi(2);
+        assert!((lambda.trace() - inertia / r2).abs() < 1e-9, "{lambda}");
+        let e = door.axis.cross(&door.lever).normalize();
+        assert!((lambda * e - e * (inertia / r2)).norm() < 1e-9);
+        assert!((lambda * door.lever).norm() < 1e-9 && (lambda * door.axis).norm() < 1e-9);
+        assert!(e.x.abs() > 0.99, "the handle moves along x: {e}");
     }
 }
