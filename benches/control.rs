@@ -11,6 +11,8 @@ use std::time::Duration;
 use criterion::{Criterion, criterion_group, criterion_main};
 use upc::config::{Config, ControllerKind};
 
+// The tests' rig; the bench uses a part of it.
+#[allow(dead_code)]
 #[path = "../tests/support/humanoid.rs"]
 mod humanoid;
 

@@ -17,6 +17,10 @@
 //! - [`bridge`]: the contract over Zenoh, for forecasters and viewers on other hosts.
 //! - [`recording`]: where the rerun recordings go (`.rrd` files, a live viewer).
 
+// Outside tests, no unwrap or expect: bad input is an error value with a message, and the
+// real-time path never panics (each exception says why it cannot fail).
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
+
 pub mod bridge;
 pub mod capability;
 pub mod channels;

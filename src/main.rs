@@ -1,5 +1,8 @@
 //! The `upc` command line: one binary, one subcommand per job.
 
+// Outside tests, no unwrap or expect (as in the library).
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
+
 use clap::{Parser, Subcommand};
 
 mod cli;

@@ -5,7 +5,7 @@ mod support;
 
 use std::time::{Duration, Instant};
 
-use support::humanoid::{push_forecast, rig, rig_of};
+use support::humanoid::{rig, rig_of};
 use upc::config::{Config, ControllerKind};
 use upc::control::GainHandoff;
 use upc::robot::Robot;
@@ -15,9 +15,7 @@ fn a_tick_at_home_gives_finite_torques_for_each_controller() {
     let config = Config::embedded_default().expect("defaults");
     for kind in [ControllerKind::C0, ControllerKind::C1, ControllerKind::C2] {
         let mut r = rig(&config, kind);
-        r.window
-            .offer(&push_forecast(0.0, -40.0), 0.0)
-            .expect("valid forecast");
+        r.offer_push(-40.0);
         let status = r
             .core
             .tick(&r.state, &r.window, None, &mut r.tau)
@@ -72,15 +70,8 @@ fn robot_gravity_is_the_whole_controllers() {
 /// along x forecast from now.
 fn lean_into_push(robot: &Robot, config: &Config, kind: ControllerKind) -> f64 {
     let mut r = rig_of(robot, config, kind);
-    r.window
-        .offer(&push_forecast(0.0, -60.0), 0.0)
-        .expect("valid forecast");
-    for k in 0..20 {
-        r.state.time = k as f64 * 0.001;
-        r.core
-            .tick(&r.state, &r.window, None, &mut r.tau)
-            .expect("tick");
-    }
+    r.offer_push(-60.0);
+    assert_eq!(r.tick_frozen(0..20), 0, "a tick failed");
     r.core.last.com_acc_cmd[0]
 }
 
@@ -289,9 +280,7 @@ fn c2_thread_hands_over_time_stamped_schedules_without_blocking() {
     config.preview.horizon = 200;
     let n = config.preview.horizon;
     let mut r = rig(&config, ControllerKind::C2);
-    r.window
-        .offer(&push_forecast(0.0, -50.0), 0.0)
-        .expect("valid forecast");
+    r.offer_push(-50.0);
     r.core
         .tick(&r.state, &r.window, None, &mut r.tau)
         .expect("tick");

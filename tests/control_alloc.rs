@@ -4,27 +4,17 @@
 mod support;
 
 use support::counting_alloc::allocations;
-use support::humanoid::{push_forecast, rig};
+use support::humanoid::rig;
 use upc::config::{Config, ControllerKind};
 
 #[test]
 fn controller_tick_allocations() {
     let config = Config::embedded_default().expect("defaults");
     let mut r = rig(&config, ControllerKind::C1);
-    r.window
-        .offer(&push_forecast(0.0, -40.0), 0.0)
-        .expect("forecast");
-    for k in 0..5 {
-        r.state.time = k as f64 * 0.001;
-        r.core
-            .tick(&r.state, &r.window, None, &mut r.tau)
-            .expect("warm-up tick");
-    }
+    r.offer_push(-40.0);
+    assert_eq!(r.tick_frozen(0..5), 0, "a warm-up tick failed");
     let count = allocations(|| {
-        for k in 5..25 {
-            r.state.time = k as f64 * 0.001;
-            let _ = r.core.tick(&r.state, &r.window, None, &mut r.tau);
-        }
+        r.tick_frozen(5..25);
     });
     eprintln!(
         "controller tick: {} allocations per tick, {:?}",
@@ -46,16 +36,11 @@ fn controller_first_ticks_torque_limited_full_formulation() {
     config.wbc.formulation = upc::config::WbcFormulation::Full;
     config.wbc.torque_limit_scale = 0.1;
     let mut r = rig(&config, ControllerKind::C1);
-    r.window
-        .offer(&push_forecast(0.0, -40.0), 0.0)
-        .expect("forecast");
+    r.offer_push(-40.0);
     let built = r.core.wbc_counters().solver_builds;
     let ticks = 20;
     let count = allocations(|| {
-        for k in 0..ticks {
-            r.state.time = k as f64 * 0.001;
-            let _ = r.core.tick(&r.state, &r.window, None, &mut r.tau);
-        }
+        r.tick_frozen(0..ticks);
     });
     let c = r.core.wbc_counters();
     eprintln!("first {ticks} ticks: {count} allocations, {c:?}");

@@ -173,6 +173,7 @@ mod tests {
                 sets: vec!["sim.dt=0.002".into()],
                 prefix: Some("p".into()),
                 scenario: Some("single_impact".into()),
+                sensing: Some(upc::sim::sensors::Sensing::Realistic),
                 robot: robot(),
             },
             simulator: PlantChoice::Mujoco,
@@ -254,6 +255,7 @@ mod tests {
             config: config(),
             sim_sets: vec!["sim.push=\"none\"".into()],
             plant: PlantChoice::Mujoco,
+            sensing: Some(upc::sim::sensors::Sensing::Realistic),
             robot: robot(),
         };
         let Command::Run(back) = parse(Argv::of("run", &run)) else {

@@ -69,6 +69,9 @@ pub struct CapabilityArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// What the plant publishes: its truth, or through the sensor models (docs/sensing.md).
+    #[arg(long, value_enum)]
+    pub sensing: Option<upc::sim::sensors::Sensing>,
     #[command(flatten)]
     pub robot: RobotArg,
     /// Config files and `--set` keys for every case's controller (the variant's own key last).
@@ -212,6 +215,7 @@ pub fn run(args: CapabilityArgs) -> CliResult {
                                     direction: case.direction,
                                     forecast: ForecastCase::EXACT,
                                     config: &args.config,
+                                    sensing: args.sensing,
                                 },
                                 &out,
                                 a,
@@ -321,6 +325,7 @@ pub(super) struct FullCase<'a> {
     pub forecast: ForecastCase,
     /// The user's config files and `--set` keys.
     pub config: &'a ConfigArgs,
+    pub sensing: Option<upc::sim::sensors::Sensing>,
 }
 
 /// What a full-simulation case gave: survived, and the controller's summary when it wrote one.
@@ -392,6 +397,7 @@ pub(super) fn full_case(
         },
         sim_sets,
         plant: case.plant,
+        sensing: case.sensing,
         robot: RobotArg {
             robot: case.robot.to_owned(),
         },
@@ -488,6 +494,16 @@ fn write_outputs(
         criteria.max_com_drop * 1e3,
         criteria.max_edge_time,
     );
+    // What the user layered over the defaults, so a table is never read as the defaults'.
+    for f in &args.config.configs {
+        md += &format!("Config file: `{}`\n\n", f.display());
+    }
+    for kv in &args.config.sets {
+        md += &format!("Config: `--set {kv}`\n\n");
+    }
+    if let Some(s) = args.sensing {
+        md += &format!("Sensing: `{}` (docs/sensing.md)\n\n", s.name());
+    }
     for model in [Model::Reduced, Model::Full] {
         let of_model: Vec<&Row> = rows.iter().filter(|r| r.model == model).collect();
         if of_model.is_empty() {

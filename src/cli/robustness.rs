@@ -65,6 +65,9 @@ pub struct RobustnessArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// What the plant publishes: its truth, or through the sensor models (docs/sensing.md).
+    #[arg(long, value_enum)]
+    pub sensing: Option<upc::sim::sensors::Sensing>,
     #[command(flatten)]
     pub robot: RobotArg,
     /// Config files and `--set` keys for every case's controller (the variant's own key last).
@@ -211,6 +214,7 @@ pub fn run(args: RobustnessArgs) -> CliResult {
                             direction: Direction::X,
                             forecast: cell.forecast,
                             config: &args.config,
+                            sensing: args.sensing,
                         };
                         let mut at_max = None;
                         let r = bisect(max, args.tol, |a| -> Result<bool, BoxError> {
@@ -402,6 +406,9 @@ fn write_outputs(
     }
     for kv in &args.config.sets {
         let _ = writeln!(md, "Config: `--set {kv}`\n");
+    }
+    if let Some(s) = args.sensing {
+        let _ = writeln!(md, "Sensing: `{}` (docs/sensing.md)\n", s.name());
     }
     for &d in &args.durations {
         let _ = writeln!(md, "## {d} s impact\n");

@@ -13,6 +13,7 @@ use upc::channels::{Bus, StateMsg};
 use upc::config::ControllerKind;
 use upc::control::server::ServerSummary;
 use upc::scenario::Scenario;
+use upc::sim::sensors::Sensing;
 
 use super::CliResult;
 use super::argv::{Argv, ToArgv, fields};
@@ -92,6 +93,9 @@ pub struct RunArgs {
     /// The plant: upc's own simulator or MuJoCo (`upc sim --plant`), on the same channels.
     #[arg(long, value_enum, default_value = "upc")]
     pub plant: PlantChoice,
+    /// What the plant publishes: its truth, or through the sensor models (`upc sim --sensing`).
+    #[arg(long, value_enum)]
+    pub sensing: Option<Sensing>,
     /// The robot, given to the simulator and the controller (the scenario's forces are scaled
     /// to its mass: `upc::robot::Robot::force_scale`).
     #[command(flatten)]
@@ -119,12 +123,13 @@ impl ToArgv for RunArgs {
             config,
             sim_sets,
             plant,
+            sensing,
             robot,
         } = self;
         fields!(w; val scenario, choice controller, switch realtime, opt duration, opt name,
                 val out, opt forecaster, switch forecaster_over_zenoh, switch no_forecaster,
                 switch viewer, opt connect, switch quiet, val forecast_error_scale,
-                val forecast_error_shift, many sim_sets, choice plant);
+                val forecast_error_shift, many sim_sets, choice plant, opt_choice sensing);
         w.nested(config);
         w.nested(robot);
     }
@@ -371,6 +376,7 @@ impl Launch<'_> {
                 sets: args.sim_sets.clone(),
                 prefix: Some(self.prefix.clone()),
                 scenario: Some(args.scenario.clone()),
+                sensing: args.sensing,
                 robot: args.robot.clone(),
             },
             simulator: args.plant,

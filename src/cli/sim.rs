@@ -10,6 +10,7 @@ use upc::sim::{Engine, SimConfig};
 use super::CliResult;
 use super::argv::{Argv, ToArgv, fields};
 use super::common::RobotArg;
+use upc::sim::sensors::Sensing;
 
 #[derive(Clone, Copy, PartialEq, Eq, Debug, clap::ValueEnum)]
 pub enum ModeChoice {
@@ -63,6 +64,10 @@ pub struct PlantArgs {
     /// Door torque profile: embedded scenario name (single_impact, multiple_impacts, standing) or a path.
     #[arg(long)]
     pub scenario: Option<String>,
+    /// What the published state is: the plant's truth, or through the sensor models
+    /// (`sim.sensors.sensing`; docs/sensing.md).
+    #[arg(long, value_enum)]
+    pub sensing: Option<Sensing>,
     #[command(flatten)]
     pub robot: RobotArg,
 }
@@ -114,9 +119,11 @@ impl ToArgv for PlantArgs {
             sets,
             prefix,
             scenario,
+            sensing,
             robot,
         } = self;
-        fields!(w; opt_choice mode, opt duration, many configs, many sets, opt prefix, opt scenario);
+        fields!(w; opt_choice mode, opt duration, many configs, many sets, opt prefix, opt scenario,
+                opt_choice sensing);
         w.nested(robot);
     }
 }
@@ -170,6 +177,9 @@ pub fn load_config(args: &PlantArgs) -> Result<SimConfig, upc::config::ConfigErr
     }
     if let Some(s) = &args.scenario {
         sets.push(format!("sim.scenario={}", toml_str(s)));
+    }
+    if let Some(s) = args.sensing {
+        sets.push(format!("sim.sensors.sensing={}", toml_str(s.name())));
     }
     SimConfig::load(&args.configs, &sets)
 }

@@ -45,6 +45,8 @@ pub struct SimConfig {
     pub process: ProcessConfig,
     pub hold: HoldConfig,
     pub mujoco: MujocoConfig,
+    /// What the robot's sensors make of the plant's state (docs/sensing.md).
+    pub sensors: super::sensors::SensorsConfig,
 }
 
 /// How the scenario's force reaches the hand (`sim.push`).
@@ -202,6 +204,9 @@ impl SimConfig {
         nonneg("sim.hold.handover", self.hold.handover)?;
         nonneg("sim.hold.feedforward_fade", self.hold.feedforward_fade)?;
         nonneg("sim.hold.lost_timeout", self.hold.lost_timeout)?;
+        if let Some((key, msg)) = self.sensors.invalid() {
+            return Err(l.range_error(&format!("sim.sensors.{key}"), msg));
+        }
         if !(self.mujoco.impratio.is_finite() && self.mujoco.impratio >= 1.0) {
             return Err(l.range_error(
                 "sim.mujoco.impratio",

@@ -23,6 +23,7 @@ pub mod physics;
 pub mod process;
 pub mod record;
 pub mod scene;
+pub mod sensors;
 pub mod world;
 
 pub use command::{CommandGate, CommandOrigin, CommandStats, Rejection, validate_command};

@@ -42,6 +42,7 @@ use super::hold::{CommandClock, HoldStats, Phase, Supervisor};
 use super::physics::{Engine, Physics};
 use super::record::{Recorder, RecorderStats};
 use super::scene::{DoorDrive, default_scene};
+use super::sensors::{SensorCounts, Sensors};
 use super::world::{SimError, StepReport};
 
 /// Errors that end a run.
@@ -107,6 +108,9 @@ pub struct RunSummary {
     pub max_penetration: f64,
     pub max_slip_speed: f64,
     pub max_loop_error: f64,
+    /// `truth` or `realistic` (`sim.sensors.sensing`), and the sensor models' counters.
+    pub sensing: String,
+    pub sensor_counts: Option<SensorCounts>,
     pub recorder: RecorderStats,
     /// Lockstep: state published → answering torques received, minus the controller's own
     /// compute time (s): the IPC and wake-up overhead of one round trip.
@@ -457,6 +461,14 @@ struct Looper {
     record_every: u64,
     /// `sim.push = "hand"`: the robot frame the scenario's force is applied at.
     push_frame: Option<usize>,
+    /// The sensor models the published state passes through (`None`: truth), and the sole
+    /// corners' positions for them (scratch).
+    sensors: Option<Sensors>,
+    points: [[f64; 3]; N_CONTACTS],
+    /// The plant's step (s).
+    dt: f64,
+    /// The state last published, as measured.
+    last_state: Box<StateMsg>,
 }
 
 fn log_transition(from: Phase, to: Phase, t: f64, cfg: &SimConfig) {
@@ -550,6 +562,10 @@ impl Looper {
                 ),
                 Push::Door | Push::None => None,
             },
+            sensors: Sensors::new(&cfg.sensors),
+            points: [[0.0; 3]; N_CONTACTS],
+            dt: cfg.dt,
+            last_state: Box::default(),
         })
     }
 
@@ -587,6 +603,8 @@ impl Looper {
             max_penetration: self.max_pen,
             max_slip_speed: self.max_slip,
             max_loop_error: self.max_loop,
+            sensing: cfg.sensors.sensing.name().into(),
+            sensor_counts: self.sensors.as_ref().map(|s| s.counts),
             recorder,
             ipc_overhead_p50: self.ipc.quantile(0.5),
             ipc_overhead_p99: self.ipc.quantile(0.99),
@@ -684,8 +702,18 @@ impl Looper {
             };
         }
         let info = &self.info;
-        ep.state
-            .send_with(|m| fill_state(m, world, info, zmp, hand))?;
+        for (p, c) in self.points.iter_mut().zip(world.contact_points()) {
+            *p = [c.x, c.y, c.z];
+        }
+        let (sensors, points, dt) = (&mut self.sensors, &self.points, self.dt);
+        let last = &mut self.last_state;
+        ep.state.send_with(|m| {
+            fill_state(m, world, info, zmp, hand);
+            if let Some(s) = sensors {
+                s.apply(m, dt, points);
+            }
+            **last = *m;
+        })?;
         let stats = self.gate.stats;
         let (flags, hold_steps) = (self.info.flags, self.supervisor.stats.hold_steps);
         ep.truth.send_with(|g| {
@@ -771,9 +799,10 @@ impl Looper {
                 if !woken {
                     // A controller that connected after this state was sent has neither the
                     // sample nor its wake-up: send the same state again (it skips duplicates).
-                    let (zmp, hand, info) = (self.zmp, self.hand_force, &self.info);
-                    ep.state
-                        .send_with(|m| fill_state(m, world, info, zmp, hand))?;
+                    // The same bytes: the sensors are not sampled again (a resend depends on
+                    // wall-clock timing, the noise must not).
+                    let last = &self.last_state;
+                    ep.state.send_with(|m| *m = **last)?;
                     ep.state_event.notify()?;
                 }
             }

@@ -158,6 +158,10 @@ impl PhysicsParams {
 }
 
 impl Default for PhysicsParams {
+    #[allow(
+        clippy::expect_used,
+        reason = "the embedded config is a constant of the binary, checked by the config tests"
+    )]
     fn default() -> Self {
         Self::from_config(&SimConfig::embedded().expect("the embedded sim config is valid"))
     }

@@ -38,6 +38,30 @@ pub fn rig_of(robot: &Robot, config: &Config, kind: ControllerKind) -> Rig {
     }
 }
 
+impl Rig {
+    /// Offers [`push_forecast`]`(0, fx)` at t = 0.
+    pub fn offer_push(&mut self, fx: f64) {
+        self.window
+            .offer(&push_forecast(0.0, fx), 0.0)
+            .expect("valid forecast");
+    }
+
+    /// Ticks the frozen state at t = k ms for each k of `ticks`; the ticks that returned an
+    /// error. Allocation-free itself (the allocation tests count inside it).
+    pub fn tick_frozen(&mut self, ticks: std::ops::Range<usize>) -> usize {
+        let mut errors = 0;
+        for k in ticks {
+            self.state.time = k as f64 * 0.001;
+            errors += usize::from(
+                self.core
+                    .tick(&self.state, &self.window, None, &mut self.tau)
+                    .is_err(),
+            );
+        }
+        errors
+    }
+}
+
 /// A forecast from `t0` (5 ms samples, 2.5 s) of a constant push `fx` starting at sample 100.
 pub fn push_forecast(t0: f64, fx: f64) -> Box<ForecastMsg> {
     let mut m: Box<ForecastMsg> = Box::default();
