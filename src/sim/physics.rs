@@ -21,6 +21,28 @@ pub enum Engine {
     Mujoco,
 }
 
+/// The centre of pressure on flat ground of vertical loads `(f_z, [x, y])`: the total load, the
+/// CoP when anything is loaded, and the loaded points. A load ≤ 0 carries nothing. Shared by
+/// the MuJoCo plant and the sensor models (which take it from the measured forces).
+pub fn centre_of_pressure(
+    loads: impl IntoIterator<Item = (f64, [f64; 2])>,
+) -> (f64, Option<[f64; 2]>, u32) {
+    let (mut total, mut cx, mut cy, mut active) = (0.0, 0.0, 0.0, 0u32);
+    for (fz, p) in loads {
+        if fz > 0.0 {
+            total += fz;
+            cx += fz * p[0];
+            cy += fz * p[1];
+            active += 1;
+        }
+    }
+    (
+        total,
+        (active > 0).then(|| [cx / total, cy / total]),
+        active,
+    )
+}
+
 pub trait Physics {
     /// Which engine (`upc`, `mujoco`), for logs and summaries.
     fn engine(&self) -> &'static str;

@@ -702,8 +702,10 @@ impl Looper {
             };
         }
         let info = &self.info;
-        for (p, c) in self.points.iter_mut().zip(world.contact_points()) {
-            *p = [c.x, c.y, c.z];
+        if self.sensors.is_some() {
+            for (p, c) in self.points.iter_mut().zip(world.contact_points()) {
+                *p = [c.x, c.y, c.z];
+            }
         }
         let (sensors, points, dt) = (&mut self.sensors, &self.points, self.dt);
         let last = &mut self.last_state;

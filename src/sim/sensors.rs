@@ -257,15 +257,10 @@ impl Sensors {
         }
         // The centre of pressure of the measured forces (flat ground), as the robot computes it;
         // where they carry no weight, the previous one stays.
-        let (mut fz, mut mx, mut my) = (0.0, 0.0, 0.0);
-        for (f, p) in m.contact_forces.iter().zip(contact_points) {
-            let z = f[2].max(0.0);
-            fz += z;
-            mx += z * p[0];
-            my += z * p[1];
-        }
-        if fz > 1e-6 {
-            m.zmp = [mx / fz, my / fz];
+        let loads =
+            (m.contact_forces.iter().zip(contact_points)).map(|(f, p)| (f[2], [p[0], p[1]]));
+        if let (_, Some(cop), _) = super::physics::centre_of_pressure(loads) {
+            m.zmp = cop;
         }
     }
 }

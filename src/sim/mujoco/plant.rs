@@ -365,22 +365,10 @@ impl MujocoPlant {
     /// The CoP of the loaded points, at the spheres' lowest points (their centres in x, y):
     /// the total normal force, the CoP if any load, and the loaded points.
     fn centre_of_pressure(&self) -> (f64, Option<[f64; 2]>, u32) {
-        let (mut total, mut cx, mut cy, mut active) = (0.0, 0.0, 0.0, 0u32);
-        for (k, &g) in self.spheres.iter().enumerate() {
-            let fz = self.forces[k].z;
-            if fz > 0.0 {
-                let p = self.mj.geom_xpos(g);
-                total += fz;
-                cx += fz * p[0];
-                cy += fz * p[1];
-                active += 1;
-            }
-        }
-        (
-            total,
-            (active > 0).then(|| [cx / total, cy / total]),
-            active,
-        )
+        crate::sim::physics::centre_of_pressure(self.spheres.iter().enumerate().map(|(k, &g)| {
+            let p = self.mj.geom_xpos(g);
+            (self.forces[k].z, [p[0], p[1]])
+        }))
     }
 
     /// The door's force on the hand. Equality rows come first; the connect's residual is
