@@ -1,6 +1,7 @@
 //! The controller's compute per tick without IPC (`ControllerCore::tick`): kinematics, M_e,
 //! the hand previewer, the ZMP preview, the whole-body QP; C0 and C1 at home with a forecast
-//! push arriving over the horizon (so C1's disturbance and α0 vary every tick, as in a run).
+//! push arriving over the horizon (so C1's disturbance and α0 vary every tick, as in a run);
+//! C1 on a robot's sensors, its base estimated (docs/estimation.md).
 //! Profile it with `perf record` on this bench to see where a tick's time goes.
 //!
 //! Run: `cargo bench --bench control`.
@@ -26,12 +27,26 @@ fn bench(c: &mut Criterion) {
     // hand force is the forecast's, so the estimator runs its full window every 5th tick.
     let mut uncorrected = config.clone();
     uncorrected.controller.forecast_correction.enabled = false;
-    for (name, kind, config) in [
-        ("c0_tick", ControllerKind::C0, &config),
-        ("c1_tick", ControllerKind::C1, &config),
-        ("c1_tick_uncorrected", ControllerKind::C1, &uncorrected),
+    let weight = upc::robot::Robot::embedded_default()
+        .expect("robot")
+        .derived
+        .mass
+        * 9.81;
+    for (name, kind, config, estimated) in [
+        ("c0_tick", ControllerKind::C0, &config, false),
+        ("c1_tick", ControllerKind::C1, &config, false),
+        (
+            "c1_tick_uncorrected",
+            ControllerKind::C1,
+            &uncorrected,
+            false,
+        ),
+        ("c1_tick_estimated_base", ControllerKind::C1, &config, true),
     ] {
         let mut r = humanoid::rig(config, kind);
+        if estimated {
+            r.without_base(weight);
+        }
         r.window
             .offer(&humanoid::push_forecast(0.0, -40.0), 0.0)
             .expect("forecast");
@@ -41,6 +56,7 @@ fn bench(c: &mut Criterion) {
         g.bench_function(name, |b| {
             b.iter(|| {
                 r.state.time = (k % 1000) as f64 * 0.001;
+                r.state.stamps = [r.state.time; 4];
                 r.state.hand_force = r.window.at(r.state.time);
                 k += 1;
                 let out = r.core.tick(&r.state, &r.window, None, &mut r.tau);

@@ -27,6 +27,7 @@ pub mod channels;
 pub mod config;
 pub mod control;
 pub mod dynamics;
+pub mod estimation;
 pub mod forecast;
 pub mod logging;
 pub mod offline;

@@ -48,3 +48,22 @@ fn controller_first_ticks_torque_limited_full_formulation() {
     assert_eq!(c.solver_builds, built, "a tick built a solver");
     assert!(count <= 3 * ticks, "{count} allocations in {ticks} ticks");
 }
+
+/// The same with the base estimated (docs/estimation.md): the estimator's kinematics, Kalman
+/// filter and centre of pressure add no allocation.
+#[test]
+fn controller_tick_with_the_base_estimator_allocations() {
+    let config = Config::embedded_default().expect("defaults");
+    let mut r = rig(&config, ControllerKind::C1);
+    let robot = upc::robot::Robot::embedded_default().expect("robot");
+    r.without_base(robot.derived.mass * 9.81);
+    r.offer_push(-40.0);
+    assert_eq!(r.tick_frozen(0..5), 0, "a warm-up tick failed");
+    let count = allocations(|| {
+        assert_eq!(r.tick_frozen(5..25), 0);
+    });
+    let e = r.core.estimator_counts().expect("the estimator ran");
+    eprintln!("with the estimator: {count} allocations in 20 ticks, {e:?}");
+    assert_eq!(e.ticks, 25);
+    assert!(count <= 20, "{count} allocations in 20 ticks");
+}

@@ -18,6 +18,7 @@ SCENARIO_NAME_LEN = 128
 STATE_FLAG_HOLD = 1
 STATE_FLAG_LOCKSTEP = 2
 STATE_FLAG_DAMPING = 4
+STATE_FLAG_BASE_UNMEASURED = 8
 TORQUE_FLAG_FALLBACK = 1
 
 
@@ -42,6 +43,11 @@ class StateMsg(ctypes.Structure):
         ("force_scale", ctypes.c_double),
         ("robot_hash", ctypes.c_uint64),
         ("scenario", ctypes.c_uint8 * SCENARIO_NAME_LEN),
+        ("imu_orientation", ctypes.c_double * 4),
+        ("imu_angular_velocity", ctypes.c_double * 3),
+        ("imu_linear_acceleration", ctypes.c_double * 3),
+        ("foot_wrenches", (ctypes.c_double * 6) * 2),
+        ("stamps", ctypes.c_double * 4),
     ]
 
     @staticmethod
@@ -146,7 +152,7 @@ def event(node, prefix: str, kind: str):
 # b"UPCZ", contract version u16, kind u16, payload size u32, reserved u32; little-endian) and
 # the payload's bytes as above. The bridge refuses a payload whose header does not match.
 WIRE_MAGIC = b"UPCZ"
-WIRE_VERSION = 2
+WIRE_VERSION = 3
 _WIRE_KIND = {"state": 1, "torques": 2, "forecast": 3, "ground_truth": 4}
 _WIRE_HEADER = struct.Struct("<4sHHII")
 

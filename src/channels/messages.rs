@@ -14,8 +14,9 @@ pub const MAX_DOF: usize = 128;
 /// Version of the payloads' layout (services/CHANNELS.md, "Contract version"): raised whenever
 /// a payload of this file changes. iceoryx2 refuses a peer of another layout when it opens a
 /// service; the Zenoh framing carries the version in its header.
-/// 1: `MAX_DOF` = 48; 2: `MAX_DOF` = 128.
-pub const CONTRACT_VERSION: u16 = 2;
+/// 1: `MAX_DOF` = 48; 2: `MAX_DOF` = 128; 3: the sensor block of [`StateMsg`] (IMU, foot
+/// wrenches, sample times).
+pub const CONTRACT_VERSION: u16 = 3;
 /// Contact points: four sole corners per foot, order l_fl, l_fr, l_rl, l_rr, r_fl, r_fr, r_rl, r_rr.
 pub const N_CONTACTS: usize = 8;
 /// Capacity of a force forecast (samples).
@@ -68,7 +69,32 @@ pub struct StateMsg {
     pub robot_hash: u64,
     /// Name (embedded) or path of the scenario the plant plays, UTF-8, NUL-padded.
     pub scenario: [u8; SCENARIO_NAME_LEN],
+    // The sensor block: what a robot's SDK gives beside the joints (services/CHANNELS.md,
+    // "Sensors"). A plant that measures its floating base (a simulator on truth, a motion-capture
+    // lab) also fills `q[..7]` and `v[..6]`; one that does not sets `STATE_FLAG_BASE_UNMEASURED`
+    // and the controller estimates them from this block.
+    /// IMU orientation: its frame (mounted on the base, aligned with it) in the world, quaternion
+    /// xyzw; the yaw is the IMU's own (it drifts on a real one).
+    pub imu_orientation: [f64; 4],
+    /// IMU angular velocity (rad/s, IMU frame).
+    pub imu_angular_velocity: [f64; 3],
+    /// IMU specific force (m/s², IMU frame): what an accelerometer reads, the acceleration minus
+    /// gravity (at rest, +g along the world's up).
+    pub imu_linear_acceleration: [f64; 3],
+    /// Wrench of the ground on each foot, left then right: [fx, fy, fz, τx, τy, τz] (N, N·m) in
+    /// the sole frame (x toward the toes, z up from the sole), about the centroid of the foot's
+    /// four corners; as a six-axis foot F/T sensor gives it, moved to the sole.
+    pub foot_wrenches: [[f64; 6]; 2],
+    /// Plant time (s) at which each sensor group was sampled, `SENSOR_*` order (joints, IMU,
+    /// feet, hand): `time` minus the group's latency; unchanged over a lost sample.
+    pub stamps: [f64; 4],
 }
+
+/// Indices of [`StateMsg::stamps`].
+pub const SENSOR_JOINTS: usize = 0;
+pub const SENSOR_IMU: usize = 1;
+pub const SENSOR_FEET: usize = 2;
+pub const SENSOR_HAND: usize = 3;
 
 /// Capacity of `StateMsg::scenario` (bytes).
 pub const SCENARIO_NAME_LEN: usize = 128;
@@ -89,6 +115,9 @@ pub const STATE_FLAG_HOLD: u32 = 1;
 pub const STATE_FLAG_LOCKSTEP: u32 = 2;
 /// The hold gave way to bare joint damping (`sim.hold.lost_timeout` passed without a controller).
 pub const STATE_FLAG_DAMPING: u32 = 4;
+/// The plant does not measure its floating base: `q[..7]` and `v[..6]` are NaN, and a
+/// controller estimates them from the sensor block (IMU, joints, foot wrenches).
+pub const STATE_FLAG_BASE_UNMEASURED: u32 = 8;
 
 impl StateMsg {
     /// The scenario name announced by the plant (empty when none or not valid UTF-8).

@@ -147,6 +147,9 @@ struct Entry {
     controller_exit: Option<i32>,
     #[serde(skip_serializing_if = "Option::is_none")]
     bridge_summary: Option<serde_json::Value>,
+    /// The base estimate against the plant's truth (lockstep runs whose base was estimated).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    base_estimate_error: Option<upc::estimation::BaseAccuracy>,
 }
 
 pub fn run(args: RunArgs) -> CliResult {
@@ -339,6 +342,10 @@ fn run_one(
         forecaster_exit,
         controller_exit,
         bridge_summary: read("bridge.json").and_then(|t| serde_json::from_str(&t).ok()),
+        base_estimate_error: upc::estimation::base_accuracy(
+            &dir.join("controller.csv"),
+            &dir.join("sim.csv"),
+        ),
     })
 }
 
@@ -908,6 +915,23 @@ fn print_table(entries: &[Entry]) {
                 "{:<4} failed (exit {:?}); see {}/controller.log",
                 e.controller, e.controller_exit, e.dir
             ),
+        }
+    }
+    // The base estimate against the plant's truth, when the base was estimated.
+    for e in entries {
+        if let Some(a) = &e.base_estimate_error {
+            println!(
+                "{}: base estimate vs truth: position RMS {:.1} mm (height max {:.1} mm), \
+                 velocity RMS {:.1} mm/s (max {:.1}), orientation RMS {:.2}° (tilt {:.2}°, max {:.2}°)",
+                e.controller,
+                a.position_rms * 1e3,
+                a.height_max * 1e3,
+                a.velocity_rms * 1e3,
+                a.velocity_max * 1e3,
+                a.orientation_rms_deg,
+                a.tilt_rms_deg,
+                a.orientation_max_deg
+            );
         }
     }
     // A simulator or forecaster that failed (a diverging simulation, a crashed plant or

@@ -5,7 +5,9 @@ mod controller_settings;
 mod layers;
 mod schema;
 
-pub use controller_settings::{ComObserverSettings, CorrectionSettings, RealtimeSettings};
+pub use controller_settings::{
+    ComObserverSettings, CorrectionSettings, EstimatorMode, EstimatorSettings, RealtimeSettings,
+};
 pub use layers::{ConfigError, Layers};
 pub use schema::*;
 

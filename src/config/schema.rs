@@ -392,6 +392,8 @@ pub struct ControllerConfig {
     pub forecast_correction: super::CorrectionSettings,
     /// The CoM disturbance observer (docs/forecast_correction.md, "CoM observer").
     pub com_observer: super::ComObserverSettings,
+    /// The floating-base estimator (docs/estimation.md).
+    pub estimator: super::EstimatorSettings,
 }
 
 impl ControllerConfig {
@@ -447,6 +449,9 @@ impl ControllerConfig {
         }
         if let Err((key, why)) = self.com_observer.check() {
             return Err(l.range_error(&format!("controller.com_observer.{key}"), why));
+        }
+        if let Err((key, why)) = self.estimator.check() {
+            return Err(l.range_error(&format!("controller.estimator.{key}"), why));
         }
         Ok(())
     }

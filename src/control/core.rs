@@ -23,12 +23,13 @@ use super::com_observer::ComObserver;
 use super::forecast_correction::{CorrectionEstimate, ForecastCorrector};
 use super::forecast_window::ForecastWindow;
 use super::gain_thread::StampedSchedule;
-use crate::channels::{MAX_DOF, StateMsg};
-use crate::config::{Config, ControllerKind};
+use crate::channels::{MAX_DOF, STATE_FLAG_BASE_UNMEASURED, StateMsg};
+use crate::config::{Config, ControllerKind, EstimatorMode};
 use crate::dynamics::{
     Data, DynamicsError, Model, OpSpaceWorkspace, ReferenceFrame, center_of_mass_velocity,
     frame_velocity,
 };
+use crate::estimation::{BaseEstimate, BaseEstimator, EstimatorCounts, EstimatorError};
 use crate::preview::{
     AxisState, GainSchedule, HandPreviewer, HandState, PreviewError, PreviewPlan, ZmpPreview,
 };
@@ -55,6 +56,12 @@ pub enum TickError {
     Robot { plant: u64, mine: u64 },
     #[error("dynamics: {0}")]
     Dynamics(#[from] DynamicsError),
+    #[error("base estimator: {0}")]
+    Estimator(#[from] EstimatorError),
+    #[error(
+        "the plant does not measure its floating base (its states carry STATE_FLAG_BASE_UNMEASURED) and controller.estimator.mode = \"off\": set it to \"auto\""
+    )]
+    BaseUnmeasured,
 }
 
 /// What one tick produced, for logging and the summary.
@@ -67,7 +74,7 @@ pub struct TickRecord {
     pub zmp_ref: [f64; 2],
     /// ZMP the preview predicts for the next preview step.
     pub zmp_pred: [f64; 2],
-    /// Measured ZMP (from the simulator's contact forces).
+    /// Measured ZMP: the state's, or the base estimator's from the foot wrenches when it runs.
     pub zmp_meas: [f64; 2],
     pub hand_pos: [f64; 3],
     pub hand_err: f64,
@@ -95,6 +102,8 @@ pub struct TickRecord {
     pub f_obs: [f64; 2],
     /// The robot is fallen: this tick held joint damping, without preview or QP.
     pub fallen: bool,
+    /// The base estimator's estimate, when it ran this tick.
+    pub base: Option<BaseEstimate>,
 }
 
 /// The controller's state between ticks.
@@ -144,6 +153,11 @@ pub struct ControllerCore {
     fallen: bool,
     pub falls: u64,
     pub fallen_ticks: u64,
+    /// The floating-base estimator and when it runs (`controller.estimator`).
+    estimator: BaseEstimator,
+    estimator_mode: EstimatorMode,
+    /// The estimator ran on the last state.
+    estimating: bool,
     pub last: TickRecord,
 }
 
@@ -197,6 +211,13 @@ impl ControllerCore {
                 control_period,
             )
         });
+        let estimator = BaseEstimator::new(
+            &model,
+            wbc.contact_frames(),
+            cart.mass * cart.gravity,
+            control_period,
+            cc.estimator,
+        );
         Ok(Self {
             data: Data::new(&model),
             q: DVector::zeros(model.nq),
@@ -233,6 +254,9 @@ impl ControllerCore {
             fallen: false,
             falls: 0,
             fallen_ticks: 0,
+            estimator,
+            estimator_mode: cc.estimator.mode,
+            estimating: false,
             last: TickRecord::default(),
             model,
         })
@@ -285,6 +309,12 @@ impl ControllerCore {
         if let Some(o) = self.observer.as_mut() {
             o.reset();
         }
+        self.estimator.reset();
+    }
+
+    /// The base estimator's counters (`None` when it never ran).
+    pub fn estimator_counts(&self) -> Option<EstimatorCounts> {
+        (self.estimator.counts.ticks > 0).then_some(self.estimator.counts)
     }
 
     /// The forecast correction's counters (`None` when it is off).
@@ -367,7 +397,8 @@ impl ControllerCore {
         let m_e_ok = self.previewer.set_effective_mass(m_e).is_ok();
 
         let zref = self.horizon_inputs(t, &latched, forecast, state.hand_force, hand.vel.into());
-        let f_obs = self.observe([com.x, com.y], [vcom.x, vcom.y], state.zmp);
+        let zmp_meas = self.measured_zmp(state);
+        let f_obs = self.observe([com.x, com.y], [vcom.x, vcom.y], zmp_meas);
         let age = self.take_schedule(t, c2);
         let x: [AxisState; 2] = [0, 1].map(|a| Vector3::new(com[a], vcom[a], self.com_acc_cmd[a]));
         let (u, fallback) = self.preview(&x, &hand, m_e_ok, f_obs);
@@ -399,7 +430,7 @@ impl ControllerCore {
             com_acc_cmd: self.com_acc_cmd.into(),
             zmp_ref: zref,
             zmp_pred,
-            zmp_meas: state.zmp,
+            zmp_meas,
             hand_pos: hand.pos.into(),
             hand_err: (hand.pos - latched.hand_target).norm(),
             kp,
@@ -421,6 +452,7 @@ impl ControllerCore {
                 .unwrap_or_default(),
             f_obs,
             fallen: false,
+            base: self.estimating.then_some(self.estimator.last),
         };
         Ok(status)
     }
@@ -461,12 +493,13 @@ impl ControllerCore {
             time: state.time,
             com: com.into(),
             com_vel: vcom.into(),
-            zmp_meas: state.zmp,
+            zmp_meas: self.measured_zmp(state),
             hand_pos: hand.pos.into(),
             hand_err: (hand.pos - latched.hand_target).norm(),
             support: latched.support,
             f_meas: state.hand_force,
             fallen: true,
+            base: self.estimating.then_some(self.estimator.last),
             ..TickRecord::default()
         };
         WbcStatus::Fallback(FallbackReason::Fallen)
@@ -493,16 +526,37 @@ impl ControllerCore {
                 mine: self.robot_hash,
             });
         }
-        if !state.q[..nq]
+        let unmeasured = state.flags & STATE_FLAG_BASE_UNMEASURED != 0;
+        self.estimating = match self.estimator_mode {
+            EstimatorMode::On => true,
+            EstimatorMode::Auto => unmeasured,
+            EstimatorMode::Off if unmeasured => return Err(TickError::BaseUnmeasured),
+            EstimatorMode::Off => false,
+        };
+        // An estimated base is NaN in the state: its coordinates are checked once estimated.
+        let (base_q, base_v) = if self.estimating { (7, 6) } else { (0, 0) };
+        if !state.q[base_q..nq]
             .iter()
-            .chain(&state.v[..nv])
+            .chain(&state.v[base_v..nv])
             .all(|x| x.is_finite())
         {
             return Err(TickError::NotFinite);
         }
         self.q.as_mut_slice().copy_from_slice(&state.q[..nq]);
         self.v.as_mut_slice().copy_from_slice(&state.v[..nv]);
+        if self.estimating {
+            self.estimator.update(state, &mut self.q, &mut self.v)?;
+        }
         Ok(())
+    }
+
+    /// The measured centre of pressure: from the foot wrenches at the estimated soles when the
+    /// base is estimated (as a robot computes it), the state's otherwise.
+    fn measured_zmp(&self, state: &StateMsg) -> [f64; 2] {
+        match self.estimator.cop {
+            Some(cop) if self.estimating => cop,
+            _ => state.zmp,
+        }
     }
 
     /// The references latched at the first tick of a session: the support and the ZMP

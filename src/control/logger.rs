@@ -173,13 +173,21 @@ impl Drop for ControlLogger {
 }
 
 /// Columns of `controller.csv`; readers go by name (`upc compare`), so columns may be added.
-pub const CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_ref_x,zmp_ref_y,zmp_pred_x,zmp_pred_y,zmp_meas_x,zmp_meas_y,hand_err,kp,kd,f_ext_x,f_ext_y,f_ext_z,f_dis_x,f_dis_y,f_dis_z,hand_x,hand_y,hand_z,sup_x_min,sup_x_max,sup_y_min,sup_y_max,tick_us,wbc_us,wbc_solved,c2_cost,c2_iterations,f_meas_x,f_meas_y,f_meas_z,f_raw_x,f_raw_y,f_raw_z,corr_factor,corr_shift,corr_offset_x,corr_offset_y,corr_offset_z,corr_contradicted,f_obs_x,f_obs_y";
+pub const CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_ref_x,zmp_ref_y,zmp_pred_x,zmp_pred_y,zmp_meas_x,zmp_meas_y,hand_err,kp,kd,f_ext_x,f_ext_y,f_ext_z,f_dis_x,f_dis_y,f_dis_z,hand_x,hand_y,hand_z,sup_x_min,sup_x_max,sup_y_min,sup_y_max,tick_us,wbc_us,wbc_solved,c2_cost,c2_iterations,f_meas_x,f_meas_y,f_meas_z,f_raw_x,f_raw_y,f_raw_z,corr_factor,corr_shift,corr_offset_x,corr_offset_y,corr_offset_z,corr_contradicted,f_obs_x,f_obs_y,est_x,est_y,est_z,est_vx,est_vy,est_vz,est_roll,est_pitch,est_yaw,est_innovation";
 
 fn write_csv(w: &mut impl Write, t: &TickLog) -> std::io::Result<()> {
     let c = &t.core;
+    // The base estimate's columns are NaN when the base was measured.
+    let b = c.base.unwrap_or(crate::estimation::BaseEstimate {
+        position: [f64::NAN; 3],
+        velocity: [f64::NAN; 3],
+        rpy: [f64::NAN; 3],
+        stance: [false; 2],
+        innovation: f64::NAN,
+    });
     writeln!(
         w,
-        "{:.4},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.2},{:.2},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.1},{:.1},{},{:.5e},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.3},{:.3},{:.3},{},{:.3},{:.3}",
+        "{:.4},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.2},{:.2},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.1},{:.1},{},{:.5e},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.3},{:.3},{:.3},{},{:.3},{:.3},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.3}",
         c.time,
         c.com[0],
         c.com[1],
@@ -224,7 +232,17 @@ fn write_csv(w: &mut impl Write, t: &TickLog) -> std::io::Result<()> {
         c.correction.offset[2],
         u8::from(c.correction.contradicted),
         c.f_obs[0],
-        c.f_obs[1]
+        c.f_obs[1],
+        b.position[0],
+        b.position[1],
+        b.position[2],
+        b.velocity[0],
+        b.velocity[1],
+        b.velocity[2],
+        b.rpy[0],
+        b.rpy[1],
+        b.rpy[2],
+        b.innovation,
     )
 }
 
@@ -303,6 +321,35 @@ fn log_tick(rec: &rerun::RecordingStream, t: &TickLog) {
         "controller/correction/contradicted",
         f64::from(u8::from(c.correction.contradicted)),
     );
+    if let Some(b) = &c.base {
+        // The base estimate (docs/estimation.md); the truth is in the simulator's recording.
+        for (k, axis) in ["x", "y", "z"].iter().enumerate() {
+            scalar(
+                rec,
+                &format!("controller/base/position_{axis}"),
+                b.position[k],
+            );
+            scalar(
+                rec,
+                &format!("controller/base/velocity_{axis}"),
+                b.velocity[k],
+            );
+        }
+        scalar(rec, "controller/base/roll_deg", b.rpy[0].to_degrees());
+        scalar(rec, "controller/base/pitch_deg", b.rpy[1].to_degrees());
+        scalar(rec, "controller/base/yaw_deg", b.rpy[2].to_degrees());
+        scalar(rec, "controller/base/innovation", b.innovation);
+        scalar(
+            rec,
+            "controller/base/stance_left",
+            f64::from(u8::from(b.stance[0])),
+        );
+        scalar(
+            rec,
+            "controller/base/stance_right",
+            f64::from(u8::from(b.stance[1])),
+        );
+    }
     scalar(rec, "controller/observer/f_x", c.f_obs[0]);
     scalar(rec, "controller/observer/f_y", c.f_obs[1]);
     scalar(rec, "controller/gains/kp", c.kp);

@@ -623,7 +623,9 @@ impl<'a> ControlLoop<'a> {
     fn record(&mut self, tick_time: Duration, c2_log: Option<(f64, f64, u32, f64)>) {
         let Some(l) = &self.logger else { return };
         let every = self.config.controller.log_every as u64;
-        let ticks = self.metrics.ticks;
+        // Records at plant times that are multiples of the record period (the first tick's
+        // state is at t = 0), the instants the plant's ground truth is recorded at.
+        let ticks = self.metrics.ticks.saturating_sub(1);
         if ticks.is_multiple_of(every) {
             let (c2_cost, c2_nominal_cost, c2_iterations, c2_solve_time) =
                 c2_log.unwrap_or_default();
@@ -708,6 +710,7 @@ impl<'a> ControlLoop<'a> {
         }
         s.preview_fallbacks = self.core.preview_fallbacks;
         (s.falls, s.fallen_ticks) = (self.core.falls, self.core.fallen_ticks);
+        s.estimator = self.core.estimator_counts();
         s.forecast_correction = self.core.correction_counts().map(|c| {
             let e = self.core.last.correction;
             CorrectionSummary {

@@ -111,6 +111,9 @@ pub struct ServerSummary {
     pub stopped_by: String,
     /// The forecast correction (docs/forecast_correction.md); `None`: off (or C0).
     pub forecast_correction: Option<CorrectionSummary>,
+    /// The base estimator's counters (docs/estimation.md); `None`: the base was measured.
+    #[serde(default)]
+    pub estimator: Option<crate::estimation::EstimatorCounts>,
 }
 
 /// What the forecast correction did over a run.

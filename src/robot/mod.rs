@@ -519,3 +519,18 @@ fn derive(
         feet_distance: (centres[0] - centres[1]).norm(),
     })
 }
+
+/// A sole's orientation from its corners (front-left, front-right, rear-left, rear-right): x
+/// toward the toes, z its normal (as the plants define the foot wrench's frame).
+pub fn sole_frame(
+    fl: Vector3<f64>,
+    fr: Vector3<f64>,
+    rl: Vector3<f64>,
+    rr: Vector3<f64>,
+) -> Matrix3<f64> {
+    let x = ((fl + fr) - (rl + rr)).normalize();
+    let left = (fl + rl) - (fr + rr);
+    let z = x.cross(&left).normalize();
+    let y = z.cross(&x);
+    Matrix3::from_columns(&[x, y, z])
+}

@@ -440,7 +440,7 @@ struct Run<'a> {
 }
 
 /// Columns of the lockstep ground-truth CSV (`--truth-csv`).
-pub const TRUTH_CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_x,zmp_y,hand_fx,hand_fy,hand_fz,door_angle,door_torque,loop_error,max_penetration,max_slip_speed,solver_iterations";
+pub const TRUTH_CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_x,zmp_y,hand_fx,hand_fy,hand_fz,door_angle,door_torque,loop_error,max_penetration,max_slip_speed,solver_iterations,base_x,base_y,base_z,base_vx,base_vy,base_vz,base_roll,base_pitch,base_yaw";
 
 struct Looper {
     tau: DVector<f64>,
@@ -461,9 +461,9 @@ struct Looper {
     record_every: u64,
     /// `sim.push = "hand"`: the robot frame the scenario's force is applied at.
     push_frame: Option<usize>,
-    /// The sensor models the published state passes through (`None`: truth), and the sole
-    /// corners' positions for them (scratch).
-    sensors: Option<Sensors>,
+    /// The sensor block of the published state and the models it passes through (on
+    /// `realistic`), and the sole corners' positions for them (scratch).
+    sensors: Sensors,
     points: [[f64; 3]; N_CONTACTS],
     /// The plant's step (s).
     dt: f64,
@@ -498,9 +498,18 @@ fn write_truth(
     zmp: [f64; 2],
     hand: [f64; 3],
 ) -> std::io::Result<()> {
+    // The floating base: position, linear velocity (world) and roll-pitch-yaw, for the base
+    // estimator's error (`upc run`).
+    let (q, v) = (world.q(), world.v());
+    let r = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+        q[6], q[3], q[4], q[5],
+    ));
+    let vel = r * nalgebra::Vector3::new(v[0], v[1], v[2]);
+    let (roll, pitch, yaw) = r.euler_angles();
     writeln!(
         w,
-        "{:.4},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{:.4},{:.4},{:.6},{:.4},{:.3e},{:.3e},{:.3e},{}",
+        "{:.4},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{:.4},{:.4},{:.6},{:.4},{:.3e},{:.3e},{:.3e},{},\
+         {:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}",
         world.time(),
         rep.com[0],
         rep.com[1],
@@ -515,7 +524,16 @@ fn write_truth(
         rep.loop_error,
         rep.max_penetration,
         rep.max_slip_speed,
-        rep.solver_iterations
+        rep.solver_iterations,
+        q[0],
+        q[1],
+        q[2],
+        vel.x,
+        vel.y,
+        vel.z,
+        roll,
+        pitch,
+        yaw,
     )
 }
 
@@ -562,7 +580,7 @@ impl Looper {
                 ),
                 Push::Door | Push::None => None,
             },
-            sensors: Sensors::new(&cfg.sensors),
+            sensors: Sensors::new(&cfg.sensors, -world.robot().gravity.z),
             points: [[0.0; 3]; N_CONTACTS],
             dt: cfg.dt,
             last_state: Box::default(),
@@ -604,7 +622,7 @@ impl Looper {
             max_slip_speed: self.max_slip,
             max_loop_error: self.max_loop,
             sensing: cfg.sensors.sensing.name().into(),
-            sensor_counts: self.sensors.as_ref().map(|s| s.counts),
+            sensor_counts: self.sensors.realistic().then_some(self.sensors.counts),
             recorder,
             ipc_overhead_p50: self.ipc.quantile(0.5),
             ipc_overhead_p99: self.ipc.quantile(0.99),
@@ -702,18 +720,14 @@ impl Looper {
             };
         }
         let info = &self.info;
-        if self.sensors.is_some() {
-            for (p, c) in self.points.iter_mut().zip(world.contact_points()) {
-                *p = [c.x, c.y, c.z];
-            }
+        for (p, c) in self.points.iter_mut().zip(world.contact_points()) {
+            *p = [c.x, c.y, c.z];
         }
         let (sensors, points, dt) = (&mut self.sensors, &self.points, self.dt);
         let last = &mut self.last_state;
         ep.state.send_with(|m| {
             fill_state(m, world, info, zmp, hand);
-            if let Some(s) = sensors {
-                s.apply(m, dt, points);
-            }
+            sensors.apply(m, dt, points);
             **last = *m;
         })?;
         let stats = self.gate.stats;

@@ -4,9 +4,14 @@
 //!
 //! Modelled: joint encoders (quantised positions; velocities from the drives with white noise),
 //! the wrist force sensor and the sole forces (white noise, a constant bias, a bias drifting as
-//! a random walk, resolution, latency in steps, dropped samples holding the previous one). Not
-//! yet: the floating base (pose and velocity published as the plant's truth until the base
-//! estimator replaces them) and an IMU.
+//! a random walk, resolution, latency in steps, dropped samples holding the previous one), an
+//! IMU on the base (gyro and accelerometer with noise densities, biases and bias drift; the
+//! orientation of its own attitude filter with a tilt error and a drifting yaw). The foot
+//! wrenches of the state's sensor block are the measured corner forces summed in each sole's
+//! frame. Unless `mocap`, the floating base is not published: a robot does not measure it.
+//!
+//! The sensor block (IMU, foot wrenches, sample times) is filled from the truth on `truth` too,
+//! so an estimator can run on exact sensors.
 //!
 //! Reproducible: one seeded generator per plant run, drawn in a fixed order every step, so a
 //! lockstep rerun publishes the same bytes. Allocation-free after [`Sensors::new`].
@@ -16,7 +21,12 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::Deserialize;
 
-use crate::channels::{MAX_DOF, N_CONTACTS, StateMsg};
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+
+use crate::channels::{
+    MAX_DOF, N_CONTACTS, SENSOR_FEET, SENSOR_HAND, SENSOR_IMU, SENSOR_JOINTS,
+    STATE_FLAG_BASE_UNMEASURED, StateMsg,
+};
 
 /// Truth or the sensor models (`sim.sensors.sensing`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, clap::ValueEnum)]
@@ -65,6 +75,32 @@ pub struct EncoderConfig {
     pub velocity_noise: f64,
 }
 
+/// The IMU's model (mounted on the base, aligned with it). Densities as data sheets give them:
+/// a sample's σ is density / √dt.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImuConfig {
+    /// Gyro rate noise density (rad/s/√Hz).
+    pub gyro_noise_density: f64,
+    /// Gyro bias per axis left after calibration (rad/s; signs from the seed) and its random
+    /// walk (rad/s/√s).
+    pub gyro_bias: f64,
+    pub gyro_bias_drift: f64,
+    /// Accelerometer noise density (m/s²/√Hz).
+    pub accel_noise_density: f64,
+    /// Accelerometer bias per axis (m/s²) and its random walk (m/s²/√s).
+    pub accel_bias: f64,
+    pub accel_bias_drift: f64,
+    /// The attitude filter's constant roll and pitch error (rad; signs from the seed), its white
+    /// orientation noise per axis (rad) and its yaw random walk (rad/√s: no magnetometer).
+    pub tilt_error: f64,
+    pub orientation_noise: f64,
+    pub yaw_drift: f64,
+    /// Delay in plant steps, and the probability that a sample is lost.
+    pub latency: usize,
+    pub dropout: f64,
+}
+
 /// `[sim.sensors]`.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -72,7 +108,12 @@ pub struct SensorsConfig {
     pub sensing: Sensing,
     /// Seed of the run's generator.
     pub seed: u64,
+    /// The floating base's pose and velocity are published as measured (a motion-capture
+    /// system): with `false` (a robot) they are NaN and `STATE_FLAG_BASE_UNMEASURED` says so.
+    /// Read on `realistic` only.
+    pub mocap: bool,
     pub encoders: EncoderConfig,
+    pub imu: ImuConfig,
     /// The wrist's force sensor (the hand force).
     pub wrist: ForceSensorConfig,
     /// Each sole corner's force.
@@ -106,6 +147,34 @@ impl SensorsConfig {
                 ));
             }
         }
+        let i = &self.imu;
+        for (key, v) in [
+            ("gyro_noise_density", i.gyro_noise_density),
+            ("gyro_bias", i.gyro_bias),
+            ("gyro_bias_drift", i.gyro_bias_drift),
+            ("accel_noise_density", i.accel_noise_density),
+            ("accel_bias", i.accel_bias),
+            ("accel_bias_drift", i.accel_bias_drift),
+            ("tilt_error", i.tilt_error),
+            ("orientation_noise", i.orientation_noise),
+            ("yaw_drift", i.yaw_drift),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Some((format!("imu.{key}"), format!("must be ≥ 0, got {v}")));
+            }
+        }
+        if !(0.0..1.0).contains(&i.dropout) {
+            return Some((
+                "imu.dropout".into(),
+                format!("must be in [0, 1), got {}", i.dropout),
+            ));
+        }
+        if i.latency > MAX_LATENCY {
+            return Some((
+                "imu.latency".into(),
+                format!("at most {MAX_LATENCY} steps, got {}", i.latency),
+            ));
+        }
         let e = &self.encoders;
         if e.bits > 32 {
             return Some((
@@ -129,19 +198,54 @@ pub const MAX_LATENCY: usize = 64;
 /// Counters of a run.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct SensorCounts {
-    /// Samples lost (the previous one published again), wrist and soles.
+    /// Samples lost (the previous one published again), wrist, soles and IMU.
     pub wrist_dropouts: u64,
     pub sole_dropouts: u64,
+    pub imu_dropouts: u64,
 }
 
-/// One three-axis force channel: its bias, its delay line and its last published sample.
+/// A delay line of `latency + 1` samples of N values, and the sample last published: what a
+/// fieldbus does to a sensor's samples (late, sometimes lost).
+#[derive(Debug, Clone)]
+struct Transport<const N: usize> {
+    line: Vec<[f64; N]>,
+    last: [f64; N],
+    primed: bool,
+}
+
+impl<const N: usize> Transport<N> {
+    fn new(latency: usize) -> Self {
+        Self {
+            line: vec![[0.0; N]; latency + 1],
+            last: [0.0; N],
+            primed: false,
+        }
+    }
+
+    /// Writes step `step`'s sample `x`, replaces it with the one published at that step, and
+    /// returns whether the sample was lost (`u`: a uniform draw, lost when below `dropout`).
+    fn pass(&mut self, step: u64, x: &mut [f64; N], u: f64, dropout: f64) -> bool {
+        // Write this step's sample, read the one `latency` steps old (the oldest written so far
+        // while the line fills).
+        let len = self.line.len() as u64;
+        self.line[(step % len) as usize] = *x;
+        let old = (step + 1).saturating_sub(len);
+        let delayed = self.line[(old % len) as usize];
+        let lost = self.primed && u < dropout;
+        if !lost {
+            self.last = delayed;
+        }
+        self.primed = true;
+        *x = self.last;
+        lost
+    }
+}
+
+/// One three-axis force channel: its bias and its transport.
 #[derive(Debug, Clone)]
 struct ForceChannel {
     bias: [f64; 3],
-    /// Delay line of measured samples (ring, `latency + 1` long).
-    line: Vec<[f64; 3]>,
-    last: [f64; 3],
-    primed: bool,
+    transport: Transport<3>,
 }
 
 impl ForceChannel {
@@ -152,9 +256,7 @@ impl ForceChannel {
         });
         Self {
             bias,
-            line: vec![[0.0; 3]; s.latency + 1],
-            last: [0.0; 3],
-            primed: false,
+            transport: Transport::new(s.latency),
         }
     }
 
@@ -177,57 +279,163 @@ impl ForceChannel {
             }
             f[c] = y;
         }
-        // The delay line: write this step's sample, read the one `latency` steps old (the
-        // oldest written so far while the line fills).
-        let len = self.line.len() as u64;
-        self.line[(step % len) as usize] = *f;
-        let old = (step + 1).saturating_sub(len);
-        let delayed = self.line[(old % len) as usize];
         let u: f64 = rng.random();
-        let lost = self.primed && u < s.dropout;
-        if !lost {
-            self.last = delayed;
-        }
-        self.primed = true;
-        *f = self.last;
-        lost
+        self.transport.pass(step, f, u, s.dropout)
     }
 }
 
-/// The sensor models of one plant run.
+/// A bias of `size` per axis with signs drawn from `rng`.
+fn signed_bias(size: f64, rng: &mut ChaCha8Rng) -> [f64; 3] {
+    [0; 3].map(|_| {
+        let u: f64 = StandardNormal.sample(rng);
+        size * u.signum()
+    })
+}
+
+/// The IMU: its biases, the attitude filter's error and the transport of its ten values
+/// (orientation xyzw, angular velocity, specific force).
+#[derive(Debug, Clone)]
+struct ImuChannel {
+    gyro_bias: [f64; 3],
+    accel_bias: [f64; 3],
+    /// Roll and pitch error of the attitude filter (constant) and its yaw error (a walk).
+    tilt: [f64; 2],
+    yaw: f64,
+    transport: Transport<10>,
+}
+
+impl ImuChannel {
+    fn new(c: &ImuConfig, rng: &mut ChaCha8Rng) -> Self {
+        let gyro_bias = signed_bias(c.gyro_bias, rng);
+        let accel_bias = signed_bias(c.accel_bias, rng);
+        let t = signed_bias(c.tilt_error, rng);
+        Self {
+            gyro_bias,
+            accel_bias,
+            tilt: [t[0], t[1]],
+            yaw: 0.0,
+            transport: Transport::new(c.latency),
+        }
+    }
+
+    /// Measures the true sample `x` (orientation, angular velocity, specific force) in place;
+    /// returns whether it was lost.
+    fn measure(
+        &mut self,
+        c: &ImuConfig,
+        step: u64,
+        dt: f64,
+        rng: &mut ChaCha8Rng,
+        x: &mut [f64; 10],
+    ) -> bool {
+        let mut n = || -> f64 { StandardNormal.sample(rng) };
+        let (sg, sa) = (
+            c.gyro_noise_density / dt.sqrt(),
+            c.accel_noise_density / dt.sqrt(),
+        );
+        let (wg, wa) = (
+            c.gyro_bias_drift * dt.sqrt(),
+            c.accel_bias_drift * dt.sqrt(),
+        );
+        for k in 0..3 {
+            self.gyro_bias[k] += wg * n();
+            self.accel_bias[k] += wa * n();
+            x[4 + k] += self.gyro_bias[k] + sg * n();
+            x[7 + k] += self.accel_bias[k] + sa * n();
+        }
+        // The attitude filter's error, a small rotation about the world's axes applied to the
+        // true orientation.
+        self.yaw += c.yaw_drift * dt.sqrt() * n();
+        let e = Vector3::new(
+            self.tilt[0] + c.orientation_noise * n(),
+            self.tilt[1] + c.orientation_noise * n(),
+            self.yaw + c.orientation_noise * n(),
+        );
+        let truth = UnitQuaternion::from_quaternion(Quaternion::new(x[3], x[0], x[1], x[2]));
+        let r = UnitQuaternion::from_scaled_axis(e) * truth;
+        x[..4].copy_from_slice(&[r.i, r.j, r.k, r.w]);
+        let u: f64 = rng.random();
+        self.transport.pass(step, x, u, c.dropout)
+    }
+}
+
+/// What an accelerometer on the base reads, from the base's world velocity over successive
+/// states: the specific force R^T (a + g ẑ), a by finite difference (0 on the first state).
+#[derive(Debug, Clone, Copy, Default)]
+struct SpecificForce {
+    last: Option<(u64, Vector3<f64>)>,
+    acc: Vector3<f64>,
+}
+
+impl SpecificForce {
+    fn update(&mut self, step: u64, dt: f64, vel: Vector3<f64>) -> Vector3<f64> {
+        match self.last {
+            Some((s, v)) if s < step => self.acc = (vel - v) / ((step - s) as f64 * dt),
+            Some(_) => {}
+            None => self.acc = Vector3::zeros(),
+        }
+        self.last = Some((step, vel));
+        self.acc
+    }
+}
+
+/// The sensor models of one plant run (the sensor block alone on `truth`).
 pub struct Sensors {
     cfg: SensorsConfig,
+    /// The models are on (`realistic`).
+    models: bool,
+    gravity: f64,
     rng: ChaCha8Rng,
     wrist: ForceChannel,
     soles: Vec<ForceChannel>,
+    imu: ImuChannel,
+    specific_force: SpecificForce,
+    /// Sample times of the IMU, feet and hand as last published.
+    stamps: [f64; 4],
     pub counts: SensorCounts,
 }
 
 impl Sensors {
-    /// `None` for truth.
-    pub fn new(cfg: &SensorsConfig) -> Option<Self> {
-        if cfg.sensing == Sensing::Truth {
-            return None;
-        }
+    /// The sensors of a plant with gravity `gravity` (m/s²).
+    pub fn new(cfg: &SensorsConfig, gravity: f64) -> Self {
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
         let wrist = ForceChannel::new(&cfg.wrist, &mut rng);
         let soles = (0..N_CONTACTS)
             .map(|_| ForceChannel::new(&cfg.soles, &mut rng))
             .collect();
-        Some(Self {
+        let imu = ImuChannel::new(&cfg.imu, &mut rng);
+        Self {
             cfg: *cfg,
+            models: cfg.sensing == Sensing::Realistic,
+            gravity,
             rng,
             wrist,
             soles,
+            imu,
+            specific_force: SpecificForce::default(),
+            stamps: [0.0; 4],
             counts: SensorCounts::default(),
-        })
+        }
     }
 
-    /// Turns the true state in `m` into what the sensors say, at plant step `m.step` of period
-    /// `dt`; `contact_points`: the sole corners (world), for the centre of pressure of the
-    /// measured forces.
+    /// Whether the models are on.
+    pub fn realistic(&self) -> bool {
+        self.models
+    }
+
+    /// Fills the sensor block of the true state in `m` and, on `realistic`, turns the state into
+    /// what the sensors say, at plant step `m.step` of period `dt`; `contact_points`: the sole
+    /// corners (world), for the foot wrenches and the centre of pressure of the measured forces.
     pub fn apply(&mut self, m: &mut StateMsg, dt: f64, contact_points: &[[f64; 3]]) {
-        let (cfg, step) = (self.cfg, m.step);
+        let imu_truth = self.imu_truth(m, dt);
+        let (t, step) = (m.time, m.step);
+        if !self.models {
+            self.publish_imu(m, &imu_truth);
+            fill_foot_wrenches(m, contact_points);
+            m.stamps = [t; 4];
+            return;
+        }
+        let cfg = self.cfg;
         // Joints: the configuration past the base's 7 coordinates, the velocity past its 6.
         let (nq, nv) = (m.nq as usize, m.nv as usize);
         let q_step = if cfg.encoders.bits > 0 {
@@ -244,17 +452,39 @@ impl Sensors {
             let n: f64 = StandardNormal.sample(&mut self.rng);
             *v += cfg.encoders.velocity_noise * n;
         }
+        let late = |latency: usize| t - latency as f64 * dt;
         if self
             .wrist
             .measure(&cfg.wrist, step, dt, &mut self.rng, &mut m.hand_force)
         {
             self.counts.wrist_dropouts += 1;
+        } else {
+            self.stamps[SENSOR_HAND] = late(cfg.wrist.latency);
         }
+        let mut lost = 0;
         for (ch, f) in self.soles.iter_mut().zip(m.contact_forces.iter_mut()) {
             if ch.measure(&cfg.soles, step, dt, &mut self.rng, f) {
-                self.counts.sole_dropouts += 1;
+                lost += 1;
             }
         }
+        self.counts.sole_dropouts += lost;
+        // The feet's stamp is the newest sample's: a corner lost holds its previous one.
+        if lost < N_CONTACTS as u64 {
+            self.stamps[SENSOR_FEET] = late(cfg.soles.latency);
+        }
+        let mut imu = imu_truth;
+        if self
+            .imu
+            .measure(&cfg.imu, step, dt, &mut self.rng, &mut imu)
+        {
+            self.counts.imu_dropouts += 1;
+        } else {
+            self.stamps[SENSOR_IMU] = late(cfg.imu.latency);
+        }
+        self.publish_imu(m, &imu);
+        fill_foot_wrenches(m, contact_points);
+        self.stamps[SENSOR_JOINTS] = t;
+        m.stamps = self.stamps;
         // The centre of pressure of the measured forces (flat ground), as the robot computes it;
         // where they carry no weight, the previous one stays.
         let loads =
@@ -262,6 +492,63 @@ impl Sensors {
         if let (_, Some(cop), _) = super::physics::centre_of_pressure(loads) {
             m.zmp = cop;
         }
+        if !cfg.mocap {
+            m.q[..7].fill(f64::NAN);
+            m.v[..6].fill(f64::NAN);
+            m.flags |= STATE_FLAG_BASE_UNMEASURED;
+        }
+    }
+
+    /// The true IMU sample of the state's base: orientation xyzw, angular velocity and specific
+    /// force in the base frame.
+    fn imu_truth(&mut self, m: &StateMsg, dt: f64) -> [f64; 10] {
+        let r = UnitQuaternion::from_quaternion(Quaternion::new(m.q[6], m.q[3], m.q[4], m.q[5]));
+        let v_world = r * Vector3::new(m.v[0], m.v[1], m.v[2]);
+        let a = self.specific_force.update(m.step, dt, v_world);
+        let f = r.inverse() * (a + Vector3::new(0.0, 0.0, self.gravity));
+        [
+            m.q[3], m.q[4], m.q[5], m.q[6], m.v[3], m.v[4], m.v[5], f.x, f.y, f.z,
+        ]
+    }
+
+    fn publish_imu(&self, m: &mut StateMsg, x: &[f64; 10]) {
+        m.imu_orientation.copy_from_slice(&x[..4]);
+        m.imu_angular_velocity.copy_from_slice(&x[4..7]);
+        m.imu_linear_acceleration.copy_from_slice(&x[7..]);
+    }
+}
+
+/// Each foot's wrench from its four corner forces (`m.contact_forces`, world) at `points`: in
+/// the sole frame (x from the heel's to the toes' midpoint, z the normal), about the corners'
+/// centroid.
+fn fill_foot_wrenches(m: &mut StateMsg, points: &[[f64; 3]]) {
+    for foot in 0..2 {
+        let k = 4 * foot;
+        let p = |i: usize| Vector3::from(points.get(k + i).copied().unwrap_or_default());
+        let f = |i: usize| Vector3::from(m.contact_forces[k + i]);
+        // Corner order per foot: front-left, front-right, rear-left, rear-right.
+        let centre = (p(0) + p(1) + p(2) + p(3)) / 4.0;
+        let sole = crate::robot::sole_frame(p(0), p(1), p(2), p(3));
+        let (x, y, z) = (sole.column(0), sole.column(1), sole.column(2));
+        let (mut force, mut moment) = (Vector3::zeros(), Vector3::zeros());
+        for i in 0..4 {
+            force += f(i);
+            moment += (p(i) - centre).cross(&f(i));
+        }
+        let w = [
+            x.dot(&force),
+            y.dot(&force),
+            z.dot(&force),
+            x.dot(&moment),
+            y.dot(&moment),
+            z.dot(&moment),
+        ];
+        // A degenerate sole (points not given) publishes zeros rather than NaN.
+        m.foot_wrenches[foot] = if w.iter().all(|c| c.is_finite()) {
+            w
+        } else {
+            [0.0; 6]
+        };
     }
 }
 
@@ -281,9 +568,23 @@ mod tests {
         SensorsConfig {
             sensing: Sensing::Realistic,
             seed: 7,
+            mocap: true,
             encoders: EncoderConfig {
                 bits: 12,
                 velocity_noise: 0.01,
+            },
+            imu: ImuConfig {
+                gyro_noise_density: 2.4e-4,
+                gyro_bias: 1e-3,
+                gyro_bias_drift: 0.0,
+                accel_noise_density: 1.7e-3,
+                accel_bias: 0.02,
+                accel_bias_drift: 0.0,
+                tilt_error: 3.5e-3,
+                orientation_noise: 0.0,
+                yaw_drift: 0.0,
+                latency: 0,
+                dropout: 0.0,
             },
             wrist: force,
             soles: force,
@@ -295,6 +596,7 @@ mod tests {
         m.step = t_step;
         m.nq = 10;
         m.nv = 9;
+        m.q[6] = 1.0;
         m.q[7] = 0.3;
         m.hand_force = hand;
         m
@@ -304,7 +606,7 @@ mod tests {
     /// (±2 N per axis), the spread the noise's σ.
     #[test]
     fn a_force_sensor_has_its_bias_and_noise() {
-        let mut s = Sensors::new(&cfg()).unwrap();
+        let mut s = Sensors::new(&cfg(), 9.81);
         let n = 20_000;
         let (mut sum, mut sum2) = ([0.0; 3], [0.0; 3]);
         for k in 0..n {
@@ -335,7 +637,7 @@ mod tests {
         let mut sum2 = 0.0;
         for seed in 0..runs {
             c.seed = seed;
-            let mut s = Sensors::new(&c).unwrap();
+            let mut s = Sensors::new(&c, 9.81);
             let mut last = 0.0;
             for k in 0..steps {
                 let mut m = state(k, [0.0; 3]);
@@ -362,7 +664,7 @@ mod tests {
             c.wrist.latency,
             c.wrist.resolution,
         ) = (0.0, 0.0, 3, 0.25);
-        let mut s = Sensors::new(&c).unwrap();
+        let mut s = Sensors::new(&c, 9.81);
         let mut out = Vec::new();
         for k in 0..10 {
             let mut m = state(k, [k as f64 + 0.1, 0.0, 0.0]);
@@ -380,7 +682,7 @@ mod tests {
     /// Encoders: positions on the 2π / 2^bits grid, the base untouched; velocities noisy.
     #[test]
     fn encoders_quantise_joints_only() {
-        let mut s = Sensors::new(&cfg()).unwrap();
+        let mut s = Sensors::new(&cfg(), 9.81);
         let mut m = state(0, [0.0; 3]);
         m.q[0] = 0.123456789;
         s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
@@ -397,7 +699,7 @@ mod tests {
         let mut c = cfg();
         c.wrist.dropout = 0.2;
         let run = |c: &SensorsConfig| {
-            let mut s = Sensors::new(c).unwrap();
+            let mut s = Sensors::new(c, 9.81);
             let mut out = Vec::new();
             for k in 0..2000 {
                 let mut m = state(k, [k as f64, 0.0, 0.0]);
@@ -418,7 +720,7 @@ mod tests {
     fn the_centre_of_pressure_is_the_measured_forces() {
         let mut c = cfg();
         (c.soles.noise, c.soles.bias) = (0.0, 0.0);
-        let mut s = Sensors::new(&c).unwrap();
+        let mut s = Sensors::new(&c, 9.81);
         let mut m = state(0, [0.0; 3]);
         let mut points = [[0.0; 3]; N_CONTACTS];
         for (k, p) in points.iter_mut().enumerate() {
@@ -427,5 +729,119 @@ mod tests {
         }
         s.apply(&mut m, 1e-3, &points);
         assert!((m.zmp[0] - 0.005).abs() < 1e-12 && (m.zmp[1] - 0.1).abs() < 1e-12);
+    }
+
+    /// The IMU of a base at rest, tilted about x: its accelerometer reads g along the world's
+    /// up in its own frame, plus its bias; its gyro reads its bias; its orientation is the truth
+    /// turned by the attitude filter's tilt error. On `truth` it reads the truth exactly.
+    #[test]
+    fn an_imu_at_rest_reads_gravity_in_its_frame() {
+        let tilt = 0.3_f64;
+        let at = |k: u64| {
+            let mut m = state(k, [0.0; 3]);
+            let r = UnitQuaternion::from_euler_angles(tilt, 0.0, 0.0);
+            m.q[3..7].copy_from_slice(&[r.i, r.j, r.k, r.w]);
+            m
+        };
+        let up = UnitQuaternion::from_euler_angles(tilt, 0.0, 0.0).inverse() * Vector3::z() * 9.81;
+        let mut c = cfg();
+        let mut exact = c;
+        exact.sensing = Sensing::Truth;
+        let mut s = Sensors::new(&exact, 9.81);
+        for k in 0..3 {
+            let mut m = at(k);
+            s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+            for a in 0..3 {
+                assert!((m.imu_linear_acceleration[a] - up[a]).abs() < 1e-12);
+                assert_eq!(m.imu_angular_velocity[a], 0.0);
+            }
+            assert_eq!(m.stamps, [0.0; 4]);
+        }
+        (c.imu.gyro_noise_density, c.imu.accel_noise_density) = (0.0, 0.0);
+        let mut s = Sensors::new(&c, 9.81);
+        let mut m = at(5);
+        s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+        for a in 0..3 {
+            let bias = m.imu_linear_acceleration[a] - up[a];
+            assert!((bias.abs() - 0.02).abs() < 1e-12, "accel bias {bias}");
+            assert!((m.imu_angular_velocity[a].abs() - 1e-3).abs() < 1e-12);
+        }
+        let o = m.imu_orientation;
+        let meas = UnitQuaternion::from_quaternion(Quaternion::new(o[3], o[0], o[1], o[2]));
+        let err =
+            (meas * UnitQuaternion::from_euler_angles(tilt, 0.0, 0.0).inverse()).scaled_axis();
+        assert!((err.x.abs() - 3.5e-3).abs() < 1e-9 && (err.y.abs() - 3.5e-3).abs() < 1e-9);
+        assert!(err.z.abs() < 1e-12, "no yaw drift configured: {err}");
+    }
+
+    /// A base accelerating at 2 m/s² along x: the accelerometer reads (2, 0, g) once it has two
+    /// states to difference.
+    #[test]
+    fn the_accelerometer_reads_the_base_acceleration() {
+        let mut c = cfg();
+        c.sensing = Sensing::Truth;
+        let mut s = Sensors::new(&c, 9.81);
+        let mut read = [0.0; 3];
+        for k in 0..5 {
+            let mut m = state(k, [0.0; 3]);
+            m.v[0] = 2.0 * k as f64 * 1e-3;
+            s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+            read = m.imu_linear_acceleration;
+        }
+        assert!(
+            (read[0] - 2.0).abs() < 1e-9 && read[1].abs() < 1e-12,
+            "{read:?}"
+        );
+        assert!((read[2] - 9.81).abs() < 1e-12);
+    }
+
+    /// A foot's wrench is its corners' forces in the sole frame about their centroid: a foot
+    /// turned by 90° about z, loaded on its two front corners.
+    #[test]
+    fn a_foot_wrench_is_its_corners_in_the_sole_frame() {
+        let mut c = cfg();
+        c.sensing = Sensing::Truth;
+        let mut s = Sensors::new(&c, 9.81);
+        let mut m = state(0, [0.0; 3]);
+        // Toes along +y: front-left (−x side), front-right, rear-left, rear-right; 0.2 × 0.1 m.
+        let mut points = [[0.0; 3]; N_CONTACTS];
+        points[..4].copy_from_slice(&[
+            [-0.05, 0.1, 0.0],
+            [0.05, 0.1, 0.0],
+            [-0.05, -0.1, 0.0],
+            [0.05, -0.1, 0.0],
+        ]);
+        m.contact_forces[0] = [1.0, 0.0, 50.0];
+        m.contact_forces[1] = [1.0, 0.0, 50.0];
+        s.apply(&mut m, 1e-3, &points);
+        let w = m.foot_wrenches[0];
+        // In the sole frame: x = world y, y = world −x, z = world z. The moment about the
+        // centre, Σ p × f = (10, 0, −0.2) in the world: the load on the toes (CoP x = −τy / fz
+        // = 0.1 m, the front edge).
+        let expected = [0.0, -2.0, 100.0, 0.0, -10.0, -0.2];
+        for (a, e) in w.iter().zip(expected) {
+            assert!((a - e).abs() < 1e-12, "{w:?}");
+        }
+        assert_eq!(
+            m.foot_wrenches[1], [0.0; 6],
+            "a degenerate sole reads nothing"
+        );
+    }
+
+    /// A robot does not measure its base: without `mocap` the base is NaN and the flag says so;
+    /// stamps lag by the latency.
+    #[test]
+    fn without_mocap_the_base_is_not_published() {
+        let mut c = cfg();
+        (c.mocap, c.imu.latency, c.wrist.latency) = (false, 2, 1);
+        let mut s = Sensors::new(&c, 9.81);
+        let mut m = state(10, [0.0; 3]);
+        m.time = 0.01;
+        s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+        assert!(m.q[..7].iter().chain(&m.v[..6]).all(|x| x.is_nan()));
+        assert!(m.q[7].is_finite() && m.flags & STATE_FLAG_BASE_UNMEASURED != 0);
+        assert!((m.stamps[SENSOR_IMU] - 0.008).abs() < 1e-12);
+        assert!((m.stamps[SENSOR_HAND] - 0.009).abs() < 1e-12);
+        assert_eq!(m.stamps[SENSOR_JOINTS], 0.01);
     }
 }

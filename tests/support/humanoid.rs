@@ -46,12 +46,31 @@ impl Rig {
             .expect("valid forecast");
     }
 
+    /// Makes the state a robot's: the base unmeasured (NaN, flagged), the IMU at rest on the
+    /// home pose, each foot carrying half of `weight` (N). The controller then estimates its base.
+    #[allow(dead_code)]
+    pub fn without_base(&mut self, weight: f64) {
+        let s = &mut self.state;
+        let q: [f64; 4] = std::array::from_fn(|k| s.q[3 + k]);
+        let r = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            q[3], q[0], q[1], q[2],
+        ));
+        let up = r.inverse() * nalgebra::Vector3::new(0.0, 0.0, 9.81);
+        s.imu_orientation = q;
+        s.imu_linear_acceleration = [up.x, up.y, up.z];
+        s.foot_wrenches = [[0.0, 0.0, weight / 2.0, 0.0, 0.0, 0.0]; 2];
+        s.q[..7].fill(f64::NAN);
+        s.v[..6].fill(f64::NAN);
+        s.flags |= upc::channels::STATE_FLAG_BASE_UNMEASURED;
+    }
+
     /// Ticks the frozen state at t = k ms for each k of `ticks`; the ticks that returned an
     /// error. Allocation-free itself (the allocation tests count inside it).
     pub fn tick_frozen(&mut self, ticks: std::ops::Range<usize>) -> usize {
         let mut errors = 0;
         for k in ticks {
             self.state.time = k as f64 * 0.001;
+            self.state.stamps = [self.state.time; 4];
             errors += usize::from(
                 self.core
                     .tick(&self.state, &self.window, None, &mut self.tau)

@@ -1,0 +1,720 @@
+//! The floating-base estimator (docs/estimation.md): what a humanoid knows of its base without
+//! a motion-capture system, from the sensor block of the state (services/CHANNELS.md) — the
+//! IMU, the joint encoders and the foot wrenches.
+//!
+//! - Orientation and angular velocity: the IMU's (its attitude filter, its gyro).
+//! - Position and linear velocity: a linear Kalman filter (eqs. EST-1 … EST-4) of
+//!   x = [p_b, v_b, p_l, p_r] (world): the base and both feet, predicted with the accelerometer,
+//!   corrected by each stance leg's kinematics (the foot relative to the base, the base velocity
+//!   the leg implies when its foot stays put) and by the ground's height under a stance foot. A
+//!   foot in the air has a free position; one on the ground creeps by `foot_drift` only.
+//! - Stance from the foot wrenches' normal force; the centre of pressure from the foot wrenches
+//!   at the estimated soles.
+//! - Joint velocities through an optional first-order low-pass.
+//!
+//! Model / Data: the robot's model is immutable; the estimator owns its workspace (kinematics
+//! with the base at the identity). Allocation-free after [`BaseEstimator::new`].
+
+mod accuracy;
+
+pub use accuracy::{BaseAccuracy, base_accuracy};
+
+use nalgebra::{DVector, Matrix3, Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
+
+use crate::channels::{N_CONTACTS, SENSOR_IMU, StateMsg};
+use crate::config::EstimatorSettings;
+use crate::dynamics::{
+    Data, DynamicsError, Model, ReferenceFrame, forward_kinematics_velocity, frame_velocity,
+};
+
+const NX: usize = 12;
+
+/// An IMU reading: orientation, angular velocity and specific force (IMU frame).
+type ImuSample = (UnitQuaternion<f64>, Vector3<f64>, Vector3<f64>);
+/// Rows per foot: its position relative to the base (3), the base velocity (3), its height (1).
+const NZ_FOOT: usize = 7;
+const NZ: usize = 2 * NZ_FOOT;
+/// A variance that carries no information (a swing foot's velocity rows).
+const UNINFORMATIVE: f64 = 1e6;
+
+/// Why a tick has no estimate.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum EstimatorError {
+    #[error("the IMU's last sample is {age:.3} s old (limit {limit} s): no base estimate")]
+    ImuLost { age: f64, limit: f64 },
+    #[error("the IMU's sample is not finite or not a rotation")]
+    ImuInvalid,
+    #[error("the joints or foot wrenches are not finite")]
+    NotFinite,
+    #[error(
+        "the base estimate diverged ({ticks} ticks disagreeing with the stance legs' kinematics): restarted from the kinematics"
+    )]
+    Diverged { ticks: u32 },
+    #[error("kinematics: {0}")]
+    Dynamics(#[from] DynamicsError),
+}
+
+/// What the estimator counted over a run.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct EstimatorCounts {
+    pub ticks: u64,
+    /// Ticks that ran on an IMU sample already used (a lost or late one).
+    pub imu_repeats: u64,
+    /// Ticks refused: the IMU lost past `imu_timeout`, or invalid.
+    pub imu_lost: u64,
+    /// Ticks whose normalised innovation passed `innovation_limit`.
+    pub disagreeing: u64,
+    /// Restarts after `divergence_ticks` disagreeing ticks in a row.
+    pub divergences: u64,
+    /// Stance changes (a foot landing or lifting off).
+    pub stance_changes: u64,
+    /// Ticks with no foot on the ground (no kinematic correction).
+    pub no_stance: u64,
+    /// Largest normalised innovation seen.
+    pub max_innovation: f64,
+}
+
+/// The last tick's estimate, for the logs.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct BaseEstimate {
+    /// Base position and linear velocity (m, m/s; world).
+    pub position: [f64; 3],
+    pub velocity: [f64; 3],
+    /// Roll, pitch, yaw (rad).
+    pub rpy: [f64; 3],
+    pub stance: [bool; 2],
+    /// The tick's normalised innovation (χ²).
+    pub innovation: f64,
+}
+
+pub struct BaseEstimator {
+    settings: EstimatorSettings,
+    model: Model,
+    data: Data,
+    /// The configuration and velocity with the base at the identity (scratch).
+    q: DVector<f64>,
+    v: DVector<f64>,
+    /// Sole corner frames per foot (front-left, front-right, rear-left, rear-right).
+    corners: [[usize; 4]; 2],
+    weight: f64,
+    dt: f64,
+    x: SVector<f64, NX>,
+    p: SMatrix<f64, NX, NX>,
+    /// Filtered joint velocities.
+    joint_v: DVector<f64>,
+    started: bool,
+    /// Plant time of the last state (the prediction's step is the time between states).
+    last_time: f64,
+    stance: [bool; 2],
+    /// The last tick's stance and contact points (sole frame, from the sole's centre).
+    stance_before: [bool; 2],
+    local: [Vector3<f64>; 2],
+    last_imu_stamp: f64,
+    disagreeing_run: u32,
+    /// The centre of pressure of the last tick's foot wrenches (world x, y), when loaded.
+    pub cop: Option<[f64; 2]>,
+    pub counts: EstimatorCounts,
+    pub last: BaseEstimate,
+}
+
+impl BaseEstimator {
+    /// The estimator of `model` (a floating-base robot, its gravity along −z) whose sole corners
+    /// are the frames `corners` (state order: four per foot, left first), weighing `weight` (N),
+    /// ticking every `dt` (s).
+    pub fn new(
+        model: &Model,
+        corners: [usize; N_CONTACTS],
+        weight: f64,
+        dt: f64,
+        settings: EstimatorSettings,
+    ) -> Self {
+        let joints = model.nv.saturating_sub(6);
+        let mut q = DVector::zeros(model.nq);
+        if model.nq >= 7 {
+            q[6] = 1.0;
+        }
+        Self {
+            settings,
+            data: Data::new(model),
+            model: model.clone(),
+            q,
+            v: DVector::zeros(model.nv),
+            corners: [
+                [corners[0], corners[1], corners[2], corners[3]],
+                [corners[4], corners[5], corners[6], corners[7]],
+            ],
+            weight,
+            dt,
+            x: SVector::zeros(),
+            p: SMatrix::identity(),
+            joint_v: DVector::zeros(joints),
+            started: false,
+            last_time: 0.0,
+            stance: [false; 2],
+            stance_before: [false; 2],
+            local: [Vector3::zeros(); 2],
+            last_imu_stamp: f64::NEG_INFINITY,
+            disagreeing_run: 0,
+            cop: None,
+            counts: EstimatorCounts::default(),
+            last: BaseEstimate::default(),
+        }
+    }
+
+    /// Start again from the next state (a new plant session).
+    pub fn reset(&mut self) {
+        self.started = false;
+        self.disagreeing_run = 0;
+        self.last_imu_stamp = f64::NEG_INFINITY;
+        self.cop = None;
+    }
+
+    /// Estimates the base of `state` into `q[..7]` and `v[..6]` (Pinocchio's convention: the
+    /// linear velocity in the base frame) and filters the joint velocities `v[6..]`; `q` and `v`
+    /// hold the state's joints already.
+    pub fn update(
+        &mut self,
+        state: &StateMsg,
+        q: &mut DVector<f64>,
+        v: &mut DVector<f64>,
+    ) -> Result<(), EstimatorError> {
+        self.counts.ticks += 1;
+        let (r, gyro, accel) = self.imu(state)?;
+        let joints = v.len() - 6;
+        if !(v
+            .iter()
+            .skip(6)
+            .chain(q.iter().skip(7))
+            .all(|x| x.is_finite())
+            && state.foot_wrenches.iter().flatten().all(|x| x.is_finite()))
+        {
+            return Err(EstimatorError::NotFinite);
+        }
+        // Joint velocities: a first-order low-pass (its state starts on the first sample).
+        let cutoff = self.settings.joint_velocity_cutoff;
+        let alpha = if cutoff > 0.0 && self.started {
+            1.0 - (-std::f64::consts::TAU * cutoff * self.dt).exp()
+        } else {
+            1.0
+        };
+        for k in 0..joints {
+            self.joint_v[k] += alpha * (v[6 + k] - self.joint_v[k]);
+        }
+        // The legs' kinematics with the base at the identity: each foot's centre relative to
+        // the base and its velocity relative to the base (base frame).
+        self.q
+            .rows_mut(7, q.len() - 7)
+            .copy_from(&q.rows(7, q.len() - 7));
+        self.v.rows_mut(6, joints).copy_from(&self.joint_v);
+        forward_kinematics_velocity(&self.model, &mut self.data, &self.q, &self.v)?;
+        // Stance from the normal force of each foot's wrench.
+        let stance =
+            [0, 1].map(|i| state.foot_wrenches[i][2] > self.settings.contact_load * self.weight);
+        let mut foot = [Vector3::zeros(); 2];
+        let mut sole_rot = [Matrix3::identity(); 2];
+        let mut local = [Vector3::zeros(); 2];
+        let mut point = [Vector3::zeros(); 2];
+        let mut point_vel = [Vector3::zeros(); 2];
+        for (i, ids) in self.corners.iter().enumerate() {
+            let c = |k: usize| self.data.o_m_f[ids[k]].trans;
+            foot[i] = (c(0) + c(1) + c(2) + c(3)) / 4.0;
+            sole_rot[i] = crate::robot::sole_frame(c(0), c(1), c(2), c(3));
+            // The contact point: the foot's CoP from its wrench, inside its sole; the sole's
+            // centre in the air. A foot rocking on an edge pivots about it: that point, not the
+            // centre, stays put (EST-3) and on the floor (EST-4).
+            if stance[i] {
+                let w = &state.foot_wrenches[i];
+                let half = (0..4).fold(Vector3::zeros(), |h: Vector3<f64>, k| {
+                    h.sup(&(sole_rot[i].transpose() * (c(k) - foot[i])).abs())
+                });
+                local[i] = Vector3::new(
+                    (-w[4] / w[2]).clamp(-half.x, half.x),
+                    (w[3] / w[2]).clamp(-half.y, half.y),
+                    0.0,
+                );
+            }
+            point[i] = foot[i] + sole_rot[i] * local[i];
+            let m = frame_velocity(
+                &self.model,
+                &self.data,
+                ids[0],
+                ReferenceFrame::LocalWorldAligned,
+            );
+            // The velocity of the foot's material point there, relative to the base.
+            point_vel[i] = m.lin + m.ang.cross(&(point[i] - c(0)));
+        }
+        if self.started && stance != self.stance {
+            self.counts.stance_changes += 1;
+        }
+        self.stance = stance;
+        if !stance[0] && !stance[1] {
+            self.counts.no_stance += 1;
+        }
+        let rot = *r.to_rotation_matrix().matrix();
+        // The contact points relative to the base (world axes) and the velocity of the base a
+        // stance foot implies (eq. EST-3).
+        let rel = point.map(|p| rot * p);
+        let centre = rot * (foot[0] + foot[1]) / 2.0;
+        let base_vel = [0, 1].map(|i| -(rot * (gyro.cross(&point[i]) + point_vel[i])));
+        let dt = state.time - self.last_time;
+        self.last_time = state.time;
+        if !self.started {
+            self.start(&centre, &rel);
+        } else {
+            // The time between states, the nominal period when that is not a sane step.
+            let dt = if dt > 0.0 && dt <= 0.1 { dt } else { self.dt };
+            self.predict(&rot, accel, dt);
+            // The foot's state is its point under the contact point: a CoP moving over the
+            // sole (or a foot landing, its point leaving the sole's centre) moves that point
+            // along the rigid foot, a known shift; the foot itself stays.
+            for i in 0..2 {
+                let shift = rot * sole_rot[i] * (local[i] - self.local[i]);
+                let mut f = self.x.fixed_rows_mut::<3>(6 + 3 * i);
+                f += shift;
+            }
+            let nis = self.correct(&rel, &base_vel);
+            self.judge(nis, &centre, &rel)?;
+        }
+        self.local = local;
+        self.stance_before = stance;
+        // The outputs.
+        let (p_b, v_b) = (self.x.fixed_rows::<3>(0), self.x.fixed_rows::<3>(3));
+        let v_local = rot.transpose() * v_b;
+        for k in 0..3 {
+            q[k] = p_b[k];
+            v[k] = v_local[k];
+            v[3 + k] = gyro[k];
+        }
+        q[3] = r.i;
+        q[4] = r.j;
+        q[5] = r.k;
+        q[6] = r.w;
+        v.rows_mut(6, joints).copy_from(&self.joint_v);
+        self.cop = self.centre_of_pressure(state, &rot, &foot, &sole_rot);
+        let (roll, pitch, yaw) = r.euler_angles();
+        self.last.position = [p_b[0], p_b[1], p_b[2]];
+        self.last.velocity = [v_b[0], v_b[1], v_b[2]];
+        self.last.rpy = [roll, pitch, yaw];
+        self.last.stance = stance;
+        Ok(())
+    }
+
+    /// The IMU's orientation, angular velocity and specific force, checked.
+    fn imu(&mut self, state: &StateMsg) -> Result<ImuSample, EstimatorError> {
+        let o = state.imu_orientation;
+        let quat = Quaternion::new(o[3], o[0], o[1], o[2]);
+        let (w, a) = (
+            Vector3::from(state.imu_angular_velocity),
+            Vector3::from(state.imu_linear_acceleration),
+        );
+        let finite = o
+            .iter()
+            .chain(w.iter())
+            .chain(a.iter())
+            .all(|x| x.is_finite());
+        if !finite || (quat.norm() - 1.0).abs() > 1e-3 {
+            self.counts.imu_lost += 1;
+            return Err(EstimatorError::ImuInvalid);
+        }
+        let stamp = state.stamps[SENSOR_IMU];
+        let age = state.time - stamp;
+        if age > self.settings.imu_timeout {
+            self.counts.imu_lost += 1;
+            return Err(EstimatorError::ImuLost {
+                age,
+                limit: self.settings.imu_timeout,
+            });
+        }
+        if stamp <= self.last_imu_stamp {
+            self.counts.imu_repeats += 1;
+        }
+        self.last_imu_stamp = stamp;
+        Ok((UnitQuaternion::from_quaternion(quat), w, a))
+    }
+
+    /// The first estimate: the frame the plants start the robot in (`Robot`'s home) — the sole
+    /// corners' centroid (`centre`, relative to the base) at the origin on the ground —, at
+    /// rest; the feet at their contact points `rel`.
+    fn start(&mut self, centre: &Vector3<f64>, rel: &[Vector3<f64>; 2]) {
+        let p_b = -centre;
+        self.x = SVector::zeros();
+        self.x.fixed_rows_mut::<3>(0).copy_from(&p_b);
+        for i in 0..2 {
+            let f = p_b + rel[i];
+            self.x.fixed_rows_mut::<3>(6 + 3 * i).copy_from(&f);
+        }
+        let s = self.settings;
+        self.p = SMatrix::zeros();
+        for k in 0..NX {
+            self.p[(k, k)] = if (3..6).contains(&k) {
+                (0.05_f64).powi(2)
+            } else {
+                s.kinematics_noise.powi(2)
+            };
+        }
+        self.started = true;
+        self.disagreeing_run = 0;
+    }
+
+    /// Prediction with the accelerometer (eq. EST-1): constant acceleration over the tick, the
+    /// feet where they were.
+    fn predict(&mut self, rot: &Matrix3<f64>, specific_force: Vector3<f64>, dt: f64) {
+        let g = self.model.gravity;
+        let a = rot * specific_force + g;
+        for k in 0..3 {
+            self.x[k] += self.x[3 + k] * dt + 0.5 * a[k] * dt * dt;
+            self.x[3 + k] += a[k] * dt;
+        }
+        // P ← F P Fᵀ + Q with F = [[I, dt I, 0], [0, I, 0], [0, 0, I]], in place by blocks.
+        let mut f = SMatrix::<f64, NX, NX>::identity();
+        for k in 0..3 {
+            f[(k, 3 + k)] = dt;
+        }
+        self.p = f * self.p * f.transpose();
+        // Q: white acceleration on the base (the continuous model's discretisation), a walk on
+        // each foot (free in the air).
+        let s = self.settings;
+        let qa = s.accel_noise * s.accel_noise;
+        for k in 0..3 {
+            self.p[(k, k)] += qa * dt.powi(3) / 3.0;
+            self.p[(k, 3 + k)] += qa * dt * dt / 2.0;
+            self.p[(3 + k, k)] += qa * dt * dt / 2.0;
+            self.p[(3 + k, 3 + k)] += qa * dt;
+            // A foot on the ground over the whole step (the last tick's stance and this one's)
+            // creeps; one that was or is in the air is free.
+            for i in 0..2 {
+                let walk = if self.stance[i] && self.stance_before[i] {
+                    s.foot_drift * s.foot_drift * dt
+                } else {
+                    1.0 * dt
+                };
+                self.p[(6 + 3 * i + k, 6 + 3 * i + k)] += walk;
+            }
+        }
+    }
+
+    /// Correction by the legs (eqs. EST-2 … EST-4); returns the normalised innovation of the
+    /// stance rows.
+    fn correct(&mut self, rel: &[Vector3<f64>; 2], base_vel: &[Vector3<f64>; 2]) -> f64 {
+        let s = self.settings;
+        let mut h = SMatrix::<f64, NZ, NX>::zeros();
+        let mut z = SVector::<f64, NZ>::zeros();
+        let mut r = SVector::<f64, NZ>::zeros();
+        for i in 0..2 {
+            let row = NZ_FOOT * i;
+            let col = 6 + 3 * i;
+            for k in 0..3 {
+                // EST-2: p_foot − p_b = R fk(q).
+                h[(row + k, col + k)] = 1.0;
+                h[(row + k, k)] = -1.0;
+                z[row + k] = rel[i][k];
+                r[row + k] = s.kinematics_noise.powi(2);
+                // EST-3: v_b = −R (ω × fk + J q̇) while the foot stays put.
+                h[(row + 3 + k, 3 + k)] = 1.0;
+                z[row + 3 + k] = base_vel[i][k];
+                r[row + 3 + k] = if self.stance[i] {
+                    s.velocity_noise.powi(2)
+                } else {
+                    UNINFORMATIVE
+                };
+            }
+            // EST-4: a stance foot is on the ground (z = 0, the frame's floor).
+            h[(row + 6, col + 2)] = 1.0;
+            r[row + 6] = if self.stance[i] {
+                s.kinematics_noise.powi(2)
+            } else {
+                UNINFORMATIVE
+            };
+        }
+        let innovation = z - h * self.x;
+        let ph = self.p * h.transpose();
+        let mut cov = h * ph;
+        for k in 0..NZ {
+            cov[(k, k)] += r[k];
+        }
+        let Some(chol) = cov.cholesky() else {
+            // Not positive definite: a numerical failure; restart on the next tick.
+            self.started = false;
+            return f64::INFINITY;
+        };
+        let sol = chol.solve(&innovation);
+        // The stance rows' share of the normalised innovation (a swing row's is ~0 anyway).
+        let nis = innovation.dot(&sol);
+        // K = P Hᵀ S⁻¹, from S Kᵀ = H P.
+        let gain = chol.solve(&ph.transpose()).transpose();
+        self.x += gain * innovation;
+        // Joseph form: P ← (I − K H) P (I − K H)ᵀ + K R Kᵀ, symmetric and positive.
+        let ikh = SMatrix::<f64, NX, NX>::identity() - gain * h;
+        let mut krk = gain;
+        for k in 0..NZ {
+            krk.column_mut(k).scale_mut(r[k]);
+        }
+        self.p = ikh * self.p * ikh.transpose() + krk * gain.transpose();
+        nis
+    }
+
+    /// Counts a tick whose measurements disagree with the filter; restarts after a run of them.
+    fn judge(
+        &mut self,
+        nis: f64,
+        centre: &Vector3<f64>,
+        rel: &[Vector3<f64>; 2],
+    ) -> Result<(), EstimatorError> {
+        self.last.innovation = nis;
+        if nis.is_finite() {
+            self.counts.max_innovation = self.counts.max_innovation.max(nis);
+        }
+        if nis <= self.settings.innovation_limit {
+            self.disagreeing_run = 0;
+            return Ok(());
+        }
+        self.counts.disagreeing += 1;
+        self.disagreeing_run += 1;
+        if self.disagreeing_run < self.settings.divergence_ticks {
+            return Ok(());
+        }
+        // Restart from the kinematics where the base is now believed to be: its height from the
+        // feet on the ground, its horizontal position kept.
+        let ticks = self.disagreeing_run;
+        let (x, y) = (self.x[0], self.x[1]);
+        self.start(centre, rel);
+        let shift = Vector3::new(x - self.x[0], y - self.x[1], 0.0);
+        for b in [0, 6, 9] {
+            let mut p = self.x.fixed_rows_mut::<3>(b);
+            p += shift;
+        }
+        self.counts.divergences += 1;
+        Err(EstimatorError::Diverged { ticks })
+    }
+
+    /// The centre of pressure of the foot wrenches at the soles as the estimate places them
+    /// (`foot`: the soles' centres relative to the base; `None` while the feet carry less than
+    /// `contact_load` of the weight). A foot's share is its moment about its centre plus its
+    /// force at the centre, so a lightly loaded foot adds its sensor's noise over the total
+    /// load, not over its own.
+    fn centre_of_pressure(
+        &self,
+        state: &StateMsg,
+        rot: &Matrix3<f64>,
+        foot: &[Vector3<f64>; 2],
+        sole_rot: &[Matrix3<f64>; 2],
+    ) -> Option<[f64; 2]> {
+        let p_b = Vector3::new(self.x[0], self.x[1], self.x[2]);
+        let (mut total, mut sum) = (0.0, Vector3::zeros());
+        for i in 0..2 {
+            let w = &state.foot_wrenches[i];
+            if w[2] <= 0.0 {
+                continue;
+            }
+            // On the sole: f_z · (x, y) = (−τ_y, τ_x).
+            let moment = Vector3::new(-w[4], w[3], 0.0);
+            total += w[2];
+            sum += w[2] * (p_b + rot * foot[i]) + rot * sole_rot[i] * moment;
+        }
+        (total > self.settings.contact_load * self.weight).then(|| [sum.x / total, sum.y / total])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::channels::STATE_FLAG_BASE_UNMEASURED;
+    use crate::robot::Robot;
+
+    struct Bench {
+        robot: Robot,
+        est: BaseEstimator,
+        state: Box<StateMsg>,
+        q: DVector<f64>,
+        v: DVector<f64>,
+    }
+
+    /// The embedded robot standing at home, its sensors exact: IMU at rest, each foot carrying
+    /// half the weight.
+    fn bench() -> Bench {
+        let robot = Robot::embedded_default().unwrap();
+        let model = &robot.model;
+        let ids: [usize; N_CONTACTS] =
+            std::array::from_fn(|k| model.frame_id(&robot.contacts[k]).unwrap());
+        let weight = robot.derived.mass * 9.81;
+        let est = BaseEstimator::new(model, ids, weight, 1e-3, EstimatorSettings::default());
+        let mut state: Box<StateMsg> = Box::default();
+        (state.nq, state.nv) = (model.nq as u32, model.nv as u32);
+        state.q[..model.nq].copy_from_slice(robot.home.as_slice());
+        state
+            .imu_orientation
+            .copy_from_slice(&robot.home.as_slice()[3..7]);
+        let r = UnitQuaternion::from_quaternion(Quaternion::new(
+            robot.home[6],
+            robot.home[3],
+            robot.home[4],
+            robot.home[5],
+        ));
+        let up = r.inverse() * Vector3::new(0.0, 0.0, 9.81);
+        state.imu_linear_acceleration = [up.x, up.y, up.z];
+        state.foot_wrenches = [[0.0, 0.0, weight / 2.0, 0.0, 0.0, 0.0]; 2];
+        state.flags = STATE_FLAG_BASE_UNMEASURED;
+        let (q, v) = (robot.home.clone(), DVector::zeros(model.nv));
+        Bench {
+            robot,
+            est,
+            state,
+            q,
+            v,
+        }
+    }
+
+    impl Bench {
+        /// One tick at step `k` (1 ms each); the joints of the state as they are.
+        fn tick(&mut self, k: u64) -> Result<(), EstimatorError> {
+            self.state.step = k;
+            self.state.time = k as f64 * 1e-3;
+            self.state.stamps = [self.state.time; 4];
+            let (nq, nv) = (self.q.len(), self.v.len());
+            self.q.as_mut_slice().copy_from_slice(&self.state.q[..nq]);
+            self.v.as_mut_slice().copy_from_slice(&self.state.v[..nv]);
+            self.est.update(&self.state, &mut self.q, &mut self.v)
+        }
+    }
+
+    /// Standing still on exact sensors, the estimate is the plants' home pose (the frame's
+    /// convention) and stays there, at rest.
+    #[test]
+    fn standing_still_on_exact_sensors_is_the_home_pose() {
+        let mut b = bench();
+        for k in 0..500 {
+            b.tick(k).unwrap();
+        }
+        for i in 0..7 {
+            assert!(
+                (b.q[i] - b.robot.home[i]).abs() < 1e-6,
+                "q[{i}] {} vs {}",
+                b.q[i],
+                b.robot.home[i]
+            );
+        }
+        assert!(b.v.rows(0, 6).norm() < 1e-9, "{}", b.v.rows(0, 6));
+        assert_eq!(b.est.last.stance, [true, true]);
+        assert!(b.est.counts.max_innovation < 1e-3, "{:?}", b.est.counts);
+        // The centre of pressure of two equally loaded feet: between their centres.
+        let cop = b.est.cop.unwrap();
+        assert!(cop[0].abs() < 1e-6 && cop[1].abs() < 1e-6, "{cop:?}");
+    }
+
+    /// The centre of pressure wandering over two flat, still feet (a robot swaying its weight)
+    /// moves their contact points along the soles, not the feet: the base stays where it is.
+    #[test]
+    fn a_cop_moving_over_still_feet_moves_nothing() {
+        let mut b = bench();
+        let fz = b.state.foot_wrenches[0][2];
+        for k in 0..1000 {
+            let x = 0.04 * (k as f64 * 0.01).sin();
+            let y = 0.02 * (k as f64 * 0.013).cos();
+            for w in b.state.foot_wrenches.iter_mut() {
+                (w[3], w[4]) = (y * fz, -x * fz);
+            }
+            b.tick(k).unwrap();
+        }
+        for i in 0..3 {
+            assert!(
+                (b.q[i] - b.robot.home[i]).abs() < 1e-6,
+                "q[{i}] {} vs {}",
+                b.q[i],
+                b.robot.home[i]
+            );
+        }
+        assert!(b.est.counts.max_innovation < 1e-3, "{:?}", b.est.counts);
+    }
+
+    /// The first state of a plant carries no contact force yet (nothing stepped): the feet
+    /// load from the next one on, their CoP off their centres. The base stays at home.
+    #[test]
+    fn feet_loading_after_the_first_state_move_nothing() {
+        let mut b = bench();
+        let fz = b.state.foot_wrenches[0][2];
+        b.state.foot_wrenches = [[0.0; 6]; 2];
+        b.tick(0).unwrap();
+        for w in b.state.foot_wrenches.iter_mut() {
+            *w = [0.0, 0.0, fz, 0.01 * fz, 0.03 * fz, 0.0];
+        }
+        for k in 1..500 {
+            b.tick(k).unwrap();
+        }
+        for i in 0..3 {
+            assert!(
+                (b.q[i] - b.robot.home[i]).abs() < 1e-6,
+                "q[{i}] {} vs {}",
+                b.q[i],
+                b.robot.home[i]
+            );
+        }
+    }
+
+    /// A lost IMU (its stamp too old) or an invalid one refuses the tick, counted; it resumes
+    /// when the samples come back.
+    #[test]
+    fn a_lost_or_invalid_imu_refuses_the_tick() {
+        let mut b = bench();
+        b.tick(0).unwrap();
+        b.state.step = 100;
+        b.state.time = 0.1;
+        b.state.stamps = [0.1, 0.05, 0.1, 0.1];
+        let (nq, nv) = (b.q.len(), b.v.len());
+        b.q.as_mut_slice().copy_from_slice(&b.state.q[..nq]);
+        b.v.as_mut_slice().copy_from_slice(&b.state.v[..nv]);
+        let e = b.est.update(&b.state, &mut b.q, &mut b.v);
+        assert!(matches!(e, Err(EstimatorError::ImuLost { .. })), "{e:?}");
+        b.state.imu_orientation = [0.0; 4];
+        assert!(matches!(b.tick(101), Err(EstimatorError::ImuInvalid)));
+        assert_eq!(b.est.counts.imu_lost, 2);
+        b.state
+            .imu_orientation
+            .copy_from_slice(&b.robot.home.as_slice()[3..7]);
+        b.tick(102).unwrap();
+    }
+
+    /// A foot slipping: the left leg's joints move its foot 1 m/s relative to the base while
+    /// the right leg and the IMU say the base is still. The disagreement is detected, and after
+    /// `divergence_ticks` the estimate restarts (an error, counted, once per run of them).
+    #[test]
+    fn a_slipping_foot_is_detected_and_the_estimate_restarted() {
+        let mut b = bench();
+        for k in 0..20 {
+            b.tick(k).unwrap();
+        }
+        // The first joint of the model after the base: a left-leg joint on the embedded robot
+        // (checked: moving it moves the left foot only).
+        let j = 7;
+        let rate = 1.0;
+        let mut diverged = None;
+        for k in 20..400 {
+            b.state.q[j] += rate * 1e-3;
+            b.state.v[j - 1] = rate;
+            if let Err(e) = b.tick(k) {
+                diverged = Some((k, e));
+                break;
+            }
+        }
+        let (k, e) = diverged.expect("a sliding foot was never detected");
+        assert!(matches!(e, EstimatorError::Diverged { ticks: 50 }), "{e:?}");
+        // The first ticks of the slide are within the filter's noise; 50 ticks after it
+        // disagrees, it restarts.
+        assert!(k < 300, "detected only after {} ms of sliding", k - 20);
+        assert_eq!(b.est.counts.divergences, 1);
+        assert_eq!(b.est.counts.disagreeing, 50);
+        assert!(b.est.counts.max_innovation > EstimatorSettings::default().innovation_limit);
+        // After the restart, with the joint still, the ticks agree again (the moved foot is
+        // off the floor it is said to stand on: not a perfect agreement).
+        b.state.v[j - 1] = 0.0;
+        for k in 400..450 {
+            b.tick(k).unwrap();
+        }
+        let limit = EstimatorSettings::default().innovation_limit;
+        assert!(
+            b.est.last.innovation < limit / 10.0,
+            "{}",
+            b.est.last.innovation
+        );
+    }
+}
