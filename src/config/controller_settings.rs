@@ -210,7 +210,7 @@ impl Default for EstimatorSettings {
             joint_velocity_cutoff: 0.0,
             innovation_limit: 200.0,
             divergence_ticks: 50,
-            imu_timeout: 0.02,
+            imu_timeout: 0.1,
         }
     }
 }

@@ -5,7 +5,7 @@
 //!
 //!   f_meas(t) + Λ ẍ_h(t) ≈ κ f_fc(t − τ) + d,                               (FC-1)
 //!
-//! ẍ_h the hand's acceleration (its measured velocity's change over a bin). κ and τ estimated
+//! ẍ_h the hand's acceleration (the change of its bin-mean velocity over a bin). κ and τ estimated
 //! from a short window of the measured push against the forecast's past, d by an observer on
 //! what κ and τ leave unexplained. The horizon the previewer sees is
 //!
@@ -69,6 +69,8 @@ type V3 = [f64; 3];
 const EVIDENCE_SD: f64 = 0.1;
 /// Time constant (s) of the model error's scale after a push: the door and the arm ring on.
 const DYNAMICS_TIME: f64 = 0.5;
+/// Memory of the bins' residual variance (s).
+const NOISE_TIME: f64 = 1.0;
 /// A window is remembered when its forecast energy is at least this fraction of the recent
 /// largest: the bulk of a push, not its tail.
 const BULK_ENERGY: f64 = 0.25;
@@ -109,9 +111,11 @@ pub struct ForecastCorrector {
     acc_n: usize,
     /// Λ: the held object's apparent mass at the hand (world, kg; zero: nothing held).
     held_mass: [V3; 3],
-    /// The hand's velocity at the previous bin's last tick, and the newest bin's mean
-    /// acceleration (its velocity's change over the bin).
-    bin_end_vel: Option<V3>,
+    /// The sum of the hand's velocity over the bin being accumulated, the previous bin's mean
+    /// velocity, and the newest acceleration: the change of the bins' mean velocities over a
+    /// bin (a measured velocity's white noise enters divided by √(ticks per bin), not by one).
+    acc_vel: V3,
+    bin_mean_vel: Option<V3>,
     last_acc: V3,
     /// Scratch: the forecast timeline g over [t_b − (n_W − 1 + M) T_b, t_b + M T_b] and its
     /// prefix sums (Σ|g|², Σg).
@@ -127,6 +131,13 @@ pub struct ForecastCorrector {
     /// The windows' recent largest mean square forecast (N²), decaying at [`DYNAMICS_TIME`]:
     /// the scale of the model error, which outlasts the push that excited it.
     recent_energy: f64,
+    /// The noise a bin really carries (the sensor's, and its hand acceleration's from noisy
+    /// velocities), per axis, over the last `NOISE_TIME`, when it exceeds the configured sensor
+    /// noise: half the mean square of the change of a bin's residual about the estimate from
+    /// one bin to the next. Differencing leaves the noise and removes a smooth mismatch (a
+    /// wrong forecast must not read as noise, or it would never be refused).
+    residual_var: f64,
+    last_residual: Option<V3>,
     pub counts: CorrectionCounts,
 }
 
@@ -156,7 +167,8 @@ impl ForecastCorrector {
             acc_fc: [0.0; 3],
             acc_n: 0,
             held_mass: [[0.0; 3]; 3],
-            bin_end_vel: None,
+            acc_vel: [0.0; 3],
+            bin_mean_vel: None,
             last_acc: [0.0; 3],
             g: vec![[0.0; 3]; timeline],
             p2: vec![0.0; timeline + 1],
@@ -166,6 +178,8 @@ impl ForecastCorrector {
             prior_factor: 1.0,
             prior_shift: 0.0,
             recent_energy: 0.0,
+            residual_var: 0.0,
+            last_residual: None,
             counts: CorrectionCounts {
                 factor_min: 1.0,
                 factor_max: 1.0,
@@ -201,12 +215,15 @@ impl ForecastCorrector {
         self.acc_meas = [0.0; 3];
         self.acc_fc = [0.0; 3];
         self.acc_n = 0;
-        self.bin_end_vel = None;
+        self.acc_vel = [0.0; 3];
+        self.bin_mean_vel = None;
         self.last_acc = [0.0; 3];
         self.est = CorrectionEstimate::default();
         self.prior_factor = 1.0;
         self.prior_shift = 0.0;
         self.recent_energy = 0.0;
+        self.residual_var = 0.0;
+        self.last_residual = None;
     }
 
     /// The forecast as received, for plant time `t`: the window where it covers `t` or `t` is
@@ -271,6 +288,7 @@ impl ForecastCorrector {
         // The bin: means of the measured force and of the forecast for the same ticks.
         axpy(&mut self.acc_meas, 1.0, &y);
         axpy(&mut self.acc_fc, 1.0, &now);
+        axpy(&mut self.acc_vel, 1.0, &hand_vel);
         self.acc_n += 1;
         if self.acc_n < self.bin_ticks {
             return;
@@ -278,13 +296,16 @@ impl ForecastCorrector {
         let inv = 1.0 / self.acc_n as f64;
         let i_m = self.bins as usize % self.meas.len();
         let i_f = self.bins as usize % self.fc.len();
-        // The bin's push (FC-1): its mean measured force plus Λ times its mean acceleration, the
-        // hand velocity's change over the bin (none known for a session's first bin).
-        self.last_acc = match self.bin_end_vel {
-            Some(v0) => [0, 1, 2].map(|c| (hand_vel[c] - v0[c]) / self.bin),
+        // The bin's push (FC-1): its mean measured force plus Λ times the hand's acceleration,
+        // the change of the mean velocity from the previous bin to this one (none known for a
+        // session's first bin; it lags the bin by half a bin).
+        let mean_vel = self.acc_vel.map(|v| v * inv);
+        self.last_acc = match self.bin_mean_vel {
+            Some(v0) => [0, 1, 2].map(|c| (mean_vel[c] - v0[c]) / self.bin),
             None => [0.0; 3],
         };
-        self.bin_end_vel = Some(hand_vel);
+        self.bin_mean_vel = Some(mean_vel);
+        self.acc_vel = [0.0; 3];
         self.meas[i_m] = self.push(&self.acc_meas.map(|v| v * inv), &self.last_acc);
         self.fc[i_f] = self.acc_fc.map(|v| v * inv);
         self.acc_meas = [0.0; 3];
@@ -292,6 +313,14 @@ impl ForecastCorrector {
         self.acc_n = 0;
         self.bins += 1;
         self.last_bin_t = t + 0.5 * self.dt;
+        // The bin's residual about the current estimate (κ̂ f_fc(t − τ̂) + d̂ at its centre).
+        let explained = self.forecast_at(window, self.last_bin_t - 0.5 * self.bin - self.est.shift);
+        let e: V3 = [0, 1, 2].map(|c| self.meas[i_m][c] - self.est.factor * explained[c]);
+        if let Some(e0) = self.last_residual {
+            let d2 = (0..3).map(|c| (e[c] - e0[c]).powi(2)).sum::<f64>() / 6.0;
+            self.residual_var += (1.0 - (-self.bin / NOISE_TIME).exp()) * (d2 - self.residual_var);
+        }
+        self.last_residual = Some(e);
         if self.bins as usize >= self.n_w {
             self.estimate_factor_and_shift(window);
         }
@@ -340,7 +369,7 @@ impl ForecastCorrector {
         // Variance of one bin: the sensor's noise of a mean over the bin, and the model error
         // in proportion to the recent forecast's RMS (the last estimations', decaying).
         self.recent_energy *= (-self.bin / DYNAMICS_TIME).exp();
-        let var = self.s.force_noise.powi(2) / self.bin_ticks as f64
+        let var = (self.s.force_noise.powi(2) / self.bin_ticks as f64).max(self.residual_var)
             + self.s.model_error.powi(2) * self.recent_energy;
         let w_k = var / self.s.factor_sd.powi(2);
         let w_b = var / self.s.offset_sd.powi(2);
@@ -428,6 +457,14 @@ impl ForecastCorrector {
         } else {
             self.prior_factor = 1.0 + (self.prior_factor - 1.0) * keep;
             self.prior_shift *= keep;
+        }
+        // Without evidence (a loose posterior: a forecast still too small to be seen in the
+        // measurement, a shift picked among many candidates by the noise), the fit may lower
+        // the forecast but not raise it: leaning into an amplified push on the noise's word
+        // topples a robot, leaning less only costs the margin the measured force restores.
+        if sd >= EVIDENCE_SD && kappa > self.prior_factor {
+            self.est.factor = self.prior_factor;
+            self.est.shift = self.prior_shift;
         }
         // Contradicted: κ̂ far from 1 with the window's evidence (posterior sd of κ below
         // half the threshold), not merely from a prior; it stays so until the factor the
