@@ -178,13 +178,7 @@ pub const CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_ref_x,zmp_ref_y,zmp_pred_x
 fn write_csv(w: &mut impl Write, t: &TickLog) -> std::io::Result<()> {
     let c = &t.core;
     // The base estimate's columns are NaN when the base was measured.
-    let b = c.base.unwrap_or(crate::estimation::BaseEstimate {
-        position: [f64::NAN; 3],
-        velocity: [f64::NAN; 3],
-        rpy: [f64::NAN; 3],
-        stance: [false; 2],
-        innovation: f64::NAN,
-    });
+    let b = c.base.unwrap_or(crate::estimation::BaseEstimate::UNKNOWN);
     writeln!(
         w,
         "{:.4},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.2},{:.2},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.1},{:.1},{},{:.5e},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.3},{:.3},{:.3},{},{:.3},{:.3},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.3}",

@@ -123,6 +123,17 @@ pub struct BaseEstimator {
     pub last: BaseEstimate,
 }
 
+impl BaseEstimate {
+    /// No estimate (NaN everywhere): a tick whose base was measured, in the logs.
+    pub const UNKNOWN: BaseEstimate = BaseEstimate {
+        position: [f64::NAN; 3],
+        velocity: [f64::NAN; 3],
+        rpy: [f64::NAN; 3],
+        stance: [false; 2],
+        innovation: f64::NAN,
+    };
+}
+
 impl BaseEstimator {
     /// The estimator of `model` (a floating-base robot, its gravity along −z) whose sole corners
     /// are the frames `corners` (state order: four per foot, left first), weighing `weight` (N),
@@ -587,15 +598,34 @@ mod tests {
     }
 
     impl Bench {
-        /// One tick at step `k` (1 ms each); the joints of the state as they are.
+        /// One tick at step `k` (1 ms each), every sensor sampled then; the joints of the
+        /// state as they are.
         fn tick(&mut self, k: u64) -> Result<(), EstimatorError> {
+            let t = k as f64 * 1e-3;
+            self.tick_stamped(k, [t; 4])
+        }
+
+        /// One tick at step `k` whose sensors were sampled at `stamps`.
+        fn tick_stamped(&mut self, k: u64, stamps: [f64; 4]) -> Result<(), EstimatorError> {
             self.state.step = k;
             self.state.time = k as f64 * 1e-3;
-            self.state.stamps = [self.state.time; 4];
+            self.state.stamps = stamps;
             let (nq, nv) = (self.q.len(), self.v.len());
             self.q.as_mut_slice().copy_from_slice(&self.state.q[..nq]);
             self.v.as_mut_slice().copy_from_slice(&self.state.v[..nv]);
             self.est.update(&self.state, &mut self.q, &mut self.v)
+        }
+
+        /// The estimate's first `n` coordinates of the configuration are the home pose's.
+        fn assert_at_home(&self, n: usize) {
+            for i in 0..n {
+                assert!(
+                    (self.q[i] - self.robot.home[i]).abs() < 1e-6,
+                    "q[{i}] {} vs {}",
+                    self.q[i],
+                    self.robot.home[i]
+                );
+            }
         }
     }
 
@@ -607,14 +637,7 @@ mod tests {
         for k in 0..500 {
             b.tick(k).unwrap();
         }
-        for i in 0..7 {
-            assert!(
-                (b.q[i] - b.robot.home[i]).abs() < 1e-6,
-                "q[{i}] {} vs {}",
-                b.q[i],
-                b.robot.home[i]
-            );
-        }
+        b.assert_at_home(7);
         assert!(b.v.rows(0, 6).norm() < 1e-9, "{}", b.v.rows(0, 6));
         assert_eq!(b.est.last.stance, [true, true]);
         assert!(b.est.counts.max_innovation < 1e-3, "{:?}", b.est.counts);
@@ -637,14 +660,7 @@ mod tests {
             }
             b.tick(k).unwrap();
         }
-        for i in 0..3 {
-            assert!(
-                (b.q[i] - b.robot.home[i]).abs() < 1e-6,
-                "q[{i}] {} vs {}",
-                b.q[i],
-                b.robot.home[i]
-            );
-        }
+        b.assert_at_home(3);
         assert!(b.est.counts.max_innovation < 1e-3, "{:?}", b.est.counts);
     }
 
@@ -662,14 +678,7 @@ mod tests {
         for k in 1..500 {
             b.tick(k).unwrap();
         }
-        for i in 0..3 {
-            assert!(
-                (b.q[i] - b.robot.home[i]).abs() < 1e-6,
-                "q[{i}] {} vs {}",
-                b.q[i],
-                b.robot.home[i]
-            );
-        }
+        b.assert_at_home(3);
     }
 
     /// A lost IMU (its stamp too old) or an invalid one refuses the tick, counted; it resumes
@@ -678,13 +687,8 @@ mod tests {
     fn a_lost_or_invalid_imu_refuses_the_tick() {
         let mut b = bench();
         b.tick(0).unwrap();
-        b.state.step = 300;
-        b.state.time = 0.3;
-        b.state.stamps = [0.3, 0.1, 0.3, 0.3];
-        let (nq, nv) = (b.q.len(), b.v.len());
-        b.q.as_mut_slice().copy_from_slice(&b.state.q[..nq]);
-        b.v.as_mut_slice().copy_from_slice(&b.state.v[..nv]);
-        let e = b.est.update(&b.state, &mut b.q, &mut b.v);
+        // The IMU's last sample is 200 ms old.
+        let e = b.tick_stamped(300, [0.3, 0.1, 0.3, 0.3]);
         assert!(matches!(e, Err(EstimatorError::ImuLost { .. })), "{e:?}");
         b.state.imu_orientation = [0.0; 4];
         assert!(matches!(b.tick(301), Err(EstimatorError::ImuInvalid)));

@@ -430,7 +430,7 @@ impl Sensors {
         let imu_truth = self.imu_truth(m, dt);
         let (t, step) = (m.time, m.step);
         if !self.models {
-            self.publish_imu(m, &imu_truth);
+            publish_imu(m, &imu_truth);
             fill_foot_wrenches(m, contact_points);
             m.stamps = [t; 4];
             return;
@@ -481,7 +481,7 @@ impl Sensors {
         } else {
             self.stamps[SENSOR_IMU] = late(cfg.imu.latency);
         }
-        self.publish_imu(m, &imu);
+        publish_imu(m, &imu);
         fill_foot_wrenches(m, contact_points);
         self.stamps[SENSOR_JOINTS] = t;
         m.stamps = self.stamps;
@@ -510,12 +510,13 @@ impl Sensors {
             m.q[3], m.q[4], m.q[5], m.q[6], m.v[3], m.v[4], m.v[5], f.x, f.y, f.z,
         ]
     }
+}
 
-    fn publish_imu(&self, m: &mut StateMsg, x: &[f64; 10]) {
-        m.imu_orientation.copy_from_slice(&x[..4]);
-        m.imu_angular_velocity.copy_from_slice(&x[4..7]);
-        m.imu_linear_acceleration.copy_from_slice(&x[7..]);
-    }
+/// The IMU sample `x` (orientation xyzw, angular velocity, specific force) into the state.
+fn publish_imu(m: &mut StateMsg, x: &[f64; 10]) {
+    m.imu_orientation.copy_from_slice(&x[..4]);
+    m.imu_angular_velocity.copy_from_slice(&x[4..7]);
+    m.imu_linear_acceleration.copy_from_slice(&x[7..]);
 }
 
 /// Each foot's wrench from its four corner forces (`m.contact_forces`, world) at `points`: in
