@@ -160,6 +160,44 @@ impl ComObserverSettings {
     }
 }
 
+/// `[controller.wrist_tare]`: the wrist sensor's offset, taken while the hand is unloaded
+/// (`control::wrist_tare`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WristTareSettings {
+    /// Quiet time averaged (s) at the start of each plant session; 0: no tare.
+    pub duration: f64,
+    /// Largest offset taken (N): a larger average is a load, and is refused.
+    pub max_offset: f64,
+}
+
+impl Default for WristTareSettings {
+    fn default() -> Self {
+        Self {
+            duration: 0.3,
+            max_offset: 10.0,
+        }
+    }
+}
+
+impl WristTareSettings {
+    pub fn check(&self) -> Result<(), (&'static str, String)> {
+        if !(self.duration.is_finite() && self.duration >= 0.0) {
+            return Err((
+                "duration",
+                format!("must be finite and ≥ 0, got {}", self.duration),
+            ));
+        }
+        if !(self.max_offset.is_finite() && self.max_offset > 0.0) {
+            return Err((
+                "max_offset",
+                format!("must be finite and > 0, got {}", self.max_offset),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// When the base estimator runs (`controller.estimator.mode`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]

@@ -7,6 +7,7 @@ mod schema;
 
 pub use controller_settings::{
     ComObserverSettings, CorrectionSettings, EstimatorMode, EstimatorSettings, RealtimeSettings,
+    WristTareSettings,
 };
 pub use layers::{ConfigError, Layers};
 pub use schema::*;

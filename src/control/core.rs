@@ -23,7 +23,8 @@ use super::com_observer::ComObserver;
 use super::forecast_correction::{CorrectionEstimate, ForecastCorrector};
 use super::forecast_window::ForecastWindow;
 use super::gain_thread::StampedSchedule;
-use crate::channels::{MAX_DOF, STATE_FLAG_BASE_UNMEASURED, StateMsg};
+use super::wrist_tare::{TareState, WristTare};
+use crate::channels::{MAX_DOF, STATE_FLAG_BASE_UNMEASURED, STATE_FLAG_HOLD, StateMsg};
 use crate::config::{Config, ControllerKind, EstimatorMode};
 use crate::dynamics::{
     Data, DynamicsError, Model, OpSpaceWorkspace, ReferenceFrame, center_of_mass_velocity,
@@ -124,6 +125,8 @@ pub struct ControllerCore {
     height_gains: [f64; 2],
     /// Feed the measured hand force to the whole-body QP (`controller.hand_force_feedback`).
     force_feedback: bool,
+    /// The wrist sensor's offset, removed from every measured hand force used.
+    tare: WristTare,
     q: DVector<f64>,
     v: DVector<f64>,
     zmp_ref: Vec<[f64; 2]>,
@@ -234,6 +237,7 @@ impl ControllerCore {
             dt: control_period,
             height_gains,
             force_feedback: config.controller.hand_force_feedback,
+            tare: WristTare::new(config.controller.wrist_tare),
             zmp_ref: vec![[0.0; 2]; n],
             hand_desired: vec![HandState::default(); n],
             f_ext: vec![[0.0; 3]; n],
@@ -301,6 +305,7 @@ impl ControllerCore {
         self.wbc.reset();
         self.com_acc_cmd = Vector3::zeros();
         self.hand_acc_cmd = Vector3::zeros();
+        self.tare.reset();
         self.last_x = [Vector3::zeros(); 2];
         self.last = TickRecord::default();
         if let Some(c) = self.correction.as_mut() {
@@ -310,6 +315,11 @@ impl ControllerCore {
             o.reset();
         }
         self.estimator.reset();
+    }
+
+    /// The wrist sensor's tare (its offset, its refusals).
+    pub fn wrist_tare(&self) -> &WristTare {
+        &self.tare
     }
 
     /// The base estimator's counters (`None` when it never ran).
@@ -396,7 +406,16 @@ impl ControllerCore {
         let m_e = *self.op.compute(&self.model, &mut self.data, &self.q)?;
         let m_e_ok = self.previewer.set_effective_mass(m_e).is_ok();
 
-        let zref = self.horizon_inputs(t, &latched, forecast, state.hand_force, hand.vel.into());
+        // Not while the plant still holds the robot (its hold loads the hand as it pleases).
+        let hand_speed = if state.flags & STATE_FLAG_HOLD != 0 {
+            f64::INFINITY
+        } else {
+            hand.vel.norm()
+        };
+        let f_meas = self
+            .tare
+            .apply(t, state.hand_force, forecast.at(t), hand_speed, self.dt);
+        let zref = self.horizon_inputs(t, &latched, forecast, f_meas, hand.vel.into());
         let zmp_meas = self.measured_zmp(state);
         let f_obs = self.observe([com.x, com.y], [vcom.x, vcom.y], zmp_meas);
         let age = self.take_schedule(t, c2);
@@ -407,7 +426,7 @@ impl ControllerCore {
         }
         let [kpz, kdz] = self.height_gains;
         self.com_acc_cmd.z = kpz * (latched.com_height - com.z) - kdz * vcom.z;
-        let (status, iterations, wbc_time) = self.whole_body(state, &latched, &hand, m_e_ok, tau);
+        let (status, iterations, wbc_time) = self.whole_body(f_meas, &latched, &hand, m_e_ok, tau);
 
         // The ZMP one preview step ahead, for the logs: O(1). The whole plan is rolled out
         // only when a log record asks for it (`fill_plan`), off the per-tick path.
@@ -443,7 +462,7 @@ impl ControllerCore {
             preview_fallback: fallback,
             schedule_age: age,
             support: latched.support,
-            f_meas: state.hand_force,
+            f_meas,
             f_raw: forecast.at(t + self.period),
             correction: self
                 .correction
@@ -497,7 +516,10 @@ impl ControllerCore {
             hand_pos: hand.pos.into(),
             hand_err: (hand.pos - latched.hand_target).norm(),
             support: latched.support,
-            f_meas: state.hand_force,
+            f_meas: {
+                let b = self.tare.offset();
+                [0, 1, 2].map(|k| state.hand_force[k] - b[k])
+            },
             fallen: true,
             base: self.estimating.then_some(self.estimator.last),
             ..TickRecord::default()
@@ -739,7 +761,7 @@ impl ControllerCore {
     /// `tau`. Returns the status, the solver's iterations and the QP's time (s).
     fn whole_body(
         &mut self,
-        state: &StateMsg,
+        f_meas: [f64; 3],
         latched: &Latched,
         hand: &HandState,
         m_e_ok: bool,
@@ -750,8 +772,11 @@ impl ControllerCore {
         // and the hand task asks for the impedance law's own response to it, eq. (23):
         // M_e ẍ = F_ext + M_e ẍ_cmd, i.e. ẍ = ẍ_cmd + M_e⁻¹ F_ext. Without it the QP ignores the
         // force, which then folds the arm's lightest joints instead of acting through M_e.
-        let f_hand = Vector3::from(state.hand_force);
-        let f_hand = if self.force_feedback && f_hand.iter().all(|x| x.is_finite()) {
+        let f_hand = Vector3::from(f_meas);
+        // Not while the wrist is being tared: the hand would yield to the offset being measured
+        // and load the door, which the tare would then take for the offset.
+        let taring = self.tare.state() == TareState::Pending && self.tare.enabled();
+        let f_hand = if self.force_feedback && !taring && f_hand.iter().all(|x| x.is_finite()) {
             f_hand
         } else {
             Vector3::zeros()

@@ -4,6 +4,7 @@
 //! - [`core`]: one tick without IPC ([`ControllerCore`]).
 //! - [`forecast_window`]: validated copy of the latest force forecast.
 //! - [`forecast_correction`]: the forecast corrected by the measured hand force.
+//! - [`wrist_tare`]: the wrist sensor's offset, taken while the hand is unloaded.
 //! - [`com_observer`]: the push on the CoM that nothing forecasts, from the measured CoP.
 //! - [`gain_thread`]: C2 in a lower-priority thread behind wait-free triple buffers.
 //! - [`logger`]: the rerun log, from its own thread, never blocking the loop.
@@ -26,6 +27,7 @@ pub mod run_metrics;
 pub mod server;
 pub mod summary;
 pub mod timing;
+pub mod wrist_tare;
 
 pub use com_observer::{ComObserver, ComObserverSettings};
 pub use core::{ControllerCore, TickError, TickRecord};

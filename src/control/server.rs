@@ -710,6 +710,8 @@ impl<'a> ControlLoop<'a> {
         }
         s.preview_fallbacks = self.core.preview_fallbacks;
         (s.falls, s.fallen_ticks) = (self.core.falls, self.core.fallen_ticks);
+        s.wrist_tare_offset = self.core.wrist_tare().offset();
+        s.wrist_tare_refusals = self.core.wrist_tare().refusals();
         s.estimator = self.core.estimator_counts();
         s.forecast_correction = self.core.correction_counts().map(|c| {
             let e = self.core.last.correction;

@@ -111,6 +111,12 @@ pub struct ServerSummary {
     pub stopped_by: String,
     /// The forecast correction (docs/forecast_correction.md); `None`: off (or C0).
     pub forecast_correction: Option<CorrectionSummary>,
+    /// The wrist sensor's offset removed at the last tare (N; zero when none was taken), and
+    /// the tares refused as loads (`control::wrist_tare`).
+    #[serde(default)]
+    pub wrist_tare_offset: [f64; 3],
+    #[serde(default)]
+    pub wrist_tare_refusals: u64,
     /// The base estimator's counters (docs/estimation.md); `None`: the base was measured.
     #[serde(default)]
     pub estimator: Option<crate::estimation::EstimatorCounts>,
