@@ -2,51 +2,18 @@
 //! `upc run` as a user runs it: lockstep, upc's plant, the estimate from the controller's log
 //! against the truth from the plant's (`base_estimate_error` of the run's summary).
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+mod support;
+
+use std::path::Path;
+use std::time::Duration;
 
 use serde_json::Value;
-
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("upc-estimation-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("scratch dir");
-    d
-}
+use support::procs::{Procs, Scratch, json, start_controller, start_plant};
+use support::upc_run::{num as f, scratch, upc_run};
 
 /// `upc run --controller c1` with `extra`; returns the run's entry of `summary.json`.
 fn run(out: &Path, extra: &[&str]) -> Value {
-    let st = Command::new(env!("CARGO_BIN_EXE_upc"))
-        .args([
-            "run",
-            "--quiet",
-            "--controller",
-            "c1",
-            "--name",
-            "run",
-            "--out",
-        ])
-        .arg(out)
-        .args(extra)
-        .stdout(Stdio::null())
-        .status()
-        .expect("upc run");
-    let dir = out.join("run");
-    assert!(
-        st.success(),
-        "upc run failed: {st}\n{}",
-        std::fs::read_to_string(dir.join("c1/controller.log")).unwrap_or_default()
-    );
-    let s: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).expect("summary"))
-            .expect("summary JSON");
-    s["runs"][0].clone()
-}
-
-fn f(v: &Value, key: &str) -> f64 {
-    v[key]
-        .as_f64()
-        .unwrap_or_else(|| panic!("no `{key}` in {v:#}"))
+    upc_run(out, "c1", extra)
 }
 
 /// On exact sensors the estimate is the truth: the filter, the leg kinematics and the frame
@@ -54,7 +21,7 @@ fn f(v: &Value, key: &str) -> f64 {
 /// base).
 #[test]
 fn on_exact_sensors_the_estimate_is_the_truth() {
-    let out = scratch("exact");
+    let out = scratch("estimation", "exact");
     let e = run(
         &out,
         &[
@@ -77,7 +44,7 @@ fn on_exact_sensors_the_estimate_is_the_truth() {
 /// the estimator never lost its IMU for good nor restarted.
 #[test]
 fn on_realistic_sensors_the_estimate_meets_its_goals() {
-    let out = scratch("realistic");
+    let out = scratch("estimation", "realistic");
     let e = run(&out, &["--sensing", "realistic"]);
     let a = &e["base_estimate_error"];
     let c = &e["controller_summary"];
@@ -96,7 +63,7 @@ fn on_realistic_sensors_the_estimate_meets_its_goals() {
 /// it) beyond 5 mm.
 #[test]
 fn standing_the_base_height_does_not_drift() {
-    let out = scratch("standing");
+    let out = scratch("estimation", "standing");
     let e = run(
         &out,
         &[
@@ -112,4 +79,63 @@ fn standing_the_base_height_does_not_drift() {
     eprintln!("{a:#}");
     assert!(f(a, "height_max") < 5e-3, "{a:#}");
     assert!(f(a, "position_rms") < 5e-3, "{a:#}");
+}
+
+/// Feet measured by one six-axis force/torque sensor each (`sim.sensors.feet = "six_axis"`,
+/// no corner forces published): the estimator takes the CoP and the stance from the wrenches
+/// alone; on `multiple_impacts` it meets the same goals and C1 stands.
+#[test]
+fn on_six_axis_foot_sensors_c1_stands() {
+    let out = scratch("estimation", "six-axis");
+    let e = run(
+        &out,
+        &[
+            "--sensing",
+            "realistic",
+            "--sim-set",
+            "sim.sensors.feet=\"six_axis\"",
+        ],
+    );
+    let a = &e["base_estimate_error"];
+    let c = &e["controller_summary"];
+    eprintln!("{a:#}\n{:#}", c["estimator"]);
+    assert!(f(a, "velocity_rms") <= 0.02, "{a:#}");
+    assert!(f(a, "orientation_rms_deg") <= 0.5, "{a:#}");
+    assert_eq!(f(&c["estimator"], "divergences"), 0.0);
+    assert_eq!(f(c, "falls"), 0.0);
+    assert!(f(c, "com_height_drop") < 5e-3, "{c:#}");
+}
+
+/// `upc controller --sensing`: `realistic` estimates the base even from a plant that publishes
+/// it (a motion-capture lab checking its estimator); `truth` refuses, tick by tick, a plant
+/// that does not measure it, and says why.
+#[test]
+fn the_controller_sensing_flag_chooses_the_estimator() {
+    let cases: [(&str, &[&str], bool); 2] = [
+        (
+            "realistic",
+            &["--sensing", "realistic", "--set", "sim.sensors.mocap=true"],
+            true,
+        ),
+        ("truth", &["--sensing", "realistic"], false),
+    ];
+    for (sensing, plant, estimates) in cases {
+        let s = Scratch::new(&format!("sensing_{sensing}"));
+        let mut p = Procs::default();
+        start_controller(&mut p, &s, &["--sensing", sensing]);
+        start_plant(&mut p, &s, "sim", plant);
+        std::thread::sleep(Duration::from_secs(3));
+        p.stop(&s, "controller", libc::SIGTERM);
+        p.stop(&s, "sim", libc::SIGTERM);
+        let c = json(&s.path("controller.json"));
+        let log = support::procs::log(&s, "controller");
+        if estimates {
+            assert!(f(&c["estimator"], "ticks") > 500.0, "{c:#}");
+            assert_eq!(f(&c, "tick_errors"), 0.0, "{c:#}");
+        } else {
+            assert!(c["estimator"].is_null(), "{c:#}");
+            assert!(f(&c, "tick_errors") > 500.0, "{c:#}");
+            assert!(log.contains("--sensing realistic"), "{log}");
+        }
+    }
 }

@@ -4,93 +4,28 @@
 //! as a push: the hand walks the door away before any force comes (and, on
 //! `multiple_impacts`, C2 then fell). Tared, the hand holds its place.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+mod support;
+
+use std::path::Path;
 
 use serde_json::Value;
+use support::upc_run::{exact_sensors_but, num as f, scratch, upc_run};
 
 const BIAS: f64 = 2.0;
 
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("upc-wrist-tare-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("scratch dir");
-    d
-}
-
-/// Every sensor model at zero but the wrist's constant offset.
-fn only_the_wrist_offset() -> Vec<String> {
-    let zero = [
-        "wrist.noise",
-        "wrist.drift",
-        "wrist.resolution",
-        "wrist.dropout",
-        "wrist.latency",
-        "soles.noise",
-        "soles.bias",
-        "soles.drift",
-        "soles.resolution",
-        "soles.dropout",
-        "soles.latency",
-        "imu.gyro_noise_density",
-        "imu.gyro_bias",
-        "imu.gyro_bias_drift",
-        "imu.accel_noise_density",
-        "imu.accel_bias",
-        "imu.accel_bias_drift",
-        "imu.tilt_error",
-        "imu.orientation_noise",
-        "imu.yaw_drift",
-        "imu.dropout",
-        "imu.latency",
-        "encoders.bits",
-        "encoders.velocity_noise",
-    ];
-    let mut args = vec!["--sensing".to_string(), "realistic".to_string()];
-    for k in zero {
-        args.push("--sim-set".into());
-        args.push(format!("sim.sensors.{k}=0"));
-    }
-    args.push("--sim-set".into());
-    args.push(format!("sim.sensors.wrist.bias={BIAS}"));
-    // Seed 2 draws the offset +2 N along the door's swing (x), which the door does not resist.
-    args.push("--sim-set".into());
-    args.push("sim.sensors.seed=2".into());
-    args
-}
-
-/// C1 until just before the first push (0.85 s); the controller's part of `summary.json`.
+/// C1 until just before the first push (0.8 s), every sensor exact but the wrist's constant
+/// offset; the controller's part of `summary.json`.
 fn run(out: &Path, extra: &[&str]) -> Value {
-    let st = Command::new(env!("CARGO_BIN_EXE_upc"))
-        .args(["run", "--quiet", "--controller", "c1", "--duration", "0.8"])
-        .args(["--name", "run", "--out"])
-        .arg(out)
-        .args(only_the_wrist_offset())
-        .args(extra)
-        .stdout(Stdio::null())
-        .status()
-        .expect("upc run");
-    let dir = out.join("run");
-    assert!(
-        st.success(),
-        "upc run failed: {st}\n{}",
-        std::fs::read_to_string(dir.join("c1/controller.log")).unwrap_or_default()
-    );
-    let s: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).expect("summary"))
-            .expect("summary JSON");
-    s["runs"][0]["controller_summary"].clone()
-}
-
-fn f(v: &Value, key: &str) -> f64 {
-    v[key]
-        .as_f64()
-        .unwrap_or_else(|| panic!("no `{key}` in {v:#}"))
+    // Seed 2 draws the offset +2 N along the door's swing (x), which the door does not resist.
+    let mut args = exact_sensors_but(&[&format!("wrist.bias={BIAS}"), "seed=2"]);
+    args.extend(["--duration".to_string(), "0.8".to_string()]);
+    args.extend(extra.iter().map(|a| a.to_string()));
+    upc_run(out, "c1", &args)["controller_summary"].clone()
 }
 
 #[test]
 fn a_tared_wrist_offset_is_not_rendered_as_a_push() {
-    let out = scratch("tared");
+    let out = scratch("wrist-tare", "tared");
     let tared = run(&out, &[]);
     let offset: Vec<f64> = tared["wrist_tare_offset"]
         .as_array()
@@ -110,8 +45,23 @@ fn a_tared_wrist_offset_is_not_rendered_as_a_push() {
     assert!(f(&tared, "hand_peak_error") < 1e-3, "{tared:#}");
 
     // The same without the tare: the hand yields to the offset.
-    let out = scratch("untared");
+    let out = scratch("wrist-tare", "untared");
     let untared = run(&out, &["--set", "controller.wrist_tare.duration=0"]);
     eprintln!("untared hand peak error {}", untared["hand_peak_error"]);
     assert!(f(&untared, "hand_peak_error") > 5e-3, "{untared:#}");
+}
+
+/// A tare refused (the quiet hand measures more than `max_offset`: a load, or an offset too
+/// large to be one) leaves the offset in the measured force; the controller then does not feed
+/// the force back, so the hand does not yield to it.
+#[test]
+fn after_a_refused_tare_the_hand_does_not_yield_to_the_offset() {
+    let out = scratch("wrist-tare", "refused");
+    let refused = run(&out, &["--set", "controller.wrist_tare.max_offset=1"]);
+    eprintln!(
+        "refused: offset {}, hand peak error {}",
+        refused["wrist_tare_offset"], refused["hand_peak_error"]
+    );
+    assert_eq!(f(&refused, "wrist_tare_refusals"), 1.0, "{refused:#}");
+    assert!(f(&refused, "hand_peak_error") < 1e-3, "{refused:#}");
 }

@@ -201,6 +201,7 @@ mod tests {
             csv: Some("c.csv".into()),
             summary: Some("c.json".into()),
             duration: Some(3.25),
+            sensing: Some(upc::sim::sensors::Sensing::Truth),
             config: config(),
         };
         let Command::Controller(back) = parse(Argv::of("controller", &controller)) else {

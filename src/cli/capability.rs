@@ -72,6 +72,9 @@ pub struct CapabilityArgs {
     /// What the plant publishes: its truth, or through the sensor models (docs/sensing.md).
     #[arg(long, value_enum)]
     pub sensing: Option<upc::sim::sensors::Sensing>,
+    /// Every case's plant config key (`upc run --sim-set`), e.g. `sim.sensors.seed=2`.
+    #[arg(long = "sim-set", value_name = "KEY=VALUE")]
+    pub sim_sets: Vec<String>,
     #[command(flatten)]
     pub robot: RobotArg,
     /// Config files and `--set` keys for every case's controller (the variant's own key last).
@@ -216,6 +219,7 @@ pub fn run(args: CapabilityArgs) -> CliResult {
                                     forecast: ForecastCase::EXACT,
                                     config: &args.config,
                                     sensing: args.sensing,
+                                    sim_sets: &args.sim_sets,
                                 },
                                 &out,
                                 a,
@@ -326,6 +330,8 @@ pub(super) struct FullCase<'a> {
     /// The user's config files and `--set` keys.
     pub config: &'a ConfigArgs,
     pub sensing: Option<upc::sim::sensors::Sensing>,
+    /// The user's plant config keys.
+    pub sim_sets: &'a [String],
 }
 
 /// What a full-simulation case gave: survived, and the controller's summary when it wrote one.
@@ -359,7 +365,7 @@ pub(super) fn full_case(
         impact_toml(amplitude, case.duration, case.direction),
     )?;
     let kind = case.variant.kind();
-    let mut sim_sets = vec![];
+    let mut sim_sets = case.sim_sets.to_vec();
     if case.direction == Direction::Y {
         sim_sets.push("sim.push=\"hand\"".to_string());
     }
@@ -503,6 +509,9 @@ fn write_outputs(
     }
     if let Some(s) = args.sensing {
         md += &format!("Sensing: `{}` (docs/sensing.md)\n\n", s.name());
+    }
+    for kv in &args.sim_sets {
+        md += &format!("Plant: `--sim-set {kv}`\n\n");
     }
     for model in [Model::Reduced, Model::Full] {
         let of_model: Vec<&Row> = rows.iter().filter(|r| r.model == model).collect();

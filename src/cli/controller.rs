@@ -7,6 +7,7 @@ use upc::config::{ControllerKind, HeldObject};
 use upc::control::server::{ServerOptions, run_server};
 use upc::scenario::Scenario;
 use upc::shutdown::stop_flag;
+use upc::sim::sensors::Sensing;
 
 use super::CliResult;
 use super::argv::{Argv, ToArgv, fields};
@@ -48,6 +49,12 @@ pub struct ControllerArgs {
     /// (a deployed controller).
     #[arg(long)]
     pub duration: Option<f64>,
+    /// What the plant's states carry: `truth` takes the published base as measured and refuses
+    /// a plant that does not measure it; `realistic` estimates the base from the sensor block
+    /// even when a base is published (overrides `controller.estimator.mode`, whose default
+    /// `auto` follows the plant's `BASE_UNMEASURED` flag; docs/estimation.md).
+    #[arg(long, value_enum)]
+    pub sensing: Option<Sensing>,
     #[command(flatten)]
     pub config: ConfigArgs,
 }
@@ -66,10 +73,12 @@ impl ToArgv for ControllerArgs {
             csv,
             summary,
             duration,
+            sensing,
             config,
         } = self;
         fields!(w; val scenario, opt_choice controller, switch realtime, val prefix, opt rrd,
-                val recording_id, opt connect, opt csv, opt summary, opt duration);
+                val recording_id, opt connect, opt csv, opt summary, opt duration,
+                opt_choice sensing);
         w.nested(robot);
         w.nested(config);
     }
@@ -85,6 +94,13 @@ pub fn run(args: ControllerArgs) -> CliResult {
     }
     if args.realtime {
         extra.push("controller.mode=\"realtime\"".into());
+    }
+    if let Some(s) = args.sensing {
+        let mode = match s {
+            Sensing::Truth => "off",
+            Sensing::Realistic => "on",
+        };
+        extra.push(format!("controller.estimator.mode=\"{mode}\""));
     }
     let config = args.config.load(&robot, Some(&scenario), &extra)?;
     let opts = ServerOptions {

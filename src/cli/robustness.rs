@@ -68,6 +68,9 @@ pub struct RobustnessArgs {
     /// What the plant publishes: its truth, or through the sensor models (docs/sensing.md).
     #[arg(long, value_enum)]
     pub sensing: Option<upc::sim::sensors::Sensing>,
+    /// Every case's plant config key (`upc run --sim-set`), e.g. `sim.sensors.seed=2`.
+    #[arg(long = "sim-set", value_name = "KEY=VALUE")]
+    pub sim_sets: Vec<String>,
     #[command(flatten)]
     pub robot: RobotArg,
     /// Config files and `--set` keys for every case's controller (the variant's own key last).
@@ -215,6 +218,7 @@ pub fn run(args: RobustnessArgs) -> CliResult {
                             forecast: cell.forecast,
                             config: &args.config,
                             sensing: args.sensing,
+                            sim_sets: &args.sim_sets,
                         };
                         let mut at_max = None;
                         let r = bisect(max, args.tol, |a| -> Result<bool, BoxError> {
@@ -409,6 +413,9 @@ fn write_outputs(
     }
     if let Some(s) = args.sensing {
         let _ = writeln!(md, "Sensing: `{}` (docs/sensing.md)\n", s.name());
+    }
+    for kv in &args.sim_sets {
+        let _ = writeln!(md, "Plant: `--sim-set {kv}`\n");
     }
     for &d in &args.durations {
         let _ = writeln!(md, "## {d} s impact\n");

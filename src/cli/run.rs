@@ -480,6 +480,9 @@ impl Launch<'_> {
             csv: Some(self.dir.join("controller.csv")),
             summary: Some(self.dir.join("controller.json")),
             duration: Some(self.duration),
+            // The estimator follows the plant's BASE_UNMEASURED flag (a `--sim-set
+            // sim.sensors.mocap=true` run keeps a measured base).
+            sensing: None,
             config: ConfigArgs {
                 configs: args.config.configs.clone(),
                 sets,

@@ -60,7 +60,7 @@ pub enum TickError {
     #[error("base estimator: {0}")]
     Estimator(#[from] EstimatorError),
     #[error(
-        "the plant does not measure its floating base (its states carry STATE_FLAG_BASE_UNMEASURED) and controller.estimator.mode = \"off\": set it to \"auto\""
+        "the plant does not measure its floating base (its states carry STATE_FLAG_BASE_UNMEASURED) and controller.estimator.mode = \"off\": set it to \"auto\" (or run `upc controller --sensing realistic`)"
     )]
     BaseUnmeasured,
 }
@@ -219,6 +219,7 @@ impl ControllerCore {
             wbc.contact_frames(),
             cart.mass * cart.gravity,
             control_period,
+            robot.imu_frame,
             cc.estimator,
         );
         Ok(Self {
@@ -774,9 +775,13 @@ impl ControllerCore {
         // force, which then folds the arm's lightest joints instead of acting through M_e.
         let f_hand = Vector3::from(f_meas);
         // Not while the wrist is being tared: the hand would yield to the offset being measured
-        // and load the door, which the tare would then take for the offset.
-        let taring = self.tare.state() == TareState::Pending && self.tare.enabled();
-        let f_hand = if self.force_feedback && !taring && f_hand.iter().all(|x| x.is_finite()) {
+        // and load the door, which the tare would then take for the offset. Nor after a refused
+        // tare: the force then carries a constant the controller cannot tell from a push (a
+        // large offset, a load), which the hand would yield to all session (an 8 N-per-axis
+        // offset fed back toppled C1; docs/sensing.md).
+        let untrusted = self.tare.enabled()
+            && matches!(self.tare.state(), TareState::Pending | TareState::Refused);
+        let f_hand = if self.force_feedback && !untrusted && f_hand.iter().all(|x| x.is_finite()) {
             f_hand
         } else {
             Vector3::zeros()

@@ -31,6 +31,7 @@ use super::logger::{ControlLogger, TickLog};
 use super::plant_link::{LinkTimeouts, PlantLink, Verdict};
 use super::run_metrics::RunMetrics;
 pub use super::summary::{CorrectionSummary, ServerSummary};
+use super::wrist_tare::{TareState, WristTare};
 use super::{ControllerCore, ForecastWindow, GainHandoff, Ticker};
 use crate::channels::{
     Bus, ChannelError, ForecastMsg, Listener, MAX_DOF, Notifier, Publisher, STATE_FLAG_HOLD,
@@ -537,7 +538,13 @@ impl<'a> ControlLoop<'a> {
         inputs.c2_log =
             schedule.map(|sch| (sch.cost, sch.nominal_cost, sch.iterations, sch.solve_time));
         let tau = &mut self.tau[..self.n_tau];
-        match self.core.tick(state, &self.intake.window, schedule, tau) {
+        let tare_before = self.core.wrist_tare().state();
+        let result = self.core.tick(state, &self.intake.window, schedule, tau);
+        let tare = self.core.wrist_tare();
+        if tare.state() != tare_before {
+            log_tare(tare, state.time);
+        }
+        match result {
             Ok(WbcStatus::Solved) => 0,
             Ok(WbcStatus::Fallback(FallbackReason::Fallen)) => TORQUE_FLAG_FALLBACK,
             Ok(_) => {
@@ -836,6 +843,29 @@ fn start_logger(
     } else {
         super::realtime::in_background(start)?
     }))
+}
+
+/// The wrist tare's outcome, once per plant session.
+fn log_tare(tare: &WristTare, t: f64) {
+    let b = tare.offset();
+    match tare.state() {
+        TareState::Taken => tracing::info!(
+            "wrist tared at t = {t:.3} s: offset ({:.2}, {:.2}, {:.2}) N removed from the measured hand force",
+            b[0],
+            b[1],
+            b[2]
+        ),
+        TareState::Refused => tracing::warn!(
+            "wrist tare refused at t = {t:.3} s: the quiet hand measures more than \
+             controller.wrist_tare.max_offset (a load, or an offset too large to be one); \
+             the hand force is not fed back to the whole-body QP this session"
+        ),
+        TareState::Skipped => tracing::info!(
+            "wrist tare skipped: no quiet second at the session's start (a controller that \
+             joined a running session); the measured hand force is used as it is"
+        ),
+        TareState::Pending => {}
+    }
 }
 
 #[cfg(test)]

@@ -104,6 +104,8 @@ pub struct BaseEstimator {
     corners: [[usize; 4]; 2],
     weight: f64,
     dt: f64,
+    /// The IMU's frame when not on the base (its readings are moved to the base, EST-0).
+    imu_frame: Option<usize>,
     x: SVector<f64, NX>,
     p: SMatrix<f64, NX, NX>,
     /// Filtered joint velocities.
@@ -137,12 +139,13 @@ impl BaseEstimate {
 impl BaseEstimator {
     /// The estimator of `model` (a floating-base robot, its gravity along −z) whose sole corners
     /// are the frames `corners` (state order: four per foot, left first), weighing `weight` (N),
-    /// ticking every `dt` (s).
+    /// ticking every `dt` (s), its IMU on the base or on frame `imu_frame`.
     pub fn new(
         model: &Model,
         corners: [usize; N_CONTACTS],
         weight: f64,
         dt: f64,
+        imu_frame: Option<usize>,
         settings: EstimatorSettings,
     ) -> Self {
         let joints = model.nv.saturating_sub(6);
@@ -162,6 +165,7 @@ impl BaseEstimator {
             ],
             weight,
             dt,
+            imu_frame,
             x: SVector::zeros(),
             p: SMatrix::identity(),
             joint_v: DVector::zeros(joints),
@@ -224,6 +228,10 @@ impl BaseEstimator {
             .copy_from(&q.rows(7, q.len() - 7));
         self.v.rows_mut(6, joints).copy_from(&self.joint_v);
         forward_kinematics_velocity(&self.model, &mut self.data, &self.q, &self.v)?;
+        let (r, gyro, accel) = match self.imu_frame {
+            Some(f) => self.imu_to_base(f, r, gyro, accel),
+            None => (r, gyro, accel),
+        };
         // Stance from the normal force of each foot's wrench.
         let stance =
             [0, 1].map(|i| state.foot_wrenches[i][2] > self.settings.contact_load * self.weight);
@@ -347,6 +355,36 @@ impl BaseEstimator {
         }
         self.last_imu_stamp = stamp;
         Ok((UnitQuaternion::from_quaternion(quat), w, a))
+    }
+
+    /// An IMU sample at frame `f` moved to the base (eq. EST-0), after the kinematics with the
+    /// base at the identity: R_b = R_i R_bi^T, ω_b = R_bi ω_i − ω_rel, and the base origin's
+    /// specific force f_b = R_bi f_i − ω_b × (ω_b × p) − 2 ω_b × v_rel, with p, v_rel, ω_rel the
+    /// frame's position and motion relative to the base (base axes). Left out: α_b × p and
+    /// the frame's acceleration relative to the base, which no sensor gives; the legs' kinematic
+    /// correction absorbs them.
+    fn imu_to_base(
+        &self,
+        f: usize,
+        r: UnitQuaternion<f64>,
+        gyro: Vector3<f64>,
+        accel: Vector3<f64>,
+    ) -> ImuSample {
+        let pose = &self.data.o_m_f[f];
+        let r_bi = nalgebra::Rotation3::from_matrix_unchecked(pose.rot);
+        let rel = frame_velocity(
+            &self.model,
+            &self.data,
+            f,
+            ReferenceFrame::LocalWorldAligned,
+        );
+        let w = r_bi * gyro - rel.ang;
+        let a = r_bi * accel - w.cross(&w.cross(&pose.trans)) - 2.0 * w.cross(&rel.lin);
+        (
+            r * UnitQuaternion::from_rotation_matrix(&r_bi).inverse(),
+            w,
+            a,
+        )
     }
 
     /// The first estimate: the frame the plants start the robot in (`Robot`'s home) — the sole
@@ -570,7 +608,7 @@ mod tests {
         let ids: [usize; N_CONTACTS] =
             std::array::from_fn(|k| model.frame_id(&robot.contacts[k]).unwrap());
         let weight = robot.derived.mass * 9.81;
-        let est = BaseEstimator::new(model, ids, weight, 1e-3, EstimatorSettings::default());
+        let est = BaseEstimator::new(model, ids, weight, 1e-3, None, EstimatorSettings::default());
         let mut state: Box<StateMsg> = Box::default();
         (state.nq, state.nv) = (model.nq as u32, model.nv as u32);
         state.q[..model.nq].copy_from_slice(robot.home.as_slice());
@@ -627,6 +665,52 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// An IMU in the head, beyond the torso's and the neck's joints, read where it is by the
+    /// plant's sensor model (exact): moved back to the base (EST-0), the base's orientation is
+    /// the truth at every tick and its angular velocity zero while the neck turns at 0.5 rad/s
+    /// (what the gyro reads is the neck's); the estimate stays at home.
+    #[test]
+    fn an_imu_in_the_head_is_moved_to_the_base() {
+        use crate::sim::sensors::{ImuMount, Sensing, Sensors};
+        let mut b = bench();
+        let model = b.robot.model.clone();
+        let head = model.frame_id("head").unwrap();
+        let ids: [usize; N_CONTACTS] =
+            std::array::from_fn(|k| model.frame_id(&b.robot.contacts[k]).unwrap());
+        let weight = b.robot.derived.mass * 9.81;
+        b.est = BaseEstimator::new(
+            &model,
+            ids,
+            weight,
+            1e-3,
+            Some(head),
+            EstimatorSettings::default(),
+        );
+        let mut cfg = crate::sim::SimConfig::load(&[], &[]).unwrap().sensors;
+        cfg.sensing = Sensing::Truth;
+        let mut sensors = Sensors::new(&cfg, 9.81, Some(ImuMount::new(&model, head)));
+        let joint = |name: &str| model.joints[model.joint_id(name).unwrap()].idx_q;
+        let (torso, neck) = (joint("torso_pitch"), joint("neck_yaw"));
+        let neck_v = model.joints[model.joint_id("neck_yaw").unwrap()].idx_v;
+        b.state.q[torso] = 0.2;
+        for k in 0..300u64 {
+            b.state.q[neck] = 0.1 + 0.5 * k as f64 * 1e-3;
+            b.state.v[neck_v] = 0.5;
+            b.state.step = k;
+            sensors.apply(&mut b.state, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+            b.state.foot_wrenches = [[0.0, 0.0, weight / 2.0, 0.0, 0.0, 0.0]; 2];
+            b.state.flags = STATE_FLAG_BASE_UNMEASURED;
+            let gyro = Vector3::from(b.state.imu_angular_velocity);
+            assert!((gyro.norm() - 0.5).abs() < 1e-9, "the head turns: {gyro}");
+            b.tick(k).unwrap();
+            b.assert_at_home(3 + 4);
+            assert!(b.v.rows(3, 3).norm() < 1e-9, "ω_b {}", b.v.rows(3, 3));
+        }
+        // The neck's own acceleration (centripetal at the IMU) is what EST-0 leaves out: the
+        // base velocity it feeds stays small under the legs' correction.
+        assert!(b.v.rows(0, 3).norm() < 5e-3, "v_b {}", b.v.rows(0, 3));
     }
 
     /// Standing still on exact sensors, the estimate is the plants' home pose (the frame's

@@ -16,6 +16,8 @@
 //! [hand]
 //! frame = "right_rubber_hand"              # holds the door
 //! chain_root = "torso_link"                # M_e: chain root → hand (docs/hand_previewer.md)
+//! [imu]                                    # optional: the IMU's frame (its axes the sensor's);
+//! frame = "imu_in_pelvis"                  # without it, on the base and aligned with it
 //! [home]                                   # joint = angle (rad); the others at 0
 //! left_knee_joint = 0.3
 //! [locked]                                 # fixed at their home value (Pinocchio's reduced
@@ -45,6 +47,10 @@ pub struct RobotDescription {
     pub urdf: UrdfSource,
     pub feet: Feet,
     pub hand: HandSpec,
+    /// Where the IMU is, when not on the base and aligned with it (docs/sensing.md, "The IMU's
+    /// mounting").
+    #[serde(default)]
+    pub imu: Option<ImuSpec>,
     /// Joint angles of the standing posture (rad); unlisted joints are at 0.
     #[serde(default)]
     pub home: BTreeMap<String, f64>,
@@ -113,6 +119,15 @@ pub struct HandSpec {
     pub frame: String,
     /// The body the arm chain of M_e starts from (its joints are the chain's, exclusive).
     pub chain_root: String,
+}
+
+/// The IMU's mounting.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImuSpec {
+    /// A frame of the URDF whose axes are the sensor's: on the base's link or beyond joints
+    /// (a head's IMU).
+    pub frame: String,
 }
 
 /// The joints a description locks.

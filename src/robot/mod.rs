@@ -116,6 +116,8 @@ pub struct Robot {
     pub derived: Derived,
     /// The joints the description locks and their values (rad or m), by name.
     pub locked: std::collections::BTreeMap<String, f64>,
+    /// The IMU's frame in [`Robot::model`]; `None`: on the base, aligned with it.
+    pub imu_frame: Option<usize>,
     /// Content hash of the description and the URDF: plant and controller must agree on it.
     pub hash: u64,
 }
@@ -197,6 +199,16 @@ impl Robot {
         let soles = [f.left.frame.clone(), f.right.frame.clone()];
         let home = home_configuration(&model, &description, &locked, &soles, &contacts)?;
         let derived = derive(&model, &description, &soles, &contacts, &home)?;
+        let imu_frame = match &description.imu {
+            Some(imu) => Some(model.frame_id(&imu.frame).map_err(|_| RobotError::Urdf {
+                robot: description.name.clone(),
+                reason: format!(
+                    "the IMU's frame `{}` ([imu] frame) is not in the URDF: name one of its links or frames",
+                    imu.frame
+                ),
+            })?),
+            None => None,
+        };
         let mut h = ContentHash::default();
         h.bytes(hashed.as_bytes());
         h.bytes(urdf.as_bytes());
@@ -211,6 +223,7 @@ impl Robot {
             home,
             derived,
             locked: locked.into_iter().collect(),
+            imu_frame,
             description,
         })
     }

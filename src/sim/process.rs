@@ -42,7 +42,7 @@ use super::hold::{CommandClock, HoldStats, Phase, Supervisor};
 use super::physics::{Engine, Physics};
 use super::record::{Recorder, RecorderStats};
 use super::scene::{DoorDrive, default_scene};
-use super::sensors::{SensorCounts, Sensors};
+use super::sensors::{ImuMount, SensorCounts, Sensors};
 use super::world::{SimError, StepReport};
 
 /// Errors that end a run.
@@ -580,7 +580,11 @@ impl Looper {
                 ),
                 Push::Door | Push::None => None,
             },
-            sensors: Sensors::new(&cfg.sensors, -world.robot().gravity.z),
+            sensors: Sensors::new(
+                &cfg.sensors,
+                -world.robot().gravity.z,
+                robot.imu_frame.map(|f| ImuMount::new(&robot.model, f)),
+            ),
             points: [[0.0; 3]; N_CONTACTS],
             dt: cfg.dt,
             last_state: Box::default(),

@@ -5,10 +5,13 @@
 //! Modelled: joint encoders (quantised positions; velocities from the drives with white noise),
 //! the wrist force sensor and the sole forces (white noise, a constant bias, a bias drifting as
 //! a random walk, resolution, latency in steps, dropped samples holding the previous one), an
-//! IMU on the base (gyro and accelerometer with noise densities, biases and bias drift; the
-//! orientation of its own attitude filter with a tilt error and a drifting yaw). The foot
-//! wrenches of the state's sensor block are the measured corner forces summed in each sole's
-//! frame. Unless `mocap`, the floating base is not published: a robot does not measure it.
+//! IMU on the base or where the robot's description mounts it (gyro and accelerometer with
+//! noise densities, biases and bias drift; the orientation of its own attitude filter with a
+//! tilt error and a drifting yaw). The feet are
+//! measured either at the sole's corners (`feet = "corners"`: each corner a force sensor, the
+//! foot wrenches their sum in the sole's frame) or by one six-axis force/torque sensor per foot
+//! (`feet = "six_axis"`: the true wrench measured, the corners not published). Unless `mocap`,
+//! the floating base is not published: a robot does not measure it.
 //!
 //! The sensor block (IMU, foot wrenches, sample times) is filled from the truth on `truth` too,
 //! so an estimator can run on exact sensors.
@@ -27,6 +30,7 @@ use crate::channels::{
     MAX_DOF, N_CONTACTS, SENSOR_FEET, SENSOR_HAND, SENSOR_IMU, SENSOR_JOINTS,
     STATE_FLAG_BASE_UNMEASURED, StateMsg,
 };
+use crate::dynamics::{Data, Model, ReferenceFrame, forward_kinematics_velocity, frame_velocity};
 
 /// Truth or the sensor models (`sim.sensors.sensing`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, clap::ValueEnum)]
@@ -62,6 +66,38 @@ pub struct ForceSensorConfig {
     /// Delay in plant steps.
     pub latency: usize,
     /// Probability that a sample is lost (the previous one is published again).
+    pub dropout: f64,
+}
+
+/// How the feet's loads are measured (`sim.sensors.feet`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FootSensing {
+    /// A force sensor at each sole corner (the `soles` model); each foot's wrench is its
+    /// corners' sum.
+    Corners,
+    /// One six-axis force/torque sensor per foot (the `foot_ft` model), as the iCub's and
+    /// TALOS's ankles have; the corner forces are not measured (published as NaN).
+    SixAxis,
+}
+
+/// One six-axis force/torque sensor's model (per axis; forces in N, moments in N m).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WrenchSensorConfig {
+    /// The force channels: σ of the white noise, the constant bias's size (signs from the
+    /// seed), the bias random walk (N/√s) and the resolution (0: none).
+    pub noise: f64,
+    pub bias: f64,
+    pub drift: f64,
+    pub resolution: f64,
+    /// The moment channels, likewise (N m, N m/√s).
+    pub moment_noise: f64,
+    pub moment_bias: f64,
+    pub moment_drift: f64,
+    pub moment_resolution: f64,
+    /// Delay in plant steps, and the probability that a sample is lost.
+    pub latency: usize,
     pub dropout: f64,
 }
 
@@ -116,8 +152,12 @@ pub struct SensorsConfig {
     pub imu: ImuConfig,
     /// The wrist's force sensor (the hand force).
     pub wrist: ForceSensorConfig,
-    /// Each sole corner's force.
+    /// How the feet are measured: at the corners (`soles`) or by a six-axis sensor (`foot_ft`).
+    pub feet: FootSensing,
+    /// Each sole corner's force (`feet = "corners"`).
     pub soles: ForceSensorConfig,
+    /// Each foot's six-axis sensor (`feet = "six_axis"`), in the sole's frame.
+    pub foot_ft: WrenchSensorConfig,
 }
 
 impl SensorsConfig {
@@ -146,6 +186,33 @@ impl SensorsConfig {
                     format!("at most {MAX_LATENCY} steps, got {}", s.latency),
                 ));
             }
+        }
+        let w = &self.foot_ft;
+        for (key, v) in [
+            ("noise", w.noise),
+            ("bias", w.bias),
+            ("drift", w.drift),
+            ("resolution", w.resolution),
+            ("moment_noise", w.moment_noise),
+            ("moment_bias", w.moment_bias),
+            ("moment_drift", w.moment_drift),
+            ("moment_resolution", w.moment_resolution),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Some((format!("foot_ft.{key}"), format!("must be ≥ 0, got {v}")));
+            }
+        }
+        if !(0.0..1.0).contains(&w.dropout) {
+            return Some((
+                "foot_ft.dropout".into(),
+                format!("must be in [0, 1), got {}", w.dropout),
+            ));
+        }
+        if w.latency > MAX_LATENCY {
+            return Some((
+                "foot_ft.latency".into(),
+                format!("at most {MAX_LATENCY} steps, got {}", w.latency),
+            ));
         }
         let i = &self.imu;
         for (key, v) in [
@@ -198,9 +265,11 @@ pub const MAX_LATENCY: usize = 64;
 /// Counters of a run.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct SensorCounts {
-    /// Samples lost (the previous one published again), wrist, soles and IMU.
+    /// Samples lost (the previous one published again): wrist, sole corners, the feet's
+    /// six-axis sensors and IMU.
     pub wrist_dropouts: u64,
     pub sole_dropouts: u64,
+    pub foot_ft_dropouts: u64,
     pub imu_dropouts: u64,
 }
 
@@ -284,6 +353,50 @@ impl ForceChannel {
     }
 }
 
+/// One six-axis force/torque channel: its biases (force, then moment) and its transport.
+#[derive(Debug, Clone)]
+struct WrenchChannel {
+    bias: [f64; 6],
+    transport: Transport<6>,
+}
+
+impl WrenchChannel {
+    fn new(s: &WrenchSensorConfig, rng: &mut ChaCha8Rng) -> Self {
+        let (f, m) = (signed_bias(s.bias, rng), signed_bias(s.moment_bias, rng));
+        Self {
+            bias: [f[0], f[1], f[2], m[0], m[1], m[2]],
+            transport: Transport::new(s.latency),
+        }
+    }
+
+    /// The sample published at `step` for the true wrench `w` (force, moment): returns whether
+    /// it was lost.
+    fn measure(
+        &mut self,
+        s: &WrenchSensorConfig,
+        step: u64,
+        dt: f64,
+        rng: &mut ChaCha8Rng,
+        w: &mut [f64; 6],
+    ) -> bool {
+        for (c, y) in w.iter_mut().enumerate() {
+            let (noise, drift, resolution) = if c < 3 {
+                (s.noise, s.drift, s.resolution)
+            } else {
+                (s.moment_noise, s.moment_drift, s.moment_resolution)
+            };
+            let (n, d): (f64, f64) = (StandardNormal.sample(rng), StandardNormal.sample(rng));
+            self.bias[c] += drift * dt.sqrt() * d;
+            *y += self.bias[c] + noise * n;
+            if resolution > 0.0 {
+                *y = (*y / resolution).round() * resolution;
+            }
+        }
+        let u: f64 = rng.random();
+        self.transport.pass(step, w, u, s.dropout)
+    }
+}
+
 /// A bias of `size` per axis with signs drawn from `rng`.
 fn signed_bias(size: f64, rng: &mut ChaCha8Rng) -> [f64; 3] {
     [0; 3].map(|_| {
@@ -359,8 +472,7 @@ impl ImuChannel {
     }
 }
 
-/// What an accelerometer on the base reads, from the base's world velocity over successive
-/// states: the specific force R^T (a + g ẑ), a by finite difference (0 on the first state).
+/// What an accelerometer reads, from its point's world velocity over successive states: the specific force R^T (a + g ẑ), a by finite difference (0 on the first state).
 #[derive(Debug, Clone, Copy, Default)]
 struct SpecificForce {
     last: Option<(u64, Vector3<f64>)>,
@@ -379,6 +491,52 @@ impl SpecificForce {
     }
 }
 
+/// Where the IMU sits when not on the base ([`crate::robot::Robot::imu_frame`]): the robot's
+/// model and workspace to place it from the state, allocated once.
+pub struct ImuMount {
+    model: Model,
+    data: Data,
+    frame: usize,
+    q: nalgebra::DVector<f64>,
+    v: nalgebra::DVector<f64>,
+}
+
+impl ImuMount {
+    /// The IMU on frame `frame` of `model` (the plant's robot, whose coordinates the state
+    /// carries).
+    pub fn new(model: &Model, frame: usize) -> Self {
+        Self {
+            model: model.clone(),
+            data: Data::new(model),
+            frame,
+            q: nalgebra::DVector::zeros(model.nq),
+            v: nalgebra::DVector::zeros(model.nv),
+        }
+    }
+
+    /// The frame's orientation (world), angular velocity and origin's velocity (world axes) in
+    /// the state `m`; `None` when the state does not fit the model.
+    fn place(&mut self, m: &StateMsg) -> Option<(UnitQuaternion<f64>, Vector3<f64>, Vector3<f64>)> {
+        let (nq, nv) = (self.model.nq, self.model.nv);
+        if m.nq as usize != nq || m.nv as usize != nv || nq > MAX_DOF {
+            return None;
+        }
+        self.q.as_mut_slice().copy_from_slice(&m.q[..nq]);
+        self.v.as_mut_slice().copy_from_slice(&m.v[..nv]);
+        forward_kinematics_velocity(&self.model, &mut self.data, &self.q, &self.v).ok()?;
+        let rot = self.data.o_m_f[self.frame].rot;
+        let r =
+            UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(rot));
+        let t = frame_velocity(
+            &self.model,
+            &self.data,
+            self.frame,
+            ReferenceFrame::LocalWorldAligned,
+        );
+        Some((r, t.ang, t.lin))
+    }
+}
+
 /// The sensor models of one plant run (the sensor block alone on `truth`).
 pub struct Sensors {
     cfg: SensorsConfig,
@@ -388,7 +546,10 @@ pub struct Sensors {
     rng: ChaCha8Rng,
     wrist: ForceChannel,
     soles: Vec<ForceChannel>,
+    feet: [WrenchChannel; 2],
     imu: ImuChannel,
+    /// The IMU's place when not on the base.
+    mount: Option<ImuMount>,
     specific_force: SpecificForce,
     /// Sample times of the IMU, feet and hand as last published.
     stamps: [f64; 4],
@@ -396,14 +557,19 @@ pub struct Sensors {
 }
 
 impl Sensors {
-    /// The sensors of a plant with gravity `gravity` (m/s²).
-    pub fn new(cfg: &SensorsConfig, gravity: f64) -> Self {
+    /// The sensors of a plant with gravity `gravity` (m/s²), its IMU on the base or at `mount`.
+    pub fn new(cfg: &SensorsConfig, gravity: f64, mount: Option<ImuMount>) -> Self {
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
         let wrist = ForceChannel::new(&cfg.wrist, &mut rng);
         let soles = (0..N_CONTACTS)
             .map(|_| ForceChannel::new(&cfg.soles, &mut rng))
             .collect();
         let imu = ImuChannel::new(&cfg.imu, &mut rng);
+        // The feet's six-axis biases come from a stream of their own: the corner and IMU draws
+        // of every seed stay what they were before these sensors existed.
+        let mut feet_rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+        feet_rng.set_stream(1);
+        let feet = [0; 2].map(|_| WrenchChannel::new(&cfg.foot_ft, &mut feet_rng));
         Self {
             cfg: *cfg,
             models: cfg.sensing == Sensing::Realistic,
@@ -411,7 +577,9 @@ impl Sensors {
             rng,
             wrist,
             soles,
+            feet,
             imu,
+            mount,
             specific_force: SpecificForce::default(),
             stamps: [0.0; 4],
             counts: SensorCounts::default(),
@@ -461,16 +629,35 @@ impl Sensors {
         } else {
             self.stamps[SENSOR_HAND] = late(cfg.wrist.latency);
         }
-        let mut lost = 0;
-        for (ch, f) in self.soles.iter_mut().zip(m.contact_forces.iter_mut()) {
-            if ch.measure(&cfg.soles, step, dt, &mut self.rng, f) {
-                lost += 1;
+        match cfg.feet {
+            FootSensing::Corners => {
+                let mut lost = 0;
+                for (ch, f) in self.soles.iter_mut().zip(m.contact_forces.iter_mut()) {
+                    if ch.measure(&cfg.soles, step, dt, &mut self.rng, f) {
+                        lost += 1;
+                    }
+                }
+                self.counts.sole_dropouts += lost;
+                // The feet's stamp is the newest sample's: a corner lost holds its previous one.
+                if lost < N_CONTACTS as u64 {
+                    self.stamps[SENSOR_FEET] = late(cfg.soles.latency);
+                }
             }
-        }
-        self.counts.sole_dropouts += lost;
-        // The feet's stamp is the newest sample's: a corner lost holds its previous one.
-        if lost < N_CONTACTS as u64 {
-            self.stamps[SENSOR_FEET] = late(cfg.soles.latency);
+            FootSensing::SixAxis => {
+                fill_foot_wrenches(m, contact_points);
+                let mut lost = 0;
+                for (ch, w) in self.feet.iter_mut().zip(m.foot_wrenches.iter_mut()) {
+                    if ch.measure(&cfg.foot_ft, step, dt, &mut self.rng, w) {
+                        lost += 1;
+                    }
+                }
+                self.counts.foot_ft_dropouts += lost;
+                if lost < 2 {
+                    self.stamps[SENSOR_FEET] = late(cfg.foot_ft.latency);
+                }
+                // No corner is measured.
+                m.contact_forces = [[f64::NAN; 3]; N_CONTACTS];
+            }
         }
         let mut imu = imu_truth;
         if self
@@ -482,14 +669,20 @@ impl Sensors {
             self.stamps[SENSOR_IMU] = late(cfg.imu.latency);
         }
         publish_imu(m, &imu);
-        fill_foot_wrenches(m, contact_points);
         self.stamps[SENSOR_JOINTS] = t;
         m.stamps = self.stamps;
-        // The centre of pressure of the measured forces (flat ground), as the robot computes it;
+        // The centre of pressure of the measured loads (flat ground), as the robot computes it;
         // where they carry no weight, the previous one stays.
-        let loads =
-            (m.contact_forces.iter().zip(contact_points)).map(|(f, p)| (f[2], [p[0], p[1]]));
-        if let (_, Some(cop), _) = super::physics::centre_of_pressure(loads) {
+        let cop = match cfg.feet {
+            FootSensing::Corners => {
+                fill_foot_wrenches(m, contact_points);
+                let loads = (m.contact_forces.iter().zip(contact_points))
+                    .map(|(f, p)| (f[2], [p[0], p[1]]));
+                super::physics::centre_of_pressure(loads).1
+            }
+            FootSensing::SixAxis => wrenches_cop(&m.foot_wrenches, contact_points),
+        };
+        if let Some(cop) = cop {
             m.zmp = cop;
         }
         if !cfg.mocap {
@@ -499,13 +692,19 @@ impl Sensors {
         }
     }
 
-    /// The true IMU sample of the state's base: orientation xyzw, angular velocity and specific
-    /// force in the base frame.
+    /// The true IMU sample: orientation xyzw, angular velocity and specific force in the IMU's
+    /// frame (the base's, or the mount's).
     fn imu_truth(&mut self, m: &StateMsg, dt: f64) -> [f64; 10] {
+        let g = Vector3::new(0.0, 0.0, self.gravity);
+        if let Some((r, omega, vel)) = self.mount.as_mut().and_then(|mount| mount.place(m)) {
+            let a = self.specific_force.update(m.step, dt, vel);
+            let (w, f) = (r.inverse() * omega, r.inverse() * (a + g));
+            return [r.i, r.j, r.k, r.w, w.x, w.y, w.z, f.x, f.y, f.z];
+        }
         let r = UnitQuaternion::from_quaternion(Quaternion::new(m.q[6], m.q[3], m.q[4], m.q[5]));
         let v_world = r * Vector3::new(m.v[0], m.v[1], m.v[2]);
         let a = self.specific_force.update(m.step, dt, v_world);
-        let f = r.inverse() * (a + Vector3::new(0.0, 0.0, self.gravity));
+        let f = r.inverse() * (a + g);
         [
             m.q[3], m.q[4], m.q[5], m.q[6], m.v[3], m.v[4], m.v[5], f.x, f.y, f.z,
         ]
@@ -519,17 +718,43 @@ fn publish_imu(m: &mut StateMsg, x: &[f64; 10]) {
     m.imu_linear_acceleration.copy_from_slice(&x[7..]);
 }
 
+/// Foot `foot`'s sole (its corners' centroid, and its frame: x from the heel's to the toes'
+/// midpoint, z the normal) from the corner points (world); corner order per foot: front-left,
+/// front-right, rear-left, rear-right.
+fn sole(points: &[[f64; 3]], foot: usize) -> (Vector3<f64>, nalgebra::Matrix3<f64>) {
+    let p = |i: usize| Vector3::from(points.get(4 * foot + i).copied().unwrap_or_default());
+    let centre = (p(0) + p(1) + p(2) + p(3)) / 4.0;
+    (centre, crate::robot::sole_frame(p(0), p(1), p(2), p(3)))
+}
+
+/// Below this total load (N) the feet are in the air for the centre of pressure: unloaded
+/// six-axis sensors read their biases, whose moments over a few newtons put a "CoP" anywhere.
+const FEET_LOADED: f64 = 20.0;
+
+/// The centre of pressure (world x, y; flat ground) of the two feet's wrenches, each in its
+/// sole's frame about the sole's centre; `None` when they carry less than [`FEET_LOADED`]. A
+/// foot's share is its moment plus its force at its centre, so a lightly loaded foot adds its
+/// sensor's error over the total load, not over its own (as the base estimator computes it).
+fn wrenches_cop(wrenches: &[[f64; 6]; 2], points: &[[f64; 3]]) -> Option<[f64; 2]> {
+    let (mut load, mut sum) = (0.0, Vector3::zeros());
+    for (foot, w) in wrenches.iter().enumerate() {
+        let (centre, r) = sole(points, foot);
+        // On the sole: f_z · (x, y) = (−τ_y, τ_x).
+        load += w[2];
+        sum += w[2] * centre + r * Vector3::new(-w[4], w[3], 0.0);
+    }
+    let cop = [sum.x / load, sum.y / load];
+    (load > FEET_LOADED && cop.iter().all(|c| c.is_finite())).then_some(cop)
+}
+
 /// Each foot's wrench from its four corner forces (`m.contact_forces`, world) at `points`: in
-/// the sole frame (x from the heel's to the toes' midpoint, z the normal), about the corners'
-/// centroid.
+/// the sole frame, about the corners' centroid ([`sole`]).
 fn fill_foot_wrenches(m: &mut StateMsg, points: &[[f64; 3]]) {
     for foot in 0..2 {
         let k = 4 * foot;
         let p = |i: usize| Vector3::from(points.get(k + i).copied().unwrap_or_default());
         let f = |i: usize| Vector3::from(m.contact_forces[k + i]);
-        // Corner order per foot: front-left, front-right, rear-left, rear-right.
-        let centre = (p(0) + p(1) + p(2) + p(3)) / 4.0;
-        let sole = crate::robot::sole_frame(p(0), p(1), p(2), p(3));
+        let (centre, sole) = sole(points, foot);
         let (x, y, z) = (sole.column(0), sole.column(1), sole.column(2));
         let (mut force, mut moment) = (Vector3::zeros(), Vector3::zeros());
         for i in 0..4 {
@@ -588,7 +813,20 @@ mod tests {
                 dropout: 0.0,
             },
             wrist: force,
+            feet: FootSensing::Corners,
             soles: force,
+            foot_ft: WrenchSensorConfig {
+                noise: 0.3,
+                bias: 2.0,
+                drift: 0.0,
+                resolution: 0.0,
+                moment_noise: 0.01,
+                moment_bias: 0.1,
+                moment_drift: 0.0,
+                moment_resolution: 0.0,
+                latency: 0,
+                dropout: 0.0,
+            },
         }
     }
 
@@ -607,7 +845,7 @@ mod tests {
     /// (±2 N per axis), the spread the noise's σ.
     #[test]
     fn a_force_sensor_has_its_bias_and_noise() {
-        let mut s = Sensors::new(&cfg(), 9.81);
+        let mut s = Sensors::new(&cfg(), 9.81, None);
         let n = 20_000;
         let (mut sum, mut sum2) = ([0.0; 3], [0.0; 3]);
         for k in 0..n {
@@ -638,7 +876,7 @@ mod tests {
         let mut sum2 = 0.0;
         for seed in 0..runs {
             c.seed = seed;
-            let mut s = Sensors::new(&c, 9.81);
+            let mut s = Sensors::new(&c, 9.81, None);
             let mut last = 0.0;
             for k in 0..steps {
                 let mut m = state(k, [0.0; 3]);
@@ -665,7 +903,7 @@ mod tests {
             c.wrist.latency,
             c.wrist.resolution,
         ) = (0.0, 0.0, 3, 0.25);
-        let mut s = Sensors::new(&c, 9.81);
+        let mut s = Sensors::new(&c, 9.81, None);
         let mut out = Vec::new();
         for k in 0..10 {
             let mut m = state(k, [k as f64 + 0.1, 0.0, 0.0]);
@@ -683,7 +921,7 @@ mod tests {
     /// Encoders: positions on the 2π / 2^bits grid, the base untouched; velocities noisy.
     #[test]
     fn encoders_quantise_joints_only() {
-        let mut s = Sensors::new(&cfg(), 9.81);
+        let mut s = Sensors::new(&cfg(), 9.81, None);
         let mut m = state(0, [0.0; 3]);
         m.q[0] = 0.123456789;
         s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
@@ -700,7 +938,7 @@ mod tests {
         let mut c = cfg();
         c.wrist.dropout = 0.2;
         let run = |c: &SensorsConfig| {
-            let mut s = Sensors::new(c, 9.81);
+            let mut s = Sensors::new(c, 9.81, None);
             let mut out = Vec::new();
             for k in 0..2000 {
                 let mut m = state(k, [k as f64, 0.0, 0.0]);
@@ -721,7 +959,7 @@ mod tests {
     fn the_centre_of_pressure_is_the_measured_forces() {
         let mut c = cfg();
         (c.soles.noise, c.soles.bias) = (0.0, 0.0);
-        let mut s = Sensors::new(&c, 9.81);
+        let mut s = Sensors::new(&c, 9.81, None);
         let mut m = state(0, [0.0; 3]);
         let mut points = [[0.0; 3]; N_CONTACTS];
         for (k, p) in points.iter_mut().enumerate() {
@@ -748,7 +986,7 @@ mod tests {
         let mut c = cfg();
         let mut exact = c;
         exact.sensing = Sensing::Truth;
-        let mut s = Sensors::new(&exact, 9.81);
+        let mut s = Sensors::new(&exact, 9.81, None);
         for k in 0..3 {
             let mut m = at(k);
             s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
@@ -759,7 +997,7 @@ mod tests {
             assert_eq!(m.stamps, [0.0; 4]);
         }
         (c.imu.gyro_noise_density, c.imu.accel_noise_density) = (0.0, 0.0);
-        let mut s = Sensors::new(&c, 9.81);
+        let mut s = Sensors::new(&c, 9.81, None);
         let mut m = at(5);
         s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
         for a in 0..3 {
@@ -781,7 +1019,7 @@ mod tests {
     fn the_accelerometer_reads_the_base_acceleration() {
         let mut c = cfg();
         c.sensing = Sensing::Truth;
-        let mut s = Sensors::new(&c, 9.81);
+        let mut s = Sensors::new(&c, 9.81, None);
         let mut read = [0.0; 3];
         for k in 0..5 {
             let mut m = state(k, [0.0; 3]);
@@ -802,7 +1040,7 @@ mod tests {
     fn a_foot_wrench_is_its_corners_in_the_sole_frame() {
         let mut c = cfg();
         c.sensing = Sensing::Truth;
-        let mut s = Sensors::new(&c, 9.81);
+        let mut s = Sensors::new(&c, 9.81, None);
         let mut m = state(0, [0.0; 3]);
         // Toes along +y: front-left (−x side), front-right, rear-left, rear-right; 0.2 × 0.1 m.
         let mut points = [[0.0; 3]; N_CONTACTS];
@@ -829,13 +1067,119 @@ mod tests {
         );
     }
 
+    /// Two feet 0.2 × 0.1 m, toes along +x, 0.1 m either side of y = 0, and their corner
+    /// forces: the left foot on its toes (CoP x = +0.1), the right flat with a sideways pull.
+    fn two_feet(m: &mut StateMsg) -> [[f64; 3]; N_CONTACTS] {
+        let mut points = [[0.0; 3]; N_CONTACTS];
+        for (foot, y) in [(0, 0.1), (1, -0.1)] {
+            let corners = [[0.1, 0.05], [0.1, -0.05], [-0.1, 0.05], [-0.1, -0.05]];
+            for (i, [cx, cy]) in corners.into_iter().enumerate() {
+                points[4 * foot + i] = [cx, y + cy, 0.0];
+            }
+        }
+        for i in 0..2 {
+            m.contact_forces[i] = [0.0, 0.0, 60.0];
+        }
+        for i in 4..8 {
+            m.contact_forces[i] = [0.0, 2.0, 30.0];
+        }
+        points
+    }
+
+    /// A six-axis sensor per foot: over many samples its mean is the true wrench plus the bias
+    /// (±2 N, ±0.1 N m per axis), its spread the configured σ; the corners are not published;
+    /// without noise the CoP of its wrenches is the CoP of the true corner forces.
+    #[test]
+    fn a_six_axis_foot_sensor_measures_the_wrench() {
+        let mut c = cfg();
+        c.feet = FootSensing::SixAxis;
+        let n = 20_000;
+        let mut s = Sensors::new(&c, 9.81, None);
+        let (mut sum, mut sum2) = ([0.0; 6], [0.0; 6]);
+        let mut truth = [0.0; 6];
+        for k in 0..n {
+            let mut m = state(k, [0.0; 3]);
+            let points = two_feet(&mut m);
+            fill_foot_wrenches(&mut m, &points);
+            truth = m.foot_wrenches[0];
+            s.apply(&mut m, 1e-3, &points);
+            assert!(m.contact_forces.iter().flatten().all(|f| f.is_nan()));
+            for a in 0..6 {
+                sum[a] += m.foot_wrenches[0][a];
+                sum2[a] += m.foot_wrenches[0][a].powi(2);
+            }
+        }
+        for a in 0..6 {
+            let (bias, sigma) = if a < 3 { (2.0, 0.3) } else { (0.1, 0.01) };
+            let mean = sum[a] / n as f64;
+            let sd = (sum2[a] / n as f64 - mean * mean).sqrt();
+            let off = (mean - truth[a]).abs();
+            assert!(
+                (off - bias).abs() < 0.02 * bias,
+                "axis {a}: mean {mean} of {truth:?}"
+            );
+            assert!((sd / sigma - 1.0).abs() < 0.05, "axis {a}: σ {sd}");
+        }
+        // Exact sensors: the wrenches' CoP is the corners' (left 120 N at x = 0.1, y = 0.1;
+        // right 120 N at x = 0, y = −0.1).
+        let c = SensorsConfig {
+            foot_ft: WrenchSensorConfig {
+                bias: 0.0,
+                noise: 0.0,
+                moment_bias: 0.0,
+                moment_noise: 0.0,
+                ..c.foot_ft
+            },
+            ..c
+        };
+        let mut s = Sensors::new(&c, 9.81, None);
+        let mut m = state(0, [0.0; 3]);
+        let points = two_feet(&mut m);
+        s.apply(&mut m, 1e-3, &points);
+        assert!(
+            (m.zmp[0] - 0.05).abs() < 1e-12 && m.zmp[1].abs() < 1e-12,
+            "{:?}",
+            m.zmp
+        );
+        assert_eq!(s.counts.foot_ft_dropouts, 0);
+    }
+
+    /// An IMU in the head of the embedded robot at home, its torso pitched by 0.2 rad (neck
+    /// straight): at rest its accelerometer reads g tilted 0.2 rad from what one on the base
+    /// reads, and its orientation is 0.2 rad from the base's.
+    #[test]
+    fn a_mounted_imu_reads_its_own_frame() {
+        let robot = crate::robot::Robot::embedded_default().unwrap();
+        let model = &robot.model;
+        let mut c = cfg();
+        c.sensing = Sensing::Truth;
+        let read = |mount: Option<ImuMount>| {
+            let mut s = Sensors::new(&c, 9.81, mount);
+            let mut m: Box<StateMsg> = Box::default();
+            (m.nq, m.nv) = (model.nq as u32, model.nv as u32);
+            m.q[..model.nq].copy_from_slice(robot.home.as_slice());
+            let torso = model.joints[model.joint_id("torso_pitch").unwrap()].idx_q;
+            m.q[torso] = 0.2;
+            s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+            let o = m.imu_orientation;
+            let r = UnitQuaternion::from_quaternion(Quaternion::new(o[3], o[0], o[1], o[2]));
+            (r, Vector3::from(m.imu_linear_acceleration))
+        };
+        let head = model.frame_id("head").unwrap();
+        let (r_base, f_base) = read(None);
+        let (r_head, f_head) = read(Some(ImuMount::new(model, head)));
+        assert!((f_head.norm() - 9.81).abs() < 1e-9, "at rest: {f_head}");
+        assert!((f_head.angle(&f_base) - 0.2).abs() < 1e-9);
+        assert!((r_head.angle_to(&r_base) - 0.2).abs() < 1e-9);
+    }
+
     /// A robot does not measure its base: without `mocap` the base is NaN and the flag says so;
     /// stamps lag by the latency.
     #[test]
     fn without_mocap_the_base_is_not_published() {
         let mut c = cfg();
         (c.mocap, c.imu.latency, c.wrist.latency) = (false, 2, 1);
-        let mut s = Sensors::new(&c, 9.81);
+        let mut s = Sensors::new(&c, 9.81, None);
         let mut m = state(10, [0.0; 3]);
         m.time = 0.01;
         s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);

@@ -7,3 +7,4 @@ pub mod pd_driver;
 pub mod procs;
 pub mod robots;
 pub mod rrd;
+pub mod upc_run;
