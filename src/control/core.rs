@@ -407,15 +407,15 @@ impl ControllerCore {
         let m_e = *self.op.compute(&self.model, &mut self.data, &self.q)?;
         let m_e_ok = self.previewer.set_effective_mass(m_e).is_ok();
 
-        // Not while the plant still holds the robot (its hold loads the hand as it pleases).
-        let hand_speed = if state.flags & STATE_FLAG_HOLD != 0 {
-            f64::INFINITY
-        } else {
-            hand.vel.norm()
-        };
-        let f_meas = self
-            .tare
-            .apply(t, state.hand_force, forecast.at(t), hand_speed, self.dt);
+        let held = state.flags & STATE_FLAG_HOLD != 0;
+        let f_meas = self.tare.apply(
+            t,
+            state.hand_force,
+            forecast.at(t),
+            hand.vel.norm(),
+            held,
+            self.dt,
+        );
         let zref = self.horizon_inputs(t, &latched, forecast, f_meas, hand.vel.into());
         let zmp_meas = self.measured_zmp(state);
         let f_obs = self.observe([com.x, com.y], [vcom.x, vcom.y], zmp_meas);

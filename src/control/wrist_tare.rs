@@ -72,7 +72,8 @@ impl WristTare {
 
     /// The measured force less the offset; accumulates the tare while it is pending. `t`: the
     /// plant's time (s); `dt`: the tick's period (s); `expected`: the forecast's force now;
-    /// `hand_speed` (m/s). A non-finite measurement is returned as it is (the callers refuse
+    /// `hand_speed` (m/s); `held`: the plant holds the robot (its hold loads the hand as it
+    /// pleases: not quiet). A non-finite measurement is returned as it is (the callers refuse
     /// it) and not accumulated.
     pub fn apply(
         &mut self,
@@ -80,6 +81,7 @@ impl WristTare {
         measured: [f64; 3],
         expected: [f64; 3],
         hand_speed: f64,
+        held: bool,
         dt: f64,
     ) -> [f64; 3] {
         let finite = measured.iter().all(|x| x.is_finite());
@@ -87,7 +89,7 @@ impl WristTare {
             self.state = TareState::Skipped;
         }
         if self.state == TareState::Pending && self.settings.duration > 0.0 && finite {
-            let quiet = norm(expected) < QUIET_FORCE && hand_speed < QUIET_SPEED;
+            let quiet = !held && norm(expected) < QUIET_FORCE && hand_speed < QUIET_SPEED;
             if quiet {
                 for k in 0..3 {
                     self.sum[k] += measured[k] * dt;
@@ -155,16 +157,16 @@ mod tests {
         // Noise that averages out over the window: ± 0.5 N alternating.
         for k in 0..99 {
             let s = if k % 2 == 0 { 0.5 } else { -0.5 };
-            let out = t.apply(0.0, bias.map(|b| b + s), [0.0; 3], 0.0, 1e-3);
+            let out = t.apply(0.0, bias.map(|b| b + s), [0.0; 3], 0.0, false, 1e-3);
             assert_eq!(out, bias.map(|b| b + s), "nothing removed while pending");
         }
         assert_eq!(t.state(), TareState::Pending);
-        t.apply(0.0, bias.map(|b| b + 0.5), [0.0; 3], 0.0, 1e-3);
+        t.apply(0.0, bias.map(|b| b + 0.5), [0.0; 3], 0.0, false, 1e-3);
         assert_eq!(t.state(), TareState::Taken);
         for k in 0..3 {
             assert!((t.offset()[k] - bias[k]).abs() < 0.02, "{:?}", t.offset());
         }
-        let out = t.apply(0.0, [12.0, -1.5, 0.5], [10.0, 0.0, 0.0], 0.0, 1e-3);
+        let out = t.apply(0.0, [12.0, -1.5, 0.5], [10.0, 0.0, 0.0], 0.0, false, 1e-3);
         assert!(
             (out[0] - 10.0).abs() < 0.02 && out[1].abs() < 0.02,
             "{out:?}"
@@ -176,18 +178,23 @@ mod tests {
         let mut t = tare(0.01);
         // A forecast push and a moving hand: their ticks are not the sensor's offset.
         for _ in 0..100 {
-            t.apply(0.0, [30.0, 0.0, 0.0], [30.0, 0.0, 0.0], 0.0, 1e-3);
-            t.apply(0.0, [30.0, 0.0, 0.0], [0.0; 3], 0.2, 1e-3);
+            t.apply(0.0, [30.0, 0.0, 0.0], [30.0, 0.0, 0.0], 0.0, false, 1e-3);
+            t.apply(0.0, [30.0, 0.0, 0.0], [0.0; 3], 0.2, false, 1e-3);
+        }
+        assert_eq!(t.state(), TareState::Pending);
+        // The plant's hold: its ticks are not quiet either.
+        for _ in 0..100 {
+            t.apply(0.0, [0.0, 0.0, -5.0], [0.0; 3], 0.0, true, 1e-3);
         }
         assert_eq!(t.state(), TareState::Pending);
         // A quiet hand holding 20 N: a load, not an offset.
         for _ in 0..10 {
-            t.apply(0.0, [0.0, 0.0, -20.0], [0.0; 3], 0.0, 1e-3);
+            t.apply(0.0, [0.0, 0.0, -20.0], [0.0; 3], 0.0, false, 1e-3);
         }
         assert_eq!(t.state(), TareState::Refused);
         assert_eq!(t.refusals(), 1);
         assert_eq!(
-            t.apply(0.0, [0.0, 0.0, -20.0], [0.0; 3], 0.0, 1e-3),
+            t.apply(0.0, [0.0, 0.0, -20.0], [0.0; 3], 0.0, false, 1e-3),
             [0.0, 0.0, -20.0]
         );
         t.reset();
@@ -197,7 +204,7 @@ mod tests {
     #[test]
     fn a_controller_joining_a_running_session_skips_the_tare() {
         let mut t = tare(0.1);
-        assert_eq!(t.apply(3.0, [2.0; 3], [0.0; 3], 0.0, 1e-3), [2.0; 3]);
+        assert_eq!(t.apply(3.0, [2.0; 3], [0.0; 3], 0.0, false, 1e-3), [2.0; 3]);
         assert_eq!(t.state(), TareState::Skipped);
     }
 
@@ -205,7 +212,7 @@ mod tests {
     fn a_zero_duration_never_tares() {
         let mut t = tare(0.0);
         for _ in 0..1000 {
-            assert_eq!(t.apply(0.0, [2.0; 3], [0.0; 3], 0.0, 1e-3), [2.0; 3]);
+            assert_eq!(t.apply(0.0, [2.0; 3], [0.0; 3], 0.0, false, 1e-3), [2.0; 3]);
         }
         assert_eq!(t.state(), TareState::Pending);
     }

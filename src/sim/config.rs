@@ -78,6 +78,9 @@ pub enum Cone {
 pub struct MujocoConfig {
     pub cone: Cone,
     pub impratio: f64,
+    /// Iterations of MuJoCo's no-slip solver after the main one (0: off): it removes the slow
+    /// creep that soft friction allows under a sustained tangential load.
+    pub noslip_iterations: u32,
 }
 
 /// What holds the robot when no controller does (`[sim.hold]`).

@@ -440,7 +440,7 @@ struct Run<'a> {
 }
 
 /// Columns of the lockstep ground-truth CSV (`--truth-csv`).
-pub const TRUTH_CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_x,zmp_y,hand_fx,hand_fy,hand_fz,door_angle,door_torque,loop_error,max_penetration,max_slip_speed,solver_iterations,base_x,base_y,base_z,base_vx,base_vy,base_vz,base_roll,base_pitch,base_yaw";
+pub const TRUTH_CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_x,zmp_y,hand_fx,hand_fy,hand_fz,door_angle,door_torque,loop_error,max_penetration,max_slip_speed,solver_iterations,base_x,base_y,base_z,base_vx,base_vy,base_vz,base_roll,base_pitch,base_yaw,lfoot_x,lfoot_y,rfoot_x,rfoot_y";
 
 struct Looper {
     tau: DVector<f64>,
@@ -506,10 +506,16 @@ fn write_truth(
     ));
     let vel = r * nalgebra::Vector3::new(v[0], v[1], v[2]);
     let (roll, pitch, yaw) = r.euler_angles();
+    // Each foot's contact points' centroid (x, y): where the feet are, to see them creep.
+    let mut feet = [[0.0; 2]; 2];
+    for (k, p) in world.contact_points().iter().take(N_CONTACTS).enumerate() {
+        let f = &mut feet[k / 4];
+        (f[0], f[1]) = (f[0] + p.x / 4.0, f[1] + p.y / 4.0);
+    }
     writeln!(
         w,
         "{:.4},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{:.4},{:.4},{:.6},{:.4},{:.3e},{:.3e},{:.3e},{},\
-         {:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}",
+         {:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}",
         world.time(),
         rep.com[0],
         rep.com[1],
@@ -534,6 +540,10 @@ fn write_truth(
         roll,
         pitch,
         yaw,
+        feet[0][0],
+        feet[0][1],
+        feet[1][0],
+        feet[1][1],
     )
 }
 

@@ -163,84 +163,76 @@ pub struct SensorsConfig {
 impl SensorsConfig {
     /// The first invalid field, as (key under `sim.sensors`, message).
     pub fn invalid(&self) -> Option<(String, String)> {
-        for (name, s) in [("wrist", &self.wrist), ("soles", &self.soles)] {
-            for (key, v) in [
+        let force = |s: &ForceSensorConfig| {
+            [
                 ("noise", s.noise),
                 ("bias", s.bias),
                 ("drift", s.drift),
                 ("resolution", s.resolution),
-            ] {
-                if !(v.is_finite() && v >= 0.0) {
-                    return Some((format!("{name}.{key}"), format!("must be ≥ 0, got {v}")));
-                }
+            ]
+        };
+        let (w, i) = (&self.foot_ft, &self.imu);
+        let channels: [(&str, &[(&str, f64)], f64, usize); 4] = [
+            (
+                "wrist",
+                &force(&self.wrist),
+                self.wrist.dropout,
+                self.wrist.latency,
+            ),
+            (
+                "soles",
+                &force(&self.soles),
+                self.soles.dropout,
+                self.soles.latency,
+            ),
+            (
+                "foot_ft",
+                &[
+                    ("noise", w.noise),
+                    ("bias", w.bias),
+                    ("drift", w.drift),
+                    ("resolution", w.resolution),
+                    ("moment_noise", w.moment_noise),
+                    ("moment_bias", w.moment_bias),
+                    ("moment_drift", w.moment_drift),
+                    ("moment_resolution", w.moment_resolution),
+                ],
+                w.dropout,
+                w.latency,
+            ),
+            (
+                "imu",
+                &[
+                    ("gyro_noise_density", i.gyro_noise_density),
+                    ("gyro_bias", i.gyro_bias),
+                    ("gyro_bias_drift", i.gyro_bias_drift),
+                    ("accel_noise_density", i.accel_noise_density),
+                    ("accel_bias", i.accel_bias),
+                    ("accel_bias_drift", i.accel_bias_drift),
+                    ("tilt_error", i.tilt_error),
+                    ("orientation_noise", i.orientation_noise),
+                    ("yaw_drift", i.yaw_drift),
+                ],
+                i.dropout,
+                i.latency,
+            ),
+        ];
+        for (name, sizes, dropout, latency) in channels {
+            if let Some((key, v)) = sizes.iter().find(|(_, v)| !(v.is_finite() && *v >= 0.0)) {
+                return Some((format!("{name}.{key}"), format!("must be ≥ 0, got {v}")));
             }
-            if !(0.0..1.0).contains(&s.dropout) {
+            if !(0.0..1.0).contains(&dropout) {
                 return Some((
                     format!("{name}.dropout"),
-                    format!("must be in [0, 1), got {}", s.dropout),
+                    format!("must be in [0, 1), got {dropout}"),
                 ));
             }
-            if s.latency > MAX_LATENCY {
+            if latency > MAX_LATENCY {
                 return Some((
                     format!("{name}.latency"),
-                    format!("at most {MAX_LATENCY} steps, got {}", s.latency),
+                    format!("at most {MAX_LATENCY} steps, got {latency}"),
                 ));
             }
-        }
-        let w = &self.foot_ft;
-        for (key, v) in [
-            ("noise", w.noise),
-            ("bias", w.bias),
-            ("drift", w.drift),
-            ("resolution", w.resolution),
-            ("moment_noise", w.moment_noise),
-            ("moment_bias", w.moment_bias),
-            ("moment_drift", w.moment_drift),
-            ("moment_resolution", w.moment_resolution),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Some((format!("foot_ft.{key}"), format!("must be ≥ 0, got {v}")));
-            }
-        }
-        if !(0.0..1.0).contains(&w.dropout) {
-            return Some((
-                "foot_ft.dropout".into(),
-                format!("must be in [0, 1), got {}", w.dropout),
-            ));
-        }
-        if w.latency > MAX_LATENCY {
-            return Some((
-                "foot_ft.latency".into(),
-                format!("at most {MAX_LATENCY} steps, got {}", w.latency),
-            ));
-        }
-        let i = &self.imu;
-        for (key, v) in [
-            ("gyro_noise_density", i.gyro_noise_density),
-            ("gyro_bias", i.gyro_bias),
-            ("gyro_bias_drift", i.gyro_bias_drift),
-            ("accel_noise_density", i.accel_noise_density),
-            ("accel_bias", i.accel_bias),
-            ("accel_bias_drift", i.accel_bias_drift),
-            ("tilt_error", i.tilt_error),
-            ("orientation_noise", i.orientation_noise),
-            ("yaw_drift", i.yaw_drift),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Some((format!("imu.{key}"), format!("must be ≥ 0, got {v}")));
-            }
-        }
-        if !(0.0..1.0).contains(&i.dropout) {
-            return Some((
-                "imu.dropout".into(),
-                format!("must be in [0, 1), got {}", i.dropout),
-            ));
-        }
-        if i.latency > MAX_LATENCY {
-            return Some((
-                "imu.latency".into(),
-                format!("at most {MAX_LATENCY} steps, got {}", i.latency),
-            ));
         }
         let e = &self.encoders;
         if e.bits > 32 {
@@ -1171,6 +1163,21 @@ mod tests {
         assert!((f_head.norm() - 9.81).abs() < 1e-9, "at rest: {f_head}");
         assert!((f_head.angle(&f_base) - 0.2).abs() < 1e-9);
         assert!((r_head.angle_to(&r_base) - 0.2).abs() < 1e-9);
+    }
+
+    /// A setting out of range is named by its key.
+    #[test]
+    fn an_invalid_setting_is_named() {
+        assert_eq!(cfg().invalid(), None);
+        let mut c = cfg();
+        c.foot_ft.moment_noise = -1.0;
+        assert_eq!(c.invalid().unwrap().0, "foot_ft.moment_noise");
+        let mut c = cfg();
+        c.imu.dropout = 1.0;
+        assert_eq!(c.invalid().unwrap().0, "imu.dropout");
+        let mut c = cfg();
+        c.soles.latency = MAX_LATENCY + 1;
+        assert_eq!(c.invalid().unwrap().0, "soles.latency");
     }
 
     /// A robot does not measure its base: without `mocap` the base is NaN and the flag says so;

@@ -19,8 +19,8 @@
 //!   identifiers (robot and scenario hashes, force factor) in `plant.json`.
 //!
 //! Not carried over: MuJoCo's soft constraints (its default `solref`/`solimp`) in place of upc's
-//! hard contacts and loop closure, with the friction cone and impratio of `[sim.mujoco]`; visual
-//! meshes (the links are drawn as capsules between joint origins).
+//! hard contacts and loop closure, with the friction cone, impratio and no-slip iterations of
+//! `[sim.mujoco]`; visual meshes (the links are drawn as capsules between joint origins).
 
 use std::fmt::Write as _;
 
@@ -145,13 +145,14 @@ pub fn build(robot: &Robot, cfg: &SimConfig, scenario: &Scenario) -> Result<Mujo
     )?;
     writeln!(
         x.s,
-        "  <compiler angle=\"radian\" inertiafromgeom=\"false\" autolimits=\"true\"/>\n  <option timestep=\"{}\" integrator=\"implicitfast\" cone=\"{}\" impratio=\"{}\" gravity=\"{} {} {}\"/>",
+        "  <compiler angle=\"radian\" inertiafromgeom=\"false\" autolimits=\"true\"/>\n  <option timestep=\"{}\" integrator=\"implicitfast\" cone=\"{}\" impratio=\"{}\" noslip_iterations=\"{}\" gravity=\"{} {} {}\"/>",
         cfg.dt,
         match cfg.mujoco.cone {
             Cone::Elliptic => "elliptic",
             Cone::Pyramidal => "pyramidal",
         },
         cfg.mujoco.impratio,
+        cfg.mujoco.noslip_iterations,
         model.gravity.x,
         model.gravity.y,
         model.gravity.z
