@@ -172,7 +172,7 @@ impl SensorsConfig {
             ]
         };
         let (w, i) = (&self.foot_ft, &self.imu);
-        let channels: [(&str, &[(&str, f64)], f64, usize); 4] = [
+        let channels: [Channel; 4] = [
             (
                 "wrist",
                 &force(&self.wrist),
@@ -250,6 +250,10 @@ impl SensorsConfig {
         None
     }
 }
+
+/// A sensor's settings for [`SensorsConfig::invalid`]: its name, its sizes that must be ≥ 0,
+/// its dropout and its latency.
+type Channel<'a> = (&'a str, &'a [(&'a str, f64)], f64, usize);
 
 /// Longest latency modelled (steps).
 pub const MAX_LATENCY: usize = 64;
