@@ -44,8 +44,15 @@ fn start_unit(p: &mut Procs, s: &Scratch, unit: &str, name: &str, extra: &[&str]
 }
 
 fn start_sim(p: &mut Procs, s: &Scratch, name: &str) {
+    start_sim_with(p, s, name, &[]);
+}
+
+/// [`start_sim`] with `extra` arguments (a robot's sensors: `--sensing realistic`).
+fn start_sim_with(p: &mut Procs, s: &Scratch, name: &str, extra: &[&str]) {
     let summary = s.path(&format!("{name}.json")).display().to_string();
-    start_unit(p, s, "upc-sim", name, &["--summary", &summary]);
+    let mut args = vec!["--summary", summary.as_str()];
+    args.extend_from_slice(extra);
+    start_unit(p, s, "upc-sim", name, &args);
 }
 
 /// Wait `secs` of wall time, failing early if a process died.
@@ -94,6 +101,11 @@ fn stop_all(p: &mut Procs, s: &Scratch, names: &[&str]) {
 /// The three units in `order`, `gap` seconds of wall time after the first; then the scenario's
 /// 25 N and 60 N pushes (its first 3 s) under control.
 fn start_order(tag: &str, order: [&str; 3], gap: f64) {
+    start_order_sensing(tag, order, gap, &[]);
+}
+
+/// [`start_order`], the simulator with `sim_extra` arguments.
+fn start_order_sensing(tag: &str, order: [&str; 3], gap: f64, sim_extra: &[&str]) {
     let _serial = serial();
     let s = Scratch::new(&format!("startup_{tag}"));
     let mut p = Procs::default();
@@ -103,7 +115,7 @@ fn start_order(tag: &str, order: [&str; 3], gap: f64) {
             pause(&mut p, &s, gap);
         }
         match *unit {
-            "sim" => start_sim(&mut p, &s, "sim"),
+            "sim" => start_sim_with(&mut p, &s, "sim", sim_extra),
             "controller" => start_unit(&mut p, &s, "upc-controller", "controller", &[]),
             "forecaster" => start_unit(&mut p, &s, "upc-forecaster", "forecaster", &[]),
             u => panic!("no unit {u}"),
@@ -128,12 +140,32 @@ fn start_order(tag: &str, order: [&str; 3], gap: f64) {
     assert_eq!(c["plant_scenario_mismatch"], Value::Bool(false), "{c}");
     assert!(u(&c, "forecasts_accepted") > 100, "{c}");
     assert_eq!(u(&c, "tick_errors"), 0, "{c}");
+    // On a robot's sensors the controller estimated the base all along, and never lost it.
+    if sim_extra.contains(&"realistic") {
+        let e = &c["estimator"];
+        assert!(u(e, "ticks") > 1000, "{c}");
+        assert_eq!(u(e, "divergences"), 0, "{c}");
+        assert_eq!(u(e, "imu_lost"), 0, "{c}");
+    }
     eprintln!(
         "{tag}: CoM drop {:.2} mm, min ZMP margin {:.1} mm, hold steps {}, stale commands {}",
         (seen.com_z0 - seen.com_z_min) * 1e3,
         f(&c, "min_zmp_margin") * 1e3,
         u(&sim["hold"], "hold_steps"),
         u(&sim["commands"], "stale")
+    );
+}
+
+/// The plant publishes what a robot measures (no base, noisy sensors): the controller, as its
+/// unit starts it (`controller.estimator.mode = "auto"`), estimates the base from the plant's
+/// first state, through the hold and the hand-over.
+#[test]
+fn on_a_robots_sensors_simulator_first_controller_a_second_later() {
+    start_order_sensing(
+        "sensors",
+        ["sim", "controller", "forecaster"],
+        1.0,
+        &["--sensing", "realistic"],
     );
 }
 
