@@ -23,7 +23,7 @@ use super::com_observer::ComObserver;
 use super::forecast_correction::{CorrectionEstimate, ForecastCorrector};
 use super::forecast_window::ForecastWindow;
 use super::gain_thread::StampedSchedule;
-use super::wrist_tare::{TareState, WristTare};
+use super::wrist_tare::WristTare;
 use crate::channels::{MAX_DOF, STATE_FLAG_BASE_UNMEASURED, STATE_FLAG_HOLD, StateMsg};
 use crate::config::{Config, ControllerKind, EstimatorMode};
 use crate::dynamics::{
@@ -774,18 +774,10 @@ impl ControllerCore {
         // M_e ẍ = F_ext + M_e ẍ_cmd, i.e. ẍ = ẍ_cmd + M_e⁻¹ F_ext. Without it the QP ignores the
         // force, which then folds the arm's lightest joints instead of acting through M_e.
         let f_hand = Vector3::from(f_meas);
-        // Not while the wrist is being tared: the hand would yield to the offset being measured
-        // and load the door, which the tare would then take for the offset. Nor after a refused
-        // tare: the force then carries a constant the controller cannot tell from a push (a
-        // large offset, a load), which the hand would yield to all session (an 8 N-per-axis
-        // offset fed back toppled C1; docs/sensing.md).
-        let untrusted = self.tare.enabled()
-            && matches!(self.tare.state(), TareState::Pending | TareState::Refused);
-        let f_hand = if self.force_feedback && !untrusted && f_hand.iter().all(|x| x.is_finite()) {
-            f_hand
-        } else {
-            Vector3::zeros()
-        };
+        // Only a force the tare vouches for (not while it is taken, nor after a refused one).
+        let fed_back =
+            self.force_feedback && self.tare.trusted() && f_hand.iter().all(|x| x.is_finite());
+        let f_hand = if fed_back { f_hand } else { Vector3::zeros() };
         let acc_ext = if m_e_ok {
             self.op.lambda_inv * f_hand
         } else {

@@ -120,6 +120,15 @@ impl WristTare {
         self.offset
     }
 
+    /// Whether the measured force, less [`WristTare::offset`], is a force and not partly a
+    /// sensor offset: not while the tare is pending (the hand would yield to the offset being
+    /// measured and load the door, which the tare would then take for the offset), nor after a
+    /// refused one (a constant the controller cannot tell from a push: an 8 N-per-axis offset
+    /// fed back toppled C1; docs/sensing.md). What may be fed back to the whole-body QP.
+    pub fn trusted(&self) -> bool {
+        !(self.enabled() && matches!(self.state, TareState::Pending | TareState::Refused))
+    }
+
     /// Whether a tare is taken at all (`duration` > 0).
     pub fn enabled(&self) -> bool {
         self.settings.duration > 0.0
@@ -192,6 +201,7 @@ mod tests {
             t.apply(0.0, [0.0, 0.0, -20.0], [0.0; 3], 0.0, false, 1e-3);
         }
         assert_eq!(t.state(), TareState::Refused);
+        assert!(!t.trusted(), "a refused tare's force is not fed back");
         assert_eq!(t.refusals(), 1);
         assert_eq!(
             t.apply(0.0, [0.0, 0.0, -20.0], [0.0; 3], 0.0, false, 1e-3),
