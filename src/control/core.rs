@@ -23,7 +23,7 @@ use super::com_observer::ComObserver;
 use super::forecast_correction::{CorrectionEstimate, ForecastCorrector};
 use super::forecast_window::ForecastWindow;
 use super::gain_thread::StampedSchedule;
-use super::wrist_tare::WristTare;
+use super::wrist_tare::{WristTare, task_time};
 use crate::channels::{MAX_DOF, STATE_FLAG_BASE_UNMEASURED, STATE_FLAG_HOLD, StateMsg};
 use crate::config::{Config, ControllerKind, EstimatorMode};
 use crate::dynamics::{
@@ -409,7 +409,7 @@ impl ControllerCore {
 
         let held = state.flags & STATE_FLAG_HOLD != 0;
         let f_meas = self.tare.apply(
-            t,
+            task_time(t, state.scenario_hash, state.scenario_start),
             state.hand_force,
             forecast.at(t),
             hand.vel.norm(),

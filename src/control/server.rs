@@ -861,8 +861,8 @@ fn log_tare(tare: &WristTare, t: f64) {
              the hand force is not fed back to the whole-body QP this session"
         ),
         TareState::Skipped => tracing::info!(
-            "wrist tare skipped: no quiet second at the session's start (a controller that \
-             joined a running session); the measured hand force is used as it is"
+            "wrist tare skipped: no quiet second at the task's start (a controller that \
+             joined a running task); the measured hand force is used as it is"
         ),
         TareState::Pending => {}
     }

@@ -20,9 +20,22 @@ use crate::config::WristTareSettings;
 const QUIET_FORCE: f64 = 1.0;
 /// ... and the hand moves slower than this (m/s).
 const QUIET_SPEED: f64 = 0.05;
-/// The tare is taken only in the first second of a plant session's time: a controller that
-/// joins a running session (restarted mid-task) meets a hand already at work, and skips it.
+/// The tare is taken only in the task's first second (its clock: [`task_time`]): a controller
+/// that joins a running task (restarted mid-task) meets a hand already at work, and skips it.
 const TARE_BEFORE: f64 = 1.0;
+
+/// The task's clock for the tare (s), from a state's time, scenario hash and scenario start:
+/// the scenario's time when the plant announces one, `None` while it announces one not started
+/// yet (a real-time plant holds the robot and starts its scenario when a controller has taken
+/// the robot over: a controller that joins during that start-up hold tares after it); the
+/// plant's time when it announces none (a real robot: its session is the task).
+pub fn task_time(time: f64, scenario_hash: u64, scenario_start: f64) -> Option<f64> {
+    match scenario_hash {
+        0 => Some(time),
+        _ if scenario_start >= 0.0 => Some(time - scenario_start),
+        _ => None,
+    }
+}
 
 /// The tare's state: accumulating, taken, or refused.
 #[derive(Debug, Clone)]
@@ -45,8 +58,8 @@ pub enum TareState {
     Taken,
     /// The average was beyond `max_offset`: nothing is removed this session.
     Refused,
-    /// The session's first second passed without enough quiet ticks (a controller that joined
-    /// a running session): nothing is removed.
+    /// The task's first second passed without enough quiet ticks (a controller that joined a
+    /// running task): nothing is removed.
     Skipped,
 }
 
@@ -71,13 +84,13 @@ impl WristTare {
     }
 
     /// The measured force less the offset; accumulates the tare while it is pending. `t`: the
-    /// plant's time (s); `dt`: the tick's period (s); `expected`: the forecast's force now;
+    /// task's time ([`task_time`]; s); `dt`: the tick's period (s); `expected`: the forecast's force now;
     /// `hand_speed` (m/s); `held`: the plant holds the robot (its hold loads the hand as it
     /// pleases: not quiet). A non-finite measurement is returned as it is (the callers refuse
     /// it) and not accumulated.
     pub fn apply(
         &mut self,
-        t: f64,
+        t: Option<f64>,
         measured: [f64; 3],
         expected: [f64; 3],
         hand_speed: f64,
@@ -85,7 +98,8 @@ impl WristTare {
         dt: f64,
     ) -> [f64; 3] {
         let finite = measured.iter().all(|x| x.is_finite());
-        if self.state == TareState::Pending && self.enabled() && t >= TARE_BEFORE {
+        if self.state == TareState::Pending && self.enabled() && t.is_some_and(|t| t >= TARE_BEFORE)
+        {
             self.state = TareState::Skipped;
         }
         if self.state == TareState::Pending && self.settings.duration > 0.0 && finite {
@@ -166,16 +180,23 @@ mod tests {
         // Noise that averages out over the window: ± 0.5 N alternating.
         for k in 0..99 {
             let s = if k % 2 == 0 { 0.5 } else { -0.5 };
-            let out = t.apply(0.0, bias.map(|b| b + s), [0.0; 3], 0.0, false, 1e-3);
+            let out = t.apply(Some(0.0), bias.map(|b| b + s), [0.0; 3], 0.0, false, 1e-3);
             assert_eq!(out, bias.map(|b| b + s), "nothing removed while pending");
         }
         assert_eq!(t.state(), TareState::Pending);
-        t.apply(0.0, bias.map(|b| b + 0.5), [0.0; 3], 0.0, false, 1e-3);
+        t.apply(Some(0.0), bias.map(|b| b + 0.5), [0.0; 3], 0.0, false, 1e-3);
         assert_eq!(t.state(), TareState::Taken);
         for k in 0..3 {
             assert!((t.offset()[k] - bias[k]).abs() < 0.02, "{:?}", t.offset());
         }
-        let out = t.apply(0.0, [12.0, -1.5, 0.5], [10.0, 0.0, 0.0], 0.0, false, 1e-3);
+        let out = t.apply(
+            Some(0.0),
+            [12.0, -1.5, 0.5],
+            [10.0, 0.0, 0.0],
+            0.0,
+            false,
+            1e-3,
+        );
         assert!(
             (out[0] - 10.0).abs() < 0.02 && out[1].abs() < 0.02,
             "{out:?}"
@@ -187,24 +208,31 @@ mod tests {
         let mut t = tare(0.01);
         // A forecast push and a moving hand: their ticks are not the sensor's offset.
         for _ in 0..100 {
-            t.apply(0.0, [30.0, 0.0, 0.0], [30.0, 0.0, 0.0], 0.0, false, 1e-3);
-            t.apply(0.0, [30.0, 0.0, 0.0], [0.0; 3], 0.2, false, 1e-3);
+            t.apply(
+                Some(0.0),
+                [30.0, 0.0, 0.0],
+                [30.0, 0.0, 0.0],
+                0.0,
+                false,
+                1e-3,
+            );
+            t.apply(Some(0.0), [30.0, 0.0, 0.0], [0.0; 3], 0.2, false, 1e-3);
         }
         assert_eq!(t.state(), TareState::Pending);
         // The plant's hold: its ticks are not quiet either.
         for _ in 0..100 {
-            t.apply(0.0, [0.0, 0.0, -5.0], [0.0; 3], 0.0, true, 1e-3);
+            t.apply(Some(0.0), [0.0, 0.0, -5.0], [0.0; 3], 0.0, true, 1e-3);
         }
         assert_eq!(t.state(), TareState::Pending);
         // A quiet hand holding 20 N: a load, not an offset.
         for _ in 0..10 {
-            t.apply(0.0, [0.0, 0.0, -20.0], [0.0; 3], 0.0, false, 1e-3);
+            t.apply(Some(0.0), [0.0, 0.0, -20.0], [0.0; 3], 0.0, false, 1e-3);
         }
         assert_eq!(t.state(), TareState::Refused);
         assert!(!t.trusted(), "a refused tare's force is not fed back");
         assert_eq!(t.refusals(), 1);
         assert_eq!(
-            t.apply(0.0, [0.0, 0.0, -20.0], [0.0; 3], 0.0, false, 1e-3),
+            t.apply(Some(0.0), [0.0, 0.0, -20.0], [0.0; 3], 0.0, false, 1e-3),
             [0.0, 0.0, -20.0]
         );
         t.reset();
@@ -214,15 +242,50 @@ mod tests {
     #[test]
     fn a_controller_joining_a_running_session_skips_the_tare() {
         let mut t = tare(0.1);
-        assert_eq!(t.apply(3.0, [2.0; 3], [0.0; 3], 0.0, false, 1e-3), [2.0; 3]);
+        assert_eq!(
+            t.apply(Some(3.0), [2.0; 3], [0.0; 3], 0.0, false, 1e-3),
+            [2.0; 3]
+        );
         assert_eq!(t.state(), TareState::Skipped);
+    }
+
+    #[test]
+    fn the_task_clock_is_the_scenarios_and_waits_for_its_start() {
+        // A real robot announces no scenario: its session is the task.
+        assert_eq!(task_time(3.0, 0, -1.0), Some(3.0));
+        // A real-time plant started its scenario at 1.2 s, when a controller took over.
+        assert_eq!(task_time(1.5, 7, 1.2).map(|x| (x * 1e9).round()), Some(3e8));
+        // Still holding the robot: the task has not started.
+        assert_eq!(task_time(1.5, 7, -1.0), None);
+    }
+
+    #[test]
+    fn a_controller_joining_during_the_start_up_hold_tares_after_it() {
+        let mut t = tare(0.1);
+        // The plant holds the robot a second into its session; the task has not started.
+        for _ in 0..1000 {
+            t.apply(None, [2.0; 3], [0.0; 3], 0.0, true, 1e-3);
+        }
+        assert_eq!(t.state(), TareState::Pending);
+        // Handed over, the scenario starts: its first quiet ticks tare the wrist.
+        for k in 0..100 {
+            t.apply(Some(k as f64 * 1e-3), [2.0; 3], [0.0; 3], 0.0, false, 1e-3);
+        }
+        assert_eq!(t.state(), TareState::Taken);
+        assert_eq!(
+            t.apply(Some(0.2), [2.0; 3], [0.0; 3], 0.0, false, 1e-3),
+            [0.0; 3]
+        );
     }
 
     #[test]
     fn a_zero_duration_never_tares() {
         let mut t = tare(0.0);
         for _ in 0..1000 {
-            assert_eq!(t.apply(0.0, [2.0; 3], [0.0; 3], 0.0, false, 1e-3), [2.0; 3]);
+            assert_eq!(
+                t.apply(Some(0.0), [2.0; 3], [0.0; 3], 0.0, false, 1e-3),
+                [2.0; 3]
+            );
         }
         assert_eq!(t.state(), TareState::Pending);
     }
