@@ -67,25 +67,65 @@ fn assert_meets_goals(e: &Value) {
 }
 
 /// Standing on the sensor models: the base height does not drift (the feet on the floor pin
-/// it) beyond 5 mm.
+/// it) beyond 5 mm. The horizontal position is not observed: the gyro's bias (1e-3 rad/s)
+/// times the legs' lever reads as a base velocity of ≈ 0.3 mm/s (6.5 mm RMS over 30 s, 13 mm
+/// over 60 s); with its estimate (EST-6, `gyro_bias_time`) 1.4 mm over 30 s.
 #[test]
 fn standing_the_base_height_does_not_drift() {
     let out = scratch("estimation", "standing");
-    let e = run(
-        &out,
-        &[
-            "--sensing",
-            "realistic",
-            "--scenario",
-            "standing",
-            "--duration",
-            "30",
-        ],
-    );
+    let standing = [
+        "--sensing",
+        "realistic",
+        "--scenario",
+        "standing",
+        "--duration",
+        "30",
+    ];
+    let e = run(&out, &standing);
     let a = &e["base_estimate_error"];
     eprintln!("{a:#}");
     assert!(f(a, "height_max") < 5e-3, "{a:#}");
-    assert!(f(a, "position_rms") < 5e-3, "{a:#}");
+    assert!(f(a, "position_rms") < 1e-2, "{a:#}");
+    // The gyro's bias taken out: the drift goes with it.
+    let out = scratch("estimation", "standing-gyro-bias");
+    let mut args = standing.to_vec();
+    args.extend(["--set", "controller.estimator.gyro_bias_time=10"]);
+    let b = &run(&out, &args)["base_estimate_error"];
+    eprintln!("{b:#}");
+    assert!(f(b, "height_max") < 5e-3, "{b:#}");
+    assert!(f(b, "position_rms") < 3e-3, "{b:#}");
+    assert!(
+        f(b, "position_rms") < 0.5 * f(a, "position_rms"),
+        "{a:#}\n{b:#}"
+    );
+}
+
+/// An attitude filter off by 2° (`imu.tilt_error`; it toppled C1 before EST-5): the soles of
+/// the stance feet level it, the estimate meets the goals and C1 stands; with the levelling
+/// off, the tilt is the estimate's.
+#[test]
+fn an_attitude_filter_off_by_two_degrees_is_levelled_by_the_soles() {
+    let out = scratch("estimation", "tilt");
+    let tilted = [
+        "--sensing",
+        "realistic",
+        "--sim-set",
+        "sim.sensors.imu.tilt_error=0.035",
+    ];
+    let e = run(&out, &tilted);
+    assert_meets_goals(&e);
+    let a = &e["base_estimate_error"];
+    assert!(f(a, "tilt_rms_deg") < 0.1, "{a:#}");
+    let out = scratch("estimation", "tilt-off");
+    let mut args = tilted.to_vec();
+    args.extend([
+        "--duration",
+        "1",
+        "--set",
+        "controller.estimator.tilt_time=0",
+    ]);
+    let b = &run(&out, &args)["base_estimate_error"];
+    assert!(f(b, "tilt_rms_deg") > 1.5, "{b:#}");
 }
 
 /// Feet measured by one six-axis force/torque sensor each (`sim.sensors.feet = "six_axis"`,

@@ -234,6 +234,12 @@ pub struct EstimatorSettings {
     pub divergence_ticks: u32,
     /// An IMU sample older than this (s) is lost: the tick is refused (damping torques).
     pub imu_timeout: f64,
+    /// Time constant (s) of the IMU's tilt correction from the soles of two flat stance feet
+    /// (docs/estimation.md, EST-5); 0: the IMU's attitude as given.
+    pub tilt_time: f64,
+    /// Time constant (s) of the gyro's bias estimate against the attitude filter's rate
+    /// (EST-6); 0: the gyro as given.
+    pub gyro_bias_time: f64,
 }
 
 impl Default for EstimatorSettings {
@@ -249,6 +255,8 @@ impl Default for EstimatorSettings {
             innovation_limit: 200.0,
             divergence_ticks: 50,
             imu_timeout: 0.1,
+            tilt_time: 1.0,
+            gyro_bias_time: 0.0,
         }
     }
 }
@@ -278,6 +286,14 @@ impl EstimatorSettings {
                 "joint_velocity_cutoff",
                 format!("must be ≥ 0, got {}", self.joint_velocity_cutoff),
             ));
+        }
+        for (key, v) in [
+            ("tilt_time", self.tilt_time),
+            ("gyro_bias_time", self.gyro_bias_time),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err((key, format!("must be ≥ 0, got {v}")));
+            }
         }
         if self.divergence_ticks == 0 {
             return Err(("divergence_ticks", "must be ≥ 1".into()));
