@@ -267,6 +267,9 @@ pub struct SensorCounts {
     pub sole_dropouts: u64,
     pub foot_ft_dropouts: u64,
     pub imu_dropouts: u64,
+    /// Samples of a mounted IMU whose frame could not be placed in the state (it does not fit
+    /// the model, or its kinematics failed): published as NaN, which the estimator refuses.
+    pub imu_mount_failures: u64,
 }
 
 /// A delay line of `latency + 1` samples of N values, and the sample last published: what a
@@ -692,7 +695,12 @@ impl Sensors {
     /// frame (the base's, or the mount's).
     fn imu_truth(&mut self, m: &StateMsg, dt: f64) -> [f64; 10] {
         let g = Vector3::new(0.0, 0.0, self.gravity);
-        if let Some((r, omega, vel)) = self.mount.as_mut().and_then(|mount| mount.place(m)) {
+        if let Some(mount) = self.mount.as_mut() {
+            // Not the base's reading instead: an IMU read at the wrong place is a wrong sensor.
+            let Some((r, omega, vel)) = mount.place(m) else {
+                self.counts.imu_mount_failures += 1;
+                return [f64::NAN; 10];
+            };
             let a = self.specific_force.update(m.step, dt, vel);
             let (w, f) = (r.inverse() * omega, r.inverse() * (a + g));
             return [r.i, r.j, r.k, r.w, w.x, w.y, w.z, f.x, f.y, f.z];
@@ -1167,6 +1175,13 @@ mod tests {
         assert!((f_head.norm() - 9.81).abs() < 1e-9, "at rest: {f_head}");
         assert!((f_head.angle(&f_base) - 0.2).abs() < 1e-9);
         assert!((r_head.angle_to(&r_base) - 0.2).abs() < 1e-9);
+        // A state that does not fit the mount's model: no sample (NaN), counted.
+        let mut s = Sensors::new(&c, 9.81, Some(ImuMount::new(model, head)));
+        let mut m: Box<StateMsg> = Box::default();
+        (m.nq, m.nv) = (model.nq as u32 - 1, model.nv as u32);
+        s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+        assert!(m.imu_orientation.iter().all(|x| x.is_nan()));
+        assert_eq!(s.counts.imu_mount_failures, 1);
     }
 
     /// A setting out of range is named by its key.
