@@ -14,8 +14,7 @@ PERIOD = 8.0  # s: multiple_impacts' pushes end by 5.8 s; the robot settles befo
 def main() -> int:
     base = tomllib.load(open(sys.argv[1], "rb"))
     duration, quiet = float(sys.argv[2]), sys.argv[3] == "1"
-    out = ['name = "soak"', "duration = 100000.0", "zmp_reference = [0.0, 0.0]", "[force]",
-           'kind = "impacts"']
+    out = ['name = "soak"', "", "zmp_reference = [0.0, 0.0]", "[force]", 'kind = "impacts"']
     if quiet:
         out.append("impacts = []")
     k = 0
@@ -27,6 +26,9 @@ def main() -> int:
                 out.append(f"{key} = {i.get(key, 0.0)}")
             out.append(f"force = {list(i['force'])}")
         k += 1
+    # The scenario lasts the soak (its processes are given their own durations), its last
+    # repetition included.
+    out[1] = f"duration = {max(duration, PERIOD * k)}"
     print("\n".join(out))
     return 0
 
