@@ -117,6 +117,8 @@ fn c2_config(mode: LoopMode) -> Config {
     let mut c = Config::embedded_default().expect("defaults");
     c.controller.kind = ControllerKind::C2;
     c.controller.mode = mode;
+    // No forecaster runs here: a short wait for one (30 s by default) keeps the test short.
+    c.controller.lockstep_first_forecast_wait = 1.0;
     c
 }
 

@@ -1,8 +1,10 @@
 //! The forecast corrected by the measured hand force, in closed loop on the full simulation
 //! (docs/forecast_correction.md): a forecast 1.5 times too strong no longer topples C1, a
-//! phantom push of 1.4 times C1's capability leaves the robot standing (twice does not yet:
-//! docs/results/robustness.md), and an exact forecast gives C1's figures. Each case is one lockstep `upc run` of a single 1 s raised-cosine impact along
-//! x (`upc capability`'s), with the correction on (the default) and off.
+//! phantom push of twice C1's capability leaves the robot standing (the capture-point guard),
+//! an exact forecast gives C1's figures, and without any forecaster C1 stands a push of 1.5
+//! times C0's capability that topples C0. Each case is one lockstep `upc run` of a single 1 s
+//! raised-cosine impact along x (`upc capability`'s), with the correction on (the default) and
+//! off.
 
 mod support;
 
@@ -12,8 +14,11 @@ use upc::capability::{Direction, impact_toml};
 
 /// C1's capability with an exact forecast on this impact (N; docs/results/capability.md).
 const C1_CAPABILITY: f64 = 57.0;
+/// C0's (N; docs/results/capability.md).
+const C0_CAPABILITY: f64 = 30.0;
 
 struct Case<'a> {
+    controller: &'a str,
     amplitude: f64,
     scale: f64,
     phantom: bool,
@@ -29,7 +34,7 @@ fn run(s: &Scratch, name: &str, c: &Case) -> Value {
         "run",
         "--quiet",
         "--controller",
-        "c1",
+        c.controller,
         "--name",
         name,
         "--out",
@@ -53,7 +58,7 @@ fn run(s: &Scratch, name: &str, c: &Case) -> Value {
     }
     args.extend(c.extra.iter().map(|a| a.to_string()));
     upc_ok(&args);
-    json(&s.path(&format!("{name}/c1/controller.json")))
+    json(&s.path(&format!("{name}/{}/controller.json", c.controller)))
 }
 
 fn fell(j: &Value) -> bool {
@@ -65,6 +70,7 @@ fn a_forecast_too_strong_by_half_no_longer_topples_c1() {
     let _one = serial();
     let s = Scratch::new("fc_scale");
     let case = |correction| Case {
+        controller: "c1",
         amplitude: 52.0,
         scale: 1.5,
         phantom: false,
@@ -108,8 +114,9 @@ fn a_forecast_too_strong_by_half_no_longer_topples_c1() {
 fn a_phantom_push_beyond_c1_s_capability_leaves_the_robot_standing() {
     let _one = serial();
     let s = Scratch::new("fc_phantom");
-    let amplitude = 1.4 * C1_CAPABILITY;
+    let amplitude = 2.0 * C1_CAPABILITY;
     let case = |correction| Case {
+        controller: "c1",
         amplitude,
         scale: 1.0,
         phantom: true,
@@ -145,6 +152,7 @@ fn an_exact_forecast_keeps_c1_s_figures() {
     let _one = serial();
     let s = Scratch::new("fc_exact");
     let case = |correction| Case {
+        controller: "c1",
         amplitude: 0.9 * C1_CAPABILITY,
         scale: 1.0,
         phantom: false,
@@ -177,6 +185,7 @@ fn without_a_forecaster_the_measured_force_is_previewed() {
     let _one = serial();
     let s = Scratch::new("fc_none");
     let case = Case {
+        controller: "c1",
         amplitude: 25.0,
         scale: 1.0,
         phantom: false,
@@ -197,6 +206,35 @@ fn without_a_forecaster_the_measured_force_is_previewed() {
         csv_without(&s.path("a/c1/controller.csv"), &["tick_us", "wbc_us"]),
         csv_without(&s.path("b/c1/controller.csv"), &["tick_us", "wbc_us"])
     );
+}
+
+/// A robot with only a wrist force sensor (no forecaster): the measured force, held and
+/// extrapolated along its trend, lets C1 stand 1.5 times the push that C0 stands.
+#[test]
+fn without_a_forecaster_c1_stands_half_again_c0_s_capability() {
+    let _one = serial();
+    let s = Scratch::new("fc_measured_only");
+    let case = |controller| Case {
+        controller,
+        amplitude: 1.5 * C0_CAPABILITY,
+        scale: 1.0,
+        phantom: false,
+        correction: true,
+        extra: &["--no-forecaster"],
+    };
+    let c0 = run(&s, "c0", &case("c0"));
+    let c1 = run(&s, "c1", &case("c1"));
+    eprintln!(
+        "{} N, no forecaster: C0 drop {:.1} mm, edge {:.2} s; C1 drop {:.1} mm, edge {:.2} s",
+        1.5 * C0_CAPABILITY,
+        f(&c0, "com_height_drop") * 1e3,
+        f(&c0, "time_at_support_edge"),
+        f(&c1, "com_height_drop") * 1e3,
+        f(&c1, "time_at_support_edge")
+    );
+    assert!(fell(&c0), "{c0}");
+    assert!(!fell(&c1), "{c1}");
+    assert_eq!(u(&c1, "wbc_fallbacks"), 0, "{c1}");
 }
 
 /// `upc robustness` end to end on a one-cell grid: the table, the CSV and the heat map.

@@ -308,7 +308,12 @@ fn a_machine_stall_is_not_a_lost_controller_but_a_frozen_controller_is() {
     assert_stands(&seen, "stall, then a frozen controller");
     let sim = json(&s.path("sim.json"));
     let c = json(&s.path("controller.json"));
-    assert!(f(&c, "longest_state_gap") > 0.09, "the stall happened: {c}");
+    // The stall lands between two ticks (a long wait for the next state) or inside one (a
+    // long tick: the wait for the next state then looks ordinary).
+    assert!(
+        f(&c, "longest_state_gap") > 0.09 || f(&c, "tick_max_us") > 90e3,
+        "the stall happened: {c}"
+    );
     assert_eq!(u(&sim["hold"], "losses"), 1, "{sim}");
     assert_eq!(u(&sim["hold"], "handovers"), 2, "{sim}");
     assert_eq!(u(&c, "tick_errors"), 0, "{c}");

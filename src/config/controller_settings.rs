@@ -49,6 +49,12 @@ pub struct CorrectionSettings {
     pub offset_time_constant: f64,
     /// Time constant T_d of the offset's decay over the horizon (s).
     pub offset_decay: f64,
+    /// Length (s) of the window of the trend fit: a line through the last bins of what the
+    /// forecast leaves unexplained (FC-3b).
+    pub trend_window: f64,
+    /// T_r (s): how far ahead the unexplained force's trend is extrapolated before it levels
+    /// off (FC-4); 0 turns the trend off.
+    pub trend_horizon: f64,
     /// |κ̂ − 1| beyond this, with the window's evidence, is a contradicted forecast.
     pub contradiction: f64,
     /// The corrected horizon's upward force is capped at this fraction of the robot's weight
@@ -72,7 +78,9 @@ impl Default for CorrectionSettings {
             factor_bounds: [0.0, 3.0],
             forget: 3.0,
             offset_time_constant: 0.05,
-            offset_decay: 0.3,
+            offset_decay: 0.6,
+            trend_window: 0.05,
+            trend_horizon: 0.25,
             contradiction: 0.5,
             max_lift: 0.5,
         }
@@ -93,14 +101,20 @@ impl CorrectionSettings {
             ("forget", self.forget),
             ("offset_time_constant", self.offset_time_constant),
             ("offset_decay", self.offset_decay),
+            ("trend_window", self.trend_window),
             ("contradiction", self.contradiction),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err((key, format!("must be finite and > 0, got {v}")));
             }
         }
-        if !(self.max_shift.is_finite() && self.max_shift >= 0.0) {
-            return Err(("max_shift", format!("must be ≥ 0, got {}", self.max_shift)));
+        for (key, v) in [
+            ("max_shift", self.max_shift),
+            ("trend_horizon", self.trend_horizon),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err((key, format!("must be finite and ≥ 0, got {v}")));
+            }
         }
         if !(self.max_lift > 0.0 && self.max_lift < 1.0) {
             return Err((
@@ -111,6 +125,43 @@ impl CorrectionSettings {
         let [lo, hi] = self.factor_bounds;
         if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo < hi) {
             return Err(("factor_bounds", format!("need 0 ≤ lo < hi, got {lo}, {hi}")));
+        }
+        Ok(())
+    }
+}
+
+/// `[controller.viability]`: the capture-point guard on unconfirmed forecasts
+/// (`control::viability`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ViabilitySettings {
+    /// Fade the forecast's unmeasured part as the capture point nears an edge (C1, C2).
+    pub enabled: bool,
+    /// Distance to the nearer support edge (fraction of the half-length) at which the
+    /// unmeasured forecast is gone.
+    pub margin: f64,
+    /// Width of the fade (fraction of the half-length) beyond the margin.
+    pub band: f64,
+}
+
+impl Default for ViabilitySettings {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            margin: 0.35,
+            band: 0.1,
+        }
+    }
+}
+
+impl ViabilitySettings {
+    /// Why the settings are unusable, if they are: (key, reason).
+    pub fn check(&self) -> Result<(), (&'static str, String)> {
+        if !(0.0..1.0).contains(&self.margin) {
+            return Err(("margin", format!("must be in [0, 1), got {}", self.margin)));
+        }
+        if !(self.band.is_finite() && self.band > 0.0) {
+            return Err(("band", format!("must be finite and > 0, got {}", self.band)));
         }
         Ok(())
     }

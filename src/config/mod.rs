@@ -7,7 +7,7 @@ mod schema;
 
 pub use controller_settings::{
     ComObserverSettings, CorrectionSettings, EstimatorMode, EstimatorSettings, RealtimeSettings,
-    WristTareSettings,
+    ViabilitySettings, WristTareSettings,
 };
 pub use layers::{ConfigError, Layers};
 pub use schema::*;

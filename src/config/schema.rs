@@ -392,6 +392,8 @@ pub struct ControllerConfig {
     pub forecast_correction: super::CorrectionSettings,
     /// The CoM disturbance observer (docs/forecast_correction.md, "CoM observer").
     pub com_observer: super::ComObserverSettings,
+    /// The capture-point guard on unconfirmed forecasts (docs/forecast_correction.md, VG).
+    pub viability: super::ViabilitySettings,
     /// The wrist sensor's offset, taken while the hand is unloaded (`control::wrist_tare`).
     pub wrist_tare: super::WristTareSettings,
     /// The floating-base estimator (docs/estimation.md).
@@ -451,6 +453,9 @@ impl ControllerConfig {
         }
         if let Err((key, why)) = self.wrist_tare.check() {
             return Err(l.range_error(&format!("controller.wrist_tare.{key}"), why));
+        }
+        if let Err((key, why)) = self.viability.check() {
+            return Err(l.range_error(&format!("controller.viability.{key}"), why));
         }
         if let Err((key, why)) = self.com_observer.check() {
             return Err(l.range_error(&format!("controller.com_observer.{key}"), why));

@@ -23,6 +23,7 @@ use super::com_observer::ComObserver;
 use super::forecast_correction::{CorrectionEstimate, ForecastCorrector};
 use super::forecast_window::ForecastWindow;
 use super::gain_thread::StampedSchedule;
+use super::viability::ViabilityGuard;
 use super::wrist_tare::{WristTare, task_time};
 use crate::channels::{MAX_DOF, STATE_FLAG_BASE_UNMEASURED, STATE_FLAG_HOLD, StateMsg};
 use crate::config::{Config, ControllerKind, EstimatorMode};
@@ -101,6 +102,10 @@ pub struct TickRecord {
     pub correction: CorrectionEstimate,
     /// The CoM observer's force (N, x and y; zero when off).
     pub f_obs: [f64; 2],
+    /// The capture-point guard's scale of the forecast's unmeasured part (x, y; 1 when off or
+    /// not fading) and the capture point under the measured force (m; NaN when off).
+    pub viability_scale: [f64; 2],
+    pub capture_point: [f64; 2],
     /// The robot is fallen: this tick held joint damping, without preview or QP.
     pub fallen: bool,
     /// The base estimator's estimate, when it ran this tick.
@@ -143,6 +148,8 @@ pub struct ControllerCore {
     zmp_offset: [f64; 2],
     /// The forecast corrected by the measured hand force (C1, C2), when on.
     correction: Option<ForecastCorrector>,
+    /// The capture-point guard on the forecast's unmeasured part (C1, C2 with the correction).
+    viability: Option<ViabilityGuard>,
     /// The CoM disturbance observer, when on, and the total CoM disturbance horizon it adds to.
     observer: Option<ComObserver>,
     f_dis_total: Vec<[f64; 3]>,
@@ -205,6 +212,8 @@ impl ControllerCore {
                 let weight = cart.mass * cart.gravity;
                 ForecastCorrector::new(cc.forecast_correction, p.period, control_period, weight)
             });
+        let viability = (correction.is_some() && cc.viability.enabled)
+            .then(|| ViabilityGuard::new(cc.viability, cart.mass, cart.gravity, cart.com_height));
         let observer = cc.com_observer.enabled.then(|| {
             ComObserver::new(
                 cc.com_observer,
@@ -251,6 +260,7 @@ impl ControllerCore {
             latched: None,
             zmp_offset,
             correction,
+            viability,
             observer,
             f_dis_total: vec![[0.0; 3]; n],
             preview_fallbacks: 0,
@@ -315,6 +325,9 @@ impl ControllerCore {
         if let Some(o) = self.observer.as_mut() {
             o.reset();
         }
+        if let Some(g) = self.viability.as_mut() {
+            g.reset();
+        }
         self.estimator.reset();
     }
 
@@ -326,6 +339,11 @@ impl ControllerCore {
     /// The base estimator's counters (`None` when it never ran).
     pub fn estimator_counts(&self) -> Option<EstimatorCounts> {
         (self.estimator.counts.ticks > 0).then_some(self.estimator.counts)
+    }
+
+    /// The capture-point guard's counters (`None` when it is off).
+    pub fn viability_counts(&self) -> Option<super::viability::ViabilityCounts> {
+        self.viability.as_ref().map(|g| g.counts)
     }
 
     /// The forecast correction's counters (`None` when it is off).
@@ -417,6 +435,17 @@ impl ControllerCore {
             self.dt,
         );
         let zref = self.horizon_inputs(t, &latched, forecast, f_meas, hand.vel.into());
+        if let (Some(g), Some(c)) = (self.viability.as_mut(), self.correction.as_ref()) {
+            let push = c.measured_push();
+            g.apply(
+                t,
+                [com.x, com.y],
+                [vcom.x, vcom.y],
+                latched.support,
+                push,
+                &mut self.f_ext,
+            );
+        }
         let zmp_meas = self.measured_zmp(state);
         let f_obs = self.observe([com.x, com.y], [vcom.x, vcom.y], zmp_meas);
         let age = self.take_schedule(t, c2);
@@ -471,6 +500,11 @@ impl ControllerCore {
                 .map(|c| *c.estimate())
                 .unwrap_or_default(),
             f_obs,
+            viability_scale: self.viability.as_ref().map_or([1.0; 2], |g| g.last_scale),
+            capture_point: self
+                .viability
+                .as_ref()
+                .map_or([f64::NAN; 2], |g| g.last_capture),
             fallen: false,
             base: self.estimating.then_some(self.estimator.last),
         };

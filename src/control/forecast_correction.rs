@@ -9,7 +9,10 @@
 //! from a short window of the measured push against the forecast's past, d by an observer on
 //! what κ and τ leave unexplained. The horizon the previewer sees is
 //!
-//!   f̂(t + s) = κ̂ f_fc(t + s − τ̂) + d̂ e^{−s/T_d}.                         (FC-4)
+//!   f̂(t + s) = κ̂ f_fc(t + s − τ̂) + (d̂ + ḋ (T_o + T_r (1 − e^{−s/T_r}))) e^{−s/T_d}.  (FC-4)
+//!
+//! ḋ the trend of what the forecast leaves unexplained, a line fitted through its last bins
+//! (FC-3b): a push the forecast misses, or one nothing forecasts, is extrapolated while it grows.
 //!
 //! A forecast the measurement contradicts (a phantom push: κ̂ → 0; an amplitude far off) is
 //! scaled down until it agrees again. With no forecast at all, f̂ is the offset alone: the
@@ -33,6 +36,8 @@ pub struct CorrectionEstimate {
     pub offset: [f64; 3],
     /// The window's evidence contradicts the forecast (|κ̂ − 1| > `contradiction`).
     pub contradicted: bool,
+    /// ḋ (N/s): the trend of the unexplained force (zero when `trend_horizon` is 0).
+    pub trend: [f64; 3],
 }
 
 impl Default for CorrectionEstimate {
@@ -42,6 +47,7 @@ impl Default for CorrectionEstimate {
             shift: 0.0,
             offset: [0.0; 3],
             contradicted: false,
+            trend: [0.0; 3],
         }
     }
 }
@@ -98,6 +104,8 @@ pub struct ForecastCorrector {
     /// Window bins n_W and shift bins M (candidates τ = m T_b, m = −M…M).
     n_w: usize,
     m: usize,
+    /// Bins of the trend fit (≤ n_W).
+    n_r: usize,
     /// Rings of bin means: measured force, and the forecast for the bin's times as it was then.
     meas: Vec<V3>,
     fc: Vec<V3>,
@@ -138,6 +146,8 @@ pub struct ForecastCorrector {
     /// wrong forecast must not read as noise, or it would never be refused).
     residual_var: f64,
     last_residual: Option<V3>,
+    /// The push measured at the last tick with a measurement.
+    last_push: V3,
     pub counts: CorrectionCounts,
 }
 
@@ -151,6 +161,7 @@ impl ForecastCorrector {
         let m = (settings.max_shift / bin).round() as usize;
         let hist = n_w + m;
         let timeline = n_w + 2 * m;
+        let n_r = ((settings.trend_window / bin).round() as usize).clamp(3, n_w.max(3));
         Self {
             s: settings,
             bin,
@@ -159,6 +170,7 @@ impl ForecastCorrector {
             lift_cap: settings.max_lift * weight,
             n_w,
             m,
+            n_r,
             meas: vec![[0.0; 3]; n_w],
             fc: vec![[0.0; 3]; hist],
             bins: 0,
@@ -180,6 +192,7 @@ impl ForecastCorrector {
             recent_energy: 0.0,
             residual_var: 0.0,
             last_residual: None,
+            last_push: [0.0; 3],
             counts: CorrectionCounts {
                 factor_min: 1.0,
                 factor_max: 1.0,
@@ -198,6 +211,12 @@ impl ForecastCorrector {
     /// The push the measured force `y` says, with the hand accelerating at `acc`: y + Λ acc.
     fn push(&self, y: &V3, acc: &V3) -> V3 {
         [0, 1, 2].map(|r| y[r] + dot(&self.held_mass[r], acc))
+    }
+
+    /// The push measured at the last tick (FC-1's left side: the measured force plus Λ times
+    /// the hand's newest bin acceleration); zero before the first measurement.
+    pub fn measured_push(&self) -> V3 {
+        self.last_push
     }
 
     pub fn settings(&self) -> &CorrectionSettings {
@@ -224,6 +243,7 @@ impl ForecastCorrector {
         self.recent_energy = 0.0;
         self.residual_var = 0.0;
         self.last_residual = None;
+        self.last_push = [0.0; 3];
     }
 
     /// The forecast as received, for plant time `t`: the window where it covers `t` or `t` is
@@ -278,6 +298,7 @@ impl ForecastCorrector {
         let explained = self.forecast_at(window, t - self.est.shift);
         let l = 1.0 - (-self.dt / self.s.offset_time_constant).exp();
         let push = self.push(&y, &self.last_acc);
+        self.last_push = push;
         for c in 0..3 {
             let r = push[c] - self.est.factor * explained[c];
             self.est.offset[c] += l * (r - self.est.offset[c]);
@@ -323,6 +344,57 @@ impl ForecastCorrector {
         self.last_residual = Some(e);
         if self.bins as usize >= self.n_w {
             self.estimate_factor_and_shift(window);
+        }
+        self.fit_trend(window);
+    }
+
+    /// The trend ḋ of what κ̂ f_fc(t − τ̂) leaves unexplained (FC-3b): the slope of the least-
+    /// squares line through the last n_r bins' residuals, shrunk toward zero by twice its
+    /// standard error (a trend the noise or the model's error could make is none). The bins'
+    /// variance is the fit's own, at least the noise they carry, plus the model error in proportion to
+    /// the recent forecast (as in FC-2): while a forecast explains the push, the door's and the
+    /// arm's own transients are no trend to extrapolate; without one, a growing push is.
+    /// O(n_r), once a bin.
+    fn fit_trend(&mut self, window: &ForecastWindow) {
+        let n_r = self.n_r;
+        if self.s.trend_horizon == 0.0 || (self.bins as usize) < n_r || n_r > self.meas.len() {
+            self.est.trend = [0.0; 3];
+            return;
+        }
+        // Bin j back from the newest at x_j = −j T_b: Σx, Σx² are fixed.
+        let n = n_r as f64;
+        let (mut sx, mut sxx) = (0.0, 0.0);
+        let (mut sy, mut sxy, mut syy) = ([0.0; 3], [0.0; 3], [0.0; 3]);
+        for j in 0..n_r {
+            let x = -(j as f64) * self.bin;
+            let centre = self.last_bin_t - (j as f64 + 0.5) * self.bin;
+            let fc = self.forecast_at(window, centre - self.est.shift);
+            let y = self.meas_bin(j);
+            sx += x;
+            sxx += x * x;
+            for c in 0..3 {
+                let r = y[c] - self.est.factor * fc[c];
+                sy[c] += r;
+                sxy[c] += x * r;
+                syy[c] += r * r;
+            }
+        }
+        let den = n * sxx - sx * sx;
+        let floor = self.residual_var;
+        let model = self.s.model_error.powi(2) * self.recent_energy;
+        for c in 0..3 {
+            let b = (n * sxy[c] - sx * sy[c]) / den;
+            let a = (sy[c] - b * sx) / n;
+            // A bin's variance (the fit's residual, at least the noise floor, plus the model
+            // error) and the slope's standard error.
+            let res = (syy[c] - a * sy[c] - b * sxy[c]).max(0.0) / (n - 2.0);
+            let se = (n * (res.max(floor) + model) / den).sqrt();
+            let shrunk = (b.abs() - 2.0 * se).max(0.0);
+            self.est.trend[c] = if b.is_finite() {
+                shrunk.copysign(b)
+            } else {
+                0.0
+            };
         }
     }
 
@@ -502,13 +574,24 @@ impl ForecastCorrector {
     pub fn fill(&mut self, t: f64, period: f64, window: &ForecastWindow, out: &mut [V3]) {
         let e = self.est;
         let decay = (-period / self.s.offset_decay).exp();
+        let (t_o, t_r) = (self.s.offset_time_constant, self.s.trend_horizon);
+        let ramp = if t_r > 0.0 {
+            (-period / t_r).exp()
+        } else {
+            0.0
+        };
         let mut w = 1.0;
+        let mut r = 1.0;
         let mut capped = false;
         for (i, f) in out.iter_mut().enumerate() {
             w *= decay;
+            r *= ramp;
             let s = (i + 1) as f64 * period;
             let p = self.forecast_at(window, t + s - e.shift);
-            *f = [0, 1, 2].map(|c| e.factor * p[c] + e.offset[c] * w);
+            // The offset's level now (the observer lags a ramp by T_o) and its trend, levelling
+            // off after T_r, both blended out at T_d (FC-4).
+            let ahead = t_o + t_r * (1.0 - r);
+            *f = [0, 1, 2].map(|c| e.factor * p[c] + (e.offset[c] + e.trend[c] * ahead) * w);
             // Never a force that lifts the robot (a tipping robot's hand, a biased sensor).
             if f[2] > self.lift_cap {
                 f[2] = self.lift_cap;
@@ -783,18 +866,57 @@ mod tests {
         }
         let mut out = vec![[0.0; 3]; 300];
         corr.fill(0.5, 0.005, &window, &mut out);
+        let t_d = CorrectionSettings::default().offset_decay;
         assert!(
-            (out[0][0] + 20.0 * (-0.005f64 / 0.3).exp()).abs() < 1e-3,
+            (out[0][0] + 20.0 * (-0.005f64 / t_d).exp()).abs() < 1e-3,
             "{:?}",
             out[0]
         );
         let s = 0.3;
         assert!(
-            (out[59][1] - 4.0 * (-s / 0.3f64).exp()).abs() < 1e-3,
+            (out[59][1] - 4.0 * (-s / t_d).exp()).abs() < 1e-3,
             "{:?}",
             out[59]
         );
         assert_eq!(corr.counts.lift_capped, 0);
+    }
+
+    /// Without a forecast, a growing measured push is extrapolated along its trend (FC-3b, FC-4).
+    /// A ramp of 100 N/s under σ = 0.5 N reads as 100 ± 20 N/s, and the horizon 0.15 s ahead
+    /// says more than the force now held and blended out; under σ = 2 N the 50 ms fit's slope is shrunk by twice its
+    /// standard error (≈ 2 × 20 N/s) but keeps its sign; a steady force under σ = 2 N has
+    /// (almost) no trend.
+    #[test]
+    fn without_a_forecast_a_growing_push_is_extrapolated() {
+        let s = CorrectionSettings::default();
+        let window = ForecastWindow::new(1.0, 1.0, 0.2, 1e4);
+        let mut out = vec![[0.0; 3]; 300];
+        for (rate, sigma, seed) in [(100.0, 0.5, 7), (100.0, 2.0, 7), (0.0, 2.0, 11)] {
+            let mut corr = ForecastCorrector::new(s, 0.005, 1e-3, 300.0);
+            let mut noise = Noise(seed);
+            let mut f = 0.0;
+            for k in 0..600 {
+                let t = k as f64 * 1e-3;
+                f = -10.0 - rate * (t - 0.3).max(0.0);
+                corr.update(t, &window, Some([f + sigma * noise.gauss(), 0.0, 0.0]), [0.0; 3]);
+            }
+            corr.fill(0.6, 0.005, &window, &mut out);
+            let trend = corr.estimate().trend[0];
+            eprintln!(
+                "rate {rate}, σ {sigma}: trend {trend:.1} N/s, now {f:.1} N, in 0.15 s {:.1} N",
+                out[29][0]
+            );
+            match (rate > 0.0, sigma < 1.0) {
+                (true, true) => {
+                    assert!((trend + rate).abs() <= 20.0, "{trend}");
+                    // Held and blended out it would be f e^{−0.15/T_d}.
+                    let held = f * (-0.15 / s.offset_decay).exp();
+                    assert!(out[29][0] < 1.1 * held, "{} against {held}", out[29][0]);
+                }
+                (true, false) => assert!((-rate..=-20.0).contains(&trend), "{trend}"),
+                _ => assert!(trend.abs() <= 5.0, "{trend}"),
+            }
+        }
     }
 
     /// A robot tipping over pulls on its hand: a measured upward force beyond its weight must

@@ -4,6 +4,7 @@
 //! - [`core`]: one tick without IPC ([`ControllerCore`]).
 //! - [`forecast_window`]: validated copy of the latest force forecast.
 //! - [`forecast_correction`]: the forecast corrected by the measured hand force.
+//! - [`viability`]: the capture-point guard on the forecast's unmeasured part.
 //! - [`wrist_tare`]: the wrist sensor's offset, taken while the hand is unloaded.
 //! - [`com_observer`]: the push on the CoM that nothing forecasts, from the measured CoP.
 //! - [`gain_thread`]: C2 in a lower-priority thread behind wait-free triple buffers.
@@ -27,6 +28,7 @@ pub mod run_metrics;
 pub mod server;
 pub mod summary;
 pub mod timing;
+pub mod viability;
 pub mod wrist_tare;
 
 pub use com_observer::{ComObserver, ComObserverSettings};

@@ -23,6 +23,9 @@ pub enum Verdict {
     NeverStarted,
     /// Lockstep: no state past the reconnect timeout, and the plant's process is gone.
     Gone,
+    /// Lockstep: the plant still sends the state `step` answered `state_timeout` ago. It has not
+    /// seen the answer (lost, or sent before it listened): send it again, or both wait forever.
+    Reanswer { step: u64 },
 }
 
 /// What the link counted over a run.
@@ -36,6 +39,8 @@ pub struct LinkCounts {
     pub reconnects: u64,
     /// Longest wall time between two fresh states (s).
     pub longest_state_gap: f64,
+    /// Lockstep: answers sent again to a plant still sending the state they answer.
+    pub reanswers: u64,
 }
 
 /// The timeouts of [`PlantLink`] (s), from `[controller]` and the command line.
@@ -159,6 +164,19 @@ impl PlantLink {
         if quiet <= self.timeouts.state {
             return Verdict::Idle;
         }
+        if repeated && !realtime {
+            // A lockstep plant resends the state it waits on: it is alive, and waits for us.
+            self.counts.reanswers += 1;
+            self.last_state_at = Instant::now();
+            if self.counts.reanswers.is_power_of_two() {
+                tracing::warn!(
+                    "the simulator still waits on step {last} {quiet:.3} s after its answer: \
+                     answering it again ({} so far)",
+                    self.counts.reanswers
+                );
+            }
+            return Verdict::Reanswer { step: last };
+        }
         if !self.stale {
             self.stale = true;
             self.counts.stale_periods += 1;
@@ -281,6 +299,31 @@ mod tests {
             Verdict::Control { restarted: false }
         );
         assert!(ls.counts.longest_state_gap >= 0.1);
+    }
+
+    /// A lost answer must not deadlock lockstep: the plant resends the state it waits on, and
+    /// past `state_timeout` the link says to answer it again (once per timeout).
+    #[test]
+    fn a_state_still_resent_after_its_answer_is_answered_again() {
+        let mut l = link(LoopMode::Lockstep, 0.05);
+        let alive = || true;
+        assert_eq!(
+            l.classify(Some(&state(3, 1)), alive),
+            Verdict::Control { restarted: false }
+        );
+        l.answered();
+        assert_eq!(l.classify(Some(&state(3, 1)), alive), Verdict::Idle);
+        std::thread::sleep(Duration::from_millis(60));
+        assert_eq!(
+            l.classify(Some(&state(3, 1)), alive),
+            Verdict::Reanswer { step: 3 }
+        );
+        assert_eq!(l.classify(Some(&state(3, 1)), alive), Verdict::Idle);
+        assert_eq!(l.counts.reanswers, 1);
+        // Silence (no state at all) is not a resend: waited for, never answered again.
+        std::thread::sleep(Duration::from_millis(60));
+        assert_eq!(l.classify(None, alive), Verdict::Idle);
+        assert_eq!(l.counts.reanswers, 1);
     }
 
     #[test]

@@ -187,6 +187,8 @@ struct ControlLoop<'a> {
     controller_id: u64,
     seq: u64,
     tau: [f64; MAX_DOF],
+    /// The flags of the last answer (sent again with it to a plant that missed it).
+    last_flags: u32,
     /// Joint rates of the last fresh state, for the damping torques of a stale period.
     last_qd: [f64; MAX_DOF],
     /// Why the run will not reproduce, if it will not (no allocation on the loop).
@@ -285,6 +287,7 @@ impl<'a> ControlLoop<'a> {
             controller_id: crate::channels::new_run_id(),
             seq: 0,
             tau: [0.0; MAX_DOF],
+            last_flags: 0,
             last_qd: [0.0; MAX_DOF],
             irreproducible: initially_irreproducible(cc),
             scenario: ScenarioCheck {
@@ -327,6 +330,10 @@ impl<'a> ControlLoop<'a> {
                 }
                 (Verdict::Damp { step }, _) => {
                     self.damp_stale(step)?;
+                    continue;
+                }
+                (Verdict::Reanswer { step }, Some(state)) if state.step == step => {
+                    self.publish(&state, self.last_flags, Duration::ZERO)?;
                     continue;
                 }
                 (Verdict::Gone, _) => break "simulator stopped",
@@ -584,6 +591,7 @@ impl<'a> ControlLoop<'a> {
         compute: Duration,
     ) -> Result<(), ChannelError> {
         self.seq += 1;
+        self.last_flags = flags;
         let (seq, id, n, tau) = (self.seq, self.controller_id, self.n_tau, &self.tau);
         let sent = self.ports.torques.send_with(|m| {
             m.seq = seq;
@@ -711,6 +719,7 @@ impl<'a> ControlLoop<'a> {
         s.stale_periods = link.stale_periods;
         s.reconnects = link.reconnects;
         s.longest_state_gap = link.longest_state_gap;
+        s.lockstep_reanswers = link.reanswers;
         if let Some(t) = &self.ticker {
             s.deadline_overruns = t.overruns;
             s.deadline_misses = t.missed;
@@ -720,6 +729,7 @@ impl<'a> ControlLoop<'a> {
         s.wrist_tare_offset = self.core.wrist_tare().offset();
         s.wrist_tare_refusals = self.core.wrist_tare().refusals();
         s.estimator = self.core.estimator_counts();
+        s.viability = self.core.viability_counts();
         s.forecast_correction = self.core.correction_counts().map(|c| {
             let e = self.core.last.correction;
             CorrectionSummary {

@@ -33,6 +33,10 @@ pub struct ServerSummary {
     pub stale_ticks: u64,
     /// Longest wall time between two fresh states (s).
     pub longest_state_gap: f64,
+    /// Lockstep: answers sent again to a plant still sending the state they answer (a lost
+    /// answer; 0 in a healthy run).
+    #[serde(default)]
+    pub lockstep_reanswers: u64,
     /// Restarted simulators the controller latched onto and resumed with.
     pub reconnects: u64,
     /// Control ticks since the last reconnect (all ticks without one).
@@ -111,6 +115,10 @@ pub struct ServerSummary {
     pub stopped_by: String,
     /// The forecast correction (docs/forecast_correction.md); `None`: off (or C0).
     pub forecast_correction: Option<CorrectionSummary>,
+    /// The capture-point guard on the forecast's unmeasured part (docs/forecast_correction.md,
+    /// VG); `None`: off (or C0).
+    #[serde(default)]
+    pub viability: Option<super::viability::ViabilityCounts>,
     /// The wrist sensor's offset removed at the last tare (N; zero when none was taken), and
     /// the tares refused as loads (`control::wrist_tare`).
     #[serde(default)]

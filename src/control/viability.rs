@@ -1,0 +1,247 @@
+//! The capture-point guard on unconfirmed forecasts (docs/forecast_correction.md, VG-1, VG-2).
+//!
+//! C1 and C2 lean the robot into a forecast push before it arrives; nothing measured can say
+//! before its onset that it will not come (a phantom). A lean is safe only as far as the robot
+//! could stop if the forecast force never came: the capture point of the cart-table under the
+//! force measured now,
+//!
+//!   ξ_m = x + ẋ/ω + F_now/(M ω²),  ω² = g/z_c,                                   (VG-1)
+//!
+//! must stay inside the support, where the ZMP can hold it (Pratt et al., capturability). The
+//! part of the horizon's force not measured yet is faded as ξ_m comes within `margin` (a
+//! fraction of the support's half-length) of an edge, over `band`:
+//!
+//!   f̂_i ← b_i + s (f̂_i − b_i),  s = clamp((d − margin)/band, 0, 1),                (VG-2)
+//!
+//! per horizontal axis and horizon sample where the forecast adds force along its own
+//! direction (a push to come, not one forecast to ease): b_i the measured push if it acts along
+//! f̂_i's direction, else zero; d the distance of ξ_m (a fraction of the half-length) to the
+//! edge that push leans the robot toward (a push to come along −x is met by leaning toward +x,
+//! which is what a phantom leaves the robot with). A push that arrives is measured, moves ξ_m
+//! with it and lifts the fade at once; a phantom's lean stops where the robot can still stand
+//! without it. Allocation-free.
+
+pub use crate::config::ViabilitySettings;
+
+type V3 = [f64; 3];
+
+/// What the guard did over a run.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct ViabilityCounts {
+    /// Ticks with the forecast faded (s < 1 on an axis), and episodes of them.
+    pub faded_ticks: u64,
+    pub episodes: u64,
+    /// Smallest s seen.
+    pub min_scale: f64,
+}
+
+pub struct ViabilityGuard {
+    s: ViabilitySettings,
+    /// M ω² = M g / z_c (N/m) and 1/ω (s) of the cart-table.
+    stiffness: f64,
+    inv_omega: f64,
+    fading: bool,
+    /// The last tick's scales (x, y) and capture points (m).
+    pub last_scale: [f64; 2],
+    pub last_capture: [f64; 2],
+    pub counts: ViabilityCounts,
+}
+
+impl ViabilityGuard {
+    /// For a cart-table of `mass` (kg) at `com_height` (m) under `gravity` (m/s²).
+    pub fn new(settings: ViabilitySettings, mass: f64, gravity: f64, com_height: f64) -> Self {
+        let omega2 = gravity / com_height;
+        Self {
+            s: settings,
+            stiffness: mass * omega2,
+            inv_omega: 1.0 / omega2.sqrt(),
+            fading: false,
+            last_scale: [1.0; 2],
+            last_capture: [0.0; 2],
+            counts: ViabilityCounts {
+                min_scale: 1.0,
+                ..Default::default()
+            },
+        }
+    }
+
+    /// A new plant session: the episode state starts over (counters are kept).
+    pub fn reset(&mut self) {
+        self.fading = false;
+        self.last_scale = [1.0; 2];
+    }
+
+    /// Fades the unmeasured part of `horizon` (the hand force over the preview, N) by VG-2,
+    /// from the CoM position and velocity (m, m/s, horizontal), the support rectangle
+    /// ([[x_min, x_max], [y_min, y_max]]) and the push measured now (N). Non-finite inputs
+    /// leave the horizon as it is.
+    pub fn apply(
+        &mut self,
+        t: f64,
+        com: [f64; 2],
+        vcom: [f64; 2],
+        support: [[f64; 2]; 2],
+        push_now: V3,
+        horizon: &mut [V3],
+    ) {
+        // Per axis, the scale of an unmeasured force toward −a (the robot leans toward +a, the
+        // + edge is at risk) and toward +a (the − edge).
+        let mut scale = [[1.0; 2]; 2];
+        for a in 0..2 {
+            let xi = com[a] + vcom[a] * self.inv_omega + push_now[a] / self.stiffness;
+            let [lo, hi] = support[a];
+            let half = 0.5 * (hi - lo);
+            if !(xi.is_finite() && half > 0.0 && push_now[a].is_finite()) {
+                continue;
+            }
+            let fade = |d: f64| ((d / half - self.s.margin) / self.s.band).clamp(0.0, 1.0);
+            scale[a] = [fade(hi - xi), fade(xi - lo)];
+            self.last_capture[a] = xi;
+        }
+        let mut used = [1.0f64; 2];
+        let faded = scale.iter().flatten().any(|s| *s < 1.0);
+        if faded {
+            for f in horizon.iter_mut() {
+                for a in 0..2 {
+                    // Only a push to come: the forecast beyond what is measured along its own
+                    // direction (all of it where the measured push is zero or the other way).
+                    // A push forecast to ease is the measured push's own future: kept.
+                    let base = if f[a] * push_now[a] > 0.0 {
+                        push_now[a]
+                    } else {
+                        0.0
+                    };
+                    let extra = f[a] - base;
+                    if extra * f[a] <= 0.0 {
+                        continue;
+                    }
+                    let s = if extra < 0.0 {
+                        scale[a][0]
+                    } else {
+                        scale[a][1]
+                    };
+                    used[a] = used[a].min(s);
+                    f[a] = base + s * extra;
+                }
+            }
+        }
+        self.last_scale = used;
+        let faded = used.iter().any(|s| *s < 1.0);
+        if faded {
+            self.counts.faded_ticks += 1;
+            self.counts.min_scale = self.counts.min_scale.min(used[0].min(used[1]));
+            if !self.fading {
+                self.counts.episodes += 1;
+                if self.counts.episodes.is_power_of_two() {
+                    tracing::info!(
+                        "t = {t:.3} s: the capture point under the measured force is {:.0} / {:.0} mm \
+                         from the support's centre: the unmeasured forecast is faded (scale {:.2} / \
+                         {:.2}) until a push arrives or the robot is back ({} times so far)",
+                        (self.last_capture[0] - 0.5 * (support[0][0] + support[0][1])) * 1e3,
+                        (self.last_capture[1] - 0.5 * (support[1][0] + support[1][1])) * 1e3,
+                        used[0],
+                        used[1],
+                        self.counts.episodes
+                    );
+                }
+            }
+        }
+        self.fading = faded;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn guard() -> ViabilityGuard {
+        // M ω² = 30 kg × 9.81 / 0.5 m ≈ 589 N/m.
+        ViabilityGuard::new(ViabilitySettings::default(), 30.0, 9.81, 0.5)
+    }
+
+    const SUPPORT: [[f64; 2]; 2] = [[-0.07, 0.07], [-0.1, 0.1]];
+
+    #[test]
+    fn a_robot_at_rest_keeps_the_whole_forecast() {
+        let mut g = guard();
+        let mut h = vec![[-80.0, 5.0, 0.0]; 10];
+        g.apply(0.0, [0.0; 2], [0.0; 2], SUPPORT, [0.0; 3], &mut h);
+        assert!(h.iter().all(|f| *f == [-80.0, 5.0, 0.0]));
+        assert_eq!(g.counts.faded_ticks, 0);
+    }
+
+    /// Leaning 60 mm forward with nothing measured: the capture point is past the margin, the
+    /// forecast beyond the measured push is dropped; once the push is measured, the same lean
+    /// is a balance against it and the forecast is kept.
+    #[test]
+    fn an_unmeasured_lean_fades_and_a_measured_push_lifts_the_fade() {
+        let mut g = guard();
+        let mut h = vec![[-80.0, 0.0, 0.0]; 10];
+        g.apply(0.0, [0.04, 0.0], [0.1, 0.0], SUPPORT, [0.0; 3], &mut h);
+        assert_eq!(g.last_scale[0], 0.0, "{:?}", g.last_capture);
+        assert!(h.iter().all(|f| f[0] == 0.0), "{:?}", h[0]);
+        assert_eq!((g.counts.faded_ticks, g.counts.episodes), (1, 1));
+        // The push of −30 N measured: ξ_m = 0.04 + 0.1 × 0.2258 − 30 / 588.6 ≈ 0.0116 m.
+        let mut h = vec![[-80.0, 0.0, 0.0]; 10];
+        g.apply(
+            0.001,
+            [0.04, 0.0],
+            [0.1, 0.0],
+            SUPPORT,
+            [-30.0, 0.0, 0.0],
+            &mut h,
+        );
+        assert_eq!(g.last_scale, [1.0, 1.0]);
+        assert!(h.iter().all(|f| f[0] == -80.0));
+        assert_eq!(g.counts.episodes, 1);
+    }
+
+    /// The edge at risk is the one a push to come leans the robot toward, and a push forecast
+    /// to ease is never faded: with the capture point near the rear edge, more push along −x
+    /// (met by leaning forward) is kept, and so is its easing; a push to come along +x (met by
+    /// leaning back) is faded. Near the front edge, more push along −x is faded.
+    #[test]
+    fn only_a_push_to_come_toward_the_near_edge_fades() {
+        let mut g = guard();
+        let mut h = vec![[-60.0, 0.0, 0.0], [-20.0, 0.0, 0.0], [30.0, 0.0, 0.0]];
+        let push = [-40.0, 0.0, 0.0];
+        // ξ_m = −0.06 m: com − 40 / (M ω²) = −0.06.
+        let com = -0.06 + 40.0 / g.stiffness;
+        g.apply(0.0, [com, 0.0], [0.0; 2], SUPPORT, push, &mut h);
+        assert!((g.last_capture[0] + 0.06).abs() < 1e-12);
+        assert_eq!(
+            h[0][0], -60.0,
+            "more push, leaning away from the rear edge: kept"
+        );
+        assert_eq!(h[1][0], -20.0, "the push easing: kept");
+        assert_eq!(h[2][0], 0.0, "a push to come along +x: faded to none");
+        let mut h = vec![[-60.0, 0.0, 0.0], [-20.0, 0.0, 0.0]];
+        let com = 0.06 + 40.0 / g.stiffness;
+        g.apply(0.001, [com, 0.0], [0.0; 2], SUPPORT, push, &mut h);
+        assert_eq!(h[0][0], -40.0, "more push toward the front edge: faded");
+        assert_eq!(h[1][0], -20.0, "its easing: kept");
+    }
+
+    /// Between margin and margin + band the unmeasured part is scaled linearly, toward the
+    /// measured push (not toward zero).
+    #[test]
+    fn inside_the_band_the_unmeasured_part_is_scaled() {
+        let mut g = guard();
+        let s = ViabilitySettings::default();
+        // ξ_m at the middle of the band: d = margin + band / 2.
+        let d = s.margin + 0.5 * s.band;
+        let xi = 0.07 - d * 0.07;
+        let mut h = vec![[-50.0, 0.0, 0.0]; 3];
+        g.apply(
+            0.0,
+            [xi + 10.0 / g.stiffness, 0.0],
+            [0.0; 2],
+            SUPPORT,
+            [-10.0, 0.0, 0.0],
+            &mut h,
+        );
+        assert!((g.last_scale[0] - 0.5).abs() < 1e-9, "{:?}", g.last_scale);
+        assert!((h[0][0] + 30.0).abs() < 1e-9, "{:?}", h[0]);
+    }
+}
