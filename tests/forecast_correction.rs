@@ -277,3 +277,41 @@ fn the_robustness_sweep_writes_its_map() {
     assert!(md.contains("| κ \\ τ (ms) |"), "{md}");
     assert!(out.join("figures/robustness_c1_1000ms.svg").exists());
 }
+
+/// A case the plant refuses to play (MuJoCo cannot play a phantom: it pushes through the door)
+/// never runs; its controller's summary of zeros must not read as a robot that stood. The
+/// sweep stops and names the plant's reason; `--plant mujoco` alone skips the phantoms.
+#[test]
+fn a_case_the_plant_refuses_stops_the_sweep_instead_of_counting_as_survived() {
+    let _one = serial();
+    let s = Scratch::new("fc_refused");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_upc"))
+        .args([
+            "robustness",
+            "--plant",
+            "mujoco",
+            "--controllers",
+            "c1",
+            "--durations",
+            "1.0",
+            "--scales",
+            "1",
+            "--shifts",
+            "0",
+            "--tol",
+            "50",
+            "--quiet",
+            "--sim-set",
+            "sim.push=\"none\"",
+            "--out",
+        ])
+        .arg(s.dir.join("sweep"))
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("upc starts");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("the case never ran"), "{err}");
+    assert!(err.contains("no phantoms on the MuJoCo plant"), "{err}");
+    assert!(err.contains("sim.push must be"), "{err}");
+}

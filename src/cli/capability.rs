@@ -408,16 +408,36 @@ pub(super) fn full_case(
             robot: case.robot.to_owned(),
         },
     };
-    let kind = kind.name();
     let mut cmd = Command::new(exe);
     cmd.args(Argv::of("run", &run)).env("RUST_LOG", "warn");
     let status = cmd.output()?;
-    let summary = std::fs::read_to_string(dir.join(&name).join(kind).join("controller.json"));
+    let summary =
+        std::fs::read_to_string(dir.join(&name).join(kind.name()).join("controller.json"));
     let result = match summary {
         Ok(text) => {
             let v: serde_json::Value = serde_json::from_str(&text)?;
+            let num = |k: &str| v.get(k).and_then(serde_json::Value::as_f64).unwrap_or(0.0);
+            // A controller that never got a state (the plant refused the case) wrote a summary
+            // of zeros, which would read as a robot that stood: the sweep cannot go on.
+            if num("ticks") == 0.0 {
+                let log = dir.join(&name).join(kind.name()).join("sim.log");
+                let last = std::fs::read_to_string(&log)
+                    .ok()
+                    .and_then(|t| {
+                        t.lines()
+                            .rev()
+                            .find(|l| !l.trim().is_empty())
+                            .map(str::to_owned)
+                    })
+                    .unwrap_or_default();
+                return Err(format!("{name}: the case never ran (no state reached the controller); the plant said: {last}").into());
+            }
+            // A run that stopped before the scenario's end (a simulation that diverged) did not
+            // survive, however little the robot had moved by then.
+            let end = upc::capability::IMPACT_START + case.duration + upc::capability::RECOVERY;
+            let complete = num("sim_time") >= end - 0.01;
             CaseResult {
-                survived: survived_full(&v, criteria),
+                survived: complete && survived_full(&v, criteria),
                 summary: Some(v),
             }
         }

@@ -187,7 +187,14 @@ pub fn run(args: RobustnessArgs) -> CliResult {
             }
         }
     }
-    let phantoms = if args.no_phantom {
+    // MuJoCo's scene pushes through the door only: it cannot play a phantom (no push at all).
+    let no_phantom = args.no_phantom || args.plant == PlantChoice::Mujoco;
+    if no_phantom && !args.no_phantom {
+        eprintln!(
+            "robustness: no phantoms on the MuJoCo plant (it pushes through the door only); run them on upc's plant"
+        );
+    }
+    let phantoms = if no_phantom {
         0
     } else {
         args.durations.len() * variants.iter().filter(|v| v.uses_forecast()).count()
@@ -278,7 +285,7 @@ pub fn run(args: RobustnessArgs) -> CliResult {
 
     // Phase 2: phantoms up to twice C1's capability with an exact forecast (the forecast as
     // received, when swept; else the variant's own).
-    if !args.no_phantom {
+    if !no_phantom {
         let exact = |label: &str, d: f64| {
             rows.iter()
                 .find(|r| {

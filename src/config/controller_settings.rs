@@ -73,7 +73,7 @@ impl Default for CorrectionSettings {
             model_error: 0.15,
             min_force: 5.0,
             factor_sd: 2.0,
-            shift_sd: 0.05,
+            shift_sd: 0.3,
             offset_sd: 3.0,
             factor_bounds: [0.0, 3.0],
             forget: 3.0,

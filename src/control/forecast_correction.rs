@@ -898,7 +898,12 @@ mod tests {
             for k in 0..600 {
                 let t = k as f64 * 1e-3;
                 f = -10.0 - rate * (t - 0.3).max(0.0);
-                corr.update(t, &window, Some([f + sigma * noise.gauss(), 0.0, 0.0]), [0.0; 3]);
+                corr.update(
+                    t,
+                    &window,
+                    Some([f + sigma * noise.gauss(), 0.0, 0.0]),
+                    [0.0; 3],
+                );
             }
             corr.fill(0.6, 0.005, &window, &mut out);
             let trend = corr.estimate().trend[0];
