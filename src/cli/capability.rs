@@ -411,46 +411,62 @@ pub(super) fn full_case(
     let mut cmd = Command::new(exe);
     cmd.args(Argv::of("run", &run)).env("RUST_LOG", "warn");
     let status = cmd.output()?;
-    let summary =
-        std::fs::read_to_string(dir.join(&name).join(kind.name()).join("controller.json"));
-    let result = match summary {
-        Ok(text) => {
-            let v: serde_json::Value = serde_json::from_str(&text)?;
-            let num = |k: &str| v.get(k).and_then(serde_json::Value::as_f64).unwrap_or(0.0);
-            // A controller that never got a state (the plant refused the case) wrote a summary
-            // of zeros, which would read as a robot that stood: the sweep cannot go on.
-            if num("ticks") == 0.0 {
-                let log = dir.join(&name).join(kind.name()).join("sim.log");
-                let last = std::fs::read_to_string(&log)
-                    .ok()
-                    .and_then(|t| {
-                        t.lines()
-                            .rev()
-                            .find(|l| !l.trim().is_empty())
-                            .map(str::to_owned)
-                    })
-                    .unwrap_or_default();
-                return Err(format!("{name}: the case never ran (no state reached the controller); the plant said: {last}").into());
-            }
+    let run_dir = dir.join(&name).join(kind.name());
+    let summary = std::fs::read_to_string(run_dir.join("controller.json"));
+    let parsed: Option<serde_json::Value> = match &summary {
+        Ok(text) => Some(serde_json::from_str(text)?),
+        Err(_) => None,
+    };
+    let num = |v: &serde_json::Value, k: &str| {
+        v.get(k).and_then(serde_json::Value::as_f64).unwrap_or(0.0)
+    };
+    // A case the plant refused never ran: its controller got no state. It wrote a summary of
+    // zeros (which would read as a robot that stood), or none when `upc run` stopped it first
+    // (which would read as a fall). Either way the sweep cannot go on. Whether any tick ran is
+    // read from the summary, else from the controller's CSV (a header only: none did).
+    let ticked = match &parsed {
+        Some(v) => num(v, "ticks") > 0.0,
+        None => std::fs::read_to_string(run_dir.join("controller.csv"))
+            .map(|t| t.lines().nth(1).is_some())
+            .unwrap_or(false),
+    };
+    if !ticked {
+        let last = std::fs::read_to_string(run_dir.join("sim.log"))
+            .ok()
+            .and_then(|t| {
+                t.lines()
+                    .rev()
+                    .find(|l| !l.trim().is_empty())
+                    .map(str::to_owned)
+            })
+            .unwrap_or_default();
+        return Err(format!(
+            "{name}: the case never ran (no state reached the controller); the plant said: {last}"
+        )
+        .into());
+    }
+    let result = match parsed {
+        Some(v) => {
             // A run that stopped before the scenario's end (a simulation that diverged) did not
             // survive, however little the robot had moved by then.
             let end = upc::capability::IMPACT_START + case.duration + upc::capability::RECOVERY;
-            let complete = num("sim_time") >= end - 0.01;
+            let complete = num(&v, "sim_time") >= end - 0.01;
             CaseResult {
                 survived: complete && survived_full(&v, criteria),
                 summary: Some(v),
             }
         }
-        // A run whose controller wrote nothing: a failure of the case, not of the sweep, when
-        // the process ran (a simulation that diverged); otherwise the sweep cannot go on.
-        Err(e) if status.status.code().is_some() => {
-            tracing::debug!("{name}: no controller summary ({e})");
+        // A run whose controller ticked but wrote no summary: a failure of the case, not of the
+        // sweep, when the process ran (a simulation that diverged); otherwise the sweep cannot
+        // go on.
+        None if status.status.code().is_some() => {
+            tracing::debug!("{name}: no controller summary");
             CaseResult {
                 survived: false,
                 summary: None,
             }
         }
-        Err(e) => return Err(format!("{name}: {e}").into()),
+        None => return Err(format!("{name}: the run was killed by a signal").into()),
     };
     // Keep the directory only for inspection of the last cases; the sweep makes hundreds.
     let _ = std::fs::remove_dir_all(dir.join(&name));

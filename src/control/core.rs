@@ -557,6 +557,8 @@ impl ControllerCore {
             },
             fallen: true,
             base: self.estimating.then_some(self.estimator.last),
+            viability_scale: [1.0; 2],
+            capture_point: [f64::NAN; 2],
             ..TickRecord::default()
         };
         WbcStatus::Fallback(FallbackReason::Fallen)
