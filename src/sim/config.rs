@@ -81,6 +81,10 @@ pub struct MujocoConfig {
     /// Iterations of MuJoCo's no-slip solver after the main one (0: off): it removes the slow
     /// creep that soft friction allows under a sustained tangential load.
     pub noslip_iterations: u32,
+    /// The contact spheres' constraint time constant (s; MuJoCo's `solref` with damping ratio
+    /// 1). MuJoCo's default, 0.02 s, lets a foot creep under a sustained sideways load that
+    /// the no-slip solver does not remove; MuJoCo integrates down to twice the step.
+    pub contact_timeconst: f64,
 }
 
 /// What holds the robot when no controller does (`[sim.hold]`).
@@ -209,6 +213,16 @@ impl SimConfig {
         nonneg("sim.hold.lost_timeout", self.hold.lost_timeout)?;
         if let Some((key, msg)) = self.sensors.invalid() {
             return Err(l.range_error(&format!("sim.sensors.{key}"), msg));
+        }
+        let tc = self.mujoco.contact_timeconst;
+        if !(tc.is_finite() && tc >= 2.0 * self.dt) {
+            return Err(l.range_error(
+                "sim.mujoco.contact_timeconst",
+                format!(
+                    "must be finite and ≥ 2 × sim.dt = {} s (MuJoCo cannot integrate a stiffer contact), got {tc}",
+                    2.0 * self.dt
+                ),
+            ));
         }
         if !(self.mujoco.impratio.is_finite() && self.mujoco.impratio >= 1.0) {
             return Err(l.range_error(

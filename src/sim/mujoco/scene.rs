@@ -18,9 +18,9 @@
 //! - the hold's gains ([`PosturePd::hold`]), effort limits, timeouts and the contract's
 //!   identifiers (robot and scenario hashes, force factor) in `plant.json`.
 //!
-//! Not carried over: MuJoCo's soft constraints (its default `solref`/`solimp`) in place of upc's
-//! hard contacts and loop closure, with the friction cone, impratio and no-slip iterations of
-//! `[sim.mujoco]`; visual meshes (the links are drawn as capsules between joint origins).
+//! Not carried over: MuJoCo's soft constraints (its default `solimp`, and its `solref` except
+//! at the contact spheres, `sim.mujoco.contact_timeconst`) in place of upc's hard contacts and
+//! loop closure, with the friction cone, impratio and no-slip iterations of `[sim.mujoco]`; visual meshes (the links are drawn as capsules between joint origins).
 
 use std::fmt::Write as _;
 
@@ -135,6 +135,7 @@ pub fn build(robot: &Robot, cfg: &SimConfig, scenario: &Scenario) -> Result<Mujo
         s: String::new(),
         joint_limits: cfg.joint_limits,
         friction: cfg.friction,
+        contact_timeconst: cfg.mujoco.contact_timeconst,
     };
     writeln!(
         x.s,
@@ -320,6 +321,7 @@ struct Mjcf {
     s: String,
     joint_limits: bool,
     friction: f64,
+    contact_timeconst: f64,
 }
 
 impl From<std::fmt::Error> for SimError {
@@ -415,9 +417,10 @@ impl Mjcf {
         for (name, p) in &spheres[j] {
             writeln!(
                 self.s,
-                "{pad}  <geom name=\"{}\" type=\"sphere\" size=\"{CONTACT_RADIUS}\" pos=\"{}\" contype=\"1\" friction=\"{} 0.005 0.0001\" rgba=\"0.9 0.3 0.2 1\"/>",
+                "{pad}  <geom name=\"{}\" type=\"sphere\" size=\"{CONTACT_RADIUS}\" pos=\"{}\" contype=\"1\" solref=\"{} 1\" friction=\"{} 0.005 0.0001\" rgba=\"0.9 0.3 0.2 1\"/>",
                 esc(name),
                 vec3(p),
+                self.contact_timeconst,
                 self.friction
             )?;
         }
