@@ -33,6 +33,49 @@ fn reduced_capability_brackets_the_threshold_and_c1_exceeds_c0() {
     assert!(c1.survived > 3.0 * c0.survived, "C0 {c0:?}, C1 {c1:?}");
 }
 
+/// `--monotone`: on the reduced models the ZMP's excursion is linear in the amplitude, so
+/// survival is monotone and the grid below each bisection must confirm it, point for point.
+#[test]
+fn the_monotone_check_confirms_a_monotone_search() {
+    let s = Scratch::new("capability_monotone");
+    let out = s.dir.to_str().expect("utf-8");
+    upc_ok([
+        "capability",
+        "--models",
+        "reduced",
+        "--controllers",
+        "c0,c1",
+        "--durations",
+        "0.3",
+        "--directions",
+        "x",
+        "--tol",
+        "1",
+        "--monotone",
+        "5",
+        "--quiet",
+        "--out",
+        out,
+    ]);
+    let j = json(&s.path("capability.json"));
+    let rows = j["rows"].as_array().expect("rows");
+    assert_eq!(rows.len(), 2);
+    for r in rows {
+        let survived = r["survived"].as_f64().expect("survived");
+        let monotone = r["monotone"].as_f64().expect("monotone");
+        assert!(survived > 10.0, "{r}");
+        assert_eq!(monotone, survived, "{r}");
+        // The bisection's cases (at least one) plus one per grid point below the result.
+        let grid = (survived / 5.0).ceil() as u64 - 1;
+        assert!(r["runs"].as_u64().expect("runs") > grid, "{r}");
+    }
+    let csv = std::fs::read_to_string(s.path("capability.csv")).expect("csv");
+    assert!(
+        csv.lines().next().unwrap_or("").ends_with(",monotone"),
+        "{csv}"
+    );
+}
+
 #[test]
 fn full_simulation_capability_of_c1_exceeds_c0() {
     let _one = serial();

@@ -193,6 +193,9 @@ pub struct Capability {
     pub failed: Option<f64>,
     /// Cases run.
     pub runs: usize,
+    /// With a monotone check ([`monotone_below`]): the largest amplitude of its grid below which
+    /// every grid point was survived. Below `survived` where survival has a pocket.
+    pub monotone: Option<f64>,
 }
 
 /// Bisection over the amplitude in `[0, max]` down to `tol` N. `survives(a)` runs a case.
@@ -207,6 +210,7 @@ pub fn bisect<E>(
             survived: max,
             failed: None,
             runs,
+            monotone: None,
         });
     }
     let (mut lo, mut hi) = (0.0, max);
@@ -223,7 +227,34 @@ pub fn bisect<E>(
         survived: lo,
         failed: Some(hi),
         runs,
+        monotone: None,
     })
+}
+
+/// Survival need not be monotone in the amplitude: near the limit a push can stand where a
+/// weaker one fell (a pocket: the fall depends on where the push catches the robot's own
+/// sway), and a bisection that lands in a pocket reads it as the capability. This scans
+/// `step`, 2 `step`, … up to `upto` (a bisection's result, itself survived) and stops at the
+/// first failure. Returns the last amplitude survived before it (`upto` when none failed) and
+/// the cases run.
+pub fn monotone_below<E>(
+    upto: f64,
+    step: f64,
+    mut survives: impl FnMut(f64) -> Result<bool, E>,
+) -> Result<(f64, usize), E> {
+    let mut last = 0.0;
+    let mut runs = 0;
+    let mut a = step;
+    // A grid point within a thousandth of a step of `upto` is `upto` itself, known survived.
+    while a < upto - 1e-3 * step {
+        runs += 1;
+        if !survives(a)? {
+            return Ok((last, runs));
+        }
+        last = a;
+        a += step;
+    }
+    Ok((upto, runs))
 }
 
 /// Whether `variant` survives the impact on `robot`'s reduced models (`config`: the robot's,
@@ -275,6 +306,29 @@ mod tests {
         assert_eq!(c.runs, 1 + 8);
         let all = bisect::<()>(200.0, 1.0, |_| Ok(true)).unwrap();
         assert_eq!((all.survived, all.failed, all.runs), (200.0, None, 1));
+    }
+
+    #[test]
+    fn a_pocket_above_the_limit_is_not_the_monotone_capability() {
+        // Stands up to 55 N, falls 60–70 N, stands 75 N (a pocket), falls above: the case of
+        // C1 with the forecast as received on the 1 s impact.
+        let stands = |a: f64| a <= 55.0 || (74.0..=76.0).contains(&a);
+        let mut calls = Vec::new();
+        let (m, runs) = monotone_below::<()>(75.0, 5.0, |a| {
+            calls.push(a);
+            Ok(stands(a))
+        })
+        .unwrap();
+        assert_eq!(m, 55.0);
+        assert_eq!(runs, 12, "5 … 60 N, stopping at the first fall: {calls:?}");
+        // Monotone survival: the grid confirms the bisection's result.
+        let (m, runs) = monotone_below::<()>(73.2, 5.0, |a| Ok(a <= 73.2)).unwrap();
+        assert_eq!((m, runs), (73.2, 14));
+        // Nothing survived: nothing to scan.
+        assert_eq!(
+            monotone_below::<()>(0.0, 5.0, |_| Ok(false)).unwrap(),
+            (0.0, 0)
+        );
     }
 
     #[test]
