@@ -315,3 +315,47 @@ fn a_case_the_plant_refuses_stops_the_sweep_instead_of_counting_as_survived() {
     assert!(err.contains("no phantoms on the MuJoCo plant"), "{err}");
     assert!(err.contains("sim.push must be"), "{err}");
 }
+
+/// `upc robustness --monotone`: each cell's grid runs below its bisection, and the monotone
+/// figure is never above the bisection's (C0 on the 1 s impact, one cell, a coarse search).
+#[test]
+fn the_robustness_sweep_checks_each_cell_below_its_bisection() {
+    let _one = serial();
+    let s = Scratch::new("fc_monotone");
+    let out = s.dir.join("sweep");
+    upc_ok([
+        "robustness",
+        "--controllers",
+        "c0",
+        "--durations",
+        "1.0",
+        "--scales",
+        "1",
+        "--shifts",
+        "0",
+        "--no-phantom",
+        "--max",
+        "1.0=60",
+        "--tol",
+        "10",
+        "--monotone",
+        "10",
+        "--quiet",
+        "--out",
+        out.to_str().expect("utf-8"),
+    ]);
+    let csv = std::fs::read_to_string(out.join("robustness.csv")).expect("csv");
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let row: Vec<&str> = lines.next().expect("C0's row").split(',').collect();
+    let col = |k: &str| {
+        let i = header.iter().position(|h| *h == k).expect(k);
+        row[i].parse::<f64>().expect(k)
+    };
+    let (survived, monotone, runs) = (col("survived"), col("monotone"), col("runs"));
+    // C0 stands 30 N and falls at 45 N on the 1 s impact (docs/results/robustness.md).
+    assert!((20.0..45.0).contains(&survived), "{csv}");
+    assert!(monotone <= survived && monotone >= 10.0, "{csv}");
+    // The bisection from 60 N to 10 N runs 4 cases; the grid adds one per 10 N below.
+    assert!(runs >= 4.0 + (monotone / 10.0).floor().min(2.0), "{csv}");
+}

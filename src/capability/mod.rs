@@ -198,6 +198,20 @@ pub struct Capability {
     pub monotone: Option<f64>,
 }
 
+impl Capability {
+    /// The figure as the reports print it: "≥ 300" when the search's bound was survived,
+    /// "138 (monotone 130)" when the monotone check found a fall below the bisection's result.
+    pub fn text(&self) -> String {
+        let at_least = if self.failed.is_none() { "≥ " } else { "" };
+        match self.monotone {
+            Some(m) if m < self.survived => {
+                format!("{at_least}{:.0} (monotone {m:.0})", self.survived)
+            }
+            _ => format!("{at_least}{:.0}", self.survived),
+        }
+    }
+}
+
 /// Bisection over the amplitude in `[0, max]` down to `tol` N. `survives(a)` runs a case.
 pub fn bisect<E>(
     max: f64,
@@ -324,6 +338,22 @@ mod tests {
         // Monotone survival: the grid confirms the bisection's result.
         let (m, runs) = monotone_below::<()>(73.2, 5.0, |a| Ok(a <= 73.2)).unwrap();
         assert_eq!((m, runs), (73.2, 14));
+        let c = Capability {
+            survived: 75.0,
+            failed: Some(77.0),
+            runs: 20,
+            monotone: Some(55.0),
+        };
+        assert_eq!(c.text(), "75 (monotone 55)");
+        assert_eq!(
+            Capability {
+                failed: None,
+                monotone: Some(75.0),
+                ..c
+            }
+            .text(),
+            "≥ 75"
+        );
         // Nothing survived: nothing to scan.
         assert_eq!(
             monotone_below::<()>(0.0, 5.0, |_| Ok(false)).unwrap(),

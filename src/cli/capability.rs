@@ -630,15 +630,7 @@ fn write_outputs(
                 md += &format!("| {} | {dur} |", d.label());
                 for &v in variants {
                     md += &match cell(d, dur, v) {
-                        Some(c) => {
-                            let at_least = if c.failed.is_none() { "≥ " } else { "" };
-                            match c.monotone {
-                                Some(m) if m < c.survived => {
-                                    format!(" {at_least}{:.0} (monotone {m:.0}) |", c.survived)
-                                }
-                                _ => format!(" {at_least}{:.0} |", c.survived),
-                            }
-                        }
+                        Some(c) => format!(" {} |", c.text()),
                         None => " – |".into(),
                     };
                 }

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;
 
-use upc::capability::{Capability, Criteria, Direction, Variant, bisect};
+use upc::capability::{Capability, Criteria, Direction, Variant, bisect, monotone_below};
 
 use super::CliResult;
 use super::capability::{BoxError, ForecastCase, FullCase, full_case, runs_bar};
@@ -50,6 +50,11 @@ pub struct RobustnessArgs {
     /// Bisection tolerance (N).
     #[arg(long, default_value_t = 2.0)]
     pub tol: f64,
+    /// After each bisection, a grid of this step (N) up to its result, stopping at the first
+    /// fall (`upc capability --monotone`): a pocket of survival above a fall is then shown as
+    /// such. Costs up to result / step more cases per cell.
+    #[arg(long, value_name = "STEP")]
+    pub monotone: Option<f64>,
     /// Largest CoM drop (m) of a phantom case still survived.
     #[arg(long, default_value_t = 0.005)]
     pub phantom_com_drop: f64,
@@ -128,6 +133,11 @@ pub fn run(args: RobustnessArgs) -> CliResult {
     {
         return Err("durations must be > 0, scales ≥ 0, all finite".into());
     }
+    if let Some(step) = args.monotone
+        && !(step.is_finite() && step > 0.0)
+    {
+        return Err(format!("--monotone must be > 0, got {step}").into());
+    }
     let mut max_for = Vec::new();
     for m in &args.max {
         let (d, n) = m
@@ -199,7 +209,11 @@ pub fn run(args: RobustnessArgs) -> CliResult {
     } else {
         args.durations.len() * variants.iter().filter(|v| v.uses_forecast()).count()
     };
-    let per_case = 1 + ((args.max_bound() / args.tol).log2().ceil().max(0.0) as u64);
+    let per_case = 1
+        + ((args.max_bound() / args.tol).log2().ceil().max(0.0) as u64)
+        + args
+            .monotone
+            .map_or(0, |step| (args.max_bound() / step).ceil() as u64);
     let bar = runs_bar(args.quiet, (cells.len() + phantoms) as u64 * per_case);
     let robot = args.robot.robot.as_str();
     let run_cells = |cells: Vec<(Cell, f64, Criteria)>| -> Result<Vec<Row>, BoxError> {
@@ -228,7 +242,7 @@ pub fn run(args: RobustnessArgs) -> CliResult {
                             sim_sets: &args.sim_sets,
                         };
                         let mut at_max = None;
-                        let r = bisect(max, args.tol, |a| -> Result<bool, BoxError> {
+                        let mut survives = |a: f64| -> Result<bool, BoxError> {
                             bar.inc(1);
                             let r = full_case(&exe, &case, &out, a, &crit)?;
                             if a == max && cell.forecast.phantom {
@@ -242,6 +256,14 @@ pub fn run(args: RobustnessArgs) -> CliResult {
                                 at_max = Some((num("com_height_drop"), num("min_zmp_margin")));
                             }
                             Ok(r.survived)
+                        };
+                        let r = bisect(max, args.tol, &mut survives).and_then(|mut c| {
+                            if let Some(step) = args.monotone {
+                                let (m, runs) = monotone_below(c.survived, step, &mut survives)?;
+                                c.monotone = Some(m);
+                                c.runs += runs;
+                            }
+                            Ok(c)
                         });
                         match r {
                             Ok(c) => {
@@ -347,13 +369,6 @@ impl RobustnessArgs {
     }
 }
 
-fn cell_text(c: &Capability) -> String {
-    match c.failed {
-        None => format!("≥ {:.0}", c.survived),
-        Some(_) => format!("{:.0}", c.survived),
-    }
-}
-
 fn write_outputs(
     out: &Path,
     args: &RobustnessArgs,
@@ -374,11 +389,11 @@ fn write_outputs(
         }))?,
     )?;
     let mut csv =
-        String::from("controller,duration,scale,shift,phantom,max,survived,failed,runs\n");
+        String::from("controller,duration,scale,shift,phantom,max,survived,failed,runs,monotone\n");
     for r in rows {
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{:.2},{},{}",
+            "{},{},{},{},{},{},{:.2},{},{},{}",
             r.controller,
             r.duration,
             r.scale,
@@ -389,7 +404,10 @@ fn write_outputs(
             r.capability
                 .failed
                 .map_or(String::new(), |f| format!("{f:.2}")),
-            r.capability.runs
+            r.capability.runs,
+            r.capability
+                .monotone
+                .map_or(String::new(), |m| format!("{m:.2}")),
         );
     }
     std::fs::write(out.join("robustness.csv"), csv)?;
@@ -424,6 +442,14 @@ fn write_outputs(
     for kv in &args.sim_sets {
         let _ = writeln!(md, "Plant: `--sim-set {kv}`\n");
     }
+    if let Some(step) = args.monotone {
+        let _ = writeln!(
+            md,
+            "Monotone check (`--monotone {step}`): after each bisection a grid of {step} N up to \
+             its result, stopping at the first fall; \"(monotone M)\" where a fall lies below the \
+             bisection's result. The heat maps show the bisection's.\n"
+        );
+    }
     for &d in &args.durations {
         let _ = writeln!(md, "## {d} s impact\n");
         let c0 = |label: &str| {
@@ -438,7 +464,7 @@ fn write_outputs(
                         md,
                         "**{}**: {} N at every κ and τ (ignores the forecast).\n",
                         v.label(),
-                        cell_text(&c)
+                        Capability::text(&c)
                     );
                 }
                 continue;
@@ -466,7 +492,7 @@ fn write_outputs(
                                 && r.shift == s
                         })
                         .map(|r| r.capability);
-                    let _ = write!(md, " {} |", c.map_or("–".into(), |c| cell_text(&c)));
+                    let _ = write!(md, " {} |", c.map_or("–".into(), |c| Capability::text(&c)));
                     line.push(c.map(|c| c.survived));
                 }
                 md += "\n";
@@ -479,7 +505,7 @@ fn write_outputs(
                 let _ = write!(
                     md,
                     "\nPhantom: survived up to {} N of {:.0} N searched",
-                    cell_text(&p.capability),
+                    Capability::text(&p.capability),
                     p.max
                 );
                 if let Some((drop, margin)) = p.at_max {
