@@ -73,6 +73,23 @@ pub struct HandConfig {
     pub damping_ratio: f64,
     /// Nominal K_d (1/s) for `damping = "free"`.
     pub kd: f64,
+    /// The impedance's stiffness and damping matrices: eq. (17)'s K_p M_e, K_d M_e, or those
+    /// with no coupling between the held object's free direction and the directions it holds.
+    pub stiffness: HandStiffness,
+}
+
+/// How the hand impedance's gains are shaped (`hand.stiffness`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HandStiffness {
+    /// K_e = K_p M_e, C_e = K_d M_e (eq. (17)): an error along one axis pushes along every
+    /// axis M_e couples it to.
+    OperationalSpace,
+    /// M_e split along the held object's free direction e and the plane it holds (P = e eᵀ,
+    /// Q = I − P): K_e = K_p (P M_e P + Q M_e Q). An error along e then pushes along e only,
+    /// not into a door's hinge. The same as eq. (17) when nothing is held
+    /// (`controller.held_object = "none"`).
+    Decoupled,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]

@@ -130,6 +130,10 @@ pub struct ControllerCore {
     height_gains: [f64; 2],
     /// Feed the measured hand force to the whole-body QP (`controller.hand_force_feedback`).
     force_feedback: bool,
+    /// `hand.stiffness = "decoupled"`: the projector P = e eᵀ onto the held object's free
+    /// direction (from its apparent mass, [`Self::with_held_mass`]); `None`: eq. (17) as is.
+    hand_free_dir: Option<Matrix3<f64>>,
+    decoupled_stiffness: bool,
     /// The wrist sensor's offset, removed from every measured hand force used.
     tare: WristTare,
     q: DVector<f64>,
@@ -247,6 +251,8 @@ impl ControllerCore {
             dt: control_period,
             height_gains,
             force_feedback: config.controller.hand_force_feedback,
+            hand_free_dir: None,
+            decoupled_stiffness: config.hand.stiffness == crate::config::HandStiffness::Decoupled,
             tare: WristTare::new(config.controller.wrist_tare),
             zmp_ref: vec![[0.0; 2]; n],
             hand_desired: vec![HandState::default(); n],
@@ -289,6 +295,10 @@ impl ControllerCore {
     pub fn with_held_mass(mut self, held_mass: Matrix3<f64>) -> Self {
         let rows = [0, 1, 2].map(|r| [0, 1, 2].map(|c| held_mass[(r, c)]));
         self.correction = self.correction.map(|c| c.with_held_mass(rows));
+        // A door's apparent mass is m e eᵀ: its trace is m, and it over m projects onto e.
+        let m = held_mass.trace();
+        self.hand_free_dir =
+            (m.is_finite() && m > 0.0 && self.decoupled_stiffness).then(|| held_mass / m);
         self
     }
 
@@ -819,14 +829,26 @@ impl ControllerCore {
         } else {
             Vector3::zeros()
         };
-        self.hand_acc_cmd = (latched.hand_target - hand.pos) * kp - hand.vel * kd + acc_ext;
+        let law = (latched.hand_target - hand.pos) * kp - hand.vel * kd;
+        // `hand.stiffness = "decoupled"`: the arm's force M_d ẍ_law with M_d = P M_e P + Q M_e Q
+        // instead of M_e ẍ_law, i.e. ẍ = M_e⁻¹ M_d ẍ_law; the QP's own law is corrected through
+        // its acceleration feed-forward.
+        let coupling = match self.hand_free_dir {
+            Some(p) if m_e_ok => {
+                let q = Matrix3::identity() - p;
+                let m_e = self.op.m_e;
+                self.op.lambda_inv * (p * m_e * p + q * m_e * q) * law - law
+            }
+            _ => Vector3::zeros(),
+        };
+        self.hand_acc_cmd = law + coupling + acc_ext;
 
         // Whole-body QP.
         let cmd = WbcCommand {
             com_acc: self.com_acc_cmd,
             hand_pos_des: latched.hand_target,
             hand_vel_des: Vector3::zeros(),
-            hand_acc_des: acc_ext,
+            hand_acc_des: acc_ext + coupling,
             kp,
             kd,
             hand_force: f_hand,
