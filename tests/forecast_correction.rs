@@ -237,7 +237,8 @@ fn without_a_forecaster_c1_stands_half_again_c0_s_capability() {
     assert_eq!(u(&c1, "wbc_fallbacks"), 0, "{c1}");
 }
 
-/// `upc robustness` end to end on a one-cell grid: the table, the CSV and the heat map.
+/// `upc robustness` end to end on a one-cell grid: the table, the CSV and the heat map, with
+/// the monotone check.
 #[test]
 fn the_robustness_sweep_writes_its_map() {
     let _one = serial();
@@ -258,6 +259,8 @@ fn the_robustness_sweep_writes_its_map() {
         "1.0=60",
         "--tol",
         "30",
+        "--monotone",
+        "10",
         "--quiet",
         "--out",
         out.to_str().expect("utf-8"),
@@ -273,6 +276,19 @@ fn the_robustness_sweep_writes_its_map() {
     // 60 N: C1 (exact forecast, 57 N capability) survives 30 N at least; C0 (30 N) not 60.
     assert!(survived("C1") >= 30.0, "{j}");
     assert!(survived("C0") < 60.0, "{j}");
+    // `--monotone 10`: each cell's grid ran below its bisection (the bisection's case at
+    // least, plus one per 10 N below its result), and never reads above it.
+    for r in rows {
+        let num = |k: &str| r[k].as_f64().unwrap_or_else(|| panic!("no {k} in {r}"));
+        let (survived, monotone) = (num("survived"), num("monotone"));
+        assert!(monotone <= survived && monotone >= 10.0, "{r}");
+        assert!(num("runs") >= (survived / 10.0).ceil(), "{r}");
+    }
+    let csv = std::fs::read_to_string(out.join("robustness.csv")).expect("csv");
+    assert!(
+        csv.lines().next().unwrap_or("").ends_with(",monotone"),
+        "{csv}"
+    );
     let md = std::fs::read_to_string(out.join("robustness.md")).expect("md");
     assert!(md.contains("| κ \\ τ (ms) |"), "{md}");
     assert!(out.join("figures/robustness_c1_1000ms.svg").exists());
@@ -314,48 +330,4 @@ fn a_case_the_plant_refuses_stops_the_sweep_instead_of_counting_as_survived() {
     assert!(err.contains("the case never ran"), "{err}");
     assert!(err.contains("no phantoms on the MuJoCo plant"), "{err}");
     assert!(err.contains("sim.push must be"), "{err}");
-}
-
-/// `upc robustness --monotone`: each cell's grid runs below its bisection, and the monotone
-/// figure is never above the bisection's (C0 on the 1 s impact, one cell, a coarse search).
-#[test]
-fn the_robustness_sweep_checks_each_cell_below_its_bisection() {
-    let _one = serial();
-    let s = Scratch::new("fc_monotone");
-    let out = s.dir.join("sweep");
-    upc_ok([
-        "robustness",
-        "--controllers",
-        "c0",
-        "--durations",
-        "1.0",
-        "--scales",
-        "1",
-        "--shifts",
-        "0",
-        "--no-phantom",
-        "--max",
-        "1.0=60",
-        "--tol",
-        "10",
-        "--monotone",
-        "10",
-        "--quiet",
-        "--out",
-        out.to_str().expect("utf-8"),
-    ]);
-    let csv = std::fs::read_to_string(out.join("robustness.csv")).expect("csv");
-    let mut lines = csv.lines();
-    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-    let row: Vec<&str> = lines.next().expect("C0's row").split(',').collect();
-    let col = |k: &str| {
-        let i = header.iter().position(|h| *h == k).expect(k);
-        row[i].parse::<f64>().expect(k)
-    };
-    let (survived, monotone, runs) = (col("survived"), col("monotone"), col("runs"));
-    // C0 stands 30 N and falls at 45 N on the 1 s impact (docs/results/robustness.md).
-    assert!((20.0..45.0).contains(&survived), "{csv}");
-    assert!(monotone <= survived && monotone >= 10.0, "{csv}");
-    // The bisection from 60 N to 10 N runs 4 cases; the grid adds one per 10 N below.
-    assert!(runs >= 4.0 + (monotone / 10.0).floor().min(2.0), "{csv}");
 }

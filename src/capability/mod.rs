@@ -245,6 +245,23 @@ pub fn bisect<E>(
     })
 }
 
+/// [`bisect`], then with `monotone = Some(step)` the [`monotone_below`] check up to its result
+/// (its cases added to the count).
+pub fn search<E>(
+    max: f64,
+    tol: f64,
+    monotone: Option<f64>,
+    mut survives: impl FnMut(f64) -> Result<bool, E>,
+) -> Result<Capability, E> {
+    let mut c = bisect(max, tol, &mut survives)?;
+    if let Some(step) = monotone {
+        let (m, runs) = monotone_below(c.survived, step, &mut survives)?;
+        c.monotone = Some(m);
+        c.runs += runs;
+    }
+    Ok(c)
+}
+
 /// Survival need not be monotone in the amplitude: near the limit a push can stand where a
 /// weaker one fell (a pocket: the fall depends on where the push catches the robot's own
 /// sway), and a bisection that lands in a pocket reads it as the capability. This scans

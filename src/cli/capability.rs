@@ -11,8 +11,7 @@ use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
 use upc::capability::{
-    Capability, Criteria, Direction, Variant, bisect, impact_toml, monotone_below, survived_full,
-    survives_reduced,
+    Capability, Criteria, Direction, Variant, impact_toml, search, survived_full, survives_reduced,
 };
 use upc::config::ControllerKind;
 use upc::report::figures::{Figure, Line, Panel, write_figure};
@@ -244,15 +243,7 @@ pub fn run(args: CapabilityArgs) -> CliResult {
                             .map(|r| r.survived),
                         }
                     };
-                    let searched = bisect(args.max, args.tol, &mut survives).and_then(|mut c| {
-                        if let Some(step) = args.monotone {
-                            let (m, runs) = monotone_below(c.survived, step, &mut survives)?;
-                            c.monotone = Some(m);
-                            c.runs += runs;
-                        }
-                        Ok(c)
-                    });
-                    match searched {
+                    match search(args.max, args.tol, args.monotone, &mut survives) {
                         Ok(c) => {
                             // The bar counted the longest search: settle the difference.
                             bar.inc(per_case.saturating_sub(c.runs as u64));

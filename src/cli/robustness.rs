@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;
 
-use upc::capability::{Capability, Criteria, Direction, Variant, bisect, monotone_below};
+use upc::capability::{Capability, Criteria, Direction, Variant, search};
 
 use super::CliResult;
 use super::capability::{BoxError, ForecastCase, FullCase, full_case, runs_bar};
@@ -257,15 +257,7 @@ pub fn run(args: RobustnessArgs) -> CliResult {
                             }
                             Ok(r.survived)
                         };
-                        let r = bisect(max, args.tol, &mut survives).and_then(|mut c| {
-                            if let Some(step) = args.monotone {
-                                let (m, runs) = monotone_below(c.survived, step, &mut survives)?;
-                                c.monotone = Some(m);
-                                c.runs += runs;
-                            }
-                            Ok(c)
-                        });
-                        match r {
+                        match search(max, args.tol, args.monotone, &mut survives) {
                             Ok(c) => {
                                 bar.inc(per_case.saturating_sub(c.runs as u64));
                                 rows.lock().unwrap_or_else(|p| p.into_inner()).push(Row {
