@@ -380,3 +380,47 @@ fn the_fall_detector_can_be_turned_off() {
     assert_eq!(r.core.falls, 0);
     assert!(!r.core.last.fallen);
 }
+
+/// Feet that creep (MuJoCo's soft friction moves them a fraction of a millimetre a push) take
+/// the support and the ZMP reference with them through `controller.support_follow`'s low-pass;
+/// with it at 0 both stay where the first tick latched them.
+#[test]
+fn the_support_and_the_zmp_reference_follow_feet_that_creep() {
+    let shift = 0.02; // the whole robot slid 20 mm sideways, feet included
+    for follow in [0.0, 0.02] {
+        let mut config = Config::embedded_default().expect("defaults");
+        config.controller.support_follow = follow;
+        let mut r = rig(&config, ControllerKind::C1);
+        r.core
+            .tick(&r.state, &r.window, None, &mut r.tau)
+            .expect("first tick");
+        let (ref0, sup0) = (r.core.last.zmp_ref, r.core.support().expect("latched"));
+        r.state.q[1] += shift;
+        // Five time constants of the low-pass: 1 − e⁻⁵ of the shift.
+        for k in 1..=100 {
+            r.state.time = k as f64 * 0.001;
+            r.core
+                .tick(&r.state, &r.window, None, &mut r.tau)
+                .expect("tick");
+        }
+        let moved = r.core.last.zmp_ref[1] - ref0[1];
+        let sup = r.core.support().expect("support");
+        let expect = if follow > 0.0 {
+            shift * (1.0 - (-5.0f64).exp())
+        } else {
+            0.0
+        };
+        assert!(
+            (moved - expect).abs() < 2e-4,
+            "follow {follow} s: the ZMP reference moved {moved} m, expected {expect}"
+        );
+        for b in 0..2 {
+            let d = sup[1][b] - sup0[1][b];
+            assert!(
+                (d - expect).abs() < 2e-4,
+                "follow {follow} s: the support's y bound {b} moved {d} m, expected {expect}"
+            );
+            assert!((sup[0][b] - sup0[0][b]).abs() < 1e-9, "x bounds stay");
+        }
+    }
+}

@@ -385,6 +385,10 @@ pub struct ControllerConfig {
     /// of it. The controller then holds joint damping without the QP until the plant restarts
     /// (a fallen robot's QP is mostly infeasible and costly). 0: never.
     pub fall_drop: f64,
+    /// The support and the ZMP reference's centre follow the sole corners as measured, through
+    /// a first-order filter of this time constant (s), so that feet that creep or slip carry
+    /// the reference with them. 0: latched at the session's first tick, never moved.
+    pub support_follow: f64,
     /// Forecast windows starting more than this before / after the current time are rejected (s).
     pub forecast_max_age: f64,
     pub forecast_max_lead: f64,
@@ -445,6 +449,7 @@ impl ControllerConfig {
                 "controller.lockstep_first_forecast_wait",
                 self.lockstep_first_forecast_wait,
             ),
+            ("controller.support_follow", self.support_follow),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(l.range_error(key, format!("must be finite and ≥ 0, got {v}")));

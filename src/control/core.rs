@@ -13,6 +13,8 @@
 //!   ẍ + u·dt; the CoM height is held by a PD.
 //! - The ZMP reference and the hand set-point are latched at the first tick: the feet midpoint
 //!   (plus the scenario's offset) and the hand's initial position (holding the door closed).
+//!   The feet midpoint and the support then follow the sole corners through a low-pass
+//!   (`controller.support_follow`), so that creeping feet do not leave the reference behind.
 //! - C1 and C2 preview the forecast as corrected by the measured hand force
 //!   ([`ForecastCorrector`], on by default); the CoM observer ([`ComObserver`], off by default)
 //!   adds the push nothing forecasts, for C0 too (docs/forecast_correction.md).
@@ -91,8 +93,8 @@ pub struct TickRecord {
     /// The preview fell back to C0 this tick (invalid disturbance forecast).
     pub preview_fallback: bool,
     pub schedule_age: f64,
-    /// Support rectangle latched at the first tick, [[x_min, x_max], [y_min, y_max]] (world
-    /// frame), so that logs can draw the ZMP against it.
+    /// Support rectangle (latched at the first tick, then following the feet), [[x_min, x_max],
+    /// [y_min, y_max]] (world frame), so that logs can draw the ZMP against it.
     pub support: [[f64; 2]; 2],
     /// The hand force measured this tick, and the forecast as received for the first preview
     /// step (`f_ext` is the forecast the previewer used: corrected, when the correction is on).
@@ -163,6 +165,8 @@ pub struct ControllerCore {
     /// (0: off), the joint damping held then, whether the robot is fallen in this session, the
     /// falls detected and the ticks held fallen.
     fall_drop: f64,
+    /// Time constant (s) of the support's following of the feet; 0: latched.
+    support_follow: f64,
     fallen_damping: f64,
     fallen: bool,
     pub falls: u64,
@@ -271,6 +275,7 @@ impl ControllerCore {
             f_dis_total: vec![[0.0; 3]; n],
             preview_fallbacks: 0,
             fall_drop: config.controller.fall_drop,
+            support_follow: config.controller.support_follow,
             fallen_damping: config.wbc.fallback_damping,
             fallen: false,
             falls: 0,
@@ -306,12 +311,13 @@ impl ControllerCore {
         self.horizon
     }
 
-    /// The support rectangle latched at the first tick, [[x_min, x_max], [y_min, y_max]].
     /// The whole-body controller's counters (solves, torque-limited ticks, fallbacks).
     pub fn wbc_counters(&self) -> crate::wbc::WbcCounters {
         self.wbc.counters()
     }
 
+    /// The support rectangle (latched at the first tick, then following the feet),
+    /// [[x_min, x_max], [y_min, y_max]].
     pub fn support(&self) -> Option<[[f64; 2]; 2]> {
         self.latched.map(|l| l.support)
     }
@@ -628,29 +634,48 @@ impl ControllerCore {
         }
     }
 
+    /// The support rectangle of the sole corners where the state puts them,
+    /// [[x_min, x_max], [y_min, y_max]], and the corners' centroid (the feet centre; the sole
+    /// frames' midpoint on robots whose sole frame is off the sole's centre).
+    fn support_now(&self) -> ([[f64; 2]; 2], [f64; 2]) {
+        let mut support = [[f64::INFINITY, f64::NEG_INFINITY]; 2];
+        let mut centre = [0.0; 2];
+        let corners = self.wbc.contact_frames();
+        for f in corners {
+            let p = self.data.o_m_f[f].trans;
+            for a in 0..2 {
+                support[a] = [support[a][0].min(p[a]), support[a][1].max(p[a])];
+                centre[a] += p[a] / corners.len() as f64;
+            }
+        }
+        (support, centre)
+    }
+
     /// The references latched at the first tick of a session: the support and the ZMP
-    /// reference's centre, the CoM height, the hand target.
+    /// reference's centre, the CoM height, the hand target. The support and the centre then
+    /// follow the corners as measured (`controller.support_follow`): a foot that creeps or slips
+    /// takes the reference with it, where a latched one would be left behind at the support's
+    /// edge (MuJoCo's feet creep ~0.2 mm a push; an hour of pushes moves them by centimetres).
     fn latch(&mut self, com_height: f64, hand_pos: Vector3<f64>) -> Latched {
-        *self.latched.get_or_insert_with(|| {
-            // The ZMP reference's centre: the contact points' centroid (the feet centre; the
-            // sole frames' midpoint on robots whose sole frame is off the sole's centre).
-            let mut support = [[f64::INFINITY, f64::NEG_INFINITY]; 2];
-            let mut centre = [0.0; 2];
-            let corners = self.wbc.contact_frames();
-            for f in corners {
-                let p = self.data.o_m_f[f].trans;
-                for a in 0..2 {
-                    support[a] = [support[a][0].min(p[a]), support[a][1].max(p[a])];
-                    centre[a] += p[a] / corners.len() as f64;
-                }
+        let (support, centre) = self.support_now();
+        let alpha = if self.support_follow > 0.0 {
+            (self.dt / self.support_follow).min(1.0)
+        } else {
+            0.0
+        };
+        let l = self.latched.get_or_insert(Latched {
+            zmp_center: centre,
+            support,
+            com_height,
+            hand_target: hand_pos,
+        });
+        for a in 0..2 {
+            l.zmp_center[a] += alpha * (centre[a] - l.zmp_center[a]);
+            for b in 0..2 {
+                l.support[a][b] += alpha * (support[a][b] - l.support[a][b]);
             }
-            Latched {
-                zmp_center: centre,
-                support,
-                com_height,
-                hand_target: hand_pos,
-            }
-        })
+        }
+        *l
     }
 
     /// The horizon's inputs at t + (i+1)·T: ZMP reference, hand set-point and the hand force
