@@ -65,7 +65,36 @@ fn bench(c: &mut Criterion) {
         });
     }
     offers(&mut g);
+    handoff(&mut g, &config);
     g.finish();
+}
+
+/// What the loop pays to hand C2 a snapshot and to read its newest schedule while the search
+/// runs in its thread (`tests/control.rs` checks what is handed over; how long it takes, here).
+fn handoff(g: &mut criterion::BenchmarkGroup<criterion::measurement::WallTime>, config: &Config) {
+    let mut config = config.clone();
+    config.preview.horizon = 200;
+    let mut r = humanoid::rig(&config, ControllerKind::C2);
+    r.window
+        .offer(&humanoid::push_forecast(0.0, -50.0), 0.0)
+        .expect("forecast");
+    r.core
+        .tick(&r.state, &r.window, None, &mut r.tau)
+        .expect("tick");
+    let robot = upc::robot::Robot::embedded_default()
+        .expect("robot")
+        .reduced();
+    let mut handoff = upc::control::GainHandoff::spawn(&config, &robot).expect("thread");
+    let mut seq = 0u64;
+    g.bench_function("c2_handoff_offer", |b| {
+        b.iter(|| {
+            seq += 1;
+            handoff.offer(|s| r.core.snapshot(s, seq));
+        })
+    });
+    g.bench_function("c2_handoff_latest", |b| {
+        b.iter(|| black_box(handoff.latest().seq))
+    });
 }
 
 /// What the forecast intake costs per window: a valid one taken (its samples copied), and bad

@@ -10,12 +10,18 @@ use upc::config::{Config, ControllerKind};
 use upc::control::GainHandoff;
 use upc::robot::Robot;
 
+/// One tick at home with a −40 N push announced 0.5 s ahead: each controller gives finite,
+/// non-zero torques from a solved QP; C0 ignores the disturbance, while C1 and C2 preview it
+/// and already lean into the push (a CoM acceleration toward +x, against the force, that C0's
+/// does not have).
 #[test]
 fn a_tick_at_home_gives_finite_torques_for_each_controller() {
     let config = Config::embedded_default().expect("defaults");
+    let fx = -40.0;
+    let mut acc = Vec::new();
     for kind in [ControllerKind::C0, ControllerKind::C1, ControllerKind::C2] {
         let mut r = rig(&config, kind);
-        r.offer_push(-40.0);
+        r.offer_push(fx);
         let status = r
             .core
             .tick(&r.state, &r.window, None, &mut r.tau)
@@ -30,12 +36,17 @@ fn a_tick_at_home_gives_finite_torques_for_each_controller() {
         if kind == ControllerKind::C0 {
             assert_eq!(rec.f_dis, [0.0; 3], "C0 ignores the disturbance");
         }
-        assert!(
-            rec.hand_err < 1e-9,
-            "the hand set-point is latched at the first tick"
-        );
         let sup = r.core.support().expect("latched support");
         assert!(sup[0][0] < rec.zmp_ref[0] && rec.zmp_ref[0] < sup[0][1]);
+        acc.push(rec.com_acc_cmd[0]);
+    }
+    eprintln!("CoM acceleration x (C0, C1, C2): {acc:?}");
+    for (kind, a) in [("C1", acc[1]), ("C2", acc[2])] {
+        assert!(
+            (a - acc[0]) * -fx.signum() > 1e-4,
+            "{kind} does not lean into the announced push: {a} against C0's {}",
+            acc[0]
+        );
     }
 }
 
@@ -291,11 +302,9 @@ fn c2_thread_hands_over_time_stamped_schedules_without_blocking() {
         0,
         "no schedule before the first snapshot"
     );
-    // Offering and reading never wait for the worker.
-    let t = Instant::now();
+    // What offering and reading cost the loop is a criterion bench (`cargo bench --bench
+    // control`: `c2_handoff_offer`, `c2_handoff_latest`), not a timed assertion.
     handoff.offer(|s| r.core.snapshot(s, 7));
-    let _ = handoff.latest();
-    assert!(t.elapsed() < Duration::from_millis(50));
     let deadline = Instant::now() + Duration::from_secs(20);
     while handoff.latest().seq == 0 && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(5));

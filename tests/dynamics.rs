@@ -1114,3 +1114,46 @@ fn armature_is_on_the_diagonal_and_the_algorithms_agree() {
     let ddq = aba(&chain, &mut dc, &one, &one, &one).expect("aba").clone();
     assert!((ddq[0] - 100.0).abs() < 1e-9, "τ / armature: {}", ddq[0]);
 }
+
+/// A hand whose two finger joints carry only massless links: M(q) is singular (its Cholesky
+/// factorisation fails), and `inert_joints` names exactly those joints; with a rotor inertia on
+/// each, M factors and none is named.
+#[test]
+fn joints_that_move_no_mass_are_found_and_make_m_singular() {
+    const HAND: &str = r#"<robot name="hand">
+  <link name="palm"><inertial><mass value="0.5"/><origin xyz="0 0 0"/>
+    <inertia ixx="1e-3" iyy="1e-3" izz="1e-3" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="finger1"/>
+  <link name="finger2"/>
+  <joint name="wrist" type="revolute"><parent link="palm"/><child link="finger1"/>
+    <origin xyz="0.05 0 0"/><axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <joint name="tip" type="revolute"><parent link="finger1"/><child link="finger2"/>
+    <origin xyz="0.03 0 0"/><axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+</robot>"#;
+    let mut model = Model::from_urdf_str(HAND, BaseJoint::Floating).expect("hand");
+    let names = |m: &Model| -> Vec<String> {
+        m.inert_joints()
+            .iter()
+            .map(|&i| m.joints[i].name.clone())
+            .collect()
+    };
+    let factors = |m: &Model| {
+        let mut data = Data::new(m);
+        crba(m, &mut data, &m.neutral())
+            .expect("crba")
+            .clone()
+            .cholesky()
+            .is_some()
+    };
+    assert_eq!(names(&model), ["wrist", "tip"]);
+    assert!(!factors(&model), "M is singular");
+    // One rotor inertia leaves the other joint inert: still singular.
+    let wrist = model.joint_id("wrist").expect("wrist");
+    model.set_armature(wrist, 1e-3).expect("armature");
+    assert_eq!(names(&model), ["tip"]);
+    assert!(!factors(&model));
+    let tip = model.joint_id("tip").expect("tip");
+    model.set_armature(tip, 1e-3).expect("armature");
+    assert!(names(&model).is_empty());
+    assert!(factors(&model), "M factors with both rotor inertias");
+}

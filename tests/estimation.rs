@@ -8,7 +8,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use serde_json::Value;
-use support::procs::{Procs, Scratch, json, start_controller, start_plant};
+use support::procs::{Procs, Scratch, json, start_lockstep_controller, start_plant};
 use support::upc_run::{num as f, scratch, upc_run};
 
 /// `upc run --controller c1` with `extra`; returns the run's entry of `summary.json`.
@@ -162,19 +162,41 @@ fn the_controller_sensing_flag_chooses_the_estimator() {
     for (sensing, plant, estimates) in cases {
         let s = Scratch::new(&format!("sensing_{sensing}"));
         let mut p = Procs::default();
-        start_controller(&mut p, &s, &["--sensing", sensing]);
-        start_plant(&mut p, &s, "sim", plant);
-        std::thread::sleep(Duration::from_secs(3));
+        // Lockstep, one second of plant time: every state is answered, so the counts below are
+        // the plant's, whatever the machine's load (no sleep, no rate).
+        // No forecaster in this test: the controller does not wait for one's first window.
+        start_lockstep_controller(
+            &mut p,
+            &s,
+            &[
+                "--sensing",
+                sensing,
+                "--set",
+                "controller.lockstep_first_forecast_wait=0.0",
+            ],
+        );
+        let mut plant = plant.to_vec();
+        plant.extend(["--mode", "lockstep", "--duration", "1.0"]);
+        start_plant(&mut p, &s, "sim", &plant);
+        let st = p.wait("sim", Duration::from_secs(120));
+        assert!(
+            st.success(),
+            "sim: {st}\n{}",
+            support::procs::log(&s, "sim")
+        );
         p.stop(&s, "controller", libc::SIGTERM);
-        p.stop(&s, "sim", libc::SIGTERM);
         let c = json(&s.path("controller.json"));
+        let steps = f(&json(&s.path("sim.json")), "steps");
+        assert!(steps >= 1000.0, "{steps} plant steps");
         let log = support::procs::log(&s, "controller");
         if estimates {
-            assert!(f(&c["estimator"], "ticks") > 500.0, "{c:#}");
+            // The estimator ran on every state the plant published, and no tick failed.
+            assert!(f(&c["estimator"], "ticks") >= steps - 1.0, "{steps}: {c:#}");
             assert_eq!(f(&c, "tick_errors"), 0.0, "{c:#}");
         } else {
+            // Every state refused, tick by tick, saying why.
             assert!(c["estimator"].is_null(), "{c:#}");
-            assert!(f(&c, "tick_errors") > 500.0, "{c:#}");
+            assert!(f(&c, "tick_errors") >= steps - 1.0, "{steps}: {c:#}");
             assert!(log.contains("--sensing realistic"), "{log}");
         }
     }

@@ -43,7 +43,9 @@ fn simulator_killed_and_restarted_controller_holds_reconnects_and_resumes() {
     let s = Scratch::new("restart");
     let mut p = Procs::default();
     let obs = Observer::start(&s.prefix);
-    start_controller(&mut p, &s, &[]);
+    let csv = s.path("controller.csv").display().to_string();
+    let rrd = s.path("controller.rrd").display().to_string();
+    start_controller(&mut p, &s, &["--rrd", &rrd, "--csv", &csv]);
     start_forecaster(&mut p, &s, "forecaster");
     start_plant(&mut p, &s, "sim1", &[]);
     obs.wait_for(1, 1.0, &mut p, &s);
@@ -68,23 +70,35 @@ fn simulator_killed_and_restarted_controller_holds_reconnects_and_resumes() {
     assert!(u(&c, "stale_ticks") > 50, "{c}");
     assert!(f(&c, "longest_state_gap") > 0.9, "{c}");
     let sim2 = json(&s.path("sim2.json"));
-    let after = u(&c, "ticks_since_reconnect");
-    let before = u(&c, "ticks") - after;
-    // Ticked before the kill and throughout the restarted run (at 1 kHz but for the deadlines
-    // a loaded machine makes it miss: the bounds are loose on purpose).
+    assert!(u(&c, "ticks_since_reconnect") > 0, "{c}");
+    // Ticked up to the kill and through the restarted run: the controller's CSV (every 10th
+    // tick, stamped with the plant's time) reaches the time of the kill, goes back to the new
+    // run's start and reaches the last time the test saw. How many ticks a second of wall time
+    // holds is not asserted: a loaded machine misses deadlines without any fault.
+    let text = std::fs::read_to_string(&csv).expect("controller.csv");
+    let times: Vec<f64> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap_or("").parse().expect("t"))
+        .collect();
+    let back = (1..times.len())
+        .find(|&i| times[i] < times[i - 1])
+        .unwrap_or_else(|| panic!("the CSV's time never goes back: {times:?}"));
+    let (run1, run2) = times.split_at(back);
     assert!(
-        before as f64 > 0.3 * killed_at * 1000.0,
-        "{before} ticks before the kill at t = {killed_at}: {c}"
+        run1[run1.len() - 1] >= killed_at - 0.05,
+        "first run logged to {} s, killed at {killed_at} s",
+        run1[run1.len() - 1]
     );
+    assert!(run2[0] < 0.5, "the restarted run logged from {} s", run2[0]);
     assert!(
-        after as f64 > 0.3 * seen.time * 1000.0,
-        "{after} ticks after the restart, over {} s: {c}",
+        run2[run2.len() - 1] >= seen.time - 0.05,
+        "restarted run logged to {} s, seen to {} s",
+        run2[run2.len() - 1],
         seen.time
     );
-    assert!(
-        u(&sim2["commands"], "accepted") as f64 > 0.3 * seen.time * 1000.0,
-        "{sim2}"
-    );
+    assert!(u(&sim2["commands"], "accepted") > 0, "{sim2}");
+    assert_eq!(u(&sim2["hold"], "handovers"), 1, "{sim2}");
     assert_eq!(u(&c, "tick_errors"), 0, "{c}");
     // The restarted simulator's robot stayed up, as measured by both sides.
     assert_eq!(seen.runs, 2);
@@ -384,19 +398,13 @@ fn bad_forecasts_are_rejected_counted_logged_and_leave_the_loop_alone() {
     // Rate-limited: a log line at the 1st, 2nd, 4th… rejection, not one per message.
     let lines = bad_log.matches("forecast rejected").count() as u64;
     assert!(lines <= 2 + rejected.ilog2() as u64, "{lines} log lines");
-    // The loop is unaffected: no tick error, no stale period, about as many ticks. What a
-    // rejection costs in time is measured by a criterion bench (`cargo bench --bench control`:
+    // The loop is unaffected: no tick error, no stale period. What a rejection costs in time is measured by a criterion bench (`cargo bench --bench control`:
     // `forecast_offer_*`), not asserted here: a timed assertion in a real-time test fails on a
     // loaded machine without any fault.
     for v in [&clean, &bad] {
         assert_eq!(u(v, "tick_errors"), 0, "{v}");
         assert_eq!(u(v, "stale_periods"), 0, "{v}");
     }
-    let ticks = |v: &Value| u(v, "ticks") as f64;
-    assert!(
-        ticks(&bad) > 0.7 * ticks(&clean),
-        "clean {clean}, bad {bad}"
-    );
 }
 
 /// Stop a controller, a simulator and a forecaster with the given signals; every one exits 0

@@ -12,8 +12,12 @@ use serde_json::Value;
 use support::procs::*;
 use upc::capability::{Direction, impact_toml};
 
-/// C1's capability with an exact forecast on this impact (N; docs/results/capability.md).
-const C1_CAPABILITY: f64 = 57.0;
+/// C1's capability with the forecast as received on this impact (N, the bisection;
+/// docs/results/robustness.md): the phantom claim is up to twice this.
+const C1_CAPABILITY: f64 = 75.0;
+/// Below this every amplitude stands for C1 as received (N, the monotone capability; the
+/// bisection's 75 N is a pocket above falls at 60–70 N; docs/results/robustness.md).
+const C1_MONOTONE_CAPABILITY: f64 = 55.0;
 /// C0's (N; docs/results/capability.md).
 const C0_CAPABILITY: f64 = 30.0;
 
@@ -59,6 +63,17 @@ fn run(s: &Scratch, name: &str, c: &Case) -> Value {
     args.extend(c.extra.iter().map(|a| a.to_string()));
     upc_ok(&args);
     json(&s.path(&format!("{name}/{}/controller.json", c.controller)))
+}
+
+/// Pearson's correlation of the two columns of `xy`.
+fn correlation(xy: &[[f64; 2]]) -> f64 {
+    let n = xy.len() as f64;
+    let mean = |k: usize| xy.iter().map(|p| p[k]).sum::<f64>() / n;
+    let (mx, my) = (mean(0), mean(1));
+    let cov = |a: usize, ma: f64, b: usize, mb: f64| {
+        xy.iter().map(|p| (p[a] - ma) * (p[b] - mb)).sum::<f64>()
+    };
+    cov(0, mx, 1, my) / (cov(0, mx, 0, mx) * cov(1, my, 1, my)).sqrt()
 }
 
 fn fell(j: &Value) -> bool {
@@ -153,7 +168,7 @@ fn an_exact_forecast_keeps_c1_s_figures() {
     let s = Scratch::new("fc_exact");
     let case = |correction| Case {
         controller: "c1",
-        amplitude: 0.9 * C1_CAPABILITY,
+        amplitude: 0.9 * C1_MONOTONE_CAPABILITY,
         scale: 1.0,
         phantom: false,
         correction,
@@ -179,14 +194,17 @@ fn an_exact_forecast_keeps_c1_s_figures() {
     assert_eq!(u(c, "contradictions"), 0, "{c}");
 }
 
-/// No forecaster: the controller previews the measured hand force alone, reproducibly.
+/// No forecaster, on a push C0 cannot take (1.5 × its capability; C0 falls there, as the next
+/// test shows): the force C1 previews at each tick is the measured hand force, and the run is
+/// reproducible.
 #[test]
 fn without_a_forecaster_the_measured_force_is_previewed() {
     let _one = serial();
     let s = Scratch::new("fc_none");
+    let amplitude = 1.5 * C0_CAPABILITY;
     let case = Case {
         controller: "c1",
-        amplitude: 25.0,
+        amplitude,
         scale: 1.0,
         phantom: false,
         correction: true,
@@ -199,6 +217,40 @@ fn without_a_forecaster_the_measured_force_is_previewed() {
     );
     assert_eq!(a["forecast_lost"], false, "{a}");
     assert!(a["reproducible"].as_bool().unwrap_or(false), "{a}");
+    // The previewed force (`f_ext`, the first preview step's) is the measured one (`f_meas`)
+    // extrapolated along its shrunk trend (FC-3b, docs/forecast_correction.md): it leads the
+    // measurement on the rise and rounds the peak off, so through the push it stays within a
+    // fifth of the peak at worst, 15 % RMS, and follows its shape (correlation above 0.95).
+    // Previewing nothing, or half the force, breaks each bound.
+    let text = std::fs::read_to_string(s.path("a/c1/controller.csv")).expect("csv");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).expect(name);
+    let (t, ext, meas) = (col("t"), col("f_ext_x"), col("f_meas_x"));
+    let rows: Vec<[f64; 3]> = lines
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .map(|c| [t, ext, meas].map(|i| c[i].parse::<f64>().expect("number")))
+        .collect();
+    let peak = rows.iter().map(|r| r[2].abs()).fold(0.0, f64::max);
+    assert!(peak > 0.5 * amplitude, "measured peak {peak} N");
+    let worst = rows.iter().map(|r| (r[1] - r[2]).abs()).fold(0.0, f64::max);
+    let push: Vec<f64> = rows
+        .iter()
+        .filter(|r| r[2].abs() > 0.1 * peak)
+        .map(|r| r[1] - r[2])
+        .collect();
+    let rms = (push.iter().map(|e| e * e).sum::<f64>() / push.len() as f64).sqrt();
+    eprintln!(
+        "{amplitude} N: measured peak {peak:.1} N, previewed − measured ≤ {worst:.2} N, RMS \
+         {rms:.2} N over {} ticks",
+        push.len()
+    );
+    let corr = correlation(&rows.iter().map(|r| [r[1], r[2]]).collect::<Vec<_>>());
+    eprintln!("correlation {corr:.4}");
+    assert!(push.len() > 50, "{} ticks of push", push.len());
+    assert!(worst < 0.2 * peak, "previewed − measured up to {worst} N");
+    assert!(rms < 0.15 * peak, "previewed − measured RMS {rms} N");
+    assert!(corr > 0.95, "correlation {corr}");
     assert!(!fell(&a), "{a}");
     let b = run(&s, "b", &case);
     assert_eq!(a["ticks"], b["ticks"], "{b}");
@@ -256,9 +308,9 @@ fn the_robustness_sweep_writes_its_map() {
         "0",
         "--no-phantom",
         "--max",
-        "1.0=60",
+        "1.0=80",
         "--tol",
-        "30",
+        "10",
         "--monotone",
         "10",
         "--quiet",
@@ -273,9 +325,12 @@ fn the_robustness_sweep_writes_its_map() {
             .and_then(|r| r["survived"].as_f64())
             .unwrap_or_else(|| panic!("no {c} in {j}"))
     };
-    // 60 N: C1 (exact forecast, 57 N capability) survives 30 N at least; C0 (30 N) not 60.
-    assert!(survived("C1") >= 30.0, "{j}");
-    assert!(survived("C0") < 60.0, "{j}");
+    // C1 (exact forecast, 55 N monotone) beats C0 (30 N) by more than the bisection's 10 N
+    // resolution: C0 below 40 N, C1 at 40 N or more.
+    eprintln!("C0 {} N, C1 {} N", survived("C0"), survived("C1"));
+    assert!(survived("C0") < 40.0, "{j}");
+    assert!(survived("C1") >= 40.0, "{j}");
+    assert!(survived("C1") >= survived("C0") + 10.0, "{j}");
     // `--monotone 10`: each cell's grid ran below its bisection (the bisection's case at
     // least, plus one per 10 N below its result), and never reads above it.
     for r in rows {

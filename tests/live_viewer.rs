@@ -1,7 +1,8 @@
 //! Live viewing: `upc run --connect URL` streams both recordings to a running rerun viewer (here
 //! `rerun --save`, the viewer's gRPC server writing what it receives) besides the `.rrd` files:
 //! the viewer gets every record the files get, and the lockstep run's bytes do not change.
-//! Skipped, saying why, without `.venv`'s rerun (scripts/setup.sh installs it).
+//! Needs `.venv`'s rerun (scripts/setup.sh installs it): fails without it under CI, skips visibly
+//! elsewhere (`support::prereq`).
 
 mod support;
 
@@ -35,7 +36,10 @@ fn run(out: &Path, name: &str, extra: &[&str]) -> PathBuf {
 fn a_live_viewer_gets_every_record_of_the_files_and_the_run_is_unchanged() {
     let rerun = Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/rerun");
     if !rerun.exists() {
-        eprintln!("SKIPPED: no {} (run scripts/setup.sh)", rerun.display());
+        support::prereq::missing(
+            &format!("no rerun viewer at {}", rerun.display()),
+            support::prereq::SETUP,
+        );
         return;
     }
     let out = std::env::temp_dir().join(format!("upc-live-{}", std::process::id()));

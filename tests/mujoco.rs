@@ -1,8 +1,8 @@
 //! MuJoCo as the plant (`upc sim --plant mujoco`): the generated scene against upc's own model
 //! (kinematics, inertias, contacts, door; read back by MuJoCo's Python bindings, an independent
 //! reader), the plant runtime on MuJoCo's C library, and the closed loop on it through `upc run
-//! --plant mujoco`. Skipped, with the reason printed, when `scripts/setup.sh` could not install
-//! MuJoCo in `.venv` (upc is then built without the engine).
+//! --plant mujoco`. Without MuJoCo in `.venv` (upc is then built without the engine) these fail
+//! under CI and skip visibly elsewhere (`support::prereq`).
 
 mod support;
 
@@ -26,7 +26,10 @@ fn mujoco_python() -> Option<PathBuf> {
 /// Whether this build has the MuJoCo engine; says why not.
 fn mujoco_engine() -> bool {
     if !upc::sim::mujoco::AVAILABLE {
-        eprintln!("skipped: {}", upc::sim::mujoco::UNAVAILABLE);
+        support::prereq::missing(
+            upc::sim::mujoco::UNAVAILABLE,
+            "scripts/setup.sh && cargo clean -p upc",
+        );
     }
     upc::sim::mujoco::AVAILABLE
 }
@@ -336,4 +339,58 @@ fn on_mujoco_c1_stands_and_rides_out_the_push_that_fells_c0() {
     assert_eq!(u(&c1, "wbc_fallbacks"), 0, "{c1}");
     assert!(f(&c1, "min_zmp_margin") > -5e-3, "{c1}");
     assert!(f(&c1, "time_at_support_edge") < 0.3, "{c1}");
+}
+
+/// A run the plant refuses at start-up (MuJoCo cannot play a phantom push) never controls the
+/// robot: `upc run` says why in the plant's own words and exits non-zero, and its summary marks
+/// the run failed with no controller figures (before: exit 0, and a summary of zeros that read
+/// as a robot that stood).
+#[test]
+fn a_run_the_plant_refuses_fails_with_the_plants_reason() {
+    if !mujoco_engine() {
+        return;
+    }
+    let _one = serial();
+    let s = Scratch::new("mujoco_refused");
+    let out = Command::new(env!("CARGO_BIN_EXE_upc"))
+        .args([
+            "run",
+            "--plant",
+            "mujoco",
+            "--controller",
+            "c1",
+            "--duration",
+            "1",
+        ])
+        .args([
+            "--sim-set",
+            "sim.push=\"none\"",
+            "--quiet",
+            "--name",
+            "refused",
+        ])
+        .arg("--out")
+        .arg(&s.dir)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("upc runs");
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(!out.status.success(), "{stdout}\n{stderr}");
+    assert!(
+        stderr.contains("the simulator exited with") && stderr.contains("sim.push must be"),
+        "{stderr}"
+    );
+    let summary = json(&s.dir.join("refused/summary.json"));
+    assert_eq!(summary["failed"], true, "{summary:#}");
+    let run = &summary["runs"][0];
+    assert!(
+        run["failure"]
+            .as_str()
+            .is_some_and(|f| f.contains("sim.push must be")),
+        "{run:#}"
+    );
+    assert!(run["controller_summary"].is_null(), "{run:#}");
 }

@@ -815,12 +815,28 @@ fn csv_force_profiles_load_and_interpolate() {
     assert!(ForceProfile::parse_csv("0,1,2\n1,1,2\n").is_err());
 }
 
+/// A workspace sized for 10 steps, factored for 10 and then for 7, reports the 7-step horizon
+/// and answers it exactly as a fresh 7-step workspace does: nothing of the longer horizon
+/// leaks into the shorter one.
 #[test]
 fn riccati_workspace_reports_its_horizon() {
-    let mut r = Riccati::with_capacity(10);
     let c = config_with(&[]);
-    r.factor(&model(&c), 1.0, 1e-6, &[-0.05; 7]);
+    let m = model(&c);
+    let t: Vec<f64> = (0..10).map(|i| 0.01 * i as f64).collect();
+    let x0 = nalgebra::Vector3::new(0.01, 0.02, -0.1);
+    let mut r = Riccati::with_capacity(10);
+    r.factor(&m, 1.0, 1e-6, &[-0.04; 10]);
+    let long = r.first_input(&x0, &t);
+    r.factor(&m, 1.0, 1e-6, &[-0.05; 7]);
     assert_eq!((r.len(), r.capacity()), (7, 10));
+    let mut fresh = Riccati::with_capacity(7);
+    fresh.factor(&m, 1.0, 1e-6, &[-0.05; 7]);
+    assert_eq!(r.first_input(&x0, &t), fresh.first_input(&x0, &t));
+    assert_ne!(
+        long,
+        r.first_input(&x0, &t),
+        "the horizon changed the answer"
+    );
 }
 
 #[test]

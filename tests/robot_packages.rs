@@ -2,7 +2,9 @@
 //! (installed with Pinocchio by `scripts/setup.sh` in `~/.cache/upc/robot-venv`, or
 //! `UPC_ROBOT_VENV`): upc loads every one Pinocchio loads but one whose inertia is not physical,
 //! and its M(q), h(q, v), CoM and frame Jacobians agree with Pinocchio's (`scripts/pin_check.py`).
-//! Without the packages the tests say why they skip.
+//! Without the packages the tests fail under CI and skip visibly elsewhere (`support::prereq`).
+
+mod support;
 
 use std::path::PathBuf;
 use std::process::Command;
@@ -21,21 +23,25 @@ const REFUSED: [(&str, &str); 2] = [
 ];
 
 fn python() -> Option<PathBuf> {
-    let venv = upc::robot::packages::robot_venv()?;
+    let Some(venv) = upc::robot::packages::robot_venv() else {
+        support::prereq::missing(
+            "no robot environment: neither UPC_ROBOT_VENV nor HOME is set",
+            support::prereq::SETUP,
+        );
+        return None;
+    };
     let py = venv.join("bin/python");
     let ok = Command::new(&py)
         .args(["-c", "import pinocchio, icub_models"])
         .output()
         .is_ok_and(|o| o.status.success());
-    if ok {
-        Some(py)
-    } else {
-        eprintln!(
-            "SKIPPED: no Pinocchio and robot packages in {} (scripts/setup.sh installs them)",
-            venv.display()
+    if !ok {
+        support::prereq::missing(
+            &format!("no Pinocchio and robot packages in {}", venv.display()),
+            support::prereq::SETUP,
         );
-        None
     }
+    ok.then_some(py)
 }
 
 fn script() -> String {

@@ -1,7 +1,7 @@
 //! Robot descriptions: what upc computes from a description (mass, CoM height, support, M_e,
 //! hand set-point) against independent computations, the contact points derived from collision
 //! geometry, the config layer, the force scaling, and the three robots of the registry packages
-//! (skipped, with the reason printed, when `scripts/setup.sh` could not install them).
+//! (without them: a failure under CI, a visible skip elsewhere; `support::prereq`).
 
 mod support;
 
@@ -353,4 +353,35 @@ fn a_variant_locks_joints_by_pattern_and_sets_armatures() {
             .to_string();
         assert!(e.contains(what), "{e}");
     }
+}
+
+/// Romeo written from the README without `[armature]`: its fingers move only massless links.
+/// Loading names them and both fixes (before, the plant stopped at start-up on "M(q_ref) is
+/// singular or not positive definite").
+#[test]
+fn a_description_whose_joints_move_no_mass_names_them_and_both_fixes() {
+    let Some(_) = installed("romeo") else { return };
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/robots");
+    let text = std::fs::read_to_string(dir.join("romeo.toml")).expect("romeo.toml");
+    let (a, b) = (
+        text.find("[armature]").expect("[armature]"),
+        text.find("[home]").expect("[home]"),
+    );
+    let stripped = format!("{}{}", &text[..a], &text[b..]);
+    let err = match Robot::parse(&stripped, "romeo without [armature]", Some(&dir)) {
+        Err(e @ RobotError::InertJoints { .. }) => e.to_string(),
+        Err(e) => panic!("another error: {e}"),
+        Ok(_) => panic!("Romeo's massless fingers were accepted"),
+    };
+    for part in [
+        "move no mass",
+        "[armature]",
+        "[locked]",
+        "Finger",
+        "singular",
+    ] {
+        assert!(err.contains(part), "{part}: {err}");
+    }
+    // The description as shipped (with its rotor inertias) loads.
+    Robot::parse(&text, "romeo", Some(&dir)).expect("romeo with [armature]");
 }

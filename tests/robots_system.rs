@@ -1,8 +1,8 @@
 //! The whole system on robots nobody here wrote: `upc run --robot R` (simulator, forecaster,
 //! controller as processes, lockstep) on the official iCub, TALOS and the G1 through the first
 //! push of the multiple-impact scenario, with its forces scaled to each robot's mass; and a
-//! controller given another robot than the plant's refuses its states. Skipped, with the reason
-//! printed, when `scripts/setup.sh` could not install the robot packages.
+//! controller given another robot than the plant's refuses its states. Without the robot
+//! packages: a failure under CI, a visible skip elsewhere (`support::prereq`).
 
 mod support;
 

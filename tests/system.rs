@@ -8,6 +8,33 @@ fn upc() -> Command {
     Command::new(env!("CARGO_BIN_EXE_upc"))
 }
 
+/// The processes of this machine whose command line contains `pattern`, as "pid: command
+/// line", read from /proc (this process excluded). Fails rather than finding none when /proc
+/// cannot be read: "nothing left running" must not hold by default.
+fn processes_with(pattern: &str) -> Vec<String> {
+    let me = std::process::id().to_string();
+    let mut found = Vec::new();
+    let mut seen = 0;
+    for entry in std::fs::read_dir("/proc").expect("/proc lists the processes") {
+        let entry = entry.expect("/proc entry");
+        let pid = entry.file_name().to_string_lossy().into_owned();
+        if !pid.bytes().all(|b| b.is_ascii_digit()) {
+            continue;
+        }
+        seen += 1;
+        // A process that ended since the listing has no cmdline: it is not running.
+        let Ok(raw) = std::fs::read(entry.path().join("cmdline")) else {
+            continue;
+        };
+        let cmdline = String::from_utf8_lossy(&raw).replace('\0', " ");
+        if pid != me && cmdline.contains(pattern) {
+            found.push(format!("{pid}: {}", cmdline.trim_end()));
+        }
+    }
+    assert!(seen > 1, "/proc lists {seen} processes");
+    found
+}
+
 /// Entity paths and timelines of every chunk in a `.rrd` file (it must decode to the end).
 fn rrd_contents(
     p: &Path,
@@ -172,16 +199,10 @@ fn python_forecaster_example_drives_a_run() {
     assert!(status.success(), "upc run failed: {status}");
     // The external forecaster ended with the run: no process of it is left behind.
     let script = root.join("examples/python/forecaster.py");
-    let left = Command::new("pgrep")
-        .arg("-f")
-        .arg(&script)
-        .output()
-        .map(|o| o.stdout)
-        .unwrap_or_default();
+    let left = processes_with(&script.display().to_string());
     assert!(
         left.is_empty(),
-        "forecaster processes left running: {}",
-        String::from_utf8_lossy(&left)
+        "forecaster processes left running: {left:?}"
     );
     let c = read_json(&out.join("py/c1/controller.json"));
     let accepted = c["forecasts_accepted"].as_u64().unwrap_or(0);
@@ -219,15 +240,7 @@ fn a_failed_start_leaves_no_participant_running() {
     let err = String::from_utf8_lossy(&output.stderr);
     assert!(!output.status.success(), "upc run succeeded: {err}");
     assert!(err.contains("before its first window"), "{err}");
-    let left = Command::new("pgrep")
-        .args(["-af", &prefix])
-        .output()
-        .map(|o| o.stdout)
-        .unwrap_or_default();
-    assert!(
-        left.is_empty(),
-        "participants left running: {}",
-        String::from_utf8_lossy(&left)
-    );
+    let left = processes_with(&prefix);
+    assert!(left.is_empty(), "participants left running: {left:?}");
     let _ = std::fs::remove_dir_all(&out);
 }

@@ -145,6 +145,11 @@ struct Entry {
     sim_exit: Option<i32>,
     forecaster_exit: Option<i32>,
     controller_exit: Option<i32>,
+    /// Why this controller's run failed (`None`: it did not): a participant's error exit with
+    /// its last log line, no controller summary, or no tick at all. A run that never
+    /// controlled the robot keeps no controller figures: zeros would read as a robot that
+    /// stood.
+    failure: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     bridge_summary: Option<serde_json::Value>,
     /// The base estimate against the plant's truth (lockstep runs whose base was estimated).
@@ -202,14 +207,45 @@ pub fn run(args: RunArgs) -> CliResult {
         root.display(),
         root.display()
     );
+    let failures: Vec<String> = entries
+        .iter()
+        .filter_map(|e| e.failure.as_ref().map(|f| format!("{}: {f}", e.controller)))
+        .collect();
     let failed = entries.iter().any(|e| e.controller_summary.is_none());
     if args.controller == Which::All {
         report(&root, failed)?;
     }
-    if failed {
-        return Err("a controller run failed: see its controller.log".into());
+    if !failures.is_empty() {
+        return Err(format!("the run failed: {}", failures.join("; ")).into());
     }
     Ok(())
+}
+
+/// Why one controller's run failed, if it did: a participant that exited with an error (the
+/// last line of its log says why), a controller that wrote no summary, or one that never
+/// controlled the robot (no tick).
+fn failure_of(e: &Entry) -> Option<String> {
+    let line = |log: &str| last_log_line(&Path::new(&e.dir).join(log));
+    for (what, exit, log) in [
+        ("simulator", e.sim_exit, "sim.log"),
+        ("forecaster", e.forecaster_exit, "forecaster.log"),
+        ("controller", e.controller_exit, "controller.log"),
+    ] {
+        if let Some(code) = exit.filter(|&c| c != 0) {
+            return Some(format!("the {what} exited with {code}: {}", line(log)));
+        }
+    }
+    match &e.controller_summary {
+        None => Some(format!(
+            "the controller wrote no summary: {}",
+            line("controller.log")
+        )),
+        Some(s) if s.ticks == 0 => Some(format!(
+            "the controller never controlled the robot (no tick); the simulator said: {}",
+            line("sim.log")
+        )),
+        Some(_) => None,
+    }
 }
 
 /// The run's `summary.json`: what was run (the arguments `upc compare` reloads) and each
@@ -243,6 +279,8 @@ fn write_summary(
         "reproducible": entries.iter().all(|e| {
             e.controller_summary.as_ref().is_some_and(|s| s.reproducible)
         }),
+        // Any controller's run that failed (each entry's `failure` says why).
+        "failed": entries.iter().any(|e| e.failure.is_some()),
         "runs": entries,
     });
     std::fs::write(
@@ -332,7 +370,7 @@ fn run_one(
     let read = |f: &str| std::fs::read_to_string(dir.join(f)).ok();
     let controller_summary = read("controller.json").and_then(|t| serde_json::from_str(&t).ok());
     let sim_summary = read("sim.json").and_then(|t| serde_json::from_str(&t).ok());
-    Ok(Entry {
+    let mut entry = Entry {
         controller: kind.name().into(),
         dir: dir.display().to_string(),
         wall_time: start.elapsed().as_secs_f64(),
@@ -341,12 +379,22 @@ fn run_one(
         sim_exit,
         forecaster_exit,
         controller_exit,
+        failure: None,
         bridge_summary: read("bridge.json").and_then(|t| serde_json::from_str(&t).ok()),
         base_estimate_error: upc::estimation::base_accuracy(
             &dir.join("controller.csv"),
             &dir.join("sim.csv"),
         ),
-    })
+    };
+    entry.failure = failure_of(&entry);
+    if entry
+        .controller_summary
+        .as_ref()
+        .is_some_and(|s| s.ticks == 0)
+    {
+        entry.controller_summary = None;
+    }
+    Ok(entry)
 }
 
 /// What one controller's run launches its children with.
@@ -824,20 +872,26 @@ fn last_log_line(path: &Path) -> String {
 
 /// SIGTERM a child now (it writes its summary), SIGKILL it if it has not exited within `grace`.
 fn terminate(child: &mut Child, grace: Duration) -> Option<i32> {
+    terminate_status(child, grace).and_then(|s| s.code())
+}
+
+/// [`terminate`]'s exit status: a signal that ended the child says which (SIGTERM, or SIGKILL
+/// after `grace`).
+fn terminate_status(child: &mut Child, grace: Duration) -> Option<std::process::ExitStatus> {
     if let Ok(Some(s)) = child.try_wait() {
-        return s.code();
+        return Some(s);
     }
     // SAFETY: sending a signal to our own child process.
     unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
     let deadline = Instant::now() + grace;
     while Instant::now() < deadline {
         if let Ok(Some(s)) = child.try_wait() {
-            return s.code();
+            return Some(s);
         }
         std::thread::sleep(Duration::from_millis(20));
     }
     let _ = child.kill();
-    child.wait().ok().and_then(|s| s.code())
+    child.wait().ok()
 }
 
 /// Wait up to `grace` for a child to exit, then SIGTERM it, then SIGKILL.
@@ -915,8 +969,10 @@ fn print_table(entries: &[Entry]) {
                 e.wall_time
             ),
             None => println!(
-                "{:<4} failed (exit {:?}); see {}/controller.log",
-                e.controller, e.controller_exit, e.dir
+                "{:<4} failed: {}  (see {}/)",
+                e.controller,
+                e.failure.as_deref().unwrap_or("no controller summary"),
+                e.dir
             ),
         }
     }
@@ -984,10 +1040,11 @@ mod tests {
             .expect("try_wait")
             .expect("a dead participant");
         assert_eq!((what, status.code()), ("simulator", Some(3)));
-        // The survivor (standing for the controller) is stopped now, not after its time-outs.
-        let t = Instant::now();
-        terminate(&mut running, Duration::from_secs(10));
-        assert!(t.elapsed() < Duration::from_secs(5), "{:?}", t.elapsed());
+        // The survivor (standing for the controller) is stopped now, by SIGTERM, not killed
+        // after the grace period: the signal that ended it says which.
+        use std::os::unix::process::ExitStatusExt;
+        let status = terminate_status(&mut running, Duration::from_secs(60)).expect("status");
+        assert_eq!(status.signal(), Some(libc::SIGTERM), "{status:?}");
     }
 
     #[test]

@@ -69,7 +69,11 @@ pub struct PlantLink {
 
 impl PlantLink {
     pub fn new(mode: LoopMode, timeouts: LinkTimeouts) -> Self {
-        let now = Instant::now();
+        Self::new_at(Instant::now(), mode, timeouts)
+    }
+
+    /// [`PlantLink::new`] started at `now` (the clock is the caller's: tests step it).
+    pub fn new_at(now: Instant, mode: LoopMode, timeouts: LinkTimeouts) -> Self {
         PlantLink {
             mode,
             timeouts,
@@ -102,28 +106,43 @@ impl PlantLink {
         received: Option<&StateMsg>,
         plant_alive: impl FnOnce() -> bool,
     ) -> Verdict {
+        self.classify_at(Instant::now(), received, plant_alive)
+    }
+
+    /// [`PlantLink::classify`] at `now`.
+    pub fn classify_at(
+        &mut self,
+        now: Instant,
+        received: Option<&StateMsg>,
+        plant_alive: impl FnOnce() -> bool,
+    ) -> Verdict {
         // A new session, or a step that goes back, is a new plant run (a restarted simulator);
         // the same step again is the lockstep simulator re-sending a state it waits on.
         let restarted = matches!((received, self.last_step),
             (Some(st), Some(l)) if st.step < l || (st.session != self.session && st.session != 0));
         match received {
             Some(st) if restarted || self.last_step.is_none_or(|l| st.step > l) => {
-                self.accept(st, restarted);
+                self.accept(now, st, restarted);
                 Verdict::Control { restarted }
             }
-            repeated => self.without_state(repeated.is_some(), plant_alive),
+            repeated => self.without_state(now, repeated.is_some(), plant_alive),
         }
     }
 
     /// The state was answered: lockstep waits for the forecast or C2 before the answer are not
     /// the plant's silence.
     pub fn answered(&mut self) {
-        self.last_state_at = Instant::now();
+        self.answered_at(Instant::now());
     }
 
-    fn accept(&mut self, state: &StateMsg, restarted: bool) {
+    /// [`PlantLink::answered`] at `now`.
+    pub fn answered_at(&mut self, now: Instant) {
+        self.last_state_at = now;
+    }
+
+    fn accept(&mut self, now: Instant, state: &StateMsg, restarted: bool) {
         if let Some(last) = self.last_step {
-            let gap = self.last_state_at.elapsed().as_secs_f64();
+            let gap = now.duration_since(self.last_state_at).as_secs_f64();
             self.counts.longest_state_gap = self.counts.longest_state_gap.max(gap);
             if restarted {
                 self.counts.reconnects += 1;
@@ -150,9 +169,14 @@ impl PlantLink {
         self.last_time = state.time;
     }
 
-    fn without_state(&mut self, repeated: bool, plant_alive: impl FnOnce() -> bool) -> Verdict {
+    fn without_state(
+        &mut self,
+        now: Instant,
+        repeated: bool,
+        plant_alive: impl FnOnce() -> bool,
+    ) -> Verdict {
         let Some(last) = self.last_step else {
-            return if self.started.elapsed().as_secs_f64() > self.timeouts.startup {
+            return if now.duration_since(self.started).as_secs_f64() > self.timeouts.startup {
                 Verdict::NeverStarted
             } else {
                 Verdict::Idle
@@ -160,14 +184,14 @@ impl PlantLink {
         };
         let realtime = self.mode == LoopMode::Realtime;
         self.counts.stale_states += u64::from(realtime || repeated);
-        let quiet = self.last_state_at.elapsed().as_secs_f64();
+        let quiet = now.duration_since(self.last_state_at).as_secs_f64();
         if quiet <= self.timeouts.state {
             return Verdict::Idle;
         }
         if repeated && !realtime {
             // A lockstep plant resends the state it waits on: it is alive, and waits for us.
             self.counts.reanswers += 1;
-            self.last_state_at = Instant::now();
+            self.last_state_at = now;
             if self.counts.reanswers.is_power_of_two() {
                 tracing::warn!(
                     "the simulator still waits on step {last} {quiet:.3} s after its answer: \
@@ -201,9 +225,9 @@ impl PlantLink {
         // (starved, stopped in a debugger) is waited for; one whose process is gone ends it.
         let due = self
             .liveness_checked
-            .is_none_or(|t| t.elapsed() >= Duration::from_millis(100));
+            .is_none_or(|t| now.duration_since(t) >= Duration::from_millis(100));
         if quiet > self.timeouts.state + self.timeouts.reconnect && due {
-            self.liveness_checked = Some(Instant::now());
+            self.liveness_checked = Some(now);
             if !plant_alive() {
                 return Verdict::Gone;
             }
@@ -232,8 +256,22 @@ mod tests {
         }
     }
 
-    fn link(mode: LoopMode, state: f64) -> PlantLink {
-        PlantLink::new(
+    /// A clock the test steps: no sleeps, no timing in the assertions.
+    struct Clock(Instant);
+
+    impl Clock {
+        fn new() -> Self {
+            Clock(Instant::now())
+        }
+        fn advance(&mut self, ms: u64) -> Instant {
+            self.0 += Duration::from_millis(ms);
+            self.0
+        }
+    }
+
+    fn link(clock: &Clock, mode: LoopMode, state: f64) -> PlantLink {
+        PlantLink::new_at(
+            clock.0,
             mode,
             LinkTimeouts {
                 state,
@@ -245,25 +283,27 @@ mod tests {
 
     #[test]
     fn new_steps_control_repeats_idle_and_a_step_back_or_new_session_restarts() {
-        let mut l = link(LoopMode::Lockstep, 10.0);
+        let c = Clock::new();
+        let mut l = link(&c, LoopMode::Lockstep, 10.0);
+        let now = c.0;
         let alive = || true;
-        assert_eq!(l.classify(None, alive), Verdict::Idle);
+        assert_eq!(l.classify_at(now, None, alive), Verdict::Idle);
         assert_eq!(
-            l.classify(Some(&state(0, 7)), alive),
+            l.classify_at(now, Some(&state(0, 7)), alive),
             Verdict::Control { restarted: false }
         );
-        assert_eq!(l.classify(Some(&state(0, 7)), alive), Verdict::Idle);
+        assert_eq!(l.classify_at(now, Some(&state(0, 7)), alive), Verdict::Idle);
         assert_eq!(l.counts.stale_states, 1, "a repeated state in lockstep");
         assert_eq!(
-            l.classify(Some(&state(1, 7)), alive),
+            l.classify_at(now, Some(&state(1, 7)), alive),
             Verdict::Control { restarted: false }
         );
         assert_eq!(
-            l.classify(Some(&state(0, 7)), alive),
+            l.classify_at(now, Some(&state(0, 7)), alive),
             Verdict::Control { restarted: true }
         );
         assert_eq!(
-            l.classify(Some(&state(5, 9)), alive),
+            l.classify_at(now, Some(&state(5, 9)), alive),
             Verdict::Control { restarted: true }
         );
         assert_eq!(
@@ -274,63 +314,97 @@ mod tests {
 
     #[test]
     fn silence_damps_in_real_time_and_ends_lockstep_only_when_the_plant_is_gone() {
-        let mut rt = link(LoopMode::Realtime, 0.0);
-        rt.classify(Some(&state(3, 1)), || true);
-        std::thread::sleep(Duration::from_millis(2));
-        assert_eq!(rt.classify(None, || true), Verdict::Damp { step: 3 });
-        assert_eq!(rt.classify(None, || true), Verdict::Damp { step: 3 });
+        let mut c = Clock::new();
+        let mut rt = link(&c, LoopMode::Realtime, 0.001);
+        rt.classify_at(c.0, Some(&state(3, 1)), || true);
+        // Within the state timeout: not yet silence.
+        assert_eq!(rt.classify_at(c.advance(1), None, || true), Verdict::Idle);
+        assert_eq!(rt.counts.stale_periods, 0);
+        assert_eq!(
+            rt.classify_at(c.advance(1), None, || true),
+            Verdict::Damp { step: 3 }
+        );
+        assert_eq!(
+            rt.classify_at(c.advance(1), None, || true),
+            Verdict::Damp { step: 3 }
+        );
         assert_eq!(
             rt.counts.stale_periods, 1,
             "one period, however many passes"
         );
-        let mut ls = link(LoopMode::Lockstep, 0.0);
-        ls.classify(Some(&state(3, 1)), || true);
-        std::thread::sleep(Duration::from_millis(2));
+        let mut ls = link(&c, LoopMode::Lockstep, 0.001);
+        ls.classify_at(c.0, Some(&state(3, 1)), || true);
+        // Past the state timeout but the plant is alive: waited for, liveness asked.
+        let mut asked = false;
         assert_eq!(
-            ls.classify(None, || true),
+            ls.classify_at(c.advance(2), None, || {
+                asked = true;
+                true
+            }),
             Verdict::Idle,
             "alive: waited for"
         );
-        std::thread::sleep(Duration::from_millis(110));
-        assert_eq!(ls.classify(None, || false), Verdict::Gone);
-        // Back: the period ends and the gap is measured.
+        assert!(asked, "the plant's liveness is asked once silent");
+        // Asked at most every 100 ms: a dead plant 50 ms later is not yet noticed ...
+        let mut asked = false;
         assert_eq!(
-            ls.classify(Some(&state(4, 1)), || true),
+            ls.classify_at(c.advance(50), None, || {
+                asked = true;
+                false
+            }),
+            Verdict::Idle
+        );
+        assert!(!asked, "liveness asked again within 100 ms");
+        // ... and is, once 100 ms have passed since the last question.
+        assert_eq!(ls.classify_at(c.advance(60), None, || false), Verdict::Gone);
+        // Back: the period ends and the gap (112 ms) is measured.
+        assert_eq!(
+            ls.classify_at(c.0, Some(&state(4, 1)), || true),
             Verdict::Control { restarted: false }
         );
-        assert!(ls.counts.longest_state_gap >= 0.1);
+        assert!(
+            (ls.counts.longest_state_gap - 0.112).abs() < 1e-9,
+            "{}",
+            ls.counts.longest_state_gap
+        );
     }
 
     /// A lost answer must not deadlock lockstep: the plant resends the state it waits on, and
     /// past `state_timeout` the link says to answer it again (once per timeout).
     #[test]
     fn a_state_still_resent_after_its_answer_is_answered_again() {
-        let mut l = link(LoopMode::Lockstep, 0.05);
+        let mut c = Clock::new();
+        let mut l = link(&c, LoopMode::Lockstep, 0.05);
         let alive = || true;
         assert_eq!(
-            l.classify(Some(&state(3, 1)), alive),
+            l.classify_at(c.0, Some(&state(3, 1)), alive),
             Verdict::Control { restarted: false }
         );
-        l.answered();
-        assert_eq!(l.classify(Some(&state(3, 1)), alive), Verdict::Idle);
-        std::thread::sleep(Duration::from_millis(60));
+        l.answered_at(c.advance(5));
         assert_eq!(
-            l.classify(Some(&state(3, 1)), alive),
+            l.classify_at(c.advance(49), Some(&state(3, 1)), alive),
+            Verdict::Idle,
+            "within the timeout of the answer"
+        );
+        assert_eq!(
+            l.classify_at(c.advance(2), Some(&state(3, 1)), alive),
             Verdict::Reanswer { step: 3 }
         );
-        assert_eq!(l.classify(Some(&state(3, 1)), alive), Verdict::Idle);
+        assert_eq!(l.classify_at(c.0, Some(&state(3, 1)), alive), Verdict::Idle);
         assert_eq!(l.counts.reanswers, 1);
         // Silence (no state at all) is not a resend: waited for, never answered again.
-        std::thread::sleep(Duration::from_millis(60));
-        assert_eq!(l.classify(None, alive), Verdict::Idle);
+        assert_eq!(l.classify_at(c.advance(60), None, alive), Verdict::Idle);
         assert_eq!(l.counts.reanswers, 1);
     }
 
     #[test]
     fn no_state_at_all_is_reported_after_the_startup_timeout() {
-        let mut l = link(LoopMode::Lockstep, 1.0);
-        assert_eq!(l.classify(None, || true), Verdict::Idle);
-        std::thread::sleep(Duration::from_millis(60));
-        assert_eq!(l.classify(None, || true), Verdict::NeverStarted);
+        let mut c = Clock::new();
+        let mut l = link(&c, LoopMode::Lockstep, 1.0);
+        assert_eq!(l.classify_at(c.advance(50), None, || true), Verdict::Idle);
+        assert_eq!(
+            l.classify_at(c.advance(1), None, || true),
+            Verdict::NeverStarted
+        );
     }
 }

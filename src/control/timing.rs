@@ -30,7 +30,13 @@ impl Ticker {
     /// Sleep until the next deadline. If it has already passed, count the overrun and move the
     /// deadline to the next one in the future: missed ticks are skipped, not run in a burst.
     pub fn wait(&mut self) {
-        let now = Instant::now();
+        let deadline = self.deadline_after(Instant::now());
+        sleep_until(deadline);
+    }
+
+    /// The deadline to sleep until for a loop ready at `now`, counting the deadlines it missed
+    /// (the clock is the caller's: tests step it).
+    pub fn deadline_after(&mut self, now: Instant) -> Instant {
         if now > self.next {
             let late = now - self.next;
             let skipped = (late.as_nanos() / self.period.as_nanos().max(1)) as u64;
@@ -38,8 +44,9 @@ impl Ticker {
             self.missed += skipped;
             self.next += self.period * (skipped as u32 + 1);
         }
-        sleep_until(self.next);
+        let deadline = self.next;
         self.next += self.period;
+        deadline
     }
 }
 
@@ -181,19 +188,21 @@ mod tests {
 
     #[test]
     fn ticker_skips_missed_deadlines() {
-        let mut t = Ticker::new(Duration::from_millis(2));
-        t.wait();
-        std::thread::sleep(Duration::from_millis(9));
-        let before = Instant::now();
-        t.wait();
-        // No burst: the next wait sleeps to a future deadline.
-        assert!(
-            t.overruns == 1 && t.missed >= 3,
-            "overruns {} missed {}",
-            t.overruns,
-            t.missed
-        );
-        t.wait();
-        assert!(before.elapsed() >= Duration::from_millis(1));
+        let ms = Duration::from_millis;
+        let mut t = Ticker::new(ms(2));
+        let start = t.next - ms(2);
+        // On time: the first deadline, then the next one period later.
+        assert_eq!(t.deadline_after(start + ms(1)), start + ms(2));
+        assert_eq!((t.overruns, t.missed), (0, 0));
+        // Ready at 13 ms, 9 ms past the 4 ms deadline: one overrun, and the 6 to 12 ms deadlines
+        // missed; the next wait is for 14 ms, in the future: no burst of catch-up ticks.
+        let now = start + ms(13);
+        let d = t.deadline_after(now);
+        assert_eq!((t.overruns, t.missed), (1, 4));
+        assert_eq!(d, start + ms(14));
+        assert!(d > now && d - now <= ms(2));
+        // Back on time: nothing more counted.
+        assert_eq!(t.deadline_after(start + ms(15)), start + ms(16));
+        assert_eq!((t.overruns, t.missed), (1, 4));
     }
 }

@@ -247,6 +247,26 @@ impl Model {
             .is_some_and(|j| j.kind == JointKind::FreeFlyer)
     }
 
+    /// One-dof joints whose motion moves no inertia: the bodies they carry (their own and every
+    /// one below) have neither mass nor rotational inertia, and they have no armature. Each
+    /// leaves a zero row and column in M(q), singular then whatever q.
+    pub fn inert_joints(&self) -> Vec<usize> {
+        // Preorder: a joint's children come after it, so a reverse pass sums each sub-tree.
+        let mut carried = vec![0.0; self.joints.len()];
+        for (i, j) in self.joints.iter().enumerate().rev() {
+            carried[i] += j.inertia.mass + j.inertia.rot.trace().abs();
+            if let Some(p) = j.parent {
+                carried[p] += carried[i];
+            }
+        }
+        (0..self.joints.len())
+            .filter(|&i| {
+                let j = &self.joints[i];
+                j.nv() == 1 && carried[i] <= 1e-12 && j.armature <= 0.0
+            })
+            .collect()
+    }
+
     /// Sum of the body masses (bodies fixed to the world are not counted: they never move).
     pub fn total_mass(&self) -> f64 {
         self.joints.iter().map(|j| j.inertia.mass).sum()

@@ -68,6 +68,14 @@ pub enum RobotError {
     Dynamics(#[from] DynamicsError),
     #[error("robot `{robot}`: {reason}")]
     Home { robot: String, reason: String },
+    #[error(
+        "robot `{robot}`: the joints {joints} move no mass (every link they carry is massless in the URDF), so the mass matrix M(q) is singular: give them a rotor inertia under [armature] (e.g. \"{first}\" = 1e-3) or lock them under [locked] (joints = [\"{first}\"])"
+    )]
+    InertJoints {
+        robot: String,
+        joints: String,
+        first: String,
+    },
 }
 
 /// What follows from the model at the home configuration (nothing here is typed by hand).
@@ -186,6 +194,18 @@ impl Robot {
         let locked = locked_joints(&description, &parsed)?;
         let mut model = Model::from_urdf_str_locked(&urdf, BaseJoint::Floating, &locked)?;
         set_armatures(&mut model, &description, &locked)?;
+        let inert = model.inert_joints();
+        if let Some(&first) = inert.first() {
+            let names: Vec<&str> = inert
+                .iter()
+                .map(|&i| model.joints[i].name.as_str())
+                .collect();
+            return Err(RobotError::InertJoints {
+                robot: description.name.clone(),
+                joints: names.join(", "),
+                first: model.joints[first].name.clone(),
+            });
+        }
         let f = &description.feet;
         let left = feet::attach(&mut model, &parsed, &f.left)?;
         let right = feet::attach(&mut model, &parsed, &f.right)?;

@@ -4,6 +4,7 @@
 pub mod counting_alloc;
 pub mod humanoid;
 pub mod pd_driver;
+pub mod prereq;
 pub mod procs;
 pub mod robots;
 pub mod rrd;

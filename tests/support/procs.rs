@@ -349,8 +349,8 @@ impl Drop for Observer {
     }
 }
 
-/// The Python of `.venv` if it imports `modules` (comma-separated), else `None` after printing
-/// why the calling test is skipped.
+/// The Python of `.venv` if it imports `modules` (comma-separated), else `None`: a failure
+/// under CI, a visible skip elsewhere (`support::prereq`).
 pub fn venv_python(modules: &str) -> Option<PathBuf> {
     let py = Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python");
     let ok = Command::new(&py)
@@ -358,9 +358,9 @@ pub fn venv_python(modules: &str) -> Option<PathBuf> {
         .output()
         .is_ok_and(|o| o.status.success());
     if !ok {
-        eprintln!(
-            "SKIPPED: {} cannot import {modules} (run scripts/setup.sh)",
-            py.display()
+        super::prereq::missing(
+            &format!("{} cannot import {modules}", py.display()),
+            super::prereq::SETUP,
         );
     }
     ok.then_some(py)

@@ -2,13 +2,13 @@
 
 use upc::robot::{Robot, RobotError};
 
-/// Robot `name`, or `None` (after printing why) when `scripts/setup.sh` could not install its
-/// package.
+/// Robot `name`, or `None` when its package is not installed: a failure under CI, a visible
+/// skip elsewhere (`support::prereq`).
 pub fn installed(name: &str) -> Option<Robot> {
     match Robot::load(name) {
         Ok(r) => Some(r),
         Err(RobotError::Urdf { reason, .. }) if reason.contains("not installed") => {
-            eprintln!("SKIPPED `{name}`: {reason}");
+            super::prereq::missing(&format!("robot `{name}`: {reason}"), super::prereq::SETUP);
             None
         }
         Err(e) => panic!("{name}: {e}"),
