@@ -385,3 +385,149 @@ fn a_description_whose_joints_move_no_mass_names_them_and_both_fixes() {
     // The description as shipped (with its rotor inertias) loads.
     Robot::parse(&text, "romeo", Some(&dir)).expect("romeo with [armature]");
 }
+
+/// A body whose principal moments break the triangle inequality (a URDF's inertia typed by
+/// hand) is refused at load, naming the link, on both plants with the same message: before,
+/// upc's plant ran it and MuJoCo refused it from the depth of its log.
+#[test]
+fn a_non_physical_inertia_is_refused_with_the_same_message_on_both_plants() {
+    let dir = std::env::temp_dir().join(format!("upc-bad-inertia-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let urdf = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/icub_like/icub_like.urdf"),
+    )
+    .expect("urdf");
+    let good =
+        r#"<inertia ixx="0.0145833" ixy="0" ixz="0" iyy="0.00478333" iyz="0" izz="0.0135333"/>"#;
+    assert_eq!(urdf.matches(good).count(), 1, "the root link's inertia");
+    // 0.001 + 0.002 < 0.0135: no body has these moments.
+    let bad = r#"<inertia ixx="0.001" ixy="0" ixz="0" iyy="0.002" iyz="0" izz="0.0135333"/>"#;
+    std::fs::write(dir.join("bad.urdf"), urdf.replace(good, bad)).expect("bad urdf");
+    let description = dir.join("bad.toml");
+    std::fs::write(
+        &description,
+        "extends = \"icub_like\"\nname = \"bad_inertia\"\n\n[urdf]\npath = \"bad.urdf\"\n",
+    )
+    .expect("description");
+    let err = match Robot::load(description.to_str().expect("utf-8")) {
+        Err(e @ RobotError::Inertia { .. }) => e.to_string(),
+        Err(e) => panic!("another error: {e}"),
+        Ok(_) => panic!("a non-physical inertia was accepted"),
+    };
+    for part in ["link 'root_link'", "A + B ≥ C", "1.000e-3, 2.000e-3"] {
+        assert!(err.contains(part), "{part}: {err}");
+    }
+    let mut plants = vec!["upc"];
+    if upc::sim::mujoco::AVAILABLE {
+        plants.push("mujoco");
+    } else {
+        support::prereq::missing(upc::sim::mujoco::UNAVAILABLE, support::prereq::SETUP);
+    }
+    for plant in plants {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_upc"))
+            .args([
+                "sim",
+                "--plant",
+                plant,
+                "--mode",
+                "lockstep",
+                "--duration",
+                "0.01",
+            ])
+            .arg("--robot")
+            .arg(&description)
+            .env("RUST_LOG", "warn")
+            .output()
+            .expect("upc sim");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{plant}: {stderr}");
+        assert!(stderr.contains(&err), "{plant}: {stderr}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Every robot upc ships passes the physical checks (the five run on both plants).
+#[test]
+fn the_shipped_robots_have_physical_inertias() {
+    Robot::embedded_default().expect("icub_like");
+    for name in ["icub", "talos", "g1", "romeo", "romeo_locked"] {
+        if let Some(r) = installed(name) {
+            upc::robot::physical::check_inertias(&r.model, name).expect(name);
+        }
+    }
+}
+
+/// `package://` resolves in ROS 1 package paths, ROS 2 prefixes (their `share/`) and the robot
+/// environment, in that order, each variable a list of directories.
+#[test]
+fn package_urls_resolve_in_ros_paths_ament_prefixes_and_the_robot_environment() {
+    use upc::robot::packages::{resolve_mesh_in, search_dirs};
+    let root = std::env::temp_dir().join(format!("upc-pkgs-{}", std::process::id()));
+    let file = |rel: &str| {
+        let p = root.join(rel);
+        std::fs::create_dir_all(p.parent().expect("parent")).expect("dir");
+        std::fs::write(&p, b"solid m\nendsolid m\n").expect("mesh");
+        p
+    };
+    let ros = file("ros/ws/arm/meshes/a.stl");
+    let both_ros = file("ros/ws/both/m.stl");
+    let ament = file("ament/install/share/hand/b.stl");
+    file("ament/install/share/both/m.stl");
+    let joined =
+        |a: &std::path::Path, b: &std::path::Path| std::env::join_paths([a, b]).expect("join");
+    let dirs = search_dirs(
+        Some(&joined(&root.join("ros/none"), &root.join("ros/ws"))),
+        Some(&joined(
+            &root.join("ament/nothing"),
+            &root.join("ament/install"),
+        )),
+        None,
+    );
+    let find = |url: &str| resolve_mesh_in(url, None, &dirs);
+    assert_eq!(find("package://arm/meshes/a.stl"), Some(ros));
+    assert_eq!(find("package://hand/b.stl"), Some(ament));
+    assert_eq!(
+        find("package://both/m.stl"),
+        Some(both_ros),
+        "ROS paths first"
+    );
+    assert_eq!(find("package://arm/meshes/missing.stl"), None);
+    assert_eq!(find("package://nowhere/a.stl"), None);
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// Placeholders a description may carry are flagged: the same effort limit on every joint (the
+/// arm then "holds" whatever it says), a link of 1 kg·m² about each axis. upc's robots have none.
+#[test]
+fn placeholder_limits_and_inertias_are_flagged() {
+    use upc::robot::physical::placeholder_warnings;
+    let joint = |n: usize, parent: &str| {
+        format!(
+            r#"<joint name="j{n}" type="revolute"><parent link="{parent}"/><child link="l{n}"/>
+  <axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="240" velocity="1"/></joint>"#
+        )
+    };
+    let link = |name: &str, i: f64| {
+        format!(
+            r#"<link name="{name}"><inertial><mass value="1"/>
+  <inertia ixx="{i}" iyy="{i}" izz="{i}" ixy="0" ixz="0" iyz="0"/></inertial></link>"#
+        )
+    };
+    let urdf = format!(
+        "<robot name=\"p\">{}{}{}{}{}{}{}</robot>",
+        link("base", 0.01),
+        link("l1", 1.0),
+        link("l2", 0.01),
+        link("l3", 0.01),
+        joint(1, "base"),
+        joint(2, "l1"),
+        joint(3, "l2")
+    );
+    let model = Model::from_urdf_str(&urdf, BaseJoint::Floating).expect("model");
+    let w = placeholder_warnings(&model);
+    assert_eq!(w.len(), 2, "{w:?}");
+    assert!(w[0].contains("effort limit 240"), "{w:?}");
+    assert!(w[1].contains("link 'l1' has a unit inertia"), "{w:?}");
+    let r = Robot::embedded_default().expect("icub_like");
+    assert!(placeholder_warnings(&r.model).is_empty());
+}

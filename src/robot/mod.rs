@@ -8,6 +8,7 @@ mod config_layers;
 pub mod description;
 pub mod feet;
 pub mod packages;
+pub mod physical;
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -75,6 +76,14 @@ pub enum RobotError {
         robot: String,
         joints: String,
         first: String,
+    },
+    #[error(
+        "robot `{robot}`: link '{link}' has principal moments of inertia {moments} kg·m² about its CoM, which break the triangle inequality A + B ≥ C that every real body satisfies (MuJoCo refuses it too): correct the link's <inertia> in the URDF"
+    )]
+    Inertia {
+        robot: String,
+        link: String,
+        moments: String,
     },
 }
 
@@ -194,6 +203,10 @@ impl Robot {
         let locked = locked_joints(&description, &parsed)?;
         let mut model = Model::from_urdf_str_locked(&urdf, BaseJoint::Floating, &locked)?;
         set_armatures(&mut model, &description, &locked)?;
+        physical::check_inertias(&model, &description.name)?;
+        for w in physical::placeholder_warnings(&model) {
+            tracing::warn!("robot `{}`: {w}", description.name);
+        }
         let inert = model.inert_joints();
         if let Some(&first) = inert.first() {
             let names: Vec<&str> = inert

@@ -68,13 +68,64 @@ pub fn package_root(package: &str) -> Result<PathBuf, String> {
     })
 }
 
-/// The file a URDF mesh `filename` names: `package://<pkg>/<rest>` looked up in the robot-model
-/// environment (`share/<pkg>` of the environment or of its cmeel prefix), `file://` or a plain
-/// path (relative to `urdf_dir`). `None` when there is no such file.
+/// Where `package://<pkg>/…` is looked up, in order: each directory of `ROS_PACKAGE_PATH` (ROS
+/// 1: a package is a directory of its name there), `share/` of each prefix of
+/// `AMENT_PREFIX_PATH` (ROS 2), then the `share` directories of the robot-model environment
+/// (`UPC_ROBOT_VENV`, else `~/.cache/upc/robot-venv`).
+pub fn package_search_dirs() -> Vec<PathBuf> {
+    search_dirs(
+        std::env::var_os("ROS_PACKAGE_PATH").as_deref(),
+        std::env::var_os("AMENT_PREFIX_PATH").as_deref(),
+        robot_venv().as_deref(),
+    )
+}
+
+/// [`package_search_dirs`] from the variables' values and the environment's directory.
+pub fn search_dirs(
+    ros_package_path: Option<&std::ffi::OsStr>,
+    ament_prefix_path: Option<&std::ffi::OsStr>,
+    venv: Option<&Path>,
+) -> Vec<PathBuf> {
+    let split = |v: Option<&std::ffi::OsStr>| -> Vec<PathBuf> {
+        v.map(|v| {
+            std::env::split_paths(v)
+                .filter(|p| !p.as_os_str().is_empty())
+                .collect()
+        })
+        .unwrap_or_default()
+    };
+    let mut dirs = split(ros_package_path);
+    dirs.extend(
+        split(ament_prefix_path)
+            .into_iter()
+            .map(|p| p.join("share")),
+    );
+    if let Some(v) = venv {
+        dirs.extend(share_dirs(v));
+    }
+    dirs
+}
+
+/// The file a URDF mesh `filename` names: `package://<pkg>/<rest>` looked up in
+/// [`package_search_dirs`], `file://` or a plain path (relative to `urdf_dir`). `None` when
+/// there is no such file.
 pub fn resolve_mesh(filename: &str, urdf_dir: Option<&Path>) -> Option<PathBuf> {
+    resolve_mesh_in(filename, urdf_dir, &package_search_dirs())
+}
+
+/// [`resolve_mesh`] with `package://` looked up in `dirs` (`<dir>/<pkg>/<rest>`, the first that
+/// is a file).
+pub fn resolve_mesh_in(
+    filename: &str,
+    urdf_dir: Option<&Path>,
+    dirs: &[PathBuf],
+) -> Option<PathBuf> {
     if let Some(rest) = filename.strip_prefix("package://") {
         let (pkg, rel) = rest.split_once('/')?;
-        return Some(shared(pkg)?.join(rel)).filter(|p| p.is_file());
+        return dirs
+            .iter()
+            .map(|d| d.join(pkg).join(rel))
+            .find(|p| p.is_file());
     }
     let path = Path::new(filename.strip_prefix("file://").unwrap_or(filename));
     let full = match urdf_dir {

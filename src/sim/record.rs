@@ -89,14 +89,17 @@ fn color_of(urdf: &urdf_rs::Robot, v: &urdf_rs::Visual) -> [u8; 4] {
 
 /// Logs each link's visuals: primitives, and meshes whose file resolves
 /// ([`crate::robot::packages::resolve_mesh`], relative paths against `urdf_dir`; a URDF
-/// without its mesh files is drawn with what remains). Returns the meshes not found.
+/// without its mesh files is drawn with what remains; `package://` looked up in `dirs`). Returns
+/// how many meshes were not found, and the first of them.
 fn log_geometry(
     rec: &rerun::RecordingStream,
     prefix: &str,
     urdf: &urdf_rs::Robot,
     urdf_dir: Option<&Path>,
-) -> rerun::RecordingStreamResult<usize> {
+    dirs: &[std::path::PathBuf],
+) -> rerun::RecordingStreamResult<(usize, Option<String>)> {
     let mut missing = 0;
+    let mut first = None;
     for link in &urdf.links {
         for (k, v) in link.visual.iter().enumerate() {
             let path = format!("{prefix}/{}/visual_{k}", link.name);
@@ -152,7 +155,7 @@ fn log_geometry(
                     )?;
                 }
                 urdf_rs::Geometry::Mesh { filename, .. } => {
-                    let file = crate::robot::packages::resolve_mesh(filename, urdf_dir);
+                    let file = crate::robot::packages::resolve_mesh_in(filename, urdf_dir, dirs);
                     match file.map(std::fs::read) {
                         Some(Ok(bytes)) => {
                             let media = filename
@@ -169,13 +172,16 @@ fn log_geometry(
                                     ),
                             )?;
                         }
-                        _ => missing += 1,
+                        _ => {
+                            missing += 1;
+                            first.get_or_insert_with(|| filename.clone());
+                        }
                     }
                 }
             }
         }
     }
-    Ok(missing)
+    Ok((missing, first))
 }
 
 /// Convex hull (counter-clockwise, closed) of 2-D points, by monotone chain.
@@ -321,18 +327,24 @@ impl Recorder {
         let robot_urdf = crate::dynamics::parse_urdf(&robot.urdf)?;
         rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
         let urdf_dir = robot.urdf_path.as_deref().and_then(Path::parent);
-        let missing = log_geometry(&rec, "world/robot", &robot_urdf, urdf_dir)?;
-        if missing > 0 {
+        let dirs = crate::robot::packages::package_search_dirs();
+        let (missing, first) = log_geometry(&rec, "world/robot", &robot_urdf, urdf_dir, &dirs)?;
+        if let Some(first) = first {
+            let looked: Vec<String> = dirs.iter().map(|d| d.display().to_string()).collect();
             tracing::info!(
-                "rerun: {missing} mesh files of `{}` not found, not drawn",
-                robot.name()
+                "rerun: {missing} mesh files of `{}` not found, not drawn (the first: {first}); \
+                 relative paths are looked up next to the URDF ({}), package:// in [{}] \
+                 (ROS_PACKAGE_PATH, AMENT_PREFIX_PATH's share/, UPC_ROBOT_VENV's share/)",
+                robot.name(),
+                urdf_dir.map_or("<embedded>".into(), |d| d.display().to_string()),
+                looked.join(", ")
             );
         }
         let robot_links = link_frames(world.robot(), &robot_urdf);
         let door_links = match world.door_model() {
             Some(model) => {
                 let door_urdf = crate::dynamics::parse_urdf(crate::dynamics::icub_like::DOOR_URDF)?;
-                log_geometry(&rec, "world/door", &door_urdf, None)?;
+                log_geometry(&rec, "world/door", &door_urdf, None, &[])?;
                 link_frames(model, &door_urdf)
             }
             None => Vec::new(),

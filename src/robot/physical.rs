@@ -1,0 +1,75 @@
+//! Physical checks of a robot's bodies, by MuJoCo's rules so that a description upc accepts runs
+//! on both plants (MuJoCo refuses these at compile time, and its message reached the user only
+//! through the simulator's log): each moving body's principal moments of inertia about its CoM
+//! satisfy the triangle inequality A + B ≥ C, which every real body does. Bodies are upc's (a
+//! joint's child link with the links fixed to it merged), as upc writes them into MuJoCo's scene.
+//! Also the values a description left at a placeholder, as warnings: nothing refuses them, but
+//! the arm's capacity, the force scaling and the torque limits are computed from them.
+
+use nalgebra::SymmetricEigen;
+
+use super::RobotError;
+use crate::dynamics::Model;
+
+/// Slack of the triangle inequality: MuJoCo's absolute 1e-15 kg·m², or a relative 1e-9 of the
+/// largest moment where that is larger, so that rounding alone never refuses a thin rod (A = 0,
+/// B = C) that MuJoCo accepts.
+fn slack(largest: f64) -> f64 {
+    1e-15_f64.max(1e-9 * largest)
+}
+
+/// The first moving body whose principal moments break the triangle inequality, as an error
+/// naming its link, its moments and what to change.
+pub fn check_inertias(model: &Model, robot: &str) -> Result<(), RobotError> {
+    for j in model.joints.iter() {
+        if j.inertia.mass <= 0.0 {
+            continue;
+        }
+        let mut m: Vec<f64> = SymmetricEigen::new(j.inertia.inertia_com())
+            .eigenvalues
+            .iter()
+            .copied()
+            .collect();
+        m.sort_by(f64::total_cmp);
+        if m[0] + m[1] < m[2] - slack(m[2]) {
+            return Err(RobotError::Inertia {
+                robot: robot.to_owned(),
+                link: j.body.clone(),
+                moments: format!("{:.3e}, {:.3e}, {:.3e}", m[0], m[1], m[2]),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Values that look like a description's placeholders: the same effort limit on every
+/// actuated joint, a body with 1 kg·m² about each axis.
+pub fn placeholder_warnings(model: &Model) -> Vec<String> {
+    let mut out = Vec::new();
+    let efforts: Vec<f64> = model
+        .joints
+        .iter()
+        .filter(|j| j.nv() == 1)
+        .map(|j| j.limits.effort)
+        .collect();
+    if efforts.len() > 2 && efforts.iter().all(|&e| e.is_finite() && e == efforts[0]) {
+        out.push(format!(
+            "every one of the {} joints has the effort limit {} (N·m or N): a placeholder? the \
+             torque limits, the arm's capacity and the force scaling come from it",
+            efforts.len(),
+            efforts[0]
+        ));
+    }
+    for j in &model.joints {
+        let i = j.inertia.inertia_com();
+        let unit = (0..3).all(|a| (i[(a, a)] - 1.0).abs() < 1e-12)
+            && (i[(0, 1)].abs() + i[(0, 2)].abs() + i[(1, 2)].abs()) < 1e-12;
+        if unit {
+            out.push(format!(
+                "link '{}' has a unit inertia (1 kg·m² about each axis): a placeholder?",
+                j.body
+            ));
+        }
+    }
+    out
+}
