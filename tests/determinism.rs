@@ -78,6 +78,20 @@ fn run_with(out: &Path, name: &str, controller: &str, duration: &str, extra: &[&
     dir
 }
 
+/// The column `name` of the run's `controller.csv`, row by row (the header's names).
+fn controller_column(dir: &Path, name: &str) -> Vec<String> {
+    let text = std::fs::read_to_string(dir.join("controller.csv")).expect("controller.csv");
+    let mut lines = text.lines();
+    let header = lines.next().expect("header");
+    let i = header
+        .split(',')
+        .position(|c| c == name)
+        .unwrap_or_else(|| panic!("no column {name}"));
+    lines
+        .map(|r| r.split(',').nth(i).unwrap_or("").to_owned())
+        .collect()
+}
+
 fn strip(v: &mut Value) {
     if let Value::Object(m) = v {
         for k in TIMING_FIELDS {
@@ -165,15 +179,8 @@ fn assert_controlled_as(dir: &Path, controller: &str) {
     );
     assert_eq!(n("c2_failures"), 0, "{c}");
     assert_eq!(n("c2_wait_timeouts"), 0, "{c}");
-    let text = std::fs::read_to_string(dir.join("controller.csv")).expect("controller.csv");
-    let mut lines = text.lines();
-    let header = lines.next().expect("header");
-    let k = header
-        .split(',')
-        .position(|h| h == "kp")
-        .expect("kp column");
-    let gains: std::collections::BTreeSet<&str> =
-        lines.filter_map(|l| l.split(',').nth(k)).collect();
+    let gains: std::collections::BTreeSet<String> =
+        controller_column(dir, "kp").into_iter().collect();
     assert!(
         gains.len() > 10,
         "C2's schedules never changed the hand's stiffness: {gains:?}"
@@ -208,19 +215,10 @@ fn lockstep_c1_with_realistic_sensing_reruns_byte_for_byte() {
     let sim = summary(&a.join("sim.json"));
     assert_eq!(sim["sensing"], "realistic", "{sim}");
     let truth = run(&out, "truth", "c1", "2.5");
-    let col = |dir: &Path| -> Vec<String> {
-        let text = std::fs::read_to_string(dir.join("controller.csv")).expect("controller.csv");
-        let mut lines = text.lines();
-        let header = lines.next().expect("header");
-        let i = header
-            .split(',')
-            .position(|c| c == "f_meas_x")
-            .expect("f_meas_x");
-        lines
-            .map(|r| r.split(',').nth(i).unwrap_or("").to_owned())
-            .collect()
-    };
-    let (measured, exact) = (col(&a), col(&truth));
+    let (measured, exact) = (
+        controller_column(&a, "f_meas_x"),
+        controller_column(&truth, "f_meas_x"),
+    );
     let differ = measured.iter().zip(&exact).filter(|(m, e)| m != e).count();
     assert!(
         differ * 10 > measured.len() * 9,
