@@ -137,6 +137,7 @@ fn contact_points_come_from_a_box_or_spheres_and_a_mesh_is_refused() {
     let spec = |contacts: ContactSpec| FootSpec {
         frame: "sole".into(),
         link: Some("foot".into()),
+        origin: None,
         contacts,
     };
     // A 0.2 × 0.1 × 0.02 box 3 cm below the ankle, shifted 2 cm forward: its bottom corners,
@@ -152,6 +153,28 @@ fn contact_points_come_from_a_box_or_spheres_and_a_mesh_is_refused() {
             "{q:?} vs {w:?}"
         );
     }
+    // The same, the made sole frame turned by `origin` (yaw 90°: its x along the link's y):
+    // the same four points on the ground, the sole's axes the turned ones.
+    let turned = FootSpec {
+        origin: Some(upc::robot::description::SoleOrigin {
+            xyz: [0.0; 3],
+            rpy: [0.0, 0.0, std::f64::consts::FRAC_PI_2],
+        }),
+        ..spec(ContactSpec::Keyword("collision".into()))
+    };
+    let q = contact_points(&boxed, &turned).expect("turned box");
+    for w in want {
+        let w = Vector3::new(w[0], w[1], -0.54);
+        assert!(
+            q.iter().any(|q| (q - w).norm() < 1e-12),
+            "{w:?} not in {q:?}"
+        );
+    }
+    // Front-left first in the turned frame: the corner furthest along the link's +y, then +x.
+    assert!(
+        (q[0] - Vector3::new(-0.08, 0.05, -0.54)).norm() < 1e-12,
+        "{q:?}"
+    );
     // Four spheres of radius 1 cm: their lowest points.
     let spheres: String = [[-0.05, 0.025], [-0.05, -0.025], [0.12, 0.03], [0.12, -0.03]]
         .iter()
@@ -530,4 +553,81 @@ fn placeholder_limits_and_inertias_are_flagged() {
     assert!(w[1].contains("link 'l1' has a unit inertia"), "{w:?}");
     let r = Robot::embedded_default().expect("icub_like");
     assert!(placeholder_warnings(&r.model).is_empty());
+}
+
+/// A sole made on a link whose z axis points forward (as some ankle links' do): the error
+/// names the rotation that brings the frame's z up, and with it as the sole's `origin` the
+/// robot is the iCub-like again (the same mass, support, CoM height and hand).
+#[test]
+fn a_made_sole_frame_on_a_tilted_link_is_turned_by_its_origin() {
+    let dir = std::env::temp_dir().join(format!("upc-tilted-sole-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let urdf = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/icub_like/icub_like.urdf"),
+    )
+    .expect("urdf");
+    // A link on the left foot whose z axis points forward and x down (pitch +90°).
+    let tilted = r#"  <joint name="l_foot_z_forward_fixed" type="fixed">
+    <origin xyz="0 0 0" rpy="0 1.5707963267948966 0"/>
+    <parent link="l_foot"/>
+    <child link="l_foot_z_forward"/>
+  </joint>
+  <link name="l_foot_z_forward"/>
+</robot>"#;
+    let urdf = urdf.replacen("</robot>", tilted, 1);
+    std::fs::write(dir.join("tilted.urdf"), urdf).expect("urdf");
+    // The made sole in the tilted link's frame: at l_sole's place, (0.02, 0, −0.06) in
+    // l_foot's frame, i.e. (0.06, 0, 0.02) in the tilted one; the corners as l_sole's.
+    let write = |origin: &str| {
+        let path = dir.join("tilted.toml");
+        std::fs::write(
+            &path,
+            format!(
+                "extends = \"icub_like\"\nname = \"tilted\"\n\n[urdf]\npath = \"tilted.urdf\"\n\n\
+                 [feet.left]\nframe = \"l_made_sole\"\nlink = \"l_foot_z_forward\"\n{origin}\
+                 contacts = [[0.07, 0.0325, 0.0], [0.07, -0.0325, 0.0], [-0.07, 0.0325, 0.0], \
+                 [-0.07, -0.0325, 0.0]]\n"
+            ),
+        )
+        .expect("description");
+        Robot::load(path.to_str().expect("utf-8"))
+    };
+    let err = match write("origin = { xyz = [0.06, 0.0, 0.02] }\n") {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("a sole frame with z forward was accepted"),
+    };
+    eprintln!("{err}");
+    for part in [
+        "l_made_sole",
+        "90.0°",
+        "[feet.left] origin = { rpy = [",
+        "-1.5708",
+    ] {
+        assert!(err.contains(part), "{part}: {err}");
+    }
+    assert!(!err.contains("adjust [home]"), "{err}");
+    let r = write("origin = { xyz = [0.06, 0.0, 0.02], rpy = [0.0, -1.5707963267948966, 0.0] }\n")
+        .expect("the turned sole frame");
+    let d0 = Robot::embedded_default().expect("icub_like").derived;
+    let d = r.derived;
+    assert!((d.mass - d0.mass).abs() < 1e-12);
+    assert!(
+        (d.com_height - d0.com_height).abs() < 1e-9,
+        "{} {}",
+        d.com_height,
+        d0.com_height
+    );
+    assert!((d.hand_position - d0.hand_position).norm() < 1e-9);
+    for a in 0..2 {
+        for b in 0..2 {
+            assert!(
+                (d.support[a][b] - d0.support[a][b]).abs() < 1e-9,
+                "{:?}",
+                d.support
+            );
+        }
+    }
+    // acos near 1 turns rounding into ~1e-8 rad.
+    assert!(d.sole_tilt < 1e-6, "{}", d.sole_tilt);
+    let _ = std::fs::remove_dir_all(&dir);
 }

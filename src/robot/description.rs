@@ -98,7 +98,23 @@ pub struct FootSpec {
     /// contacts come from this link's collision geometry.
     #[serde(default)]
     pub link: Option<String>,
+    /// Where a made sole frame sits on `link` (the link's axes and origin when absent): its
+    /// placement in the link's frame, for a link whose axes are not the sole's (z out of the
+    /// sole, x toward the toes). A sole made from collision geometry sits at its contact
+    /// points' centroid: only `rpy` applies there.
+    #[serde(default)]
+    pub origin: Option<SoleOrigin>,
     pub contacts: ContactSpec,
+}
+
+/// A made sole frame's placement in its link's frame, as a URDF joint's `<origin>`.
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SoleOrigin {
+    #[serde(default)]
+    pub xyz: [f64; 3],
+    #[serde(default)]
+    pub rpy: [f64; 3],
 }
 
 /// The four contact points of a sole.

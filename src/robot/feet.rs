@@ -114,6 +114,22 @@ pub fn attach(
 ) -> Result<[String; 4], RobotError> {
     let names = CORNERS.map(|c| format!("{}_{c}", spec.frame));
     let sole = on_body(model, &spec.frame);
+    let origin = spec.origin.unwrap_or_default();
+    if spec.origin.is_some() && sole.is_some() {
+        return Err(RobotError::Feet(format!(
+            "`origin` places a sole frame upc makes, but the URDF has `{}`: drop `origin`, or \
+             name a new frame",
+            spec.frame
+        )));
+    }
+    if !origin.xyz.iter().chain(&origin.rpy).all(|x| x.is_finite()) {
+        return Err(RobotError::Feet(format!(
+            "sole `{}`: origin is not finite",
+            spec.frame
+        )));
+    }
+    // The made sole frame in its link's frame.
+    let made = SE3::from_xyz_rpy(origin.xyz, origin.rpy);
     let points: Vec<Vector3<f64>> = match &spec.contacts {
         ContactSpec::Keyword(k) if k == "frames" => {
             if sole.is_none() {
@@ -148,10 +164,20 @@ pub fn attach(
                     lowest_four(&pts, &radii, &to_sole, link)?
                 }
                 None => {
-                    // A new sole frame at the contact points' centroid, axes of the link.
-                    let p = lowest_four(&pts, &radii, &SE3::identity(), link)?;
+                    // A new sole frame at the contact points' centroid, axes of the link turned
+                    // by `origin.rpy`.
+                    if origin.xyz != [0.0; 3] {
+                        return Err(RobotError::Feet(format!(
+                            "sole `{}`: a sole made from collision geometry sits at its contact \
+                             points' centroid: give `origin` an rpy only",
+                            spec.frame
+                        )));
+                    }
+                    let p = lowest_four(&pts, &radii, &made.inverse(), link)?;
                     let c = p.iter().sum::<Vector3<f64>>() / 4.0;
-                    let sole_in_body = link_in_body.compose(&SE3::new(Matrix3::identity(), c));
+                    let sole_in_body = link_in_body
+                        .compose(&made)
+                        .compose(&SE3::new(Matrix3::identity(), c));
                     model.add_frame(spec.frame.clone(), body_joint, sole_in_body)?;
                     p.iter().map(|x| x - c).collect()
                 }
@@ -179,7 +205,7 @@ pub fn attach(
                 })?;
                 let (joint, at) = on_body(model, link)
                     .ok_or_else(|| RobotError::Feet(format!("no link `{link}` in the model")))?;
-                model.add_frame(spec.frame.clone(), joint, at)?;
+                model.add_frame(spec.frame.clone(), joint, at.compose(&made))?;
             }
             p.iter().map(|x| Vector3::from(*x)).collect()
         }

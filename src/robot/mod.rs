@@ -508,13 +508,39 @@ fn derive(
         zmax = zmax.max(p.z);
     }
     let mut tilt: f64 = 0.0;
+    let mut worst = (0, Matrix3::identity());
     let mut centres = [Vector3::zeros(); 2];
     for (k, s) in soles.iter().enumerate() {
         let m = data.o_m_f[model.frame_id(s)?];
-        tilt = tilt.max((m.rot * Vector3::z()).z.clamp(-1.0, 1.0).acos());
+        let t = (m.rot * Vector3::z()).z.clamp(-1.0, 1.0).acos();
+        if t > tilt {
+            (tilt, worst) = (t, (k, m.rot));
+        }
         for c in &contacts[4 * k..4 * k + 4] {
             centres[k] += data.o_m_f[model.frame_id(c)?].trans / 4.0;
         }
+    }
+    // A sole frame far from level is a frame whose axes are not the sole's (a made frame takes
+    // its link's axes, and an ankle link's z may point forward): no posture fixes that.
+    if tilt > 45f64.to_radians() {
+        let (k, rot) = worst;
+        let side = if k == 0 { "left" } else { "right" };
+        // The rotation about the sole frame's own axes that brings its z up: from z to the
+        // world's vertical as seen in that frame.
+        let up = rot.transpose() * Vector3::z();
+        let fix = nalgebra::Rotation3::rotation_between(&Vector3::z(), &up).unwrap_or_else(|| {
+            nalgebra::Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+        });
+        let (r, p, y) = fix.euler_angles();
+        return Err(home_err(format!(
+            "the sole frame `{}` points its z axis {:.1}° away from the vertical at home: its \
+             axes are not the sole's (z out of the sole, x toward the toes), which no [home] \
+             posture changes. A sole frame upc makes takes its link's axes: turn it with \
+             [feet.{side}] origin = {{ rpy = [{r:.4}, {p:.4}, {y:.4}] }} (that brings z up; \
+             check that x then points to the toes), or name a sole frame of the URDF",
+            soles[k],
+            tilt.to_degrees()
+        )));
     }
     // A robot that does not stand flat on its eight points at home cannot be balanced by a
     // controller that assumes it: refuse it with the figures.
