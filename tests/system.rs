@@ -244,3 +244,55 @@ fn a_failed_start_leaves_no_participant_running() {
     assert!(left.is_empty(), "participants left running: {left:?}");
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// `--forecast-error-shape` reaches the controller through the built-in forecaster: a forecast
+/// rotated 30° about z arrives as such (the forecast as received, `f_raw`, points 30° off the
+/// push); a shape the scenario cannot take, or an unknown one, is refused before any process
+/// starts.
+#[test]
+fn a_forecast_of_the_wrong_shape_reaches_the_controller_as_asked() {
+    let out = std::env::temp_dir().join(format!("upc-system-shape-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let status = upc()
+        .args(["run", "--scenario", "single_impact", "--controller", "c1"])
+        .args(["--duration", "2", "--quiet", "--name", "rotated"])
+        .args(["--forecast-error-shape", "rotated:30", "--out"])
+        .arg(&out)
+        .status()
+        .expect("upc runs");
+    assert!(status.success(), "upc run failed: {status}");
+    let text = std::fs::read_to_string(out.join("rotated/c1/controller.csv")).expect("csv");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let col = |n: &str| header.iter().position(|h| *h == n).expect(n);
+    let (x, y) = (col("f_raw_x"), col("f_raw_y"));
+    let peak = lines
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .map(|c| [c[x], c[y]].map(|v| v.parse::<f64>().expect("number")))
+        .max_by(|a, b| a[0].hypot(a[1]).total_cmp(&b[0].hypot(b[1])))
+        .expect("rows");
+    let scenario = upc::scenario::Scenario::load("single_impact").expect("scenario");
+    let push = (0..4000)
+        .map(|k| scenario.force.at(k as f64 * 1e-3))
+        .max_by(|a, b| a[0].hypot(a[1]).total_cmp(&b[0].hypot(b[1])))
+        .expect("push");
+    let turned = (peak[1].atan2(peak[0]) - push[1].atan2(push[0])).to_degrees();
+    let turned = (turned + 540.0) % 360.0 - 180.0;
+    assert!(
+        (turned - 30.0).abs() < 0.5,
+        "turned {turned}°: {peak:?} vs {push:?}"
+    );
+    for (shape, why) in [
+        ("wobbly", "unknown forecast shape"),
+        ("step:2", "takes no value"),
+    ] {
+        let o = upc()
+            .args(["run", "--quiet", "--forecast-error-shape", shape])
+            .output()
+            .expect("upc runs");
+        assert!(!o.status.success(), "{shape}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(why), "{shape}: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -41,6 +41,12 @@ impl ArgValue for f64 {
     }
 }
 
+impl ArgValue for upc::forecast::ForecastShape {
+    fn word(&self) -> OsString {
+        self.to_string().into()
+    }
+}
+
 /// A `clap::ValueEnum` value as its command-line name.
 pub struct Choice<'a, T>(pub &'a T);
 
@@ -218,6 +224,7 @@ mod tests {
             prefix: "p".into(),
             error_scale: 1.5,
             error_shift: -0.1,
+            error_shape: upc::forecast::ForecastShape::Decaying(0.3),
         };
         let Command::Forecast(back) = parse(Argv::of("forecast", &forecast)) else {
             panic!("not forecast")
@@ -253,6 +260,7 @@ mod tests {
             quiet: true,
             forecast_error_scale: 0.5,
             forecast_error_shift: -0.25,
+            forecast_error_shape: upc::forecast::ForecastShape::Truncated(0.5),
             config: config(),
             sim_sets: vec!["sim.push=\"none\"".into()],
             plant: PlantChoice::Mujoco,

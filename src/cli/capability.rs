@@ -406,6 +406,7 @@ pub(super) fn full_case(
         quiet: true,
         forecast_error_scale: f.scale,
         forecast_error_shift: f.shift,
+        forecast_error_shape: upc::forecast::ForecastShape::Exact,
         config: ConfigArgs {
             configs: case.config.configs.clone(),
             sets: case

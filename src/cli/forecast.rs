@@ -1,7 +1,7 @@
 //! `upc forecast`: publish a scenario's hand force forecast.
 
 use upc::channels::{Bus, DEFAULT_PREFIX};
-use upc::forecast::{ForecastError, ForecastSettings, Source, run};
+use upc::forecast::{ForecastError, ForecastSettings, ForecastShape, Source, run};
 use upc::scenario::Scenario;
 use upc::shutdown::stop_flag;
 
@@ -36,6 +36,11 @@ pub struct ForecastArgs {
     /// Forecast error: publish the force this many seconds late (negative: early).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub error_shift: f64,
+    /// Forecast error: the push's shape wrong on purpose: exact, truncated:F (only the first
+    /// fraction F of each push), decaying:T (its peak from the onset, decaying with time
+    /// constant T s), step, stretched:K (K times as long), rotated:D (D degrees about z).
+    #[arg(long, default_value = "exact", allow_hyphen_values = true)]
+    pub error_shape: ForecastShape,
 }
 
 impl ToArgv for ForecastArgs {
@@ -49,9 +54,10 @@ impl ToArgv for ForecastArgs {
             prefix,
             error_scale,
             error_shift,
+            error_shape,
         } = self;
         fields!(w; opt scenario, val dt, val window, val period, opt until, val prefix,
-                val error_scale, val error_shift);
+                val error_scale, val error_shift, val error_shape);
     }
 }
 
@@ -77,13 +83,19 @@ pub fn run_cli(args: ForecastArgs) -> CliResult {
         error: ForecastError {
             scale: args.error_scale,
             shift: args.error_shift,
+            shape: args.error_shape,
         },
     };
+    // A shape the scenario cannot take is refused now, not window by window.
+    if let Some(s) = &scenario {
+        args.error_shape.apply(&s.force)?;
+    }
     if settings.error != ForecastError::NONE {
         tracing::warn!(
-            "forecast error on purpose: forces × {}, {} s late",
+            "forecast error on purpose: forces × {}, {} s late, shape {}",
             args.error_scale,
-            args.error_shift
+            args.error_shift,
+            args.error_shape
         );
     }
     let bus = Bus::open(&args.prefix, "forecaster")?;

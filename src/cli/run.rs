@@ -84,6 +84,10 @@ pub struct RunArgs {
     /// A wrong forecast on purpose: the force forecast this many seconds late (negative: early).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub forecast_error_shift: f64,
+    /// A wrong forecast on purpose: the push's shape (`upc forecast --error-shape`: exact,
+    /// truncated:F, decaying:T, step, stretched:K, rotated:D).
+    #[arg(long, default_value = "exact", allow_hyphen_values = true)]
+    pub forecast_error_shape: upc::forecast::ForecastShape,
     /// Controller config (files and --set), passed to `upc controller`.
     #[command(flatten)]
     pub config: ConfigArgs,
@@ -120,6 +124,7 @@ impl ToArgv for RunArgs {
             quiet,
             forecast_error_scale,
             forecast_error_shift,
+            forecast_error_shape,
             config,
             sim_sets,
             plant,
@@ -129,7 +134,7 @@ impl ToArgv for RunArgs {
         fields!(w; val scenario, choice controller, switch realtime, opt duration, opt name,
                 val out, opt forecaster, switch forecaster_over_zenoh, switch no_forecaster,
                 switch viewer, opt connect, switch quiet, val forecast_error_scale,
-                val forecast_error_shift, many sim_sets, choice plant, opt_choice sensing);
+                val forecast_error_shift, val forecast_error_shape, many sim_sets, choice plant, opt_choice sensing);
         w.nested(config);
         w.nested(robot);
     }
@@ -163,6 +168,7 @@ pub fn run(args: RunArgs) -> CliResult {
     // Fail early on a bad config, before starting processes.
     args.config.load(&robot, Some(&scenario), &[])?;
     upc::sim::SimConfig::load(&[], &args.sim_sets)?;
+    args.forecast_error_shape.apply(&scenario.force)?;
     let duration = args.duration.unwrap_or(scenario.duration);
     let name = args.name.clone().unwrap_or_else(|| {
         let secs = std::time::SystemTime::now()
@@ -266,7 +272,11 @@ fn write_summary(
         "plant": args.plant.name(),
         "robot_mass": robot.derived.mass,
         "force_scale": scenario.force_scale,
-        "forecast_error": { "scale": args.forecast_error_scale, "shift": args.forecast_error_shift },
+        "forecast_error": {
+            "scale": args.forecast_error_scale,
+            "shift": args.forecast_error_shift,
+            "shape": args.forecast_error_shape.to_string(),
+        },
         "scenario_source": args.scenario,
         "config_files": args.config.configs,
         "config_sets": args.config.sets,
@@ -479,6 +489,7 @@ impl Launch<'_> {
                     prefix: self.prefix.clone(),
                     error_scale: args.forecast_error_scale,
                     error_shift: args.forecast_error_shift,
+                    error_shape: args.forecast_error_shape,
                 };
                 let mut c = Command::new(self.exe);
                 c.args(Argv::of("forecast", &forecast));

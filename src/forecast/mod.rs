@@ -6,6 +6,10 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
+mod shape;
+
+pub use shape::ForecastShape;
+
 use crate::channels::{Bus, ChannelError, ForecastMsg, MAX_FORECAST, ServiceKind, StateMsg};
 use crate::scenario::{ForceProfile, Scenario};
 
@@ -26,11 +30,13 @@ pub struct ForecastSettings {
 }
 
 /// How the published forecast departs from the scenario: the force forecast for time t is
-/// `scale × F(t − shift)` (a push forecast `shift` s late, `scale` times as strong).
+/// `scale × G(t − shift)` (a push forecast `shift` s late, `scale` times as strong), where G is
+/// the scenario's force F given the wrong `shape` ([`ForecastShape`]; G = F when exact).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ForecastError {
     pub scale: f64,
     pub shift: f64,
+    pub shape: ForecastShape,
 }
 
 impl ForecastError {
@@ -38,6 +44,7 @@ impl ForecastError {
     pub const NONE: ForecastError = ForecastError {
         scale: 1.0,
         shift: 0.0,
+        shape: ForecastShape::Exact,
     };
 }
 
@@ -62,7 +69,8 @@ pub fn window_covers(t0: f64, period: f64, t: f64) -> bool {
 }
 
 /// Fill `msg` with the window starting at plant time `t0` of `profile` played from plant time
-/// `scenario_start` (infinite: not started, all zeros), with `s.error` applied.
+/// `scenario_start` (infinite: not started, all zeros), with `s.error`'s scale and shift
+/// applied (its shape is the caller's, applied once to `profile`: [`ForecastShape::apply`]).
 pub fn fill_window(
     msg: &mut ForecastMsg,
     profile: &ForceProfile,
@@ -100,9 +108,10 @@ pub enum Source {
     FollowPlant,
 }
 
-/// The scenario being forecast.
+/// The scenario being forecast, and its force as forecast (its shape error applied).
 struct Current {
     scenario: Scenario,
+    force: ForceProfile,
     hash: u64,
 }
 
@@ -164,11 +173,18 @@ pub fn run(
                 Source::Fixed(sc) => Some(sc.clone()),
                 Source::FollowPlant => follow(&st),
             };
-            current = chosen.map(|sc| {
+            current = chosen.and_then(|sc| {
                 let scenario = sc.with_force_scale(scale);
-                Current {
-                    hash: scenario.content_hash(),
-                    scenario,
+                match s.error.shape.apply(&scenario.force) {
+                    Ok(force) => Some(Current {
+                        hash: scenario.content_hash(),
+                        force,
+                        scenario,
+                    }),
+                    Err(e) => {
+                        tracing::error!("`{}`: {e}; publishing nothing", scenario.name);
+                        None
+                    }
                 }
             });
             if let Some(cur) = &current
@@ -200,7 +216,7 @@ pub fn run(
                 f64::INFINITY
             };
             publisher.send_with(|m| {
-                fill_window(m, &cur.scenario.force, seq, t0, offset, s);
+                fill_window(m, &cur.force, seq, t0, offset, s);
                 m.scenario_hash = hash;
             })?;
             notifier.notify()?;
@@ -259,6 +275,7 @@ mod tests {
             error: ForecastError {
                 scale: 1.5,
                 shift: 0.1,
+                shape: ForecastShape::Exact,
             },
             ..exact
         };
