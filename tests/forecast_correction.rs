@@ -307,6 +307,8 @@ fn the_robustness_sweep_writes_its_map() {
         "--shifts",
         "0",
         "--no-phantom",
+        "--shapes",
+        "rotated:30",
         "--max",
         "1.0=80",
         "--tol",
@@ -321,7 +323,7 @@ fn the_robustness_sweep_writes_its_map() {
     let rows = j["rows"].as_array().expect("rows");
     let survived = |c: &str| {
         rows.iter()
-            .find(|r| r["controller"] == c)
+            .find(|r| r["controller"] == c && r["shape"] == "exact")
             .and_then(|r| r["survived"].as_f64())
             .unwrap_or_else(|| panic!("no {c} in {j}"))
     };
@@ -332,7 +334,7 @@ fn the_robustness_sweep_writes_its_map() {
     assert!(survived("C1") >= 40.0, "{j}");
     assert!(survived("C1") >= survived("C0") + 10.0, "{j}");
     // `--monotone 10`: each cell's grid ran below its bisection (the bisection's case at
-    // least, plus one per 10 N below its result), and never reads above it.
+    // least, plus one per 10 N below its result), and never reads above it (the shape cell too).
     for r in rows {
         let num = |k: &str| r[k].as_f64().unwrap_or_else(|| panic!("no {k} in {r}"));
         let (survived, monotone) = (num("survived"), num("monotone"));
@@ -344,8 +346,17 @@ fn the_robustness_sweep_writes_its_map() {
         csv.lines().next().unwrap_or("").ends_with(",monotone"),
         "{csv}"
     );
+    // The shape cell (`--shapes`): its own row, off the κ × τ map, in a table of its own.
+    let rotated: Vec<&Value> = rows.iter().filter(|r| r["shape"] == "rotated:30").collect();
+    assert_eq!(rotated.len(), 1, "{j}");
+    assert_eq!(rotated[0]["controller"], "C1", "{j}");
+    assert!(
+        rotated[0]["survived"].as_f64().is_some_and(|s| s > 0.0),
+        "{j}"
+    );
     let md = std::fs::read_to_string(out.join("robustness.md")).expect("md");
     assert!(md.contains("| κ \\ τ (ms) |"), "{md}");
+    assert!(md.contains("| `rotated:30` |"), "{md}");
     assert!(out.join("figures/robustness_c1_1000ms.svg").exists());
 }
 

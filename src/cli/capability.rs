@@ -324,6 +324,8 @@ pub(super) struct ForecastCase {
     pub shift: f64,
     /// The plant does not push at all (`sim.push = "none"`): the forecast is a phantom.
     pub phantom: bool,
+    /// The forecast's shape (`upc run --forecast-error-shape`; exact on the κ × τ map).
+    pub shape: upc::forecast::ForecastShape,
 }
 
 impl ForecastCase {
@@ -331,6 +333,7 @@ impl ForecastCase {
         scale: 1.0,
         shift: 0.0,
         phantom: false,
+        shape: upc::forecast::ForecastShape::Exact,
     };
 }
 
@@ -365,13 +368,17 @@ pub(super) fn full_case(
 ) -> Result<CaseResult, BoxError> {
     let f = case.forecast;
     let name = format!(
-        "{}_{}_{:.0}ms_{amplitude:.2}N_k{}_s{:.0}ms{}",
+        "{}_{}_{:.0}ms_{amplitude:.2}N_k{}_s{:.0}ms{}{}",
         case.variant.label().replace(['+', ' '], "_"),
         case.direction.label(),
         case.duration * 1e3,
         f.scale,
         f.shift * 1e3,
-        if f.phantom { "_phantom" } else { "" }
+        if f.phantom { "_phantom" } else { "" },
+        match f.shape {
+            upc::forecast::ForecastShape::Exact => String::new(),
+            s => format!("_{}", s.to_string().replace([':', '.', '-'], "_")),
+        }
     );
     let dir = out.join("cases");
     let scenario = dir.join(format!("{name}.toml"));
@@ -406,7 +413,7 @@ pub(super) fn full_case(
         quiet: true,
         forecast_error_scale: f.scale,
         forecast_error_shift: f.shift,
-        forecast_error_shape: upc::forecast::ForecastShape::Exact,
+        forecast_error_shape: f.shape,
         config: ConfigArgs {
             configs: case.config.configs.clone(),
             sets: case

@@ -1,9 +1,10 @@
 //! `upc robustness`: how much forecast error each controller survives. For each controller and
 //! impact duration, the largest single impact survived (`upc capability`'s bisection, full
 //! simulation) over a grid of forecast errors — amplitude factor κ (the forecast is κ × the
-//! force) and shift τ (the forecast τ late) — and the largest phantom survived: a forecast
-//! impact the plant never plays, up to twice C1's capability. Writes `robustness.md` (a table and
-//! a heat map per controller and duration), `.csv` and `.json`.
+//! force) and shift τ (the forecast τ late) — the largest phantom survived: a forecast
+//! impact the plant never plays, up to twice C1's capability, and with `--shapes` forecasts of
+//! the wrong shape (`upc run --forecast-error-shape`). Writes `robustness.md` (a table and a heat
+//! map per controller and duration), `.csv` and `.json`.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -11,6 +12,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use upc::capability::{Capability, Criteria, Direction, Variant, search};
+use upc::forecast::ForecastShape;
 
 use super::CliResult;
 use super::capability::{BoxError, ForecastCase, FullCase, full_case, runs_bar};
@@ -43,6 +45,10 @@ pub struct RobustnessArgs {
     /// Skip the phantom forecasts.
     #[arg(long)]
     pub no_phantom: bool,
+    /// Forecasts of the wrong shape, each a cell of its own at κ = 1, τ = 0 (`upc run
+    /// --forecast-error-shape`), e.g. truncated:0.5,decaying:0.3,step,stretched:2,rotated:30.
+    #[arg(long, value_delimiter = ',')]
+    pub shapes: Vec<ForecastShape>,
     /// Upper bound of the search (N) for each duration, as DURATION=N (default 2.5 × the
     /// iCub-like's exact C1 capability: 0.1=700, 0.3=160, 1=100; others 300).
     #[arg(long, value_delimiter = ',')]
@@ -98,6 +104,8 @@ struct Row {
     scale: f64,
     shift: f64,
     phantom: bool,
+    /// The forecast's shape, as `--forecast-error-shape` spells it (`exact` on the κ × τ map).
+    shape: String,
     /// The search's upper bound (N).
     max: f64,
     #[serde(flatten)]
@@ -190,7 +198,7 @@ pub fn run(args: RobustnessArgs) -> CliResult {
                         forecast: ForecastCase {
                             scale,
                             shift,
-                            phantom: false,
+                            ..ForecastCase::EXACT
                         },
                     });
                 }
@@ -204,11 +212,23 @@ pub fn run(args: RobustnessArgs) -> CliResult {
             "robustness: no phantoms on the MuJoCo plant (it pushes through the door only); run them on upc's plant"
         );
     }
-    let phantoms = if no_phantom {
-        0
-    } else {
-        args.durations.len() * variants.iter().filter(|v| v.uses_forecast()).count()
-    };
+    let forecasting = args.durations.len() * variants.iter().filter(|v| v.uses_forecast()).count();
+    let phantoms = if no_phantom { 0 } else { forecasting };
+    // The shape cells: each forecasting controller and duration, each shape, κ = 1 and τ = 0.
+    for &duration in &args.durations {
+        for &variant in variants.iter().filter(|v| v.uses_forecast()) {
+            for &shape in &args.shapes {
+                cells.push(Cell {
+                    variant,
+                    duration,
+                    forecast: ForecastCase {
+                        shape,
+                        ..ForecastCase::EXACT
+                    },
+                });
+            }
+        }
+    }
     let per_case = 1
         + ((args.max_bound() / args.tol).log2().ceil().max(0.0) as u64)
         + args
@@ -266,6 +286,7 @@ pub fn run(args: RobustnessArgs) -> CliResult {
                                     scale: cell.forecast.scale,
                                     shift: cell.forecast.shift,
                                     phantom: cell.forecast.phantom,
+                                    shape: cell.forecast.shape.to_string(),
                                     max,
                                     capability: c,
                                     at_max,
@@ -307,7 +328,7 @@ pub fn run(args: RobustnessArgs) -> CliResult {
                         && r.duration == d
                         && r.scale == 1.0
                         && r.shift == 0.0
-                        && !r.phantom
+                        && on_map(r)
                 })
                 .map(|r| r.capability.survived)
         };
@@ -322,9 +343,8 @@ pub fn run(args: RobustnessArgs) -> CliResult {
                     variant,
                     duration,
                     forecast: ForecastCase {
-                        scale: 1.0,
-                        shift: 0.0,
                         phantom: true,
+                        ..ForecastCase::EXACT
                     },
                 };
                 ph.push((cell, (2.0 * cap).max(args.tol), phantom_criteria));
@@ -339,6 +359,7 @@ pub fn run(args: RobustnessArgs) -> CliResult {
             (r.duration * 1e6) as i64,
             variants.iter().position(|v| v.label() == r.controller),
             r.phantom,
+            r.shape.clone(),
             (r.scale * 1e6) as i64,
             (r.shift * 1e6) as i64,
         )
@@ -380,17 +401,19 @@ fn write_outputs(
             "rows": rows,
         }))?,
     )?;
-    let mut csv =
-        String::from("controller,duration,scale,shift,phantom,max,survived,failed,runs,monotone\n");
+    let mut csv = String::from(
+        "controller,duration,scale,shift,phantom,shape,max,survived,failed,runs,monotone\n",
+    );
     for r in rows {
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{:.2},{},{},{}",
+            "{},{},{},{},{},{},{},{:.2},{},{},{}",
             r.controller,
             r.duration,
             r.scale,
             r.shift,
             r.phantom,
+            r.shape,
             r.max,
             r.capability.survived,
             r.capability
@@ -446,7 +469,7 @@ fn write_outputs(
         let _ = writeln!(md, "## {d} s impact\n");
         let c0 = |label: &str| {
             rows.iter()
-                .find(|r| r.controller == label && r.duration == d && !r.phantom)
+                .find(|r| r.controller == label && r.duration == d && on_map(r))
                 .map(|r| r.capability)
         };
         for &v in variants {
@@ -479,7 +502,7 @@ fn write_outputs(
                         .find(|r| {
                             r.controller == v.label()
                                 && r.duration == d
-                                && !r.phantom
+                                && on_map(r)
                                 && r.scale == k
                                 && r.shift == s
                         })
@@ -530,14 +553,74 @@ fn write_outputs(
             )?;
             let _ = writeln!(md, "\n![{}](figures/{name}.svg)\n", v.label());
         }
+        shape_table(&mut md, args, variants, rows, d);
     }
     std::fs::write(out.join("robustness.md"), md)?;
     Ok(())
 }
 
+/// A row of the κ × τ map (not a phantom, not a shape error).
+fn on_map(r: &Row) -> bool {
+    !r.phantom && r.shape == "exact"
+}
+
+/// The shape errors of duration `d`: each shape × each forecasting controller, beside the same
+/// controller with an exact forecast and with none (κ = 0), when the sweep has those cells.
+fn shape_table(md: &mut String, args: &RobustnessArgs, variants: &[Variant], rows: &[Row], d: f64) {
+    if args.shapes.is_empty() {
+        return;
+    }
+    let forecasting: Vec<Variant> = variants
+        .iter()
+        .copied()
+        .filter(|v| v.uses_forecast())
+        .collect();
+    let cell = |v: Variant, pick: &dyn Fn(&Row) -> bool| {
+        rows.iter()
+            .find(|r| r.controller == v.label() && r.duration == d && pick(r))
+            .map_or("–".into(), |r| Capability::text(&r.capability))
+    };
+    let _ = writeln!(
+        md,
+        "**Forecasts of the wrong shape** (κ = 1, τ = 0; `upc run --forecast-error-shape`)\n"
+    );
+    *md += "| forecast |";
+    for v in &forecasting {
+        let _ = write!(md, " {} |", v.label());
+    }
+    *md += "\n|---|";
+    *md += &"---|".repeat(forecasting.len());
+    *md += "\n";
+    let exact = |r: &Row| on_map(r) && r.scale == 1.0 && r.shift == 0.0;
+    let none = |r: &Row| on_map(r) && r.scale == 0.0 && r.shift == 0.0;
+    for (label, pick) in [
+        ("exact".to_string(), &exact as &dyn Fn(&Row) -> bool),
+        ("none (κ = 0)".to_string(), &none),
+    ] {
+        let _ = write!(md, "| {label} |");
+        for &v in &forecasting {
+            let _ = write!(md, " {} |", cell(v, pick));
+        }
+        *md += "\n";
+    }
+    for s in &args.shapes {
+        let name = s.to_string();
+        let _ = write!(md, "| `{name}` |");
+        for &v in &forecasting {
+            let _ = write!(
+                md,
+                " {} |",
+                cell(v, &|r: &Row| !r.phantom && r.shape == name)
+            );
+        }
+        *md += "\n";
+    }
+    *md += "\n";
+}
+
 fn max_or(rows: &[Row], d: f64) -> f64 {
     rows.iter()
-        .filter(|r| r.duration == d && !r.phantom)
+        .filter(|r| r.duration == d && on_map(r))
         .map(|r| r.max)
         .fold(1.0, f64::max)
 }
