@@ -416,10 +416,7 @@ fn a_description_whose_joints_move_no_mass_names_them_and_both_fixes() {
 fn a_non_physical_inertia_is_refused_with_the_same_message_on_both_plants() {
     let dir = std::env::temp_dir().join(format!("upc-bad-inertia-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("dir");
-    let urdf = std::fs::read_to_string(
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/icub_like/icub_like.urdf"),
-    )
-    .expect("urdf");
+    let urdf = upc::dynamics::icub_like::URDF;
     let good =
         r#"<inertia ixx="0.0145833" ixy="0" ixz="0" iyy="0.00478333" iyz="0" izz="0.0135333"/>"#;
     assert_eq!(urdf.matches(good).count(), 1, "the root link's inertia");
@@ -562,10 +559,7 @@ fn placeholder_limits_and_inertias_are_flagged() {
 fn a_made_sole_frame_on_a_tilted_link_is_turned_by_its_origin() {
     let dir = std::env::temp_dir().join(format!("upc-tilted-sole-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("dir");
-    let urdf = std::fs::read_to_string(
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/icub_like/icub_like.urdf"),
-    )
-    .expect("urdf");
+    let urdf = upc::dynamics::icub_like::URDF;
     // A link on the left foot whose z axis points forward and x down (pitch +90°).
     let tilted = r#"  <joint name="l_foot_z_forward_fixed" type="fixed">
     <origin xyz="0 0 0" rpy="0 1.5707963267948966 0"/>

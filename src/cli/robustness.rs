@@ -104,8 +104,8 @@ struct Row {
     scale: f64,
     shift: f64,
     phantom: bool,
-    /// The forecast's shape, as `--forecast-error-shape` spells it (`exact` on the κ × τ map).
-    shape: String,
+    /// The forecast's shape (exact on the κ × τ map).
+    shape: ForecastShape,
     /// The search's upper bound (N).
     max: f64,
     #[serde(flatten)]
@@ -286,7 +286,7 @@ pub fn run(args: RobustnessArgs) -> CliResult {
                                     scale: cell.forecast.scale,
                                     shift: cell.forecast.shift,
                                     phantom: cell.forecast.phantom,
-                                    shape: cell.forecast.shape.to_string(),
+                                    shape: cell.forecast.shape,
                                     max,
                                     capability: c,
                                     at_max,
@@ -359,7 +359,7 @@ pub fn run(args: RobustnessArgs) -> CliResult {
             (r.duration * 1e6) as i64,
             variants.iter().position(|v| v.label() == r.controller),
             r.phantom,
-            r.shape.clone(),
+            r.shape.to_string(),
             (r.scale * 1e6) as i64,
             (r.shift * 1e6) as i64,
         )
@@ -561,7 +561,7 @@ fn write_outputs(
 
 /// A row of the κ × τ map (not a phantom, not a shape error).
 fn on_map(r: &Row) -> bool {
-    !r.phantom && r.shape == "exact"
+    !r.phantom && r.shape == ForecastShape::Exact
 }
 
 /// The shape errors of duration `d`: each shape × each forecasting controller, beside the same
@@ -594,8 +594,8 @@ fn shape_table(md: &mut String, args: &RobustnessArgs, variants: &[Variant], row
     let exact = |r: &Row| on_map(r) && r.scale == 1.0 && r.shift == 0.0;
     let none = |r: &Row| on_map(r) && r.scale == 0.0 && r.shift == 0.0;
     for (label, pick) in [
-        ("exact".to_string(), &exact as &dyn Fn(&Row) -> bool),
-        ("none (κ = 0)".to_string(), &none),
+        ("exact", &exact as &dyn Fn(&Row) -> bool),
+        ("none (κ = 0)", &none),
     ] {
         let _ = write!(md, "| {label} |");
         for &v in &forecasting {
@@ -603,15 +603,10 @@ fn shape_table(md: &mut String, args: &RobustnessArgs, variants: &[Variant], row
         }
         *md += "\n";
     }
-    for s in &args.shapes {
-        let name = s.to_string();
-        let _ = write!(md, "| `{name}` |");
+    for &s in &args.shapes {
+        let _ = write!(md, "| `{s}` |");
         for &v in &forecasting {
-            let _ = write!(
-                md,
-                " {} |",
-                cell(v, &|r: &Row| !r.phantom && r.shape == name)
-            );
+            let _ = write!(md, " {} |", cell(v, &|r: &Row| !r.phantom && r.shape == s));
         }
         *md += "\n";
     }

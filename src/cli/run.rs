@@ -397,13 +397,8 @@ fn run_one(
         ),
     };
     entry.failure = failure_of(&entry);
-    if entry
-        .controller_summary
-        .as_ref()
-        .is_some_and(|s| s.ticks == 0)
-    {
-        entry.controller_summary = None;
-    }
+    // A run without a tick keeps no figures (its failure says so).
+    entry.controller_summary = entry.controller_summary.take().filter(|s| s.ticks > 0);
     Ok(entry)
 }
 

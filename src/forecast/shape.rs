@@ -91,6 +91,13 @@ impl fmt::Display for ForecastShape {
     }
 }
 
+/// Written as the command line spells it (`truncated:0.5`), in sweep results.
+impl serde::Serialize for ForecastShape {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
 impl ForecastShape {
     /// `profile` as forecast with this shape. Shapes other than `rotated` need the pushes, so an
     /// impact profile (a CSV profile can only be rotated).
@@ -134,13 +141,13 @@ impl ForecastShape {
                 // Where each impact's shaped forecast ends.
                 let span = |i: &Impact| match shape {
                     ForecastShape::Decaying(tc) => DECAY_SPAN * tc,
-                    _ => i.rise + i.hold + i.fall,
+                    _ => i.length(),
                 };
                 let end = impacts
                     .iter()
                     .map(|i| i.start + span(i))
                     .fold(0.0, f64::max);
-                sampled(impacts, end, |i, t| contribution(shape, i, t))
+                sampled(impacts, end, shape)
             }
         };
         Ok(out)
@@ -149,29 +156,25 @@ impl ForecastShape {
 
 /// One impact's forecast at time t under `shape` (a shape drawn sample by sample).
 fn contribution(shape: ForecastShape, i: &Impact, t: f64) -> [f64; 3] {
-    let length = i.rise + i.hold + i.fall;
     let tau = t - i.start;
     let gain = match shape {
-        ForecastShape::Truncated(frac) if tau < frac * length => {
-            let single = ForceProfile::Impacts(vec![i.clone()]);
-            return single.at(t);
-        }
+        ForecastShape::Truncated(frac) if tau < frac * i.length() => i.envelope(t),
         ForecastShape::Decaying(tc) if (0.0..DECAY_SPAN * tc).contains(&tau) => (-tau / tc).exp(),
-        ForecastShape::Step if (0.0..length).contains(&tau) => 1.0,
+        ForecastShape::Step if (0.0..i.length()).contains(&tau) => 1.0,
         _ => 0.0,
     };
     i.force.map(|f| f * gain)
 }
 
-/// The sum of each impact's shaped forecast, sampled every [`DT`] up to `end`.
-fn sampled(impacts: &[Impact], end: f64, f: impl Fn(&Impact, f64) -> [f64; 3]) -> ForceProfile {
+/// The sum of each impact's forecast under `shape`, sampled every [`DT`] up to `end`.
+fn sampled(impacts: &[Impact], end: f64, shape: ForecastShape) -> ForceProfile {
     let n = (end / DT).ceil() as usize + 2;
     let samples = (0..n)
         .map(|k| {
             let t = k as f64 * DT;
             let mut sum = [0.0; 3];
             for i in impacts {
-                let c = f(i, t);
+                let c = contribution(shape, i, t);
                 for a in 0..3 {
                     sum[a] += c[a];
                 }

@@ -204,20 +204,9 @@ impl Robot {
         let mut model = Model::from_urdf_str_locked(&urdf, BaseJoint::Floating, &locked)?;
         set_armatures(&mut model, &description, &locked)?;
         physical::check_inertias(&model, &description.name)?;
+        physical::check_inert_joints(&model, &description.name)?;
         for w in physical::placeholder_warnings(&model) {
             tracing::warn!("robot `{}`: {w}", description.name);
-        }
-        let inert = model.inert_joints();
-        if let Some(&first) = inert.first() {
-            let names: Vec<&str> = inert
-                .iter()
-                .map(|&i| model.joints[i].name.as_str())
-                .collect();
-            return Err(RobotError::InertJoints {
-                robot: description.name.clone(),
-                joints: names.join(", "),
-                first: model.joints[first].name.clone(),
-            });
         }
         let f = &description.feet;
         let left = feet::attach(&mut model, &parsed, &f.left)?;

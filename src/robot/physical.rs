@@ -1,10 +1,13 @@
-//! Physical checks of a robot's bodies, by MuJoCo's rules so that a description upc accepts runs
-//! on both plants (MuJoCo refuses these at compile time, and its message reached the user only
-//! through the simulator's log): each moving body's principal moments of inertia about its CoM
-//! satisfy the triangle inequality A + B ≥ C, which every real body does. Bodies are upc's (a
-//! joint's child link with the links fixed to it merged), as upc writes them into MuJoCo's scene.
-//! Also the values a description left at a placeholder, as warnings: nothing refuses them, but
-//! the arm's capacity, the force scaling and the torque limits are computed from them.
+//! Physical checks of a robot's bodies at load, each refused with what to change:
+//! - joints that move only massless links (M(q) singular whatever q);
+//! - a moving body whose principal moments of inertia about its CoM break the triangle
+//!   inequality A + B ≥ C, which every real body satisfies. MuJoCo refuses it too, at compile
+//!   time, and its message reached the user only through the simulator's log: the same rule
+//!   here makes a description upc accepts run on both plants. Bodies are upc's (a joint's child
+//!   link with the links fixed to it merged), as upc writes them into MuJoCo's scene.
+//!
+//! Values a description left at a placeholder are warnings: nothing refuses them, but the arm's
+//! capacity, the force scaling and the torque limits are computed from them.
 
 use nalgebra::SymmetricEigen;
 
@@ -25,11 +28,9 @@ pub fn check_inertias(model: &Model, robot: &str) -> Result<(), RobotError> {
         if j.inertia.mass <= 0.0 {
             continue;
         }
-        let mut m: Vec<f64> = SymmetricEigen::new(j.inertia.inertia_com())
+        let mut m: [f64; 3] = SymmetricEigen::new(j.inertia.inertia_com())
             .eigenvalues
-            .iter()
-            .copied()
-            .collect();
+            .into();
         m.sort_by(f64::total_cmp);
         if m[0] + m[1] < m[2] - slack(m[2]) {
             return Err(RobotError::Inertia {
@@ -40,6 +41,24 @@ pub fn check_inertias(model: &Model, robot: &str) -> Result<(), RobotError> {
         }
     }
     Ok(())
+}
+
+/// Joints that move only massless links ([`Model::inert_joints`]: M(q) singular), as an error
+/// naming them all and both fixes.
+pub fn check_inert_joints(model: &Model, robot: &str) -> Result<(), RobotError> {
+    let inert = model.inert_joints();
+    let Some(&first) = inert.first() else {
+        return Ok(());
+    };
+    let names: Vec<&str> = inert
+        .iter()
+        .map(|&i| model.joints[i].name.as_str())
+        .collect();
+    Err(RobotError::InertJoints {
+        robot: robot.to_owned(),
+        joints: names.join(", "),
+        first: model.joints[first].name.clone(),
+    })
 }
 
 /// Values that look like a description's placeholders: the same effort limit on every

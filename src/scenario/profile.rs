@@ -35,11 +35,16 @@ impl Impact {
         Ok(())
     }
 
+    /// How long the impact lasts (s): rise, hold and fall.
+    pub fn length(&self) -> f64 {
+        self.rise + self.hold + self.fall
+    }
+
     /// The impact's envelope in [0, 1] at time t.
-    fn envelope(&self, t: f64) -> f64 {
+    pub(crate) fn envelope(&self, t: f64) -> f64 {
         let tau = t - self.start;
         let (r, h, f) = (self.rise, self.hold, self.fall);
-        if tau <= 0.0 || tau >= r + h + f {
+        if tau <= 0.0 || tau >= self.length() {
             0.0
         } else if tau < r {
             0.5 * (1.0 - (std::f64::consts::PI * tau / r).cos())
@@ -91,7 +96,7 @@ impl ForceProfile {
         match self {
             ForceProfile::Impacts(impacts) => impacts
                 .iter()
-                .map(|i| i.start + i.rise + i.hold + i.fall)
+                .map(|i| i.start + i.length())
                 .fold(0.0, f64::max),
             ForceProfile::Samples(s) => s.last().map_or(0.0, |(t, _)| *t),
         }
