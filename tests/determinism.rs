@@ -14,7 +14,7 @@ use support::procs::{csv_without, freeze, serial, venv_python};
 /// Columns of `controller.csv` that are wall-clock measurements.
 const TIMING_COLUMNS: [&str; 2] = ["tick_us", "wbc_us"];
 /// Summary fields that are wall-clock measurements, or identify a process run.
-const TIMING_FIELDS: [&str; 25] = [
+const TIMING_FIELDS: [&str; 26] = [
     "tick_p50_us",
     "tick_p99_us",
     "tick_max_us",
@@ -45,6 +45,9 @@ const TIMING_FIELDS: [&str; 25] = [
     "stale_states",
     // Wall time without a state (a plant stopped or starved past `state_timeout`).
     "stale_periods",
+    // An answer sent again to a simulator that resent its state while the controller was
+    // stopped: how long the stop lasted in wall time, not what was computed.
+    "lockstep_reanswers",
 ];
 
 fn scratch(name: &str) -> PathBuf {
