@@ -22,6 +22,7 @@
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod bridge;
+pub mod bus;
 pub mod capability;
 pub mod channels;
 pub mod config;
