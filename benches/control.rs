@@ -27,21 +27,41 @@ fn bench(c: &mut Criterion) {
     // hand force is the forecast's, so the estimator runs its full window every 5th tick.
     let mut uncorrected = config.clone();
     uncorrected.controller.forecast_correction.enabled = false;
+    // Without the forecast's record (FC-5): its cost is c1_tick's less this one's.
+    let mut no_record = config.clone();
+    no_record.controller.forecast_correction.skill_time = 0.0;
     let weight = upc::robot::Robot::embedded_default()
         .expect("robot")
         .derived
         .mass
         * 9.81;
-    for (name, kind, config, estimated) in [
-        ("c0_tick", ControllerKind::C0, &config, false),
-        ("c1_tick", ControllerKind::C1, &config, false),
+    // (name, controller, settings, estimated base, hand force measured as forecast; else none:
+    // a phantom, whose forecast FC-5 discounts and blends toward measurement only).
+    for (name, kind, config, estimated, measured) in [
+        ("c0_tick", ControllerKind::C0, &config, false, true),
+        ("c1_tick", ControllerKind::C1, &config, false, true),
         (
             "c1_tick_uncorrected",
             ControllerKind::C1,
             &uncorrected,
             false,
+            true,
         ),
-        ("c1_tick_estimated_base", ControllerKind::C1, &config, true),
+        (
+            "c1_tick_no_record",
+            ControllerKind::C1,
+            &no_record,
+            false,
+            true,
+        ),
+        ("c1_tick_phantom", ControllerKind::C1, &config, false, false),
+        (
+            "c1_tick_estimated_base",
+            ControllerKind::C1,
+            &config,
+            true,
+            true,
+        ),
     ] {
         let mut r = humanoid::rig(config, kind);
         if estimated {
@@ -57,7 +77,11 @@ fn bench(c: &mut Criterion) {
             b.iter(|| {
                 r.state.time = (k % 1000) as f64 * 0.001;
                 r.state.stamps = [r.state.time; 4];
-                r.state.hand_force = r.window.at(r.state.time);
+                r.state.hand_force = if measured {
+                    r.window.at(r.state.time)
+                } else {
+                    [0.0; 3]
+                };
                 k += 1;
                 let out = r.core.tick(&r.state, &r.window, None, &mut r.tau);
                 black_box((out.is_ok(), r.tau[0]));

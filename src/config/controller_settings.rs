@@ -61,6 +61,9 @@ pub struct CorrectionSettings {
     /// M g: the hand force of a robot tipping over (or a biased sensor) must not preview as a
     /// force lifting it (eq. (10) needs M g − F_z > 0), which the forecast intake refuses too.
     pub max_lift: f64,
+    /// FC-5: the memory (s) of the forecast's and the measurement's prediction errors from which
+    /// the forecast's weight is judged; 0 always believes the corrected forecast (w = 1).
+    pub skill_time: f64,
 }
 
 impl Default for CorrectionSettings {
@@ -83,6 +86,7 @@ impl Default for CorrectionSettings {
             trend_horizon: 0.25,
             contradiction: 0.5,
             max_lift: 0.5,
+            skill_time: 0.3,
         }
     }
 }
@@ -111,6 +115,7 @@ impl CorrectionSettings {
         for (key, v) in [
             ("max_shift", self.max_shift),
             ("trend_horizon", self.trend_horizon),
+            ("skill_time", self.skill_time),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err((key, format!("must be finite and ≥ 0, got {v}")));
@@ -142,6 +147,11 @@ pub struct ViabilitySettings {
     pub margin: f64,
     /// Width of the fade (fraction of the half-length) beyond the margin.
     pub band: f64,
+    /// The margin for a forecast easing the measured push (VG-3): the robot eases off the push
+    /// before it does, and the edge at risk is the one the push drives it toward if it does not
+    /// ease. Negative (the default: it costs the 0.3 s impact's κ × τ map up to a quarter,
+    /// docs/forecast_correction.md): easing is never faded.
+    pub ease_margin: f64,
 }
 
 impl Default for ViabilitySettings {
@@ -150,6 +160,7 @@ impl Default for ViabilitySettings {
             enabled: true,
             margin: 0.35,
             band: 0.1,
+            ease_margin: -1.0,
         }
     }
 }
@@ -159,6 +170,12 @@ impl ViabilitySettings {
     pub fn check(&self) -> Result<(), (&'static str, String)> {
         if !(0.0..1.0).contains(&self.margin) {
             return Err(("margin", format!("must be in [0, 1), got {}", self.margin)));
+        }
+        if !(self.ease_margin.is_finite() && self.ease_margin < 1.0) {
+            return Err((
+                "ease_margin",
+                format!("must be finite and < 1, got {}", self.ease_margin),
+            ));
         }
         if !(self.band.is_finite() && self.band > 0.0) {
             return Err(("band", format!("must be finite and > 0, got {}", self.band)));

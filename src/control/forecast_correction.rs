@@ -18,6 +18,13 @@
 //! scaled down until it agrees again. With no forecast at all, f̂ is the offset alone: the
 //! measurement held and decaying (a robot with only a wrist force sensor).
 //!
+//! A forecast of the wrong shape (no κ and τ explain it) is judged by its record: every bin,
+//! FC-4 with the forecast and FC-4 without it (measurement only) each predict the push a few
+//! leads ahead; when those times come, their errors give the weight w of the forecast's
+//! prediction in the least-squares combination of the two (FC-5), and the horizon is
+//!
+//!   f̂ = w f̂_forecast + (1 − w) f̂_measured.                                  (FC-5)
+//!
 //! Real-time: every buffer is allocated in [`ForecastCorrector::new`]; a tick is O(1) but one
 //! tick in `bin_ticks`, which re-estimates κ and τ in O(window × shifts).
 
@@ -38,6 +45,12 @@ pub struct CorrectionEstimate {
     pub contradicted: bool,
     /// ḋ (N/s): the trend of the unexplained force (zero when `trend_horizon` is 0).
     pub trend: [f64; 3],
+    /// w (FC-5): the weight of the corrected forecast against measurement only, in [0, 1].
+    pub weight: f64,
+    /// RMS error (N) of the push predicted a lead ahead with the forecast and without it, over
+    /// the last `skill_time` (FC-5): how well each explained the measurement so far.
+    pub error_forecast: f64,
+    pub error_measured: f64,
 }
 
 impl Default for CorrectionEstimate {
@@ -48,6 +61,9 @@ impl Default for CorrectionEstimate {
             offset: [0.0; 3],
             contradicted: false,
             trend: [0.0; 3],
+            weight: 1.0,
+            error_forecast: 0.0,
+            error_measured: 0.0,
         }
     }
 }
@@ -67,6 +83,11 @@ pub struct CorrectionCounts {
     pub factor_max: f64,
     /// Ticks whose corrected horizon asked for more upward force than `max_lift` M g (capped).
     pub lift_capped: u64,
+    /// FC-5: smallest weight w, times w fell below [`DISCOUNTED`] and the plant time it stayed
+    /// there (s).
+    pub weight_min: f64,
+    pub discounts: u64,
+    pub discounted_time: f64,
 }
 
 type V3 = [f64; 3];
@@ -80,6 +101,12 @@ const NOISE_TIME: f64 = 1.0;
 /// A window is remembered when its forecast energy is at least this fraction of the recent
 /// largest: the bulk of a push, not its tail.
 const BULK_ENERGY: f64 = 0.25;
+/// FC-5's leads (bins): 10 ms to 320 ms at 5 ms bins, doubling, around the cart-table's time
+/// constant 1/ω ≈ 0.23 s, the lead over which a push decides a fall.
+const LEADS: [usize; 6] = [2, 4, 8, 16, 32, 64];
+/// Below this weight the forecast is discounted (counted, logged); back above [`TRUSTED`].
+pub const DISCOUNTED: f64 = 0.5;
+const TRUSTED: f64 = 0.9;
 
 fn dot(a: &V3, b: &V3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
@@ -89,6 +116,12 @@ fn axpy(y: &mut V3, a: f64, x: &V3) {
     for c in 0..3 {
         y[c] += a * x[c];
     }
+}
+
+/// FC-4's unexplained part ahead: (d̂ + ḋ `ahead`) `w`, with [`ForecastCorrector::ahead`]'s
+/// factors.
+fn unexplained(offset: &V3, trend: &V3, ahead: f64, w: f64) -> V3 {
+    [0, 1, 2].map(|c| (offset[c] + trend[c] * ahead) * w)
 }
 
 /// The estimator with its preallocated history.
@@ -148,6 +181,22 @@ pub struct ForecastCorrector {
     last_residual: Option<V3>,
     /// The push measured at the last tick with a measurement.
     last_push: V3,
+    /// FC-4b: the largest forecast (N) κ̂ was fitted on, relaxing at `forget`.
+    seen_level: f64,
+    /// FC-5: the measurement-only model (FC-3, FC-3b with f_fc = 0): its offset and trend.
+    offset_meas: V3,
+    trend_meas: V3,
+    /// FC-5: per lead of [`LEADS`], a ring of that many bins of the push each model predicted
+    /// (concatenated: lead k's ring starts at `lead_at[k]`).
+    lead_at: [usize; LEADS.len()],
+    pred_forecast: Vec<V3>,
+    pred_measured: Vec<V3>,
+    /// FC-5's exponentially weighted means over `skill_time`: e_m·(e_m − e_f), |e_m − e_f|²,
+    /// |e_f|², |e_m|² (N²), e_f and e_m the two models' prediction errors.
+    skill: [f64; 4],
+    /// The forecast is discounted (w fell below [`DISCOUNTED`] and has not risen above
+    /// [`TRUSTED`] since).
+    discounted: bool,
     pub counts: CorrectionCounts,
 }
 
@@ -162,6 +211,11 @@ impl ForecastCorrector {
         let hist = n_w + m;
         let timeline = n_w + 2 * m;
         let n_r = ((settings.trend_window / bin).round() as usize).clamp(3, n_w.max(3));
+        let mut lead_at = [0; LEADS.len()];
+        for k in 1..LEADS.len() {
+            lead_at[k] = lead_at[k - 1] + LEADS[k - 1];
+        }
+        let leads: usize = LEADS.iter().sum();
         Self {
             s: settings,
             bin,
@@ -193,9 +247,18 @@ impl ForecastCorrector {
             residual_var: 0.0,
             last_residual: None,
             last_push: [0.0; 3],
+            seen_level: 0.0,
+            offset_meas: [0.0; 3],
+            trend_meas: [0.0; 3],
+            lead_at,
+            pred_forecast: vec![[0.0; 3]; leads],
+            pred_measured: vec![[0.0; 3]; leads],
+            skill: [0.0; 4],
+            discounted: false,
             counts: CorrectionCounts {
                 factor_min: 1.0,
                 factor_max: 1.0,
+                weight_min: 1.0,
                 ..Default::default()
             },
         }
@@ -244,6 +307,11 @@ impl ForecastCorrector {
         self.residual_var = 0.0;
         self.last_residual = None;
         self.last_push = [0.0; 3];
+        self.seen_level = 0.0;
+        self.offset_meas = [0.0; 3];
+        self.trend_meas = [0.0; 3];
+        self.skill = [0.0; 4];
+        self.discounted = false;
     }
 
     /// The forecast as received, for plant time `t`: the window where it covers `t` or `t` is
@@ -302,9 +370,14 @@ impl ForecastCorrector {
         for c in 0..3 {
             let r = push[c] - self.est.factor * explained[c];
             self.est.offset[c] += l * (r - self.est.offset[c]);
+            // The measurement-only model's offset (FC-5): the same observer with f_fc = 0.
+            self.offset_meas[c] += l * (push[c] - self.offset_meas[c]);
         }
         if self.est.contradicted {
             self.counts.contradicted_time += self.dt;
+        }
+        if self.discounted {
+            self.counts.discounted_time += self.dt;
         }
         // The bin: means of the measured force and of the forecast for the same ticks.
         axpy(&mut self.acc_meas, 1.0, &y);
@@ -346,6 +419,7 @@ impl ForecastCorrector {
             self.estimate_factor_and_shift(window);
         }
         self.fit_trend(window);
+        self.judge_forecast(window);
     }
 
     /// The trend ḋ of what κ̂ f_fc(t − τ̂) leaves unexplained (FC-3b): the slope of the least-
@@ -356,10 +430,18 @@ impl ForecastCorrector {
     /// arm's own transients are no trend to extrapolate; without one, a growing push is.
     /// O(n_r), once a bin.
     fn fit_trend(&mut self, window: &ForecastWindow) {
+        let model = self.s.model_error.powi(2) * self.recent_energy;
+        self.est.trend = self.trend_of(window, self.est.factor, self.est.shift, model);
+        // The measurement-only model's (FC-5): nothing forecast, so no model error either.
+        self.trend_meas = self.trend_of(window, 0.0, 0.0, 0.0);
+    }
+
+    /// The shrunk slope of what `factor` f_fc(t − `shift`) leaves unexplained, `model` the
+    /// model error's variance (N²).
+    fn trend_of(&self, window: &ForecastWindow, factor: f64, shift: f64, model: f64) -> V3 {
         let n_r = self.n_r;
         if self.s.trend_horizon == 0.0 || (self.bins as usize) < n_r || n_r > self.meas.len() {
-            self.est.trend = [0.0; 3];
-            return;
+            return [0.0; 3];
         }
         // Bin j back from the newest at x_j = −j T_b: Σx, Σx² are fixed.
         let n = n_r as f64;
@@ -368,12 +450,16 @@ impl ForecastCorrector {
         for j in 0..n_r {
             let x = -(j as f64) * self.bin;
             let centre = self.last_bin_t - (j as f64 + 0.5) * self.bin;
-            let fc = self.forecast_at(window, centre - self.est.shift);
+            let fc = if factor == 0.0 {
+                [0.0; 3]
+            } else {
+                self.forecast_at(window, centre - shift)
+            };
             let y = self.meas_bin(j);
             sx += x;
             sxx += x * x;
             for c in 0..3 {
-                let r = y[c] - self.est.factor * fc[c];
+                let r = y[c] - factor * fc[c];
                 sy[c] += r;
                 sxy[c] += x * r;
                 syy[c] += r * r;
@@ -381,7 +467,7 @@ impl ForecastCorrector {
         }
         let den = n * sxx - sx * sx;
         let floor = self.residual_var;
-        let model = self.s.model_error.powi(2) * self.recent_energy;
+        let mut trend = [0.0; 3];
         for c in 0..3 {
             let b = (n * sxy[c] - sx * sy[c]) / den;
             let a = (sy[c] - b * sx) / n;
@@ -390,11 +476,122 @@ impl ForecastCorrector {
             let res = (syy[c] - a * sy[c] - b * sxy[c]).max(0.0) / (n - 2.0);
             let se = (n * (res.max(floor) + model) / den).sqrt();
             let shrunk = (b.abs() - 2.0 * se).max(0.0);
-            self.est.trend[c] = if b.is_finite() {
+            trend[c] = if b.is_finite() {
                 shrunk.copysign(b)
             } else {
                 0.0
             };
+        }
+        trend
+    }
+
+    /// κ̂ f_fc for the horizon (FC-4b): an amplification (κ̂ > 1) is believed up to the forecast
+    /// levels it was fitted on, and beyond them the forecast gains only what it gained there,
+    /// (κ̂ − 1) times that level. A forecast 2× too slow and one 4× too weak rise alike at their
+    /// onset; applying the onset's κ̂ = 4 to the slow forecast's peak previews a push 4× the
+    /// real one (and the robot leans into it).
+    fn scaled(&self, p: &V3) -> V3 {
+        let k = self.est.factor;
+        if k <= 1.0 {
+            return p.map(|v| k * v);
+        }
+        let n = dot(p, p).sqrt();
+        let gain = if n > self.seen_level {
+            1.0 + (k - 1.0) * self.seen_level / n
+        } else {
+            k
+        };
+        p.map(|v| gain * v)
+    }
+
+    /// FC-4's factors at s ahead: how far the trend is extrapolated, T_o + T_r (1 − e^{−s/T_r})
+    /// (the observer lags a ramp by T_o; the trend levels off after T_r), and the blend-out
+    /// e^{−s/T_d}.
+    fn ahead(&self, s: f64) -> (f64, f64) {
+        let t_r = self.s.trend_horizon;
+        let ramp = if t_r > 0.0 {
+            t_r * (1.0 - (-s / t_r).exp())
+        } else {
+            0.0
+        };
+        (
+            self.s.offset_time_constant + ramp,
+            (-s / self.s.offset_decay).exp(),
+        )
+    }
+
+    /// FC-5, once a bin: each model's prediction of this bin made [`LEADS`] ago against the
+    /// measured push, the weight w that minimises the combination's mean square error over the
+    /// last `skill_time`, and the models' predictions of the push `LEADS` ahead.
+    ///
+    /// With e_f, e_m the errors of the forecast's and the measurement's predictions, the
+    /// combination w f_f + (1 − w) f_m errs by e_m − w (e_m − e_f), whose mean square is least
+    /// at w* = E[e_m·(e_m − e_f)] / E|e_m − e_f|² (Bates & Granger's combination of forecasts,
+    /// their errors' correlation included). Where the two predictions agree the data say
+    /// nothing of w: a prior w = 1 weighing as a disagreement of `min_force` RMS keeps the
+    /// forecast's anticipation before a push, and clamping to [0, 1] keeps w a blend.
+    fn judge_forecast(&mut self, window: &ForecastWindow) {
+        if self.s.skill_time == 0.0 {
+            return;
+        }
+        let b = self.bins as usize - 1;
+        let y = self.meas_bin(0);
+        let centre = self.last_bin_t - 0.5 * self.bin;
+        let mut m = [0.0; 4];
+        let mut judged = 0;
+        for (k, &lead) in LEADS.iter().enumerate() {
+            let slot = self.lead_at[k] + b % lead;
+            if b >= lead {
+                let (p_f, p_m) = (self.pred_forecast[slot], self.pred_measured[slot]);
+                let e_f = [0, 1, 2].map(|c| y[c] - p_f[c]);
+                let e_m = [0, 1, 2].map(|c| y[c] - p_m[c]);
+                let d = [0, 1, 2].map(|c| e_m[c] - e_f[c]);
+                m[0] += dot(&e_m, &d);
+                m[1] += dot(&d, &d);
+                m[2] += dot(&e_f, &e_f);
+                m[3] += dot(&e_m, &e_m);
+                judged += 1;
+            }
+            let s = lead as f64 * self.bin;
+            let p = self.forecast_at(window, centre + s - self.est.shift);
+            let (ahead, w) = self.ahead(s);
+            let u = unexplained(&self.est.offset, &self.est.trend, ahead, w);
+            let p = self.scaled(&p);
+            self.pred_forecast[slot] = [0, 1, 2].map(|c| p[c] + u[c]);
+            self.pred_measured[slot] = unexplained(&self.offset_meas, &self.trend_meas, ahead, w);
+        }
+        if judged == 0 {
+            return;
+        }
+        let a = 1.0 - (-self.bin / self.s.skill_time).exp();
+        for (s, v) in self.skill.iter_mut().zip(m) {
+            *s += a * (v / judged as f64 - *s);
+        }
+        let prior = self.s.min_force.powi(2);
+        let w = ((self.skill[0] + prior) / (self.skill[1] + prior)).clamp(0.0, 1.0);
+        let w = if w.is_finite() { w } else { 1.0 };
+        self.est.weight = w;
+        self.est.error_forecast = self.skill[2].sqrt();
+        self.est.error_measured = self.skill[3].sqrt();
+        self.counts.weight_min = self.counts.weight_min.min(w);
+        if !self.discounted && w < DISCOUNTED {
+            self.discounted = true;
+            self.counts.discounts += 1;
+            if self.counts.discounts.is_power_of_two() {
+                tracing::warn!(
+                    "the forecast predicts the measured hand force worse than the measurement                      alone at t = {:.3} s (RMS error {:.1} N against {:.1} N): its weight is                      {w:.2} ({} times so far)",
+                    self.last_bin_t,
+                    self.est.error_forecast,
+                    self.est.error_measured,
+                    self.counts.discounts
+                );
+            }
+        } else if self.discounted && w > TRUSTED {
+            self.discounted = false;
+            tracing::info!(
+                "the forecast predicts the measured hand force again at t = {:.3} s (weight {w:.2})",
+                self.last_bin_t
+            );
         }
     }
 
@@ -507,6 +704,13 @@ impl ForecastCorrector {
         }
         self.est.factor = kappa;
         self.est.shift = tau;
+        // The forecast levels κ̂ was fitted on (FC-4b): the window's largest at the chosen
+        // shift, remembered as the priors are.
+        let hi = n_w + 2 * m - mi;
+        let level = (hi - n_w..hi).fold(0.0f64, |l, i| l.max(dot(&self.g[i], &self.g[i])));
+        self.seen_level = level
+            .sqrt()
+            .max(self.seen_level * (-self.bin / self.s.forget).exp());
         // The next estimation's priors: this estimate where the window gave evidence of it
         // (else a noisy fit would random-walk the priors), relaxing toward κ = 1, τ = 0.
         // Evidence: a tight posterior (the model error scaled by the recent push keeps the tail
@@ -573,6 +777,8 @@ impl ForecastCorrector {
     /// The corrected hand force over the horizon (FC-4): `out[i]` for t + (i + 1) `period`.
     pub fn fill(&mut self, t: f64, period: f64, window: &ForecastWindow, out: &mut [V3]) {
         let e = self.est;
+        // FC-4's factors by recursion over the samples (an exp per sample costs a fifth of
+        // this function).
         let decay = (-period / self.s.offset_decay).exp();
         let (t_o, t_r) = (self.s.offset_time_constant, self.s.trend_horizon);
         let ramp = if t_r > 0.0 {
@@ -588,10 +794,15 @@ impl ForecastCorrector {
             r *= ramp;
             let s = (i + 1) as f64 * period;
             let p = self.forecast_at(window, t + s - e.shift);
-            // The offset's level now (the observer lags a ramp by T_o) and its trend, levelling
-            // off after T_r, both blended out at T_d (FC-4).
             let ahead = t_o + t_r * (1.0 - r);
-            *f = [0, 1, 2].map(|c| e.factor * p[c] + (e.offset[c] + e.trend[c] * ahead) * w);
+            let u = unexplained(&e.offset, &e.trend, ahead, w);
+            let p = self.scaled(&p);
+            *f = [0, 1, 2].map(|c| p[c] + u[c]);
+            if e.weight < 1.0 {
+                // FC-5: toward measurement only as the forecast's record falls.
+                let m = unexplained(&self.offset_meas, &self.trend_meas, ahead, w);
+                *f = [0, 1, 2].map(|c| f[c] + (1.0 - e.weight) * (m[c] - f[c]));
+            }
             // Never a force that lifts the robot (a tipping robot's hand, a biased sensor).
             if f[2] > self.lift_cap {
                 f[2] = self.lift_cap;
@@ -920,6 +1131,79 @@ mod tests {
                 }
                 (true, false) => assert!((-rate..=-20.0).contains(&trend), "{trend}"),
                 _ => assert!(trend.abs() <= 5.0, "{trend}"),
+            }
+        }
+    }
+
+    /// FC-5 on a 1 s, 60 N push measured with σ = 2 N noise and a 5 N bias: the weight of a
+    /// forecast as long as the push stays at least 0.5 through it; one that forecasts the push
+    /// twice as long (its end a second late) falls below 0.25 within 0.3 s of the real push's
+    /// end, and both are back above 0.9 after 3 s of quiet. FC-4b: at the slow forecast's onset
+    /// (κ̂ at its bound: the push rises 4× faster than forecast), the horizon previews at most
+    /// the forecast's own peak plus (κ̂ − 1) times the level κ̂ was fitted on, not κ̂ × its peak.
+    #[test]
+    fn a_forecast_of_the_wrong_shape_loses_its_weight_and_regains_it() {
+        let dt = 1e-3;
+        let (start, amp) = (1.0, 60.0);
+        // A raised cosine of `len` s.
+        let push = |t: f64, len: f64| -> f64 {
+            let x = (t - start) / len;
+            if (0.0..1.0).contains(&x) {
+                -amp * 0.5 * (1.0 - (2.0 * std::f64::consts::PI * x).cos())
+            } else {
+                0.0
+            }
+        };
+        for len in [1.0, 2.0] {
+            let mut corr = ForecastCorrector::new(CorrectionSettings::default(), 0.005, dt, 300.0);
+            let mut window = ForecastWindow::new(1.0, 1.0, 0.2, 1e4);
+            let mut msg: Box<ForecastMsg> = Box::default();
+            let mut noise = Noise(5);
+            let mut out = vec![[0.0; 3]; 300];
+            let (mut w_push, mut w_after, mut peak_ahead) = (1.0f64, 1.0f64, 0.0f64);
+            for k in 0..6000 {
+                let t = k as f64 * dt;
+                if k % 100 == 0 {
+                    msg.seq += 1;
+                    (msg.t0, msg.dt, msg.len, msg.period) = (t, 0.005, 400, 0.1);
+                    for i in 0..400 {
+                        msg.forces[i] = [push(t + i as f64 * 0.005, len), 0.0, 0.0];
+                    }
+                    window.offer(&msg, t).unwrap();
+                }
+                let y = [push(t, 1.0) + 5.0 + 2.0 * noise.gauss(), 0.0, 0.0];
+                corr.update(t, &window, Some(y), [0.0; 3]);
+                corr.fill(t, 0.005, &window, &mut out);
+                let w = corr.estimate().weight;
+                if (start..start + 1.0).contains(&t) {
+                    w_push = w_push.min(w);
+                }
+                if (start + 1.0..start + 1.3).contains(&t) {
+                    w_after = w_after.min(w);
+                }
+                if (t - (start + 0.25)).abs() < 0.5 * dt {
+                    peak_ahead = out.iter().map(|f| -f[0]).fold(0.0, f64::max);
+                    eprintln!(
+                        "len {len}: at +0.25 s κ̂ {:.2}, fitted on {:.1} N, previewed peak {peak_ahead:.1} N",
+                        corr.estimate().factor,
+                        corr.seen_level
+                    );
+                }
+            }
+            let e = *corr.estimate();
+            eprintln!(
+                "len {len}: weight ≥ {w_push:.2} in the push, ≥ {w_after:.2} after it, {:.2} at the end; {} discounts",
+                e.weight, corr.counts.discounts
+            );
+            assert!(e.weight > 0.9, "{}", e.weight);
+            if len == 1.0 {
+                assert!(w_push >= 0.5, "{w_push}");
+                assert_eq!(corr.counts.discounts, 0);
+            } else {
+                assert!(w_after < 0.25, "{w_after}");
+                assert!(corr.counts.discounts >= 1);
+                // The slow forecast's peak is 60 N; κ̂ × 60 N would be up to 180 N.
+                assert!(peak_ahead < 110.0, "{peak_ahead}");
             }
         }
     }

@@ -173,7 +173,7 @@ impl Drop for ControlLogger {
 }
 
 /// Columns of `controller.csv`; readers go by name (`upc compare`), so columns may be added.
-pub const CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_ref_x,zmp_ref_y,zmp_pred_x,zmp_pred_y,zmp_meas_x,zmp_meas_y,hand_err,kp,kd,f_ext_x,f_ext_y,f_ext_z,f_dis_x,f_dis_y,f_dis_z,hand_x,hand_y,hand_z,sup_x_min,sup_x_max,sup_y_min,sup_y_max,tick_us,wbc_us,wbc_solved,c2_cost,c2_iterations,f_meas_x,f_meas_y,f_meas_z,f_raw_x,f_raw_y,f_raw_z,corr_factor,corr_shift,corr_offset_x,corr_offset_y,corr_offset_z,corr_contradicted,f_obs_x,f_obs_y,est_x,est_y,est_z,est_vx,est_vy,est_vz,est_roll,est_pitch,est_yaw,est_innovation,corr_trend_x,corr_trend_y,guard_x,guard_y,capture_x,capture_y";
+pub const CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_ref_x,zmp_ref_y,zmp_pred_x,zmp_pred_y,zmp_meas_x,zmp_meas_y,hand_err,kp,kd,f_ext_x,f_ext_y,f_ext_z,f_dis_x,f_dis_y,f_dis_z,hand_x,hand_y,hand_z,sup_x_min,sup_x_max,sup_y_min,sup_y_max,tick_us,wbc_us,wbc_solved,c2_cost,c2_iterations,f_meas_x,f_meas_y,f_meas_z,f_raw_x,f_raw_y,f_raw_z,corr_factor,corr_shift,corr_offset_x,corr_offset_y,corr_offset_z,corr_contradicted,f_obs_x,f_obs_y,est_x,est_y,est_z,est_vx,est_vy,est_vz,est_roll,est_pitch,est_yaw,est_innovation,corr_trend_x,corr_trend_y,guard_x,guard_y,capture_x,capture_y,corr_weight,corr_error_forecast,corr_error_measured";
 
 fn write_csv(w: &mut impl Write, t: &TickLog) -> std::io::Result<()> {
     let c = &t.core;
@@ -181,7 +181,7 @@ fn write_csv(w: &mut impl Write, t: &TickLog) -> std::io::Result<()> {
     let b = c.base.unwrap_or(crate::estimation::BaseEstimate::UNKNOWN);
     writeln!(
         w,
-        "{:.4},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.2},{:.2},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.1},{:.1},{},{:.5e},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.3},{:.3},{:.3},{},{:.3},{:.3},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.3},{:.2},{:.2},{:.3},{:.3},{:.5},{:.5}",
+        "{:.4},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.2},{:.2},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.1},{:.1},{},{:.5e},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.3},{:.3},{:.3},{},{:.3},{:.3},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.3},{:.2},{:.2},{:.3},{:.3},{:.5},{:.5},{:.4},{:.3},{:.3}",
         c.time,
         c.com[0],
         c.com[1],
@@ -243,6 +243,9 @@ fn write_csv(w: &mut impl Write, t: &TickLog) -> std::io::Result<()> {
         c.viability_scale[1],
         c.capture_point[0],
         c.capture_point[1],
+        c.correction.weight,
+        c.correction.error_forecast,
+        c.correction.error_measured,
     )
 }
 
@@ -307,6 +310,17 @@ fn log_tick(rec: &rerun::RecordingStream, t: &TickLog) {
     scalar(rec, "controller/forecast/measured_y", c.f_meas[1]);
     scalar(rec, "controller/correction/factor", c.correction.factor);
     scalar(rec, "controller/correction/trend_x", c.correction.trend[0]);
+    scalar(rec, "controller/correction/weight", c.correction.weight);
+    scalar(
+        rec,
+        "controller/correction/error_forecast",
+        c.correction.error_forecast,
+    );
+    scalar(
+        rec,
+        "controller/correction/error_measured",
+        c.correction.error_measured,
+    );
     scalar(rec, "controller/viability/scale_x", c.viability_scale[0]);
     scalar(rec, "controller/viability/scale_y", c.viability_scale[1]);
     scalar(rec, "controller/viability/capture_x", c.capture_point[0]);

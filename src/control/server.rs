@@ -743,6 +743,9 @@ impl<'a> ControlLoop<'a> {
                 estimations: c.estimations,
                 bad_measurements: c.bad_measurements,
                 lift_capped: c.lift_capped,
+                weight_min: c.weight_min,
+                discounts: c.discounts,
+                discounted_time: c.discounted_time,
             }
         });
         let wc = self.core.wbc_counters();

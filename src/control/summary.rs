@@ -149,4 +149,9 @@ pub struct CorrectionSummary {
     /// Ticks whose corrected horizon was capped at `max_lift` M g upward.
     #[serde(default)]
     pub lift_capped: u64,
+    /// FC-5: the forecast's smallest weight against measurement only, times it was
+    /// discounted (weight below 0.5) and the plant time it stayed so (s).
+    pub weight_min: f64,
+    pub discounts: u64,
+    pub discounted_time: f64,
 }

@@ -19,7 +19,13 @@
 //! edge that push leans the robot toward (a push to come along −x is met by leaning toward +x,
 //! which is what a phantom leaves the robot with). A push that arrives is measured, moves ξ_m
 //! with it and lifts the fade at once; a phantom's lean stops where the robot can still stand
-//! without it. Allocation-free.
+//! without it.
+//!
+//! A forecast that the measured push will ease is the same bet the other way (VG-3): the robot
+//! eases off before the push does, and if it does not (a forecast that ends too early), the push
+//! drives it toward the edge it leans against. The easing is faded toward the measured push as
+//! ξ_m comes within `ease_margin` of that edge (off by default: an exact forecast's easing is what
+//! lets a short impact's lean come back in time). Allocation-free.
 
 pub use crate::config::ViabilitySettings;
 
@@ -88,6 +94,7 @@ impl ViabilityGuard {
         // Per axis, the scale of an unmeasured force toward −a (the robot leans toward +a, the
         // + edge is at risk) and toward +a (the − edge).
         let mut scale = [[1.0; 2]; 2];
+        let mut ease = [[1.0; 2]; 2];
         for a in 0..2 {
             let xi = com[a] + vcom[a] * self.inv_omega + push_now[a] / self.stiffness;
             let [lo, hi] = support[a];
@@ -95,31 +102,41 @@ impl ViabilityGuard {
             if !(xi.is_finite() && half > 0.0 && push_now[a].is_finite()) {
                 continue;
             }
-            let fade = |d: f64| ((d / half - self.s.margin) / self.s.band).clamp(0.0, 1.0);
-            scale[a] = [fade(hi - xi), fade(xi - lo)];
+            let fade = |d: f64, m: f64| ((d / half - m) / self.s.band).clamp(0.0, 1.0);
+            let (m, e) = (self.s.margin, self.s.ease_margin);
+            // Indexed by the departure's sign: a force toward −a (more push along −a, or a
+            // push along +a easing) is met by leaning toward +a, and the + edge is at risk.
+            scale[a] = [fade(hi - xi, m), fade(xi - lo, m)];
+            ease[a] = if e < 0.0 {
+                [1.0; 2]
+            } else {
+                [fade(hi - xi, e), fade(xi - lo, e)]
+            };
             self.last_capture[a] = xi;
         }
         let mut used = [1.0f64; 2];
-        let faded = scale.iter().flatten().any(|s| *s < 1.0);
+        let faded = scale.iter().chain(&ease).flatten().any(|s| *s < 1.0);
         if faded {
             for f in horizon.iter_mut() {
                 for a in 0..2 {
-                    // Only a push to come: the forecast beyond what is measured along its own
-                    // direction (all of it where the measured push is zero or the other way).
-                    // A push forecast to ease is the measured push's own future: kept.
-                    let base = if f[a] * push_now[a] > 0.0 {
+                    // The forecast's departure from the push measured now: a push to come (the
+                    // forecast beyond it along its own direction, all of it where nothing or
+                    // the opposite is measured; VG-2) or the measured push easing (VG-3).
+                    let easing = f[a] * push_now[a] > 0.0 && f[a].abs() < push_now[a].abs();
+                    let base = if f[a] * push_now[a] > 0.0 || easing {
                         push_now[a]
                     } else {
                         0.0
                     };
                     let extra = f[a] - base;
-                    if extra * f[a] <= 0.0 {
+                    if extra == 0.0 || (easing && self.s.ease_margin < 0.0) {
                         continue;
                     }
-                    let s = if extra < 0.0 {
-                        scale[a][0]
-                    } else {
-                        scale[a][1]
+                    let s = match (easing, extra < 0.0) {
+                        (false, true) => scale[a][0],
+                        (false, false) => scale[a][1],
+                        (true, true) => ease[a][0],
+                        (true, false) => ease[a][1],
                     };
                     used[a] = used[a].min(s);
                     f[a] = base + s * extra;
@@ -197,13 +214,23 @@ mod tests {
         assert_eq!(g.counts.episodes, 1);
     }
 
-    /// The edge at risk is the one a push to come leans the robot toward, and a push forecast
-    /// to ease is never faded: with the capture point near the rear edge, more push along −x
-    /// (met by leaning forward) is kept, and so is its easing; a push to come along +x (met by
-    /// leaning back) is faded. Near the front edge, more push along −x is faded.
+    /// The edge at risk is the one a push to come leans the robot toward: with the capture
+    /// point near the rear edge, more push along −x (met by leaning forward) is kept and a push
+    /// to come along +x (met by leaning back) is faded. Near the front edge, more push along −x
+    /// is faded. The push's easing (VG-3) is kept unless the capture point is within
+    /// `ease_margin` (0.1 here) + `band` of the rear edge, the one the push drives the robot
+    /// toward if it does not ease.
     #[test]
-    fn only_a_push_to_come_toward_the_near_edge_fades() {
-        let mut g = guard();
+    fn only_a_departure_toward_the_near_edge_fades() {
+        let mut g = ViabilityGuard::new(
+            ViabilitySettings {
+                ease_margin: 0.1,
+                ..Default::default()
+            },
+            30.0,
+            9.81,
+            0.5,
+        );
         let mut h = vec![[-60.0, 0.0, 0.0], [-20.0, 0.0, 0.0], [30.0, 0.0, 0.0]];
         let push = [-40.0, 0.0, 0.0];
         // ξ_m = −0.06 m: com − 40 / (M ω²) = −0.06.
@@ -214,13 +241,26 @@ mod tests {
             h[0][0], -60.0,
             "more push, leaning away from the rear edge: kept"
         );
-        assert_eq!(h[1][0], -20.0, "the push easing: kept");
+        // d = 0.01 / 0.07 of the half-length: the easing scaled by (d − 0.1) / 0.1.
+        let s = (0.01 / 0.07 - 0.1) / 0.1;
+        assert!(
+            (h[1][0] - (-40.0 + s * 20.0)).abs() < 1e-9,
+            "the push easing toward the rear edge: scaled by {s}, {}",
+            h[1][0]
+        );
         assert_eq!(h[2][0], 0.0, "a push to come along +x: faded to none");
         let mut h = vec![[-60.0, 0.0, 0.0], [-20.0, 0.0, 0.0]];
         let com = 0.06 + 40.0 / g.stiffness;
         g.apply(0.001, [com, 0.0], [0.0; 2], SUPPORT, push, &mut h);
         assert_eq!(h[0][0], -40.0, "more push toward the front edge: faded");
-        assert_eq!(h[1][0], -20.0, "its easing: kept");
+        assert_eq!(h[1][0], -20.0, "its easing, away from the rear edge: kept");
+        // With `ease_margin` < 0 (the default) the easing is never faded.
+        let mut g = guard();
+        let mut h = vec![[-20.0, 0.0, 0.0]];
+        let com = -0.069 + 40.0 / g.stiffness;
+        g.apply(0.0, [com, 0.0], [0.0; 2], SUPPORT, push, &mut h);
+        assert_eq!(h[0][0], -20.0);
+        assert_eq!(g.counts.faded_ticks, 0);
     }
 
     /// Between margin and margin + band the unmeasured part is scaled linearly, toward the
