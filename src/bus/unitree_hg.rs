@@ -488,6 +488,55 @@ impl MotorCmd {
     }
 }
 
+/// What both messages do with their one field walk (`put`): the C-struct image and its CRC, and
+/// the wire encoding. A command is sealed as the last step before publishing (the robot ignores
+/// one whose CRC does not match); a simulated robot seals its states.
+macro_rules! sealed_message {
+    ($msg:ident, $c_name:literal, $image_size:expr, $cdr_size:expr) => {
+        impl $msg {
+            fn image(&self) -> ImageWriter<$image_size> {
+                let mut w = ImageWriter::new();
+                self.put(&mut w);
+                w
+            }
+
+            #[doc = concat!("The little-endian bytes of the C struct `", $c_name, "` (what the CRC covers).")]
+            pub fn struct_image(&self) -> [u8; $image_size] {
+                self.image().buf
+            }
+
+            /// The CRC the message should carry.
+            pub fn compute_crc(&self) -> u32 {
+                crc_of_image(&self.struct_image())
+            }
+
+            /// Set `crc` from the other fields.
+            pub fn seal(&mut self) {
+                self.crc = self.compute_crc();
+            }
+
+            /// Whether `crc` matches the other fields (a sample corrupted or from another
+            /// layout fails).
+            pub fn crc_ok(&self) -> bool {
+                self.crc == self.compute_crc()
+            }
+
+            /// The sample on the wire, header included, into `out` (cleared first).
+            pub fn encode_cdr(&self, out: &mut Vec<u8>) {
+                self.put(&mut cdr_writer(out, $cdr_size));
+            }
+        }
+    };
+}
+
+sealed_message!(
+    LowState,
+    "LowState_",
+    LOW_STATE_IMAGE_SIZE,
+    LOW_STATE_CDR_SIZE
+);
+sealed_message!(LowCmd, "LowCmd_", LOW_CMD_IMAGE_SIZE, LOW_CMD_CDR_SIZE);
+
 impl LowState {
     fn put<S: Sink>(&self, s: &mut S) {
         s.struct_edge();
@@ -508,37 +557,6 @@ impl LowState {
         }
         s.u32(self.crc);
         s.struct_edge();
-    }
-
-    fn image(&self) -> ImageWriter<LOW_STATE_IMAGE_SIZE> {
-        let mut w = ImageWriter::new();
-        self.put(&mut w);
-        w
-    }
-
-    /// The little-endian bytes of the C struct `LowState_` (what the CRC covers).
-    pub fn struct_image(&self) -> [u8; LOW_STATE_IMAGE_SIZE] {
-        self.image().buf
-    }
-
-    /// The CRC the message should carry.
-    pub fn compute_crc(&self) -> u32 {
-        crc_of_image(&self.struct_image())
-    }
-
-    /// Set `crc` from the other fields (a simulated robot's samples).
-    pub fn seal(&mut self) {
-        self.crc = self.compute_crc();
-    }
-
-    /// Whether `crc` matches the other fields (a sample corrupted or from another layout fails).
-    pub fn crc_ok(&self) -> bool {
-        self.crc == self.compute_crc()
-    }
-
-    /// The sample on the wire, header included, into `out` (cleared first).
-    pub fn encode_cdr(&self, out: &mut Vec<u8>) {
-        self.put(&mut cdr_writer(out, LOW_STATE_CDR_SIZE));
     }
 
     /// A sample from the wire. The CRC is not checked here: see [`LowState::crc_ok`].
@@ -588,38 +606,6 @@ impl LowCmd {
         }
         s.u32(self.crc);
         s.struct_edge();
-    }
-
-    fn image(&self) -> ImageWriter<LOW_CMD_IMAGE_SIZE> {
-        let mut w = ImageWriter::new();
-        self.put(&mut w);
-        w
-    }
-
-    /// The little-endian bytes of the C struct `LowCmd_` (what the CRC covers).
-    pub fn struct_image(&self) -> [u8; LOW_CMD_IMAGE_SIZE] {
-        self.image().buf
-    }
-
-    /// The CRC the message should carry.
-    pub fn compute_crc(&self) -> u32 {
-        crc_of_image(&self.struct_image())
-    }
-
-    /// Set `crc` from the other fields: the last step before publishing, as the robot ignores a
-    /// command whose CRC does not match.
-    pub fn seal(&mut self) {
-        self.crc = self.compute_crc();
-    }
-
-    /// Whether `crc` matches the other fields.
-    pub fn crc_ok(&self) -> bool {
-        self.crc == self.compute_crc()
-    }
-
-    /// The sample on the wire, header included, into `out` (cleared first).
-    pub fn encode_cdr(&self, out: &mut Vec<u8>) {
-        self.put(&mut cdr_writer(out, LOW_CMD_CDR_SIZE));
     }
 
     /// A sample from the wire. The CRC is not checked here: see [`LowCmd::crc_ok`].
