@@ -105,7 +105,7 @@ const BULK_ENERGY: f64 = 0.25;
 /// constant 1/ω ≈ 0.23 s, the lead over which a push decides a fall.
 const LEADS: [usize; 6] = [2, 4, 8, 16, 32, 64];
 /// Below this weight the forecast is discounted (counted, logged); back above [`TRUSTED`].
-pub const DISCOUNTED: f64 = 0.5;
+const DISCOUNTED: f64 = 0.5;
 const TRUSTED: f64 = 0.9;
 
 fn dot(a: &V3, b: &V3) -> f64 {
