@@ -83,8 +83,8 @@ pub struct CorrectionCounts {
     pub factor_max: f64,
     /// Ticks whose corrected horizon asked for more upward force than `max_lift` M g (capped).
     pub lift_capped: u64,
-    /// FC-5: smallest weight w, times w fell below 0.5 (until back above 0.9) and the plant time it stayed
-    /// there (s).
+    /// FC-5: smallest weight w, times w fell below 0.5 (until back above 0.9) and the plant
+    /// time it stayed there (s).
     pub weight_min: f64,
     pub discounts: u64,
     pub discounted_time: f64,
