@@ -14,6 +14,13 @@ python3 -c 'import venv, ensurepip' >/dev/null 2>&1 || need+=(python3-venv)
 command -v openssl >/dev/null 2>&1 || need+=(openssl)
 # The font of the PNG figures of `upc compare` (loaded at run time; SVGs do without it).
 [ -f /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || need+=(fonts-dejavu-core)
+# CycloneDDS 0.10.2, the C library (headers for the binding's build) that scripts/g1_bus_peer.py
+# plays a G1's low-level bus with against upc's rustdds participant; Python's headers to build
+# that binding's C extension (see below).
+[ -f /usr/include/dds/dds.h ] || need+=(cyclonedds-dev)
+python3 -c 'import os, sys, sysconfig
+sys.exit(not os.path.isfile(os.path.join(sysconfig.get_paths()["include"], "Python.h")))' \
+  >/dev/null 2>&1 || need+=(python3-dev)
 if [ ${#need[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi
   $SUDO apt-get update -qq
@@ -41,6 +48,32 @@ if ! "$ROBOT_VENV/bin/python" -c 'import pinocchio, icub_models' >/dev/null 2>&1
     case "${CI:-}" in
       ""|0|false) echo "setup.sh: robot models not installed in $ROBOT_VENV (their tests will be skipped)" >&2 ;;
       *) echo "setup.sh: robot models could not be installed in $ROBOT_VENV, and CI runs their tests" >&2; exit 1 ;;
+    esac
+  fi
+fi
+# CycloneDDS's Python binding, 0.10.2 like Debian's library, in the robot venv: the other side of
+# the wire for the DDS bus tests (scripts/g1_bus_peer.py, an independent G1 low-level bus). Built
+# from the sdist against Debian's libddsc, never a wheel: wheels bundle their own libddsc, and a
+# Cyclone of another version (0.11) crashes a 0.10.2 peer. The build looks for include/, lib/ and
+# bin/ under CYCLONEDDS_HOME, so one of symlinks to Debian's files is made for it. Some seconds
+# (a C extension). Outside CI a failed install only skips those tests; under CI it fails here.
+if ! "$ROBOT_VENV/bin/python" -c 'import sys, importlib.metadata, cyclonedds.core
+sys.exit(importlib.metadata.version("cyclonedds") != "0.10.2")' >/dev/null 2>&1; then
+  cyclone_home="$HOME/.cache/upc/cyclonedds-home"
+  multiarch="$(dpkg-architecture -qDEB_HOST_MULTIARCH 2>/dev/null || gcc -print-multiarch)"
+  if ! { [ -n "$multiarch" ] && [ -f "/usr/lib/$multiarch/libddsc.so" ] \
+      && mkdir -p "$cyclone_home/include" "$cyclone_home/lib" "$cyclone_home/bin" \
+      && for d in dds ddsc idl idlc; do ln -sfn "/usr/include/$d" "$cyclone_home/include/$d"; done \
+      && for l in libddsc.so libcycloneddsidl.so; do
+           ln -sfn "/usr/lib/$multiarch/$l" "$cyclone_home/lib/$l"; done \
+      && ln -sfn /usr/bin/idlc "$cyclone_home/bin/idlc" \
+      && CYCLONEDDS_HOME="$cyclone_home" "$ROBOT_VENV/bin/pip" install -q \
+           --disable-pip-version-check --no-binary cyclonedds "cyclonedds==0.10.2" \
+      && "$ROBOT_VENV/bin/python" -c 'import sys, importlib.metadata, cyclonedds.core
+sys.exit(importlib.metadata.version("cyclonedds") != "0.10.2")'; }; then
+    case "${CI:-}" in
+      ""|0|false) echo "setup.sh: CycloneDDS 0.10.2 not installed in $ROBOT_VENV (the DDS bus tests will be skipped)" >&2 ;;
+      *) echo "setup.sh: CycloneDDS 0.10.2 could not be installed in $ROBOT_VENV, and CI runs the DDS bus tests" >&2; exit 1 ;;
     esac
   fi
 fi

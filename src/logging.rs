@@ -47,15 +47,21 @@ impl Drop for LogGuard {
     }
 }
 
-/// Installs the global subscriber: `RUST_LOG` (default `info`), colours on a terminal only, lines
-/// to stderr through [`non_blocking`]. Keep the guard for the whole process.
+/// The log filter without `RUST_LOG`. rustdds logs, at error level, the multicast groups it
+/// cannot leave on a loopback without multicast and its shutdown: noise on the bus.
+pub const DEFAULT_FILTER: &str = "info,rustdds=warn,rustdds::network::udp_listener=off";
+
+/// Installs the global subscriber: `RUST_LOG` (default `info`, with the DDS library's own
+/// chatter at `warn`: it reports locators and multicast sockets it does not use as errors
+/// ([`DEFAULT_FILTER`])), colours on a terminal only, lines to stderr through [`non_blocking`].
+/// Keep the guard for the whole process.
 pub fn init_stderr() -> LogGuard {
     let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
     let (writer, guard) = non_blocking(std::io::stderr(), QUEUE_LINES);
     let counter = writer.error_counter();
     let installed = tracing_subscriber::fmt()
         .with_env_filter(
-            EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")),
+            EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(DEFAULT_FILTER)),
         )
         .with_writer(writer)
         // Colours on a terminal only: `upc run` and systemd send the processes' logs to files.

@@ -36,6 +36,8 @@ enum Command {
     Bridge(cli::bridge::BridgeArgs),
     /// Run the simulator: the humanoid on the ground and the door, over iceoryx2 (see --help).
     Sim(cli::sim::SimArgs),
+    /// Drive a robot on its own DDS bus (Unitree G1): the plant on upc's contract, the controller on the bus.
+    Bus(cli::bus::BusArgs),
     /// Largest impact each controller survives, by bisection, on the reduced models and the full simulation.
     Capability(cli::capability::CapabilityArgs),
     /// Largest impact survived against forecast errors (factor, shift, phantom), full simulation.
@@ -55,6 +57,7 @@ fn main() -> std::process::ExitCode {
         Command::Compare(args) => cli::compare::run(args),
         Command::Model(args) => cli::model::run(args),
         Command::Sim(args) => cli::sim::run_cli(args),
+        Command::Bus(args) => cli::bus::run_cli(args),
         Command::Mjcf(args) => cli::sim::mjcf_cli(args),
         Command::Capability(args) => cli::capability::run(args),
         Command::Robustness(args) => cli::robustness::run(args),

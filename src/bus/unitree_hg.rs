@@ -59,6 +59,8 @@ pub enum WireError {
         got: usize,
         want: usize,
     },
+    #[error("{type_name}: {got} bytes that do not decode as this type")]
+    Malformed { type_name: &'static str, got: usize },
     #[error("{type_name}: {extra} extra bytes after the sample (another type or layout version?)")]
     Trailing {
         type_name: &'static str,
@@ -359,7 +361,15 @@ fn cdr_body<'a>(
             id: [header[0], header[1]],
         });
     }
-    let want = want - CDR_LE.len();
+    body_of_length(body, type_name, want - CDR_LE.len())
+}
+
+/// Check that a body (the bytes after the encapsulation header) has `want` bytes.
+fn body_of_length<'a>(
+    body: &'a [u8],
+    type_name: &'static str,
+    want: usize,
+) -> Result<&'a [u8], WireError> {
     match body.len() {
         n if n < want => Err(WireError::Truncated {
             type_name,
@@ -561,7 +571,12 @@ impl LowState {
 
     /// A sample from the wire. The CRC is not checked here: see [`LowState::crc_ok`].
     pub fn decode_cdr(bytes: &[u8]) -> Result<Self, WireError> {
-        let body = cdr_body(bytes, "LowState_", LOW_STATE_CDR_SIZE)?;
+        Self::decode_body(cdr_body(bytes, "LowState_", LOW_STATE_CDR_SIZE)?)
+    }
+
+    /// A sample's body, the bytes after the CDR_LE header (what a DDS library hands over).
+    pub fn decode_body(body: &[u8]) -> Result<Self, WireError> {
+        let body = body_of_length(body, "LowState_", LOW_STATE_CDR_SIZE - CDR_LE.len())?;
         let mut r = CdrReader::new(body);
         let version = r.u32s();
         let mode_pr = r.u8();
@@ -610,7 +625,12 @@ impl LowCmd {
 
     /// A sample from the wire. The CRC is not checked here: see [`LowCmd::crc_ok`].
     pub fn decode_cdr(bytes: &[u8]) -> Result<Self, WireError> {
-        let body = cdr_body(bytes, "LowCmd_", LOW_CMD_CDR_SIZE)?;
+        Self::decode_body(cdr_body(bytes, "LowCmd_", LOW_CMD_CDR_SIZE)?)
+    }
+
+    /// A sample's body, the bytes after the CDR_LE header (what a DDS library hands over).
+    pub fn decode_body(body: &[u8]) -> Result<Self, WireError> {
+        let body = body_of_length(body, "LowCmd_", LOW_CMD_CDR_SIZE - CDR_LE.len())?;
         let mut r = CdrReader::new(body);
         let mode_pr = r.u8();
         let mode_machine = r.u8();

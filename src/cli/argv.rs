@@ -189,11 +189,26 @@ mod tests {
             connect: Some("rerun+http://h:1/proxy".into()),
             summary: Some("sim.json".into()),
             truth_csv: Some("sim.csv".into()),
+            bus: Some(super::super::bus::BusChoice::Unitree),
+            bus_settings: super::super::bus::BusSettingsArgs {
+                bus_configs: vec!["b.toml".into()],
+                bus_sets: vec!["bus.sim.rate=200.0".into()],
+            },
         };
         let Command::Sim(back) = parse(Argv::of("sim", &sim)) else {
             panic!("not sim")
         };
         assert_eq!(format!("{back:?}"), format!("{sim:?}"));
+
+        let bus = super::super::bus::BusArgs {
+            plant: sim.plant.clone(),
+            settings: sim.bus_settings.clone(),
+            summary: Some("bus.json".into()),
+        };
+        let Command::Bus(back) = parse(Argv::of("bus", &bus)) else {
+            panic!("not bus")
+        };
+        assert_eq!(format!("{back:?}"), format!("{bus:?}"));
 
         let controller = ControllerArgs {
             scenario: "s.toml".into(),
@@ -266,6 +281,11 @@ mod tests {
             plant: PlantChoice::Mujoco,
             sensing: Some(upc::sim::sensors::Sensing::Realistic),
             robot: robot(),
+            bus: Some(super::super::bus::BusChoice::Unitree),
+            bus_settings: super::super::bus::BusSettingsArgs {
+                bus_configs: vec!["b.toml".into()],
+                bus_sets: vec!["bus.domain=7".into()],
+            },
         };
         let Command::Run(back) = parse(Argv::of("run", &run)) else {
             panic!("not run")

@@ -430,6 +430,8 @@ pub(super) fn full_case(
         robot: RobotArg {
             robot: case.robot.to_owned(),
         },
+        bus: None,
+        bus_settings: Default::default(),
     };
     let mut cmd = Command::new(exe);
     cmd.args(Argv::of("run", &run)).env("RUST_LOG", "warn");

@@ -2,6 +2,7 @@
 
 pub mod argv;
 pub mod bridge;
+pub mod bus;
 pub mod capability;
 pub mod common;
 pub mod compare;

@@ -104,6 +104,12 @@ pub struct RunArgs {
     /// to its mass: `upc::robot::Robot::force_scale`).
     #[command(flatten)]
     pub robot: RobotArg,
+    /// Through the robot's own bus: the plant speaks as the robot does (`upc sim --bus`), and
+    /// `upc bus` stands between it and the controller (real time; docs/bus.md).
+    #[arg(long, value_enum)]
+    pub bus: Option<super::bus::BusChoice>,
+    #[command(flatten)]
+    pub bus_settings: super::bus::BusSettingsArgs,
 }
 
 /// One controller's run in the summary.
@@ -130,7 +136,11 @@ impl ToArgv for RunArgs {
             plant,
             sensing,
             robot,
+            bus,
+            bus_settings,
         } = self;
+        w.nested(bus_settings);
+        fields!(w; opt_choice bus);
         fields!(w; val scenario, choice controller, switch realtime, opt duration, opt name,
                 val out, opt forecaster, switch forecaster_over_zenoh, switch no_forecaster,
                 switch viewer, opt connect, switch quiet, val forecast_error_scale,
@@ -148,6 +158,11 @@ struct Entry {
     controller_summary: Option<ServerSummary>,
     sim_summary: Option<serde_json::Value>,
     sim_exit: Option<i32>,
+    /// `--bus`: the bus participant's exit code and summary (`bus.json`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    bus_exit: Option<i32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    bus_summary: Option<serde_json::Value>,
     forecaster_exit: Option<i32>,
     controller_exit: Option<i32>,
     /// Why this controller's run failed (`None`: it did not): a participant's error exit with
@@ -162,14 +177,20 @@ struct Entry {
     base_estimate_error: Option<upc::estimation::BaseAccuracy>,
 }
 
-pub fn run(args: RunArgs) -> CliResult {
+pub fn run(mut args: RunArgs) -> CliResult {
+    // A robot's bus runs at the robot's pace: real time.
+    args.realtime |= args.bus.is_some();
     let robot = args.robot.load()?;
     let scenario = Scenario::load(&args.scenario)?.with_force_scale(robot.force_scale()?);
     // Fail early on a bad config, before starting processes.
     args.config.load(&robot, Some(&scenario), &[])?;
     upc::sim::SimConfig::load(&[], &args.sim_sets)?;
     args.forecast_error_shape.apply(&scenario.force)?;
-    let duration = args.duration.unwrap_or(scenario.duration);
+    let mut duration = args.duration.unwrap_or(scenario.duration);
+    if args.bus.is_some() {
+        // The plant on the bus starts the push this long after the robot is first commanded.
+        duration += args.bus_settings.load()?.sim.scenario_delay;
+    }
     let name = args.name.clone().unwrap_or_else(|| {
         let secs = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
@@ -234,6 +255,7 @@ fn failure_of(e: &Entry) -> Option<String> {
     let line = |log: &str| last_log_line(&Path::new(&e.dir).join(log));
     for (what, exit, log) in [
         ("simulator", e.sim_exit, "sim.log"),
+        ("bus participant", e.bus_exit, "bus.log"),
         ("forecaster", e.forecaster_exit, "forecaster.log"),
         ("controller", e.controller_exit, "controller.log"),
     ] {
@@ -356,6 +378,19 @@ fn run_one(
             .stdout(out)
             .stderr(err),
     )?;
+    let mut bus = match args.bus {
+        Some(_) => {
+            let (out, err) = ctx.log("bus.log")?;
+            Some(Participant::spawn(
+                "bus",
+                Command::new(exe)
+                    .args(Argv::of("bus", &ctx.bus_args()))
+                    .stdout(out)
+                    .stderr(err),
+            )?)
+        }
+        None => None,
+    };
     let (mut forecaster, mut bridge) = ctx.forecaster()?;
     let (out, err) = ctx.log("controller.log")?;
     let mut controller = Participant::spawn(
@@ -365,11 +400,17 @@ fn run_one(
             .stdout(out)
             .stderr(err),
     )?;
-    let (controller_exit, died) =
-        ctx.watch(kind, &mut controller, &mut sim, forecaster.as_deref_mut())?;
+    let (controller_exit, died) = ctx.watch(
+        kind,
+        &mut controller,
+        &mut sim,
+        forecaster.as_deref_mut(),
+        bus.as_deref_mut(),
+    )?;
     // The controller is done: give the others a moment, then ask them to stop (at once when one
     // of them died).
     let grace = |d: u64| Duration::from_secs(if died { 0 } else { d });
+    let bus_exit = bus.as_mut().and_then(|b| stop(b, grace(5)));
     let sim_exit = stop(&mut sim, grace(5));
     let forecaster_exit = forecaster.as_mut().and_then(|f| stop(f, grace(2)));
     if let Some(b) = &mut bridge {
@@ -387,6 +428,8 @@ fn run_one(
         controller_summary,
         sim_summary,
         sim_exit,
+        bus_exit,
+        bus_summary: read("bus.json").and_then(|t| serde_json::from_str(&t).ok()),
         forecaster_exit,
         controller_exit,
         failure: None,
@@ -401,6 +444,9 @@ fn run_one(
     entry.controller_summary = entry.controller_summary.take().filter(|s| s.ticks > 0);
     Ok(entry)
 }
+
+/// s the plant on a bus runs beyond the run (it is stopped when the controller is done).
+const BUS_PLANT_MARGIN: f64 = 30.0;
 
 /// What one controller's run launches its children with.
 struct Launch<'a> {
@@ -431,7 +477,13 @@ impl Launch<'_> {
                 } else {
                     ModeChoice::Lockstep
                 }),
-                duration: Some(self.duration),
+                // On a bus the plant outlives the participant (stopped with the run): a robot
+                // does not go away when its controller is done.
+                duration: Some(if args.bus.is_some() {
+                    self.duration + BUS_PLANT_MARGIN
+                } else {
+                    self.duration
+                }),
                 configs: vec![],
                 sets: args.sim_sets.clone(),
                 prefix: Some(self.prefix.clone()),
@@ -447,6 +499,18 @@ impl Launch<'_> {
             connect: self.live.map(str::to_owned),
             summary: Some(self.dir.join("sim.json")),
             truth_csv: (!args.realtime).then(|| self.dir.join("sim.csv")),
+            bus: args.bus,
+            bus_settings: args.bus_settings.clone(),
+        }
+    }
+
+    /// `upc bus` between the plant on the bus and the controller.
+    fn bus_args(&self) -> super::bus::BusArgs {
+        // The participant is the plant on the contract: it outlives the controller's run too.
+        super::bus::BusArgs {
+            plant: self.sim_args().plant,
+            settings: self.args.bus_settings.clone(),
+            summary: Some(self.dir.join("bus.json")),
         }
     }
 
@@ -515,6 +579,12 @@ impl Launch<'_> {
         if args.no_forecaster {
             sets.push("controller.lockstep_forecast_wait=0".into());
         }
+        // On a bus the robot's rate governs: the controller ticks at the rate it publishes.
+        if args.bus.is_some()
+            && let Ok(b) = args.bus_settings.load()
+        {
+            sets.insert(0, format!("controller.rate_hz={:?}", b.sim.rate));
+        }
         // A plant without the door in the hand (none, or the push applied at the hand) holds
         // nothing whose inertia the wrist sensor feels; the user's --set still has the last word.
         let held = upc::sim::SimConfig::load(&[], &args.sim_sets)
@@ -553,6 +623,7 @@ impl Launch<'_> {
         controller: &mut Child,
         sim: &mut Child,
         mut forecaster: Option<&mut Child>,
+        mut bus: Option<&mut Child>,
     ) -> Result<(Option<i32>, bool), Box<dyn std::error::Error + Send + Sync>> {
         let bar = progress_bar(self.args.quiet, self.duration, kind);
         let watcher = Bus::open(&self.prefix, "launcher")
@@ -572,11 +643,14 @@ impl Launch<'_> {
             if let Some(f) = forecaster.as_deref_mut() {
                 others.push(("forecaster", f));
             }
+            if let Some(b) = bus.as_deref_mut() {
+                others.push(("bus", b));
+            }
             if let Some((what, status)) = failed_participant(&mut others)? {
-                let log = self.dir.join(if what == "simulator" {
-                    "sim.log"
-                } else {
-                    "forecaster.log"
+                let log = self.dir.join(match what {
+                    "simulator" => "sim.log",
+                    "bus" => "bus.log",
+                    _ => "forecaster.log",
                 });
                 bar.suspend(|| {
                     eprintln!(

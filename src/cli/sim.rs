@@ -108,6 +108,12 @@ pub struct SimArgs {
     /// record period as CSV here: the same bytes on every rerun.
     #[arg(long)]
     pub truth_csv: Option<PathBuf>,
+    /// Speak as the robot does on its own bus instead of upc's contract (a G1 on Unitree's DDS
+    /// topics, for `upc bus`; real time; docs/bus.md).
+    #[arg(long, value_enum)]
+    pub bus: Option<super::bus::BusChoice>,
+    #[command(flatten)]
+    pub bus_settings: super::bus::BusSettingsArgs,
 }
 
 impl ToArgv for PlantArgs {
@@ -139,10 +145,13 @@ impl ToArgv for SimArgs {
             connect,
             summary,
             truth_csv,
+            bus,
+            bus_settings,
         } = self;
         w.nested(plant);
         fields!(w; choice simulator, opt bundle, opt rrd, opt recording_id,
-                opt connect, opt summary, opt truth_csv);
+                opt connect, opt summary, opt truth_csv, opt_choice bus);
+        w.nested(bus_settings);
     }
 }
 
@@ -228,6 +237,9 @@ pub fn run_cli(args: SimArgs) -> CliResult {
         write_bundle(&args.plant, dir)?;
     }
     let config = load_config(&args.plant)?;
+    if args.bus.is_some() {
+        return bus_robot(&args, config, engine);
+    }
     let opts = RunOptions {
         node_name: format!("upc-sim-{}", std::process::id()),
         robot: std::sync::Arc::new(args.plant.robot.load()?),
@@ -284,4 +296,42 @@ pub fn run_cli(args: SimArgs) -> CliResult {
         Some(e) => Err(e.into()),
         None => Ok(()),
     }
+}
+
+/// `upc sim --bus unitree`: the plant speaking as the robot on its bus, in real time.
+fn bus_robot(args: &SimArgs, mut config: SimConfig, engine: Engine) -> CliResult {
+    config.mode = upc::sim::Mode::Realtime;
+    let opts = upc::bus::sim_robot::SimRobotOptions {
+        bus: args.bus_settings.load()?,
+        robot: std::sync::Arc::new(args.plant.robot.load()?),
+        sim: config,
+        engine,
+    };
+    let s = upc::bus::sim_robot::run(&opts, &stop_flag())?;
+    if let Some(p) = &args.summary {
+        std::fs::write(p, serde_json::to_string_pretty(&s)?)?;
+    }
+    println!(
+        "sim on the bus: {} steps, {:.3} s; {} states at {:.0} Hz, {} commands ({} bad CRC, {} wrong \
+         mode_machine, {} above an effort limit); harness steps {}, limp steps {}, damping steps {} \
+         from {:?}; overruns {}{}",
+        s.steps,
+        s.sim_time,
+        s.states,
+        s.rate,
+        s.commands,
+        s.bad_crc_commands,
+        s.wrong_mode_machine,
+        s.over_limit_commands,
+        s.harness_steps,
+        s.limp_steps,
+        s.damping_steps,
+        s.damping_starts,
+        s.overruns,
+        s.error
+            .as_ref()
+            .map(|e| format!("; ended: {e}"))
+            .unwrap_or_default()
+    );
+    Ok(())
 }

@@ -5,7 +5,7 @@
 use serde::Deserialize;
 
 /// `[controller.realtime]` settings.
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RealtimeSettings {
     /// SCHED_FIFO priority (1–99) of the control thread; 0 keeps the default scheduler.

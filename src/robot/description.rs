@@ -65,6 +65,19 @@ pub struct RobotDescription {
     /// Config keys layered over `config/default.toml` for this robot (gains, torque scale).
     #[serde(default)]
     pub config: Option<toml::Table>,
+    /// The robot's own low-level bus (`upc bus`, docs/bus.md), if upc can drive it there.
+    #[serde(default)]
+    pub bus: Option<BusSpec>,
+}
+
+/// How the robot's own bus addresses its drives.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BusSpec {
+    /// The message set: `unitree_hg` (Unitree's `rt/lowstate` / `rt/lowcmd`, G1 and H1-2).
+    pub kind: String,
+    /// The joint each motor slot drives, slot 0 first (checked against the URDF at start-up).
+    pub slots: Vec<String>,
 }
 
 /// Where the URDF is.

@@ -180,22 +180,43 @@ struct Endpoints {
 /// Runs `upc sim` until the configured duration elapses or `stop` is raised: the scene built
 /// for the chosen engine, then the plant runtime on it.
 pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunSummary, ProcessError> {
-    let (cfg, robot) = (&opts.config, &opts.robot);
-    match opts.engine {
+    struct Runtime<'a>(&'a RunOptions, &'a AtomicBool);
+    impl PlantUser for Runtime<'_> {
+        type Output = RunSummary;
+        fn with<P: Physics>(self, plant: Plant<P>) -> Result<RunSummary, ProcessError> {
+            run_plant(self.0, plant, self.1)
+        }
+    }
+    build_plant(&opts.config, &opts.robot, opts.engine, Runtime(opts, stop))
+}
+
+/// What runs on a plant whatever its engine (the plant runtime, or the robot on a bus).
+pub trait PlantUser {
+    type Output;
+    fn with<P: Physics>(self, plant: Plant<P>) -> Result<Self::Output, ProcessError>;
+}
+
+/// The scene built for `engine`, handed to `user`.
+pub fn build_plant<U: PlantUser>(
+    cfg: &SimConfig,
+    robot: &crate::robot::Robot,
+    engine: Engine,
+    user: U,
+) -> Result<U::Output, ProcessError> {
+    match engine {
         Engine::Upc => {
             let (scene, scenario) =
                 default_scene(cfg, robot).map_err(|e| ProcessError::Setup(e.to_string()))?;
-            let plant = Plant {
+            user.with(Plant {
                 physics: scene.world,
                 drive: scene.drive,
                 scenario,
                 carrying: scene.carrying,
                 version: env!("CARGO_PKG_VERSION").into(),
-            };
-            run_plant(opts, plant, stop)
+            })
         }
         #[cfg(upc_mujoco)]
-        Engine::Mujoco => run_plant(opts, mujoco_plant(cfg, robot)?, stop),
+        Engine::Mujoco => user.with(mujoco_plant(cfg, robot)?),
         #[cfg(not(upc_mujoco))]
         Engine::Mujoco => Err(ProcessError::Setup(super::mujoco::UNAVAILABLE.into())),
     }
@@ -337,7 +358,7 @@ fn check_setup(opts: &RunOptions, world: &impl Physics) -> Result<(), ProcessErr
 
 impl PlantInfo {
     /// A new plant run of `scenario` for the robot of content hash `robot_hash`.
-    fn start(cfg: &SimConfig, scenario: &crate::scenario::Scenario, robot_hash: u64) -> Self {
+    pub fn start(cfg: &SimConfig, scenario: &crate::scenario::Scenario, robot_hash: u64) -> Self {
         PlantInfo {
             session: crate::channels::new_run_id(),
             scenario_hash: scenario.content_hash(),

@@ -1,0 +1,138 @@
+//! The bus's settings (`config/bus.toml`, embedded), layered like the rest of upc: embedded
+//! defaults ← `--bus-config` files ← `--bus-set key=value`. Errors name the key and its layer.
+
+use std::net::IpAddr;
+use std::path::PathBuf;
+
+use serde::Deserialize;
+
+use super::dds::BusNetwork;
+use crate::config::{ConfigError, Layers};
+
+/// The defaults shipped inside the binary.
+pub const BUS_TOML: &str = include_str!("../../config/bus.toml");
+
+/// What a state with a CRC that does not match means.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BadCrc {
+    /// Refused and counted (a robot: the sample is corrupt).
+    Refuse,
+    /// Counted only (a simulator that leaves the CRC and the tick at zero).
+    Count,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct BusFile {
+    bus: BusConfig,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BusConfig {
+    pub domain: u16,
+    pub interface: IpAddr,
+    pub discovery: f64,
+    pub first_state_timeout: f64,
+    pub state_timeout: f64,
+    pub command_timeout: f64,
+    pub damping: f64,
+    pub bad_crc: BadCrc,
+    pub late: f64,
+    pub hold: BusHold,
+    pub sim: BusSim,
+    /// Scheduling of `upc bus` (its loop and, created after it, the DDS library's threads).
+    pub realtime: crate::config::RealtimeSettings,
+}
+
+/// The drives' hold before the controller has the robot.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BusHold {
+    pub leg_kp: f64,
+    pub leg_kd: f64,
+    pub arm_kp: f64,
+    pub arm_kd: f64,
+    pub handover: f64,
+}
+
+/// The simulated robot on the bus.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BusSim {
+    pub rate: f64,
+    pub scenario_delay: f64,
+    pub lab: bool,
+    pub mode_machine: u8,
+    pub command_loss: f64,
+}
+
+impl BusConfig {
+    pub fn load(files: &[PathBuf], sets: &[String]) -> Result<Self, ConfigError> {
+        let layers = Layers::stack("<embedded config/bus.toml>", BUS_TOML, files, sets)?;
+        let file: BusFile = layers.typed()?;
+        file.bus.validate(&layers)?;
+        Ok(file.bus)
+    }
+
+    pub fn network(&self) -> BusNetwork {
+        BusNetwork {
+            domain: self.domain,
+            interface: self.interface,
+        }
+    }
+
+    fn validate(&self, l: &Layers) -> Result<(), ConfigError> {
+        let check = |key: &str, v: f64, ok: bool, what: &str| {
+            if v.is_finite() && ok {
+                Ok(())
+            } else {
+                Err(l.range_error(key, format!("must be finite and {what}, got {v}")))
+            }
+        };
+        for (key, v) in [
+            ("bus.discovery", self.discovery),
+            ("bus.hold.leg_kp", self.hold.leg_kp),
+            ("bus.hold.leg_kd", self.hold.leg_kd),
+            ("bus.hold.arm_kp", self.hold.arm_kp),
+            ("bus.hold.arm_kd", self.hold.arm_kd),
+            ("bus.hold.handover", self.hold.handover),
+            ("bus.sim.scenario_delay", self.sim.scenario_delay),
+        ] {
+            check(key, v, v >= 0.0, "≥ 0")?;
+        }
+        for (key, v) in [
+            ("bus.first_state_timeout", self.first_state_timeout),
+            ("bus.state_timeout", self.state_timeout),
+            ("bus.command_timeout", self.command_timeout),
+            ("bus.damping", self.damping),
+            ("bus.late", self.late),
+            ("bus.sim.rate", self.sim.rate),
+            ("bus.sim.command_loss", self.sim.command_loss),
+        ] {
+            check(key, v, v > 0.0, "> 0")?;
+        }
+        if self.domain > 232 {
+            return Err(l.range_error(
+                "bus.domain",
+                format!("DDS domains are 0–232, got {}", self.domain),
+            ));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_embedded_defaults_load_and_stay_on_the_loopback() {
+        let c = BusConfig::load(&[], &[]).unwrap();
+        assert!(c.interface.is_loopback());
+        assert_eq!(c.bad_crc, BadCrc::Refuse);
+        let e = BusConfig::load(&[], &["bus.damping=-1".into()]).unwrap_err();
+        assert!(e.to_string().contains("bus.damping"), "{e}");
+    }
+}

@@ -1,0 +1,799 @@
+//! `upc bus`: the participant that is the plant on upc's contract and the controller on the
+//! robot's bus. The controller, forecasters, bridge and loggers see a plant like any other; the
+//! robot sees one low-level controller on `rt/lowcmd`.
+//!
+//! The robot's rate governs: every valid `rt/lowstate` becomes one [`StateMsg`], and one
+//! `rt/lowcmd` answers it, with the controller's torques for that state when they arrive within
+//! `bus.late`, else with the last ones while they are current. Safety (docs/bus.md, "Safety"):
+//! - no command before a valid state, and none at all while another participant writes
+//!   `rt/lowcmd` (Unitree's motion service must be released first);
+//! - until the controller's first valid torques the drives hold the start posture (kp, kd,
+//!   tau = 0), then the torques are blended in over `bus.hold.handover`;
+//! - the controller silent for `bus.command_timeout` (of this loop's live time) → damping on the
+//!   drives (kp = 0, kd = `bus.damping`, tau = 0), until it answers again (a new hand-over);
+//! - every torque clamped to its joint's effort limit; mode_machine echoed from the state;
+//! - a state with a bad CRC (`bus.bad_crc`), a tick that does not advance or a non-finite value
+//!   is refused and counted; no valid state for `bus.state_timeout` ends the run (the robot is
+//!   gone: there is nothing to command).
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use nalgebra::DVector;
+
+use super::config::{BadCrc, BusConfig};
+use super::dds::{DdsError, Inbox, Outbox, participant};
+use super::lab::{LAB_STATE_TOPIC, LabState};
+use super::motors::{MotorMap, Slot};
+use super::ros2::{
+    HAND_WRENCH_TOPIC, Header, JOINT_STATE_TOPIC, JointState, Time, Vector3, Wrench, WrenchStamped,
+};
+use super::unitree_hg::{LOW_CMD_TOPIC, LOW_STATE_TOPIC, LowCmd, LowState, MOTOR_SLOTS, MotorCmd};
+use crate::channels::{
+    Bus, ChannelError, N_CONTACTS, STATE_FLAG_BASE_UNMEASURED, STATE_FLAG_DAMPING, STATE_FLAG_HOLD,
+    ServiceKind, StateMsg, TORQUE_FLAG_FALLBACK, TorqueMsg,
+};
+use crate::control::timing::LatencyHistogram;
+use crate::sim::command::{CommandGate, CommandOrigin, CommandStats};
+use crate::sim::process::PlantInfo;
+use crate::sim::sensors::{ImuMount, Sensing, Sensors, SensorsConfig};
+
+/// Errors that end a run.
+#[derive(Debug, thiserror::Error)]
+pub enum BusError {
+    #[error(transparent)]
+    Dds(#[from] DdsError),
+    #[error(transparent)]
+    Channel(#[from] ChannelError),
+    #[error("{0}")]
+    Setup(String),
+    #[error(
+        "another participant writes rt/lowcmd ({0} writer(s)): two controllers would fight over \
+         the drives. Release Unitree's own motion service first (its SDK's motion switcher, \
+         `ReleaseMode`), and stop any other low-level controller"
+    )]
+    OtherController(usize),
+    #[error("no valid rt/lowstate within {0} s: is the robot (or its simulator) on this domain?")]
+    NoRobot(f64),
+    #[error("the robot went silent: no valid rt/lowstate for {0} s")]
+    RobotLost(f64),
+}
+
+/// What the participant was asked to run.
+#[derive(Debug, Clone)]
+pub struct BusOptions {
+    pub bus: BusConfig,
+    pub robot: Arc<crate::robot::Robot>,
+    /// The scenario the plant plays (its name goes out with every state).
+    pub sim: crate::sim::SimConfig,
+    /// iceoryx2 prefix and node name of upc's contract.
+    pub prefix: String,
+    pub node_name: String,
+    /// Run this long (s of robot time; 0: until interrupted).
+    pub duration: f64,
+}
+
+/// Who drives the robot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Drive {
+    /// The drives hold the start posture (no controller yet).
+    Hold,
+    /// Hold blended into the controller's torques.
+    Handover,
+    /// The controller's torques.
+    Control,
+    /// Damping only (the controller went silent).
+    Damping,
+}
+
+/// Counters and figures of a run (`bus.json`).
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct BusSummary {
+    /// What of `bus.realtime` the OS granted.
+    pub realtime: crate::control::realtime::RealtimeReport,
+    pub robot: String,
+    pub domain: u16,
+    pub interface: String,
+    /// Valid states per second of the robot's ticks (Hz): the robot's rate less the refused.
+    pub robot_rate: f64,
+    pub states: u64,
+    pub commands: u64,
+    pub refused_bad_crc: u64,
+    pub counted_bad_crc: u64,
+    pub refused_stale_tick: u64,
+    pub refused_non_finite: u64,
+    pub undecodable: u64,
+    /// States dropped unread because a newer one had arrived (the loop fell behind the robot).
+    pub superseded: u64,
+    /// States whose lab sample did not arrive with them (the previous one was used).
+    pub lab_missing: u64,
+    /// Answers that came after `bus.late`, and states answered without fresh torques.
+    pub late_answers: u64,
+    pub unanswered: u64,
+    /// Commands with at least one torque clamped to its effort limit.
+    pub clamped_commands: u64,
+    pub controller_commands: CommandStats,
+    pub handovers: u64,
+    pub losses: u64,
+    pub hold_states: u64,
+    pub damping_states: u64,
+    /// The longest time from the controller's last torques to the damping command sent for
+    /// its silence (s): the bound is `bus.command_timeout` plus one robot period.
+    pub loss_to_damping_max: f64,
+    /// Robot time at which the controller first had the robot, and the scenario started.
+    pub control_start: f64,
+    pub scenario_start: f64,
+    /// What the bus adds: the robot's state received → its command written, minus the
+    /// controller's own wait (s), and the whole state → command time.
+    pub adapter_p50: f64,
+    pub adapter_p99: f64,
+    pub adapter_max: f64,
+    pub state_to_command_p50: f64,
+    pub state_to_command_p99: f64,
+    pub state_to_command_max: f64,
+    /// CPU time of this process per second of run (one core = 1).
+    pub cpu_share: f64,
+    pub wall_time: f64,
+    pub error: Option<String>,
+}
+
+/// The robot's latest state as the participant knows it.
+struct Robot {
+    map: MotorMap,
+    /// Each slot's position at the first state: the hold's target.
+    start_q: [f64; MOTOR_SLOTS],
+    /// Whether each slot's joint carries the body (the hold's stiffer gains).
+    leg: [bool; MOTOR_SLOTS],
+    /// The tick of the first state (the robot's time origin).
+    tick0: u32,
+    state: LowState,
+    lab: Option<LabState>,
+}
+
+/// How long a state waits for the lab's sample of its tick (s).
+const LAB_WAIT: f64 = 3e-4;
+
+/// The participant's endpoints: the robot's bus and upc's contract.
+struct Endpoints {
+    states: Inbox<LowState>,
+    labs: Inbox<LabState>,
+    commands: Outbox<LowCmd>,
+    joint_states: Outbox<JointState>,
+    wrenches: Outbox<WrenchStamped>,
+    state_out: crate::channels::Publisher<StateMsg>,
+    torques: crate::channels::Subscriber<TorqueMsg>,
+    state_event: crate::channels::Notifier,
+    torque_event: crate::channels::Listener,
+}
+
+/// What the loop keeps between states.
+struct Session<'a> {
+    cfg: &'a BusConfig,
+    desc: &'a crate::robot::Robot,
+    robot: Robot,
+    info: PlantInfo,
+    sensors: Sensors,
+    gate: CommandGate,
+    /// The controller's last valid torques, and when they came.
+    tau: DVector<f64>,
+    last_command: Option<Instant>,
+    drive: Drive,
+    /// Robot time the drive began.
+    since: f64,
+    msg: Box<StateMsg>,
+    points: [[f64; 3]; N_CONTACTS],
+    tick0: u32,
+    step: u64,
+    /// When `robot.state` arrived.
+    received: Instant,
+    adapter: LatencyHistogram,
+    round_trip: LatencyHistogram,
+    summary: BusSummary,
+}
+
+/// Runs the participant until the duration elapses, `stop` is raised or the robot is lost.
+pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError> {
+    let cfg = &opts.bus;
+    let map = MotorMap::new(&opts.robot).map_err(BusError::Setup)?;
+    // Before the participant: the DDS library's threads inherit the scheduling.
+    let realtime = crate::control::realtime::apply(&cfg.realtime);
+    let mut summary = BusSummary {
+        realtime,
+        robot: opts.robot.name().into(),
+        domain: cfg.domain,
+        interface: cfg.interface.to_string(),
+        scenario_start: -1.0,
+        control_start: -1.0,
+        ..Default::default()
+    };
+    let dp = participant(cfg.network())?;
+    refuse_other_controllers(&dp, cfg, stop)?;
+    let mut states = Inbox::<LowState>::new(&dp, LOW_STATE_TOPIC)?;
+    let labs = Inbox::<LabState>::new(&dp, LAB_STATE_TOPIC)?;
+    // The first valid state: nothing is commanded before it.
+    let first = Instant::now() + Duration::from_secs_f64(cfg.first_state_timeout);
+    let state = loop {
+        if stop.load(Ordering::Relaxed) {
+            return Ok(summary);
+        }
+        match states.wait(first)? {
+            None => return Err(BusError::NoRobot(cfg.first_state_timeout)),
+            Some(s) if valid(&s, cfg.bad_crc, &mut summary) => break s,
+            Some(_) => {}
+        }
+    };
+    let scenario = crate::scenario::Scenario::load(&opts.sim.scenario)
+        .map_err(|e| BusError::Setup(e.to_string()))?;
+    let contract = Bus::open(&opts.prefix, &opts.node_name)?;
+    let ep = Endpoints {
+        states,
+        labs,
+        commands: Outbox::new(&dp, LOW_CMD_TOPIC)?,
+        joint_states: Outbox::new(&dp, JOINT_STATE_TOPIC)?,
+        wrenches: Outbox::new(&dp, HAND_WRENCH_TOPIC)?,
+        state_out: contract.publisher()?,
+        torques: contract.subscriber()?,
+        state_event: contract.notifier(ServiceKind::State)?,
+        torque_event: contract.listener(ServiceKind::Torques)?,
+    };
+    tracing::info!(
+        "on the bus: robot `{}` on domain {} via {}; contract prefix `{}`",
+        opts.robot.name(),
+        cfg.domain,
+        cfg.interface,
+        opts.prefix
+    );
+    let mut start_q = [0.0; MOTOR_SLOTS];
+    for (q, m) in start_q.iter_mut().zip(&state.motor_state) {
+        *q = f64::from(m.q);
+    }
+    let model = &opts.robot.model;
+    // The sensor block as measured on truth: the robot's own measurements replace it.
+    let truth = SensorsConfig {
+        sensing: Sensing::Truth,
+        ..opts.sim.sensors
+    };
+    let info = PlantInfo::start(&opts.sim, &scenario, opts.robot.hash);
+    let mut session = Session {
+        cfg,
+        desc: &opts.robot,
+        robot: Robot {
+            leg: legs(&map),
+            map,
+            start_q,
+            tick0: state.tick,
+            state,
+            lab: None,
+        },
+        sensors: Sensors::new(
+            &truth,
+            -model.gravity.z,
+            opts.robot.imu_frame.map(|f| ImuMount::new(model, f)),
+        ),
+        gate: CommandGate::for_session(info.session),
+        info,
+        tau: DVector::zeros(model.nv - 6),
+        last_command: None,
+        drive: Drive::Hold,
+        since: 0.0,
+        msg: Box::default(),
+        points: [[0.0; 3]; N_CONTACTS],
+        tick0: 0,
+        step: 0,
+        received: Instant::now(),
+        adapter: LatencyHistogram::new(),
+        round_trip: LatencyHistogram::new(),
+        summary,
+    };
+    session.tick0 = session.robot.tick0;
+    let (cpu0, wall0) = (cpu_time(), Instant::now());
+    let mut ep = ep;
+    let result = session.run(&mut ep, opts.duration, stop);
+    // Leave the robot damped, not under the last torques.
+    let _ = ep.commands.write(session.command(Drive::Damping, 0.0));
+    let mut s = session.finish(&ep);
+    s.wall_time = wall0.elapsed().as_secs_f64();
+    s.cpu_share = (cpu_time() - cpu0) / s.wall_time.max(1e-9);
+    s.error = result.as_ref().err().map(|e| e.to_string());
+    match result {
+        Err(e @ BusError::RobotLost(_)) => {
+            tracing::error!("{e}");
+            Ok(s)
+        }
+        Err(e) => Err(e),
+        Ok(()) => Ok(s),
+    }
+}
+
+/// Watch `rt/lowcmd` for `bus.discovery` before writing to it: a writer there is another
+/// controller (Unitree's motion service, another upc).
+fn refuse_other_controllers(
+    dp: &rustdds::DomainParticipant,
+    cfg: &BusConfig,
+    stop: &AtomicBool,
+) -> Result<(), BusError> {
+    let mut watch = Inbox::<LowCmd>::new(dp, LOW_CMD_TOPIC)?;
+    let until = Instant::now() + Duration::from_secs_f64(cfg.discovery);
+    while Instant::now() < until && !stop.load(Ordering::Relaxed) {
+        let _ = watch.wait(until)?;
+    }
+    match watch.writers() {
+        (_, 0) => Ok(()),
+        (_, foreign) => Err(BusError::OtherController(foreign)),
+    }
+}
+
+impl Session<'_> {
+    /// One pass per robot state until the duration, a stop or the robot's silence.
+    fn run(
+        &mut self,
+        ep: &mut Endpoints,
+        duration: f64,
+        stop: &AtomicBool,
+    ) -> Result<(), BusError> {
+        loop {
+            let t = self.time();
+            if duration > 0.0 && t > duration || stop.load(Ordering::Relaxed) {
+                return Ok(());
+            }
+            self.pair_lab(ep)?;
+            self.publish(ep, t)?;
+            let published = Instant::now();
+            let waited = self.await_answer(ep, published)?;
+            self.decide(t);
+            let blend = match self.drive {
+                Drive::Handover => ((t - self.since) / self.cfg.hold.handover.max(1e-9)).min(1.0),
+                _ => 0.0,
+            };
+            ep.commands.write(self.command(self.drive, blend))?;
+            self.summary.commands += 1;
+            let total = self.received.elapsed();
+            self.round_trip.record(total);
+            self.adapter.record(total.saturating_sub(waited));
+            self.next_state(ep)?;
+        }
+    }
+
+    /// Robot time of the current state (s since the first).
+    fn time(&self) -> f64 {
+        f64::from(self.robot.state.tick.wrapping_sub(self.tick0)) * 1e-3
+    }
+
+    /// The lab's sample of this state's tick, if the lab publishes: it may trail the robot's.
+    fn pair_lab(&mut self, ep: &mut Endpoints) -> Result<(), BusError> {
+        let robot = &mut self.robot;
+        while let Some(l) = ep.labs.try_take()? {
+            robot.lab = Some(l);
+        }
+        if robot
+            .lab
+            .as_ref()
+            .is_some_and(|l| l.tick != robot.state.tick)
+        {
+            let until = self.received + Duration::from_secs_f64(LAB_WAIT);
+            while let Some(l) = ep.labs.wait(until)? {
+                let this = l.tick == robot.state.tick;
+                robot.lab = Some(l);
+                if this {
+                    break;
+                }
+            }
+            self.summary.lab_missing += u64::from(
+                robot
+                    .lab
+                    .as_ref()
+                    .is_some_and(|l| l.tick != robot.state.tick),
+            );
+        }
+        if let Some(l) = &robot.lab
+            && l.scenario_start >= 0.0
+            && self.info.scenario_start < 0.0
+        {
+            self.info.scenario_start = l.scenario_start - f64::from(self.tick0) * 1e-3;
+            self.summary.scenario_start = self.info.scenario_start;
+        }
+        Ok(())
+    }
+
+    /// The contract's state and the ROS 2 messages of this robot state.
+    fn publish(&mut self, ep: &mut Endpoints, t: f64) -> Result<(), BusError> {
+        self.info.flags = match self.drive {
+            Drive::Hold | Drive::Handover => STATE_FLAG_HOLD,
+            Drive::Damping => STATE_FLAG_DAMPING,
+            Drive::Control => 0,
+        };
+        fill(
+            &mut self.msg,
+            &self.robot,
+            self.desc,
+            &self.info,
+            (self.step, t),
+            &mut self.sensors,
+            &mut self.points,
+        );
+        let msg = &self.msg;
+        ep.state_out.send_with(|m| *m = **msg)?;
+        ep.state_event.notify()?;
+        publish_ros(&ep.joint_states, &ep.wrenches, &self.robot, t)?;
+        Ok(())
+    }
+
+    /// Takes the controller's valid torques; whether one answers the current state.
+    fn take_torques(&mut self, ep: &mut Endpoints) -> Result<bool, BusError> {
+        let mut fresh = false;
+        while let Some(m) = ep.torques.receive()? {
+            let holding = matches!(self.drive, Drive::Hold | Drive::Damping);
+            if holding && m.flags & TORQUE_FLAG_FALLBACK != 0 {
+                continue;
+            }
+            let origin = CommandOrigin {
+                session: m.session,
+                controller: m.controller,
+            };
+            let n = self.tau.len();
+            if self.gate.check(origin, m.seq, m.n, &m.tau, n).is_ok() {
+                self.tau.as_mut_slice().copy_from_slice(&m.tau[..n]);
+                self.last_command = Some(Instant::now());
+                fresh |= m.state_step == self.step;
+            }
+        }
+        Ok(fresh)
+    }
+
+    /// Whether the controller's torques are recent enough to apply.
+    fn current(&self) -> bool {
+        self.last_command
+            .is_some_and(|c| c.elapsed().as_secs_f64() < self.cfg.command_timeout)
+    }
+
+    /// The controller's answer to this state, until `bus.late` (no wait while there is no live
+    /// controller: the hold or the damping go out at once); how long the controller took.
+    fn await_answer(
+        &mut self,
+        ep: &mut Endpoints,
+        published: Instant,
+    ) -> Result<Duration, BusError> {
+        let live = self.current();
+        let late = if live { self.cfg.late } else { 0.0 };
+        let deadline = self.received + Duration::from_secs_f64(late);
+        loop {
+            if self.take_torques(ep)? {
+                return Ok(published.elapsed());
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                self.summary.late_answers += u64::from(live);
+                self.summary.unanswered += 1;
+                return Ok(Duration::ZERO);
+            }
+            ep.torque_event
+                .wait_until(deadline - now, Duration::ZERO, || ep.torques.has_samples())?;
+        }
+    }
+
+    /// Who drives the robot now.
+    fn decide(&mut self, t: f64) {
+        let next = match (self.drive, self.current()) {
+            (Drive::Hold | Drive::Damping, true) => Drive::Handover,
+            (Drive::Handover, true) if t - self.since >= self.cfg.hold.handover => Drive::Control,
+            (Drive::Handover | Drive::Control, false) => Drive::Damping,
+            (d, _) => d,
+        };
+        if next != self.drive {
+            if next == Drive::Damping
+                && let Some(c) = self.last_command
+            {
+                let delay = c.elapsed().as_secs_f64();
+                self.summary.loss_to_damping_max = self.summary.loss_to_damping_max.max(delay);
+            }
+            transition(self.drive, next, t, &mut self.summary);
+            self.since = t;
+            self.drive = next;
+        }
+        self.summary.hold_states += u64::from(matches!(self.drive, Drive::Hold | Drive::Handover));
+        self.summary.damping_states += u64::from(self.drive == Drive::Damping);
+    }
+
+    /// Waits for the next valid state. A controller falling silent meanwhile is damped at once,
+    /// without waiting for the robot: the bound is `bus.command_timeout`, not a robot period.
+    fn next_state(&mut self, ep: &mut Endpoints) -> Result<(), BusError> {
+        let lost = Instant::now() + Duration::from_secs_f64(self.cfg.state_timeout);
+        loop {
+            let driven = matches!(self.drive, Drive::Handover | Drive::Control);
+            let silence = self
+                .last_command
+                .filter(|_| driven)
+                .map(|c| c + Duration::from_secs_f64(self.cfg.command_timeout));
+            let until = silence.map_or(lost, |s| s.min(lost));
+            match ep.states.wait_newest(until)? {
+                None if Instant::now() < lost => {
+                    // The silence deadline: torques that came meanwhile keep the controller.
+                    self.take_torques(ep)?;
+                    if !self.current() {
+                        let t = self.time();
+                        self.decide(t);
+                        ep.commands.write(self.command(Drive::Damping, 0.0))?;
+                        self.summary.commands += 1;
+                    }
+                }
+                None => return Err(BusError::RobotLost(self.cfg.state_timeout)),
+                Some(s)
+                    if s.tick == self.robot.state.tick
+                        || tick_behind(s.tick, self.robot.state.tick) =>
+                {
+                    self.summary.refused_stale_tick += 1;
+                }
+                Some(s) if valid(&s, self.cfg.bad_crc, &mut self.summary) => {
+                    self.robot.state = s;
+                    self.received = Instant::now();
+                    self.step += 1;
+                    return Ok(());
+                }
+                Some(_) => {}
+            }
+        }
+    }
+
+    /// The command for this state: the drives' hold, the controller's torques, a blend of both,
+    /// or damping; torques clamped to the effort limits; mode_machine echoed; sealed.
+    fn command(&mut self, drive: Drive, blend: f64) -> LowCmd {
+        let (cmd, clamped) = command(&self.robot, self.cfg, drive, blend, &self.tau);
+        self.summary.clamped_commands += u64::from(clamped);
+        cmd
+    }
+
+    /// The run's figures.
+    fn finish(self, ep: &Endpoints) -> BusSummary {
+        let mut s = self.summary;
+        s.states = self.step + 1;
+        // The robot's rate from its own clock: states per second of ticks.
+        let span = f64::from(self.robot.state.tick.wrapping_sub(self.tick0)) * 1e-3;
+        s.robot_rate = if span > 0.0 {
+            self.step as f64 / span
+        } else {
+            0.0
+        };
+        s.undecodable = ep.states.undecodable + ep.labs.undecodable;
+        s.superseded = ep.states.superseded;
+        s.controller_commands = self.gate.stats;
+        s.adapter_p50 = self.adapter.quantile(0.5);
+        s.adapter_p99 = self.adapter.quantile(0.99);
+        s.adapter_max = self.adapter.max();
+        s.state_to_command_p50 = self.round_trip.quantile(0.5);
+        s.state_to_command_p99 = self.round_trip.quantile(0.99);
+        s.state_to_command_max = self.round_trip.max();
+        s
+    }
+}
+
+/// Whether a state may be used; refusals counted.
+fn valid(s: &LowState, bad_crc: BadCrc, summary: &mut BusSummary) -> bool {
+    if !s.crc_ok() {
+        match bad_crc {
+            BadCrc::Refuse => {
+                summary.refused_bad_crc += 1;
+                return false;
+            }
+            BadCrc::Count => summary.counted_bad_crc += 1,
+        }
+    }
+    let finite = s
+        .motor_state
+        .iter()
+        .all(|m| m.q.is_finite() && m.dq.is_finite() && m.tau_est.is_finite())
+        && s.imu_state.quaternion.iter().all(|x| x.is_finite())
+        && s.imu_state.gyroscope.iter().all(|x| x.is_finite())
+        && s.imu_state.accelerometer.iter().all(|x| x.is_finite());
+    if !finite {
+        summary.refused_non_finite += 1;
+    }
+    finite
+}
+
+/// Whether tick `a` is before `b` (wrapping u32 milliseconds).
+fn tick_behind(a: u32, b: u32) -> bool {
+    b.wrapping_sub(a) < u32::MAX / 2 && a != b
+}
+
+fn transition(from: Drive, to: Drive, t: f64, s: &mut BusSummary) {
+    match to {
+        Drive::Handover => {
+            s.handovers += 1;
+            tracing::info!("t = {t:.3} s: the controller's torques arrived; handing over");
+        }
+        Drive::Control => {
+            if s.control_start < 0.0 {
+                s.control_start = t;
+            }
+            tracing::info!("t = {t:.3} s: the controller drives the robot");
+        }
+        Drive::Damping => {
+            s.losses += u64::from(from == Drive::Control || from == Drive::Handover);
+            tracing::warn!("t = {t:.3} s: the controller is silent: damping the drives");
+        }
+        Drive::Hold => {}
+    }
+}
+
+/// Whether each slot's joint carries the body (legs and waist: stiffer hold), by its name.
+fn legs(map: &MotorMap) -> [bool; MOTOR_SLOTS] {
+    let mut leg = [false; MOTOR_SLOTS];
+    for (l, name) in leg.iter_mut().zip(&map.names) {
+        *l = ["hip", "knee", "ankle", "waist", "torso"]
+            .iter()
+            .any(|p| name.contains(p));
+    }
+    leg
+}
+
+/// A command: the drives' hold, the controller's torques, a blend of both, or damping; torques
+/// clamped to the effort limits (and whether one was); mode_machine echoed; sealed.
+fn command(
+    robot: &Robot,
+    cfg: &BusConfig,
+    drive: Drive,
+    blend: f64,
+    tau: &DVector<f64>,
+) -> (LowCmd, bool) {
+    let mut cmd = LowCmd {
+        mode_pr: robot.state.mode_pr,
+        mode_machine: robot.state.mode_machine,
+        ..LowCmd::default()
+    };
+    let hold = 1.0 - blend;
+    let mut clamped = false;
+    for (k, slot) in robot.map.slots.iter().enumerate() {
+        let c = &mut cmd.motor_cmd[k];
+        let (kp, kd) = if robot.leg[k] {
+            (cfg.hold.leg_kp, cfg.hold.leg_kd)
+        } else {
+            (cfg.hold.arm_kp, cfg.hold.arm_kd)
+        };
+        match *slot {
+            Slot::Unused => {}
+            Slot::Locked { q } => {
+                *c = MotorCmd {
+                    mode: 1,
+                    q: q as f32,
+                    kp: kp as f32,
+                    kd: kd as f32,
+                    ..Default::default()
+                };
+            }
+            Slot::Joint {
+                actuated, effort, ..
+            } => {
+                let (kp, kd, ff) = match drive {
+                    Drive::Damping => (0.0, cfg.damping, 0.0),
+                    Drive::Hold => (kp, kd, 0.0),
+                    Drive::Handover => (hold * kp, hold * kd, blend * tau[actuated]),
+                    Drive::Control => (0.0, 0.0, tau[actuated]),
+                };
+                let limited = ff.clamp(-effort, effort);
+                clamped |= limited != ff;
+                *c = MotorCmd {
+                    mode: 1,
+                    q: robot.start_q[k] as f32,
+                    dq: 0.0,
+                    tau: limited as f32,
+                    kp: kp as f32,
+                    kd: kd as f32,
+                    reserve: 0,
+                };
+            }
+        }
+    }
+    cmd.seal();
+    (cmd, clamped)
+}
+
+/// The contract's state from the robot's: joints and IMU from `rt/lowstate`; the base, sole and
+/// hand forces and the door from the lab topic when there is one, else unmeasured.
+fn fill(
+    m: &mut StateMsg,
+    robot: &Robot,
+    desc: &crate::robot::Robot,
+    info: &PlantInfo,
+    (step, t): (u64, f64),
+    sensors: &mut Sensors,
+    points: &mut [[f64; 3]; N_CONTACTS],
+) {
+    let model = &desc.model;
+    m.step = step;
+    m.time = t;
+    m.nq = model.nq as u32;
+    m.nv = model.nv as u32;
+    for (k, q, v, _, _) in robot.map.joints() {
+        let s = &robot.state.motor_state[k];
+        m.q[q] = f64::from(s.q);
+        m.v[v] = f64::from(s.dq);
+    }
+    let mut flags = info.flags;
+    match &robot.lab {
+        Some(l) => {
+            m.q[..7].copy_from_slice(&l.base_pose);
+            m.v[..6].copy_from_slice(&l.base_velocity);
+            m.contact_forces = l.contact_forces;
+            *points = l.contact_points;
+            m.zmp = l.zmp;
+            m.hand_force = l.hand_force;
+            m.door_angle = l.door_angle;
+            m.door_velocity = l.door_velocity;
+        }
+        None => {
+            m.q[..7].fill(f64::NAN);
+            m.v[..6].fill(f64::NAN);
+            m.contact_forces = [[f64::NAN; 3]; N_CONTACTS];
+            m.hand_force = [f64::NAN; 3];
+            flags |= STATE_FLAG_BASE_UNMEASURED;
+        }
+    }
+    m.session = info.session;
+    m.scenario_hash = info.scenario_hash;
+    m.scenario_start = info.scenario_start;
+    m.flags = flags;
+    m.force_scale = info.force_scale;
+    m.robot_hash = info.robot_hash;
+    m.set_scenario_name(&info.scenario);
+    // The foot wrenches from the sole forces (the contract's sensor block), then the robot's
+    // own IMU over the modelled one.
+    sensors.apply(m, 1e-3, points);
+    let imu = &robot.state.imu_state;
+    let [w, x, y, z] = imu.quaternion.map(f64::from);
+    m.imu_orientation = [x, y, z, w];
+    m.imu_angular_velocity = imu.gyroscope.map(f64::from);
+    m.imu_linear_acceleration = imu.accelerometer.map(f64::from);
+    m.stamps = [t; 4];
+}
+
+/// The joints and the hand's wrench for ROS 2.
+fn publish_ros(
+    joints: &Outbox<JointState>,
+    wrenches: &Outbox<WrenchStamped>,
+    robot: &Robot,
+    t: f64,
+) -> Result<(), DdsError> {
+    let header = Header {
+        stamp: Time::from_secs(t),
+        frame_id: String::new(),
+    };
+    let mut js = JointState {
+        header: header.clone(),
+        ..Default::default()
+    };
+    for (k, name) in robot.map.names.iter().enumerate() {
+        let s = &robot.state.motor_state[k];
+        js.name.push(name.clone());
+        js.position.push(f64::from(s.q));
+        js.velocity.push(f64::from(s.dq));
+        js.effort.push(f64::from(s.tau_est));
+    }
+    joints.write(js)?;
+    if let Some(l) = &robot.lab {
+        let [x, y, z] = l.hand_force;
+        wrenches.write(WrenchStamped {
+            header: Header {
+                frame_id: "world".into(),
+                ..header
+            },
+            wrench: Wrench {
+                force: Vector3 { x, y, z },
+                torque: Vector3::default(),
+            },
+        })?;
+    }
+    Ok(())
+}
+
+/// CPU time of this process (s).
+fn cpu_time() -> f64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime writes the timespec it is given.
+    unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
+    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
+}

@@ -1,0 +1,341 @@
+//! upc on a robot's own bus (docs/bus.md): the G1's low-level DDS topics, end to end.
+//!
+//! - upc's plant speaking as a G1 (`upc sim --bus unitree`), `upc bus` and a real-time
+//!   controller: the robot held, handed over, standing, then its controller killed and the
+//!   drives damped within the stated bound; no feed-forward torque above an effort limit.
+//! - `upc run --bus unitree`: the same verdict as on upc's contract.
+//! - An independent robot on the other side of the wire: CycloneDDS 0.10.2 (Debian's library,
+//!   its Python binding built against it by scripts/setup.sh) with Unitree's IDL types and its
+//!   own CRC (`scripts/g1_bus_peer.py`): every command sealed, mode_machine echoed, states with
+//!   a bad CRC refused, the rate held, the joints seen by a ROS 2-typed reader; a second
+//!   controller on `rt/lowcmd` makes `upc bus` refuse to start.
+//!
+//! DDS stays on the loopback (config/bus.toml's defaults; the Cyclone side uses
+//! scripts/cyclone-loopback.xml). Each test has its own DDS domain.
+
+mod support;
+
+use std::path::PathBuf;
+use std::process::Command;
+use std::time::Duration;
+
+use support::procs::*;
+use support::robots::installed;
+
+fn domain(d: u16) -> String {
+    format!("bus.domain={d}")
+}
+
+#[test]
+fn a_g1_on_the_bus_stands_and_is_damped_within_10_ms_of_its_controller_s_death() {
+    let _one = serial();
+    if installed("g1").is_none() {
+        return;
+    }
+    let s = Scratch::new("bus_damping");
+    let mut p = Procs::default();
+    let d = domain(21);
+    let sim_summary = s.path("sim.json").display().to_string();
+    let bus_summary = s.path("bus.json").display().to_string();
+    let scenario = s.scenario();
+    p.start(
+        &s,
+        "sim",
+        &[
+            "sim",
+            "--bus",
+            "unitree",
+            "--robot",
+            "g1",
+            "--scenario",
+            &scenario,
+            "--duration",
+            "0",
+            "--summary",
+            &sim_summary,
+            "--bus-set",
+            &d,
+        ],
+    );
+    p.start(
+        &s,
+        "bus",
+        &[
+            "bus",
+            "--robot",
+            "g1",
+            "--scenario",
+            &scenario,
+            "--duration",
+            "0",
+            "--prefix",
+            &s.prefix,
+            "--summary",
+            &bus_summary,
+            "--bus-set",
+            &d,
+        ],
+    );
+    start_controller(
+        &mut p,
+        &s,
+        &["--robot", "g1", "--set", "controller.rate_hz=500.0"],
+    );
+    std::thread::sleep(Duration::from_secs(8));
+    p.signal("controller", libc::SIGKILL);
+    std::thread::sleep(Duration::from_secs(1));
+    p.stop(&s, "bus", libc::SIGTERM);
+    p.stop(&s, "sim", libc::SIGTERM);
+    let bus = json(&s.path("bus.json"));
+    let sim = json(&s.path("sim.json"));
+    // The controller had the robot, then lost it.
+    assert!(u(&bus, "handovers") >= 1, "{bus}");
+    assert!(f(&bus, "control_start") >= 0.0, "{bus}");
+    assert_eq!(u(&bus, "losses"), 1, "{bus}");
+    assert!(u(&bus, "damping_states") > 100, "{bus}");
+    // The bound: the controller's last torques → the damping command, within 10 ms.
+    let delay = f(&bus, "loss_to_damping_max");
+    assert!(delay > 0.0 && delay <= 0.010, "{bus}");
+    // The robot received damping only from then on, valid and echoed.
+    let starts = sim["damping_starts"].as_array().expect("damping_starts");
+    assert_eq!(starts.len(), 1, "{sim}");
+    assert!(u(&sim, "damping_steps") > 200, "{sim}");
+    assert_eq!(u(&sim, "bad_crc_commands"), 0, "{sim}");
+    assert_eq!(u(&sim, "wrong_mode_machine"), 0, "{sim}");
+    assert_eq!(u(&sim, "feedforward_over_limit"), 0, "{sim}");
+    assert!((f(&bus, "robot_rate") - 500.0).abs() < 25.0, "{bus}");
+    assert_eq!(u(&bus, "refused_bad_crc"), 0, "{bus}");
+    assert_eq!(u(&bus, "clamped_commands"), 0, "{bus}");
+}
+
+#[test]
+fn upc_run_through_the_bus_keeps_c1_standing_on_the_g1() {
+    let _one = serial();
+    if installed("g1").is_none() {
+        return;
+    }
+    let s = Scratch::new("bus_run");
+    let out = Command::new(env!("CARGO_BIN_EXE_upc"))
+        .args([
+            "run",
+            "--robot",
+            "g1",
+            "--bus",
+            "unitree",
+            "--controller",
+            "c1",
+        ])
+        .args(["--duration", "4", "--bus-set", &domain(22)])
+        .args(["--quiet", "--name", "run", "--out"])
+        .arg(&s.dir)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("upc run");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let dir = s.dir.join("run/c1");
+    let c = json(&dir.join("controller.json"));
+    assert_eq!(u(&c, "falls"), 0, "{c}");
+    assert_eq!(u(&c, "tick_errors"), 0, "{c}");
+    let bus = json(&dir.join("bus.json"));
+    assert!(u(&bus, "states") > 1500, "{bus}");
+    // One hand-over: the controller kept the robot until its run was over.
+    assert_eq!(u(&bus, "handovers"), 1, "{bus}");
+    // The scenario started after the controller had the robot.
+    assert!(
+        f(&bus, "scenario_start") > f(&bus, "control_start"),
+        "{bus}"
+    );
+    let sim = json(&dir.join("sim.json"));
+    assert_eq!(u(&sim, "bad_crc_commands"), 0, "{sim}");
+    assert_eq!(u(&sim, "feedforward_over_limit"), 0, "{sim}");
+}
+
+/// The robot venv's Python when it has CycloneDDS 0.10.2, else `None` (a failure under CI).
+fn cyclone_python() -> Option<PathBuf> {
+    let venv = std::env::var_os("UPC_ROBOT_VENV")
+        .map(PathBuf::from)
+        .or_else(|| {
+            std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache/upc/robot-venv"))
+        });
+    let py = venv.map(|v| v.join("bin/python"));
+    let ok = py.as_ref().is_some_and(|py| {
+        Command::new(py)
+            .args([
+                "-c",
+                "import importlib.metadata as m, cyclonedds.core; \
+                 assert m.version('cyclonedds') == '0.10.2'",
+            ])
+            .status()
+            .is_ok_and(|s| s.success())
+    });
+    if !ok {
+        support::prereq::missing(
+            "CycloneDDS 0.10.2's Python binding in the robot venv",
+            support::prereq::SETUP,
+        );
+        return None;
+    }
+    py
+}
+
+fn peer() -> String {
+    concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/g1_bus_peer.py").into()
+}
+
+#[test]
+fn a_cyclone_dds_g1_gets_sealed_echoed_commands_and_its_bad_states_are_refused() {
+    let _one = serial();
+    let Some(py) = cyclone_python() else {
+        return;
+    };
+    if installed("g1").is_none() {
+        return;
+    }
+    let s = Scratch::new("bus_cyclone");
+    let mut p = Procs::default();
+    let (robot_report, listen_report) = (s.path("robot.json"), s.path("listen.json"));
+    let mut robot = Command::new(&py);
+    robot
+        .args([
+            &peer(),
+            "robot",
+            "--domain",
+            "23",
+            "--rate",
+            "500",
+            "--duration",
+            "7",
+        ])
+        .args(["--bad-crc-every", "5", "--mode-machine", "6", "--report"])
+        .arg(&robot_report);
+    let mut listen = Command::new(&py);
+    listen
+        .args([
+            &peer(),
+            "listen",
+            "--domain",
+            "23",
+            "--duration",
+            "6",
+            "--report",
+        ])
+        .arg(&listen_report);
+    let mut robot = robot.spawn().expect("cyclone robot");
+    let mut listen = listen.spawn().expect("cyclone listener");
+    let bus_summary = s.path("bus.json").display().to_string();
+    let scenario = s.scenario();
+    p.start(
+        &s,
+        "bus",
+        &[
+            "bus",
+            "--robot",
+            "g1",
+            "--scenario",
+            &scenario,
+            "--duration",
+            "4",
+            "--prefix",
+            &s.prefix,
+            "--summary",
+            &bus_summary,
+            "--bus-set",
+            &domain(23),
+        ],
+    );
+    let status = p.wait("bus", Duration::from_secs(30));
+    assert!(status.success(), "upc bus: {status}");
+    assert!(robot.wait().expect("robot").success());
+    assert!(listen.wait().expect("listener").success());
+    let r = json(&robot_report);
+    let bus = json(&s.path("bus.json"));
+    // Every command reached the robot sealed with the CRC the robot computes itself, with
+    // its mode_machine echoed.
+    let received = u(&r, "commands_received");
+    assert!(received > 1000, "{}", r["commands_received"]);
+    assert_eq!(u(&r, "commands_crc_ok"), received);
+    assert_eq!(r["mode_machine_seen"], serde_json::json!([6]));
+    // Without a controller: the drives hold the start posture (kp > 0 on the knee, its target
+    // the robot's own q), no feed-forward torque; the last command, at the end, damps.
+    let cmds = r["commands"].as_array().expect("commands");
+    let mid = &cmds[cmds.len() / 2];
+    assert!(mid["kp"][3].as_f64().unwrap() > 0.0, "{mid}");
+    assert!((mid["q"][3].as_f64().unwrap() - 0.03).abs() < 1e-6, "{mid}");
+    assert_eq!(mid["tau"][3].as_f64().unwrap(), 0.0, "{mid}");
+    let last = cmds.last().expect("a command");
+    assert_eq!(last["kp"][3].as_f64().unwrap(), 0.0, "{last}");
+    assert!(last["kd"][3].as_f64().unwrap() > 0.0, "{last}");
+    assert_eq!(last["tau"][3].as_f64().unwrap(), 0.0, "{last}");
+    // One state in five had a bad CRC: refused, counted.
+    let (refused, states) = (u(&bus, "refused_bad_crc"), u(&bus, "states"));
+    assert!(refused > 0, "{bus}");
+    let share = refused as f64 / (refused + states) as f64;
+    assert!(
+        (share - 0.2).abs() < 0.05,
+        "{refused} refused of {}",
+        refused + states
+    );
+    // The loop ran at the rate of the usable states: four in five of the robot's 500 Hz.
+    assert!((f(&bus, "robot_rate") - 400.0).abs() < 40.0, "{bus}");
+    // A ROS 2-typed reader saw the joints, by name, at the robot's positions.
+    let l = json(&listen_report);
+    assert!(u(&l, "joint_states_received") > 100, "{l}");
+    assert_eq!(l["joint_names"][0], "left_hip_pitch_joint");
+    assert_eq!(l["joint_names"][28], "right_wrist_yaw_joint");
+    let q3 = l["joint_positions"][3].as_f64().unwrap();
+    assert!((q3 - 0.03).abs() < 1e-6, "{l}");
+}
+
+#[test]
+fn upc_bus_refuses_to_start_beside_another_controller() {
+    let _one = serial();
+    let Some(py) = cyclone_python() else {
+        return;
+    };
+    if installed("g1").is_none() {
+        return;
+    }
+    let s = Scratch::new("bus_two_controllers");
+    let mut other = Command::new(&py)
+        .args([
+            &peer(),
+            "talk-cmd",
+            "--domain",
+            "24",
+            "--rate",
+            "500",
+            "--duration",
+            "8",
+        ])
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .expect("second controller");
+    std::thread::sleep(Duration::from_millis(500));
+    let out = Command::new(env!("CARGO_BIN_EXE_upc"))
+        .args([
+            "bus",
+            "--robot",
+            "g1",
+            "--duration",
+            "2",
+            "--prefix",
+            &s.prefix,
+        ])
+        .args(["--bus-set", &domain(24), "--bus-set", "bus.discovery=3.0"])
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("upc bus");
+    let _ = other.kill();
+    let _ = other.wait();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("another participant writes rt/lowcmd"),
+        "{err}"
+    );
+    assert!(err.contains("motion service"), "{err}");
+}
