@@ -210,7 +210,8 @@ fn a_cyclone_dds_g1_gets_sealed_echoed_commands_and_its_bad_states_are_refused()
             "--duration",
             "7",
         ])
-        .args(["--bad-crc-every", "5", "--mode-machine", "6", "--report"])
+        .args(["--bad-crc-every", "5", "--stale-every", "7", "--mode-machine", "6"])
+        .arg("--report")
         .arg(&robot_report);
     let mut listen = Command::new(&py);
     listen

@@ -101,6 +101,9 @@ fn run_on_bus<P: Physics>(
         ..
     } = plant;
     let map = MotorMap::new(&opts.robot).map_err(ProcessError::Setup)?;
+    // A robot's loop has its own computer: `bus.realtime` gives the simulated one its priority
+    // (before the participant, whose threads inherit it).
+    crate::control::realtime::apply(&bus.realtime);
     let dp = participant(bus.network()).map_err(dds)?;
     let states = Outbox::<LowState>::new(&dp, LOW_STATE_TOPIC).map_err(dds)?;
     let labs = Outbox::<LabState>::new(&dp, LAB_STATE_TOPIC).map_err(dds)?;
