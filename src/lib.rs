@@ -15,6 +15,7 @@
 //! - [`shutdown`]: SIGINT/SIGTERM handling shared by the processes.
 //! - [`channels`]: the iceoryx2 channel contract shared by every process.
 //! - [`bridge`]: the contract over Zenoh, for forecasters and viewers on other hosts.
+//! - [`bus`]: upc on a robot's own DDS bus (the Unitree G1's `rt/lowstate`, `rt/lowcmd`).
 //! - [`recording`]: where the rerun recordings go (`.rrd` files, a live viewer).
 
 // Outside tests, no unwrap or expect: bad input is an error value with a message, and the

@@ -49,10 +49,10 @@ impl Drop for LogGuard {
 
 /// The log filter without `RUST_LOG`. rustdds logs, at error level, the multicast groups it
 /// cannot leave on a loopback without multicast and its shutdown: noise on the bus.
-pub const DEFAULT_FILTER: &str = "info,rustdds=warn,rustdds::network::udp_listener=off";
+pub const DEFAULT_FILTER: &str = "info,rustdds=error,rustdds::network::udp_listener=off";
 
 /// Installs the global subscriber: `RUST_LOG` (default `info`, with the DDS library's own
-/// chatter at `warn`: it reports locators and multicast sockets it does not use as errors
+/// chatter at `error`: it reports locators and multicast sockets it does not use as errors
 /// ([`DEFAULT_FILTER`])), colours on a terminal only, lines to stderr through [`non_blocking`].
 /// Keep the guard for the whole process.
 pub fn init_stderr() -> LogGuard {

@@ -210,7 +210,14 @@ fn a_cyclone_dds_g1_gets_sealed_echoed_commands_and_its_bad_states_are_refused()
             "--duration",
             "7",
         ])
-        .args(["--bad-crc-every", "5", "--stale-every", "7", "--mode-machine", "6"])
+        .args([
+            "--bad-crc-every",
+            "5",
+            "--stale-every",
+            "7",
+            "--mode-machine",
+            "6",
+        ])
         .arg("--report")
         .arg(&robot_report);
     let mut listen = Command::new(&py);
@@ -271,17 +278,17 @@ fn a_cyclone_dds_g1_gets_sealed_echoed_commands_and_its_bad_states_are_refused()
     assert_eq!(last["kp"][3].as_f64().unwrap(), 0.0, "{last}");
     assert!(last["kd"][3].as_f64().unwrap() > 0.0, "{last}");
     assert_eq!(last["tau"][3].as_f64().unwrap(), 0.0, "{last}");
-    // One state in five had a bad CRC: refused, counted.
-    let (refused, states) = (u(&bus, "refused_bad_crc"), u(&bus, "states"));
-    assert!(refused > 0, "{bus}");
-    let share = refused as f64 / (refused + states) as f64;
+    // One state in five had a bad CRC, one in seven repeated its predecessor's tick: refused,
+    // counted.
+    let (refused, stale) = (u(&bus, "refused_bad_crc"), u(&bus, "refused_stale_tick"));
+    let total = (refused + stale + u(&bus, "states")) as f64;
+    assert!((refused as f64 / total - 0.2).abs() < 0.05, "{bus}");
     assert!(
-        (share - 0.2).abs() < 0.05,
-        "{refused} refused of {}",
-        refused + states
+        stale > 0 && (stale as f64 / total) < 1.0 / 7.0 + 0.03,
+        "{bus}"
     );
-    // The loop ran at the rate of the usable states: four in five of the robot's 500 Hz.
-    assert!((f(&bus, "robot_rate") - 400.0).abs() < 40.0, "{bus}");
+    // The loop ran at the rate of the usable states: about 500 Hz × (1 − 1/5 − 1/7 × 4/5).
+    assert!((f(&bus, "robot_rate") - 343.0).abs() < 45.0, "{bus}");
     // A ROS 2-typed reader saw the joints, by name, at the robot's positions.
     let l = json(&listen_report);
     assert!(u(&l, "joint_states_received") > 100, "{l}");

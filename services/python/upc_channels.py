@@ -48,6 +48,7 @@ class StateMsg(ctypes.Structure):
         ("imu_linear_acceleration", ctypes.c_double * 3),
         ("foot_wrenches", (ctypes.c_double * 6) * 2),
         ("stamps", ctypes.c_double * 4),
+        ("joint_torques", ctypes.c_double * MAX_DOF),
     ]
 
     @staticmethod
@@ -152,7 +153,7 @@ def event(node, prefix: str, kind: str):
 # b"UPCZ", contract version u16, kind u16, payload size u32, reserved u32; little-endian) and
 # the payload's bytes as above. The bridge refuses a payload whose header does not match.
 WIRE_MAGIC = b"UPCZ"
-WIRE_VERSION = 3
+WIRE_VERSION = 4
 _WIRE_KIND = {"state": 1, "torques": 2, "forecast": 3, "ground_truth": 4}
 _WIRE_HEADER = struct.Struct("<4sHHII")
 

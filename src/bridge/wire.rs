@@ -66,7 +66,7 @@ unsafe impl WireMessage for TorqueMsg {}
 unsafe impl WireMessage for ForecastMsg {}
 unsafe impl WireMessage for GroundTruthMsg {}
 // Each size is the sum of the fields' sizes (in 8-byte words): no byte of padding.
-const _: () = assert!(size_of::<StateMsg>() == 8 * (7 + 2 * MAX_DOF + 24 + 7 + 2 + 16 + 26));
+const _: () = assert!(size_of::<StateMsg>() == 8 * (7 + 3 * MAX_DOF + 24 + 7 + 2 + 16 + 26));
 const _: () = assert!(size_of::<TorqueMsg>() == 8 * (6 + MAX_DOF));
 const _: () = assert!(size_of::<ForecastMsg>() == 8 * (6 + 3 * crate::channels::MAX_FORECAST));
 const _: () = assert!(size_of::<GroundTruthMsg>() == 8 * 14);

@@ -109,9 +109,13 @@ pub struct BusSummary {
     pub superseded: u64,
     /// States whose lab sample did not arrive with them (the previous one was used).
     pub lab_missing: u64,
-    /// Answers that came after `bus.late`, and states answered without fresh torques.
+    /// States that got no new torques within `bus.late` while a controller was live, and states
+    /// answered without new torques at all (the hold, the damping, a late controller).
     pub late_answers: u64,
     pub unanswered: u64,
+    /// States whose answer did not come within `bus.late` but torques answering an earlier
+    /// state did (they went out).
+    pub answers_behind: u64,
     /// Commands with at least one torque clamped to its effort limit.
     pub clamped_commands: u64,
     pub controller_commands: CommandStats,
@@ -119,14 +123,20 @@ pub struct BusSummary {
     pub losses: u64,
     pub hold_states: u64,
     pub damping_states: u64,
+    /// The longest publication of a state on the contract and to ROS 2 (s).
+    pub publish_max: f64,
+    /// The longest a wait for the controller's answer overran its deadline (s).
+    pub wait_overshoot_max: f64,
+    /// The longest write of a command on the bus (s).
+    pub write_max: f64,
     /// The longest time from the controller's last torques to the damping command sent for
     /// its silence (s): the bound is `bus.command_timeout` plus one robot period.
     pub loss_to_damping_max: f64,
     /// Robot time at which the controller first had the robot, and the scenario started.
     pub control_start: f64,
     pub scenario_start: f64,
-    /// What the bus adds: the robot's state received → its command written, minus the
-    /// controller's own wait (s), and the whole state → command time.
+    /// What the bus adds: the robot's state received → its command written, minus the wait
+    /// for the controller's answer (s), and the whole state → command time.
     pub adapter_p50: f64,
     pub adapter_p99: f64,
     pub adapter_max: f64,
@@ -151,6 +161,9 @@ struct Robot {
     state: LowState,
     lab: Option<LabState>,
 }
+
+/// The poll period of the wait for the controller's answer: what it adds to an answer at most.
+const ANSWER_POLL: Duration = Duration::from_micros(50);
 
 /// How long a state waits for the lab's sample of its tick (s).
 const LAB_WAIT: f64 = 3e-4;
@@ -339,15 +352,22 @@ impl Session<'_> {
                 return Ok(());
             }
             self.pair_lab(ep)?;
+            let start = Instant::now();
             self.publish(ep, t)?;
             let published = Instant::now();
+            self.summary.publish_max = self
+                .summary
+                .publish_max
+                .max((published - start).as_secs_f64());
             let waited = self.await_answer(ep, published)?;
             self.decide(t);
             let blend = match self.drive {
                 Drive::Handover => ((t - self.since) / self.cfg.hold.handover.max(1e-9)).min(1.0),
                 _ => 0.0,
             };
+            let w = Instant::now();
             ep.commands.write(self.command(self.drive, blend))?;
+            self.summary.write_max = self.summary.write_max.max(w.elapsed().as_secs_f64());
             self.summary.commands += 1;
             let total = self.received.elapsed();
             self.round_trip.record(total);
@@ -420,9 +440,9 @@ impl Session<'_> {
         Ok(())
     }
 
-    /// Takes the controller's valid torques; whether one answers the current state.
-    fn take_torques(&mut self, ep: &mut Endpoints) -> Result<bool, BusError> {
-        let mut fresh = false;
+    /// Takes the controller's valid torques; the state the newest of them answers, if any came.
+    fn take_torques(&mut self, ep: &mut Endpoints) -> Result<Option<u64>, BusError> {
+        let mut fresh = None;
         while let Some(m) = ep.torques.receive()? {
             let holding = matches!(self.drive, Drive::Hold | Drive::Damping);
             if holding && m.flags & TORQUE_FLAG_FALLBACK != 0 {
@@ -436,7 +456,7 @@ impl Session<'_> {
             if self.gate.check(origin, m.seq, m.n, &m.tau, n).is_ok() {
                 self.tau.as_mut_slice().copy_from_slice(&m.tau[..n]);
                 self.last_command = Some(Instant::now());
-                fresh |= m.state_step == self.step;
+                fresh = Some(m.state_step);
             }
         }
         Ok(fresh)
@@ -449,7 +469,10 @@ impl Session<'_> {
     }
 
     /// The controller's answer to this state, until `bus.late` (no wait while there is no live
-    /// controller: the hold or the damping go out at once); how long the controller took.
+    /// controller: the hold or the damping go out at once); how long it waited since the state
+    /// was published. The controller ticks on its own clock, in step with the robot's: when its
+    /// answer to this state does not come in time, its newest torques go out (an answer to an
+    /// earlier state: counted, `answers_behind`) while they are current.
     fn await_answer(
         &mut self,
         ep: &mut Endpoints,
@@ -458,18 +481,30 @@ impl Session<'_> {
         let live = self.current();
         let late = if live { self.cfg.late } else { 0.0 };
         let deadline = self.received + Duration::from_secs_f64(late);
+        let mut newest = None;
         loop {
-            if self.take_torques(ep)? {
-                return Ok(published.elapsed());
+            if let Some(answered) = self.take_torques(ep)? {
+                if answered >= self.step {
+                    return Ok(published.elapsed());
+                }
+                newest = Some(answered);
             }
             let now = Instant::now();
             if now >= deadline {
                 self.summary.late_answers += u64::from(live);
-                self.summary.unanswered += 1;
-                return Ok(Duration::ZERO);
+                match newest {
+                    Some(_) => self.summary.answers_behind += 1,
+                    None => self.summary.unanswered += 1,
+                }
+                // The wait was the controller's, answered or not: not the bus's own time.
+                return Ok(published.elapsed());
             }
-            ep.torque_event
-                .wait_until(deadline - now, Duration::ZERO, || ep.torques.has_samples())?;
+            // Polled, not a blocking wait on the torques' event: that wait overran its deadline by
+            // 10 ms when the controller had been killed (measured), past the damping bound.
+            ep.torque_event.drain()?;
+            std::thread::sleep((deadline - now).min(ANSWER_POLL));
+            let overslept = now.elapsed().saturating_sub(deadline - now).as_secs_f64();
+            self.summary.wait_overshoot_max = self.summary.wait_overshoot_max.max(overslept);
         }
     }
 
@@ -510,7 +545,7 @@ impl Session<'_> {
             match ep.states.wait_newest(until)? {
                 None if Instant::now() < lost => {
                     // The silence deadline: torques that came meanwhile keep the controller.
-                    self.take_torques(ep)?;
+                    let _ = self.take_torques(ep)?;
                     if !self.current() {
                         let t = self.time();
                         self.decide(t);
@@ -705,10 +740,12 @@ fn fill(
     m.time = t;
     m.nq = model.nq as u32;
     m.nv = model.nv as u32;
+    m.joint_torques.fill(f64::NAN);
     for (k, q, v, _, _) in robot.map.joints() {
         let s = &robot.state.motor_state[k];
         m.q[q] = f64::from(s.q);
         m.v[v] = f64::from(s.dq);
+        m.joint_torques[v] = f64::from(s.tau_est);
     }
     let mut flags = info.flags;
     match &robot.lab {

@@ -15,8 +15,8 @@ pub const MAX_DOF: usize = 128;
 /// a payload of this file changes. iceoryx2 refuses a peer of another layout when it opens a
 /// service; the Zenoh framing carries the version in its header.
 /// 1: `MAX_DOF` = 48; 2: `MAX_DOF` = 128; 3: the sensor block of [`StateMsg`] (IMU, foot
-/// wrenches, sample times).
-pub const CONTRACT_VERSION: u16 = 3;
+/// wrenches, sample times); 4: the measured joint torques of [`StateMsg`].
+pub const CONTRACT_VERSION: u16 = 4;
 /// Contact points: four sole corners per foot, order l_fl, l_fr, l_rl, l_rr, r_fl, r_fr, r_rl, r_rr.
 pub const N_CONTACTS: usize = 8;
 /// Capacity of a force forecast (samples).
@@ -88,6 +88,10 @@ pub struct StateMsg {
     /// Plant time (s) at which each sensor group was sampled, `SENSOR_*` order (joints, IMU,
     /// feet, hand): `time` minus the group's latency; unchanged over a lost sample.
     pub stamps: [f64; 4],
+    /// Measured joint torques (N·m), indexed like `v` (the floating base's six entries NaN): a
+    /// robot's drive torque estimates (the G1's `tau_est`), the torques upc's plants applied
+    /// over the step; NaN where the plant does not measure them.
+    pub joint_torques: [f64; MAX_DOF],
 }
 
 /// Indices of [`StateMsg::stamps`].

@@ -42,6 +42,10 @@ use crate::preview::ReducedModel;
 use crate::robot::Robot;
 use crate::wbc::{FallbackReason, WbcStatus};
 
+/// The phase lock's lead and step, as a fraction of the period: 1/8, well inside the grace
+/// wait (`state_grace`, half a period by default).
+const PHASE_STEP: u32 = 8;
+
 /// How to run, beyond the config.
 #[derive(Debug, Clone)]
 pub struct ServerOptions {
@@ -378,14 +382,26 @@ impl<'a> ControlLoop<'a> {
         // for the rest of an hour. Waiting a part of the period for it runs the loop in step
         // with the plant's cycle, as a robot's controller runs on its bus cycle; a silent plant
         // costs only that wait before the stale-state handling.
+        // The deadlines also follow the plant's cycle (a phase lock): a state already waiting
+        // at a deadline moves the next one earlier, one that arrives in the wait puts the next
+        // deadline just before the next state. The tick then starts as the state arrives: on a
+        // robot's bus at 500 Hz, unlocked, the answer came up to a period after the state
+        // (1.5 ms p50 in one run of two), which the bus cannot wait for.
         let grace = t.period().mul_f64(self.config.controller.state_grace);
-        if !grace.is_zero() && !self.ports.states.has_samples() {
-            let states = &self.ports.states;
-            let woken = self
-                .ports
-                .state_events
-                .wait_until(grace, Duration::ZERO, || states.has_samples());
-            self.or_safe_torques(woken)?;
+        if !grace.is_zero() {
+            if self.ports.states.has_samples() {
+                t.advance(t.period() / PHASE_STEP);
+            } else {
+                let states = &self.ports.states;
+                let woken = self
+                    .ports
+                    .state_events
+                    .wait_until(grace, Duration::ZERO, || states.has_samples());
+                if matches!(woken, Ok(true)) {
+                    t.lock_to(Instant::now(), t.period() / PHASE_STEP);
+                }
+                self.or_safe_torques(woken)?;
+            }
         }
         Ok(())
     }

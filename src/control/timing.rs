@@ -27,6 +27,18 @@ impl Ticker {
         self.period
     }
 
+    /// Lock the deadlines to the plant's cycle: a state that arrived at `arrival`, during the
+    /// wait after a deadline, puts the next deadline `lead` before the next one's arrival.
+    pub fn lock_to(&mut self, arrival: Instant, lead: Duration) {
+        self.next = arrival + self.period.saturating_sub(lead);
+    }
+
+    /// Move the next deadline earlier by `by`: a state already waiting at a deadline says the
+    /// deadlines fall late in the plant's cycle.
+    pub fn advance(&mut self, by: Duration) {
+        self.next = self.next.checked_sub(by).unwrap_or(self.next);
+    }
+
     /// Sleep until the next deadline. If it has already passed, count the overrun and move the
     /// deadline to the next one in the future: missed ticks are skipped, not run in a burst.
     pub fn wait(&mut self) {

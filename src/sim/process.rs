@@ -759,10 +759,14 @@ impl Looper {
             *p = [c.x, c.y, c.z];
         }
         let (sensors, points, dt) = (&mut self.sensors, &self.points, self.dt);
-        let last = &mut self.last_state;
+        let (last, tau) = (&mut self.last_state, &self.tau);
         ep.state.send_with(|m| {
             fill_state(m, world, info, zmp, hand);
             sensors.apply(m, dt, points);
+            // The torques applied over the step: what the drives' torque sensing reads.
+            m.joint_torques.fill(f64::NAN);
+            let base = m.nv as usize - tau.len();
+            m.joint_torques[base..base + tau.len()].copy_from_slice(tau.as_slice());
             **last = *m;
         })?;
         let stats = self.gate.stats;
