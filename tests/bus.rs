@@ -152,6 +152,11 @@ fn upc_run_through_the_bus_keeps_c1_standing_on_the_g1() {
     let sim = json(&dir.join("sim.json"));
     assert_eq!(u(&sim, "bad_crc_commands"), 0, "{sim}");
     assert_eq!(u(&sim, "feedforward_over_limit"), 0, "{sim}");
+    // Both recordings, the plant's ground truth among them.
+    for rrd in ["sim.rrd", "controller.rrd"] {
+        let len = std::fs::metadata(dir.join(rrd)).map_or(0, |m| m.len());
+        assert!(len > 10_000, "{rrd}: {len} bytes");
+    }
 }
 
 /// The robot venv's Python when it has CycloneDDS 0.10.2, else `None` (a failure under CI).

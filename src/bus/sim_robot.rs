@@ -32,6 +32,9 @@ use crate::sim::sensors::{ImuMount, Sensing, Sensors, SensorsConfig};
 #[derive(Debug, Clone)]
 pub struct SimRobotOptions {
     pub sim: crate::sim::SimConfig,
+    /// Write the ground truth to this `.rrd`, with this recording id.
+    pub rrd: Option<std::path::PathBuf>,
+    pub recording_id: Option<String>,
     pub bus: BusConfig,
     pub robot: Arc<crate::robot::Robot>,
     pub engine: Engine,
@@ -93,173 +96,46 @@ fn run_on_bus<P: Physics>(
     stop: &AtomicBool,
 ) -> Result<SimRobotSummary, ProcessError> {
     let (cfg, bus) = (&opts.sim, &opts.bus);
-    let Plant {
-        physics: mut world,
-        drive,
-        scenario,
-        carrying,
-        ..
-    } = plant;
     let map = MotorMap::new(&opts.robot).map_err(ProcessError::Setup)?;
     // A robot's loop has its own computer: `bus.realtime` gives the simulated one its priority
     // (before the participant, whose threads inherit it).
     crate::control::realtime::apply(&bus.realtime);
     let dp = participant(bus.network()).map_err(dds)?;
-    let states = Outbox::<LowState>::new(&dp, LOW_STATE_TOPIC).map_err(dds)?;
-    let labs = Outbox::<LabState>::new(&dp, LAB_STATE_TOPIC).map_err(dds)?;
-    let mut commands = Inbox::<LowCmd>::new(&dp, LOW_CMD_TOPIC).map_err(dds)?;
-    let dt = cfg.dt;
-    let every = (1.0 / (bus.sim.rate * dt)).round().max(1.0) as u64;
-    let mut summary = SimRobotSummary {
-        plant: world.engine().into(),
-        robot: opts.robot.name().into(),
-        rate: 1.0 / (every as f64 * dt),
-        first_command: -1.0,
-        scenario_start: -1.0,
-        ..Default::default()
-    };
+    let mut robot = BusRobot::new(opts, plant, map, &dp)?;
     tracing::info!(
         "simulated {} on the bus: domain {} via {}, rt/lowstate at {:.0} Hz, physics at {:.0} Hz",
         opts.robot.name(),
         bus.domain,
         bus.interface,
-        summary.rate,
-        1.0 / dt
+        robot.summary.rate,
+        1.0 / cfg.dt
     );
-    let mut harness = Supervisor::new(
-        world.robot(),
-        world.q(),
-        &carrying,
-        &cfg.hold,
-        cfg.process.safe_damping,
-        dt,
-    )?;
-    let truth = SensorsConfig {
-        sensing: Sensing::Truth,
-        ..cfg.sensors
-    };
-    let mut sensors = Sensors::new(
-        &truth,
-        -world.robot().gravity.z,
-        opts.robot
-            .imu_frame
-            .map(|f| ImuMount::new(&opts.robot.model, f)),
-    );
-    let info = PlantInfo::start(cfg, &scenario, opts.robot.hash);
-    let push_frame = match cfg.push {
-        Push::Hand => Some(
-            opts.robot
-                .model
-                .frame_id(&opts.robot.description.hand.frame)
-                .map_err(crate::sim::SimError::from)?,
-        ),
-        Push::Door | Push::None => None,
-    };
-    let n = world.n_actuated();
-    let mut tau = DVector::zeros(n);
-    let mut applied = vec![0.0; n];
-    let mut latest: Option<(LowCmd, f64)> = None;
-    let mut msg = Box::<StateMsg>::default();
-    let mut points = [[0.0; 3]; N_CONTACTS];
-    let mut rep = *world.last_report();
-    let mut damping = false;
     let total = if cfg.duration > 0.0 {
-        (cfg.duration / dt).round() as u64
+        (cfg.duration / cfg.dt).round() as u64
     } else {
         u64::MAX
     };
-    let period = Duration::from_secs_f64(dt);
+    let period = Duration::from_secs_f64(cfg.dt);
+    let record_every = (cfg.record_period / cfg.dt).round().max(1.0) as u64;
     let mut next = Instant::now() + period;
-    while world.steps() < total && !stop.load(Ordering::Relaxed) {
-        let t = world.time();
-        // The publish of the state of this step comes first: a command answers a state.
-        if world.steps().is_multiple_of(every) {
-            fill_state(
-                &mut msg,
-                &world,
-                &info,
-                rep.zmp.unwrap_or_default(),
-                rep.hand_force,
-            );
-            for (p, c) in points.iter_mut().zip(world.contact_points()) {
-                *p = [c.x, c.y, c.z];
-            }
-            sensors.apply(&mut msg, dt * every as f64, &points);
-            // The lab's sample first: the participant pairs it with the state of its tick.
-            if bus.sim.lab {
-                labs.write(lab_state(&msg, &rep, &world, &summary))
-                    .map_err(dds)?;
-            }
-            let state = low_state(&msg, &map, &applied, bus.sim.mode_machine, t);
-            states.write(state).map_err(dds)?;
-            summary.states += 1;
+    while robot.world.steps() < total && !stop.load(Ordering::Relaxed) {
+        // The state of this step goes out first: a command answers a state.
+        if robot.world.steps().is_multiple_of(robot.every) {
+            robot.publish()?;
         }
-        while let Some(c) = commands.try_take().map_err(dds)? {
-            if !c.crc_ok() {
-                summary.bad_crc_commands += 1;
-                continue;
-            }
-            summary.commands += 1;
-            summary.wrong_mode_machine += u64::from(c.mode_machine != bus.sim.mode_machine);
-            if summary.first_command < 0.0 {
-                summary.first_command = t;
-                tracing::info!("t = {t:.3} s: first command; out of the harness");
-            }
-            latest = Some((c, t));
+        robot.take_commands()?;
+        if let Err(e) = robot.step() {
+            robot.summary.error = Some(e.to_string());
+            break;
         }
-        if summary.scenario_start < 0.0
-            && summary.first_command >= 0.0
-            && t >= summary.first_command + bus.sim.scenario_delay
+        if robot.world.steps().is_multiple_of(record_every)
+            && let Some(r) = &mut robot.recorder
         {
-            summary.scenario_start = t;
-            tracing::info!("t = {t:.3} s: scenario `{}` starts", cfg.scenario);
+            r.offer(&mut robot.world, &robot.rep.hand_force);
         }
-        let live = latest
-            .as_ref()
-            .filter(|(_, at)| t - at < bus.sim.command_loss);
-        match live {
-            None if summary.first_command < 0.0 => {
-                harness.torques(t, world.q(), world.v(), None, &mut tau);
-                summary.harness_steps += 1;
-            }
-            None => {
-                tau.fill(0.0);
-                summary.limp_steps += 1;
-            }
-            Some((c, _)) => {
-                let d = drives(c, &map, world.q(), world.v(), &mut tau, &mut summary);
-                if d && !damping {
-                    summary.damping_starts.push(t);
-                }
-                damping = d;
-                summary.damping_steps += u64::from(d);
-            }
-        }
-        applied.copy_from_slice(tau.as_slice());
-        let door_torque = if summary.scenario_start >= 0.0 {
-            drive.torque(world.sample_time(t - summary.scenario_start))
-        } else {
-            0.0
-        };
-        if let Some(frame) = push_frame {
-            let f = if summary.scenario_start >= 0.0 {
-                drive.hand_force(t - summary.scenario_start)
-            } else {
-                [0.0; 3]
-            };
-            world.set_push(frame, nalgebra::Vector3::from(f))?;
-        }
-        rep = match world.step(&tau, door_torque) {
-            Ok(r) => r,
-            Err(e) => {
-                summary.error = Some(e.to_string());
-                break;
-            }
-        };
-        summary.max_penetration = summary.max_penetration.max(rep.max_penetration);
         let now = Instant::now();
         if now > next {
-            summary.overruns += 1;
+            robot.summary.overruns += 1;
             if now - next > 10 * period {
                 next = now;
             }
@@ -268,9 +144,235 @@ fn run_on_bus<P: Physics>(
         }
         next += period;
     }
-    summary.steps = world.steps();
-    summary.sim_time = world.time();
-    Ok(summary)
+    robot.summary.steps = robot.world.steps();
+    robot.summary.sim_time = robot.world.time();
+    if let Some(r) = robot.recorder.take() {
+        r.finish();
+    }
+    Ok(robot.summary)
+}
+
+/// The simulated robot: the plant, its drives and harness, its bus endpoints.
+struct BusRobot<'a, P> {
+    opts: &'a SimRobotOptions,
+    world: P,
+    drive: crate::sim::DoorDrive,
+    map: MotorMap,
+    states: Outbox<LowState>,
+    labs: Outbox<LabState>,
+    commands: Inbox<LowCmd>,
+    /// The plant's hold until the first command (the robot's harness).
+    harness: Supervisor,
+    sensors: Sensors,
+    info: PlantInfo,
+    push_frame: Option<usize>,
+    /// Publish a state every this many physics steps.
+    every: u64,
+    tau: DVector<f64>,
+    /// The torques of the last step, the drives' estimates in the next state.
+    applied: Vec<f64>,
+    /// The latest valid command and the plant time it came.
+    latest: Option<(LowCmd, f64)>,
+    msg: Box<StateMsg>,
+    points: [[f64; 3]; N_CONTACTS],
+    rep: crate::sim::StepReport,
+    damping: bool,
+    recorder: Option<crate::sim::record::Recorder>,
+    summary: SimRobotSummary,
+}
+
+impl<'a, P: Physics> BusRobot<'a, P> {
+    fn new(
+        opts: &'a SimRobotOptions,
+        plant: Plant<P>,
+        map: MotorMap,
+        dp: &rustdds::DomainParticipant,
+    ) -> Result<Self, ProcessError> {
+        let (cfg, bus) = (&opts.sim, &opts.bus);
+        let Plant {
+            physics: world,
+            drive,
+            scenario,
+            carrying,
+            ..
+        } = plant;
+        let every = (1.0 / (bus.sim.rate * cfg.dt)).round().max(1.0) as u64;
+        let harness = Supervisor::new(
+            world.robot(),
+            world.q(),
+            &carrying,
+            &cfg.hold,
+            cfg.process.safe_damping,
+            cfg.dt,
+        )?;
+        let truth = SensorsConfig {
+            sensing: Sensing::Truth,
+            ..cfg.sensors
+        };
+        let sensors = Sensors::new(
+            &truth,
+            -world.robot().gravity.z,
+            opts.robot
+                .imu_frame
+                .map(|f| ImuMount::new(&opts.robot.model, f)),
+        );
+        let push_frame = match cfg.push {
+            Push::Hand => Some(
+                opts.robot
+                    .model
+                    .frame_id(&opts.robot.description.hand.frame)
+                    .map_err(crate::sim::SimError::from)?,
+            ),
+            Push::Door | Push::None => None,
+        };
+        let recorder = match &opts.rrd {
+            Some(path) => Some(
+                crate::control::realtime::in_background(|| {
+                    crate::sim::record::Recorder::spawn(
+                        path,
+                        opts.recording_id.as_deref(),
+                        None,
+                        &world,
+                        &opts.robot,
+                    )
+                })
+                .map_err(|e| {
+                    ProcessError::Setup(format!("rerun recording {}: {e}", path.display()))
+                })?,
+            ),
+            None => None,
+        };
+        let n = world.n_actuated();
+        Ok(Self {
+            summary: SimRobotSummary {
+                plant: world.engine().into(),
+                robot: opts.robot.name().into(),
+                rate: 1.0 / (every as f64 * cfg.dt),
+                first_command: -1.0,
+                scenario_start: -1.0,
+                ..Default::default()
+            },
+            rep: *world.last_report(),
+            info: PlantInfo::start(cfg, &scenario, opts.robot.hash),
+            states: Outbox::new(dp, LOW_STATE_TOPIC).map_err(dds)?,
+            labs: Outbox::new(dp, LAB_STATE_TOPIC).map_err(dds)?,
+            commands: Inbox::new(dp, LOW_CMD_TOPIC).map_err(dds)?,
+            opts,
+            world,
+            drive,
+            map,
+            harness,
+            sensors,
+            push_frame,
+            every,
+            tau: DVector::zeros(n),
+            applied: vec![0.0; n],
+            latest: None,
+            msg: Box::default(),
+            points: [[0.0; 3]; N_CONTACTS],
+            damping: false,
+            recorder,
+        })
+    }
+
+    /// The state as the G1 reports it, and the lab's sample (first: the participant pairs it
+    /// with the state of its tick).
+    fn publish(&mut self) -> Result<(), ProcessError> {
+        let (bus, t) = (&self.opts.bus, self.world.time());
+        let rep = &self.rep;
+        fill_state(
+            &mut self.msg,
+            &self.world,
+            &self.info,
+            rep.zmp.unwrap_or_default(),
+            rep.hand_force,
+        );
+        for (p, c) in self.points.iter_mut().zip(self.world.contact_points()) {
+            *p = [c.x, c.y, c.z];
+        }
+        let dt = self.opts.sim.dt * self.every as f64;
+        self.sensors.apply(&mut self.msg, dt, &self.points);
+        if bus.sim.lab {
+            let lab = lab_state(&self.msg, rep, &self.world, &self.summary);
+            self.labs.write(lab).map_err(dds)?;
+        }
+        let state = low_state(&self.msg, &self.map, &self.applied, bus.sim.mode_machine, t);
+        self.states.write(state).map_err(dds)?;
+        self.summary.states += 1;
+        Ok(())
+    }
+
+    /// The commands that arrived: the valid ones counted and the newest kept; the scenario's
+    /// push started `bus.sim.scenario_delay` after the first.
+    fn take_commands(&mut self) -> Result<(), ProcessError> {
+        let (bus, t) = (&self.opts.bus, self.world.time());
+        while let Some(c) = self.commands.try_take().map_err(dds)? {
+            if !c.crc_ok() {
+                self.summary.bad_crc_commands += 1;
+                continue;
+            }
+            self.summary.commands += 1;
+            self.summary.wrong_mode_machine += u64::from(c.mode_machine != bus.sim.mode_machine);
+            if self.summary.first_command < 0.0 {
+                self.summary.first_command = t;
+                tracing::info!("t = {t:.3} s: first command; out of the harness");
+            }
+            self.latest = Some((c, t));
+        }
+        if self.summary.scenario_start < 0.0
+            && self.summary.first_command >= 0.0
+            && t >= self.summary.first_command + bus.sim.scenario_delay
+        {
+            self.summary.scenario_start = t;
+            tracing::info!("t = {t:.3} s: scenario `{}` starts", self.opts.sim.scenario);
+        }
+        Ok(())
+    }
+
+    /// One physics step under the drives (or the harness, or limp drives) and the scenario.
+    fn step(&mut self) -> Result<(), ProcessError> {
+        let t = self.world.time();
+        let loss = self.opts.bus.sim.command_loss;
+        let live = self.latest.as_ref().filter(|(_, at)| t - at < loss);
+        match live {
+            None if self.summary.first_command < 0.0 => {
+                let (q, v) = (self.world.q(), self.world.v());
+                self.harness.torques(t, q, v, None, &mut self.tau);
+                self.summary.harness_steps += 1;
+            }
+            None => {
+                self.tau.fill(0.0);
+                self.summary.limp_steps += 1;
+            }
+            Some((c, _)) => {
+                let (q, v) = (self.world.q(), self.world.v());
+                let d = drives(c, &self.map, q, v, &mut self.tau, &mut self.summary);
+                if d && !self.damping {
+                    self.summary.damping_starts.push(t);
+                }
+                self.damping = d;
+                self.summary.damping_steps += u64::from(d);
+            }
+        }
+        self.applied.copy_from_slice(self.tau.as_slice());
+        let start = self.summary.scenario_start;
+        let door_torque = if start >= 0.0 {
+            self.drive.torque(self.world.sample_time(t - start))
+        } else {
+            0.0
+        };
+        if let Some(frame) = self.push_frame {
+            let f = if start >= 0.0 {
+                self.drive.hand_force(t - start)
+            } else {
+                [0.0; 3]
+            };
+            self.world.set_push(frame, nalgebra::Vector3::from(f))?;
+        }
+        self.rep = self.world.step(&self.tau, door_torque)?;
+        self.summary.max_penetration = self.summary.max_penetration.max(self.rep.max_penetration);
+        Ok(())
+    }
 }
 
 /// The drives under a command: τ = tau + kp (q − q_meas) + kd (dq − dq_meas) on enabled slots,

@@ -302,6 +302,8 @@ pub fn run_cli(args: SimArgs) -> CliResult {
 fn bus_robot(args: &SimArgs, mut config: SimConfig, engine: Engine) -> CliResult {
     config.mode = upc::sim::Mode::Realtime;
     let opts = upc::bus::sim_robot::SimRobotOptions {
+        rrd: args.rrd.clone(),
+        recording_id: args.recording_id.clone(),
         bus: args.bus_settings.load()?,
         robot: std::sync::Arc::new(args.plant.robot.load()?),
         sim: config,
