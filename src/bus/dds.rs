@@ -165,31 +165,43 @@ impl<M: BusMessage> DefaultDecoder<M> for Xcdr1<M> {
     const DECODER: Self::Decoder = Xcdr1Decoder(PhantomData);
 }
 
-/// A typed writer on one topic, counting the readers matched to it.
+/// A typed writer on one topic.
 pub struct Outbox<M: BusMessage> {
     writer: DataWriter<M, Xcdr1<M>>,
     topic: String,
-    matched: i32,
+}
+
+/// Why an endpoint of `topic` could not be made.
+fn endpoint_error(topic: &str, e: impl std::fmt::Display) -> DdsError {
+    DdsError::Endpoint {
+        topic: topic.into(),
+        reason: e.to_string(),
+    }
+}
+
+/// Topic `name` of `M`'s type, keyless, with `qos`.
+fn topic_of<M: BusMessage>(
+    dp: &DomainParticipant,
+    name: &str,
+    qos: &QosPolicies,
+) -> Result<rustdds::Topic, DdsError> {
+    dp.create_topic(name.into(), M::TYPE_NAME.into(), qos, TopicKind::NoKey)
+        .map_err(|e| endpoint_error(name, e))
 }
 
 impl<M: BusMessage> Outbox<M> {
     pub fn new(dp: &DomainParticipant, topic: &str) -> Result<Self, DdsError> {
-        let err = |e: &dyn std::fmt::Display| DdsError::Endpoint {
-            topic: topic.into(),
-            reason: e.to_string(),
-        };
+        let err = |e: rustdds::dds::CreateError| endpoint_error(topic, e);
         let qos = writer_qos();
-        let t = dp
-            .create_topic(topic.into(), M::TYPE_NAME.into(), &qos, TopicKind::NoKey)
-            .map_err(|e| err(&e))?;
-        let publisher = dp.create_publisher(&qos).map_err(|e| err(&e))?;
-        let writer = publisher
+        let t = topic_of::<M>(dp, topic, &qos)?;
+        let writer = dp
+            .create_publisher(&qos)
+            .map_err(err)?
             .create_datawriter_no_key::<M, Xcdr1<M>>(&t, Some(qos))
-            .map_err(|e| err(&e))?;
+            .map_err(err)?;
         Ok(Self {
             writer,
             topic: topic.into(),
-            matched: 0,
         })
     }
 
@@ -198,17 +210,6 @@ impl<M: BusMessage> Outbox<M> {
             topic: self.topic.clone(),
             reason: e.to_string(),
         })
-    }
-
-    /// Readers matched now (from the writer's status events; rustdds's
-    /// `get_matched_subscriptions` is a placeholder that panics).
-    pub fn matched(&mut self) -> i32 {
-        while let Some(s) = self.writer.try_recv_status() {
-            if let rustdds::DataWriterStatus::PublicationMatched { current, .. } = s {
-                self.matched = current.count();
-            }
-        }
-        self.matched
     }
 }
 
@@ -222,30 +223,24 @@ pub struct Inbox<M: BusMessage> {
     pub undecodable: u64,
     /// Samples dropped unread because a newer one was there ([`Inbox::wait_newest`]).
     pub superseded: u64,
-    /// Writers matched now, and every writer ever matched that is not of `own` participant.
-    matched: i32,
+    /// Every writer ever matched that is not of `own` participant.
     foreign: Vec<rustdds::GUID>,
     own: rustdds::GUID,
 }
 
 impl<M: BusMessage> Inbox<M> {
     pub fn new(dp: &DomainParticipant, topic: &str) -> Result<Self, DdsError> {
-        let err = |e: &dyn std::fmt::Display| DdsError::Endpoint {
-            topic: topic.into(),
-            reason: e.to_string(),
-        };
         let qos = reader_qos();
-        let t = dp
-            .create_topic(topic.into(), M::TYPE_NAME.into(), &qos, TopicKind::NoKey)
-            .map_err(|e| err(&e))?;
-        let subscriber = dp.create_subscriber(&qos).map_err(|e| err(&e))?;
-        let mut reader = subscriber
+        let t = topic_of::<M>(dp, topic, &qos)?;
+        let mut reader = dp
+            .create_subscriber(&qos)
+            .map_err(|e| endpoint_error(topic, e))?
             .create_simple_datareader_no_key::<M, Xcdr1<M>>(&t, Some(qos))
-            .map_err(|e| err(&e))?;
-        let poll = Poll::new().map_err(|e| err(&e))?;
+            .map_err(|e| endpoint_error(topic, e))?;
+        let poll = Poll::new().map_err(|e| endpoint_error(topic, e))?;
         poll.registry()
             .register(&mut reader, Token(0), Interest::READABLE)
-            .map_err(|e| err(&e))?;
+            .map_err(|e| endpoint_error(topic, e))?;
         Ok(Self {
             reader,
             poll,
@@ -253,7 +248,6 @@ impl<M: BusMessage> Inbox<M> {
             topic: topic.into(),
             undecodable: 0,
             superseded: 0,
-            matched: 0,
             foreign: Vec::new(),
             own: dp.guid(),
         })
@@ -317,21 +311,18 @@ impl<M: BusMessage> Inbox<M> {
         Ok(Some(newest))
     }
 
-    /// Writers matched now, and how many distinct writers of other participants were ever
-    /// matched (another controller on a command topic).
-    pub fn writers(&mut self) -> (i32, usize) {
+    /// How many distinct writers of other participants were ever matched (another controller
+    /// on a command topic).
+    pub fn foreign_writers(&mut self) -> usize {
         while let Some(s) = self.reader.try_recv_status() {
-            if let rustdds::DataReaderStatus::SubscriptionMatched {
-                current, writer, ..
-            } = s
+            if let rustdds::DataReaderStatus::SubscriptionMatched { writer, .. } = s
+                && writer.prefix != self.own.prefix
+                && !self.foreign.contains(&writer)
             {
-                self.matched = current.count();
-                if writer.prefix != self.own.prefix && !self.foreign.contains(&writer) {
-                    self.foreign.push(writer);
-                }
+                self.foreign.push(writer);
             }
         }
-        (self.matched, self.foreign.len())
+        self.foreign.len()
     }
 }
 

@@ -332,9 +332,9 @@ fn refuse_other_controllers(
     while Instant::now() < until && !stop.load(Ordering::Relaxed) {
         let _ = watch.wait(until)?;
     }
-    match watch.writers() {
-        (_, 0) => Ok(()),
-        (_, foreign) => Err(BusError::OtherController(foreign)),
+    match watch.foreign_writers() {
+        0 => Ok(()),
+        foreign => Err(BusError::OtherController(foreign)),
     }
 }
 

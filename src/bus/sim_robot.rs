@@ -22,10 +22,11 @@ use super::lab::{LAB_STATE_TOPIC, LabState};
 use super::motors::{MotorMap, Slot};
 use super::unitree_hg::{LOW_CMD_TOPIC, LOW_STATE_TOPIC, LowCmd, LowState};
 use crate::channels::{N_CONTACTS, StateMsg};
-use crate::sim::config::Push;
 use crate::sim::hold::Supervisor;
 use crate::sim::physics::{Engine, Physics};
-use crate::sim::process::{Plant, PlantInfo, PlantUser, ProcessError, build_plant, fill_state};
+use crate::sim::process::{
+    Plant, PlantInfo, PlantUser, ProcessError, apply_scenario, build_plant, fill_state, push_frame,
+};
 use crate::sim::sensors::{ImuMount, Sensing, Sensors, SensorsConfig};
 
 /// What the simulated robot runs.
@@ -216,15 +217,7 @@ impl<'a, P: Physics> BusRobot<'a, P> {
                 .imu_frame
                 .map(|f| ImuMount::new(&opts.robot.model, f)),
         );
-        let push_frame = match cfg.push {
-            Push::Hand => Some(
-                opts.robot
-                    .model
-                    .frame_id(&opts.robot.description.hand.frame)
-                    .map_err(crate::sim::SimError::from)?,
-            ),
-            Push::Door | Push::None => None,
-        };
+        let push_frame = push_frame(cfg, &opts.robot)?;
         let recorder = match &opts.rrd {
             Some(path) => Some(
                 crate::control::realtime::in_background(|| {
@@ -356,19 +349,7 @@ impl<'a, P: Physics> BusRobot<'a, P> {
         }
         self.applied.copy_from_slice(self.tau.as_slice());
         let start = self.summary.scenario_start;
-        let door_torque = if start >= 0.0 {
-            self.drive.torque(self.world.sample_time(t - start))
-        } else {
-            0.0
-        };
-        if let Some(frame) = self.push_frame {
-            let f = if start >= 0.0 {
-                self.drive.hand_force(t - start)
-            } else {
-                [0.0; 3]
-            };
-            self.world.set_push(frame, nalgebra::Vector3::from(f))?;
-        }
+        let door_torque = apply_scenario(&mut self.world, &self.drive, self.push_frame, start)?;
         self.rep = self.world.step(&self.tau, door_torque)?;
         self.summary.max_penetration = self.summary.max_penetration.max(self.rep.max_penetration);
         Ok(())

@@ -450,6 +450,47 @@ fn open_truth_csv(
     Ok(Some(w))
 }
 
+/// `sim.push = "hand"`: the robot frame the scenario's force is applied at.
+pub fn push_frame(
+    cfg: &SimConfig,
+    robot: &crate::robot::Robot,
+) -> Result<Option<usize>, ProcessError> {
+    Ok(match cfg.push {
+        Push::Hand => Some(
+            robot
+                .model
+                .frame_id(&robot.description.hand.frame)
+                .map_err(SimError::from)?,
+        ),
+        Push::Door | Push::None => None,
+    })
+}
+
+/// The scenario's push before a step from plant time `start` (negative: not started): the
+/// force at the hand frame `push_frame` if the push is applied there; the door's hinge torque,
+/// returned.
+pub fn apply_scenario<P: Physics>(
+    world: &mut P,
+    drive: &DoorDrive,
+    push_frame: Option<usize>,
+    start: f64,
+) -> Result<f64, ProcessError> {
+    let t = world.time() - start;
+    if let Some(frame) = push_frame {
+        let f = if start >= 0.0 {
+            drive.hand_force(t)
+        } else {
+            [0.0; 3]
+        };
+        world.set_push(frame, nalgebra::Vector3::from(f))?;
+    }
+    Ok(if start >= 0.0 {
+        drive.torque(world.sample_time(t))
+    } else {
+        0.0
+    })
+}
+
 /// What both loops share for a run.
 struct Run<'a> {
     cfg: &'a SimConfig,
@@ -602,15 +643,7 @@ impl Looper {
             overruns: 0,
             last_reject_log: None,
             record_every: (cfg.record_period / cfg.dt).round().max(1.0) as u64,
-            push_frame: match cfg.push {
-                Push::Hand => Some(
-                    robot
-                        .model
-                        .frame_id(&robot.description.hand.frame)
-                        .map_err(SimError::from)?,
-                ),
-                Push::Door | Push::None => None,
-            },
+            push_frame: push_frame(cfg, robot)?,
             sensors: Sensors::new(
                 &cfg.sensors,
                 -world.robot().gravity.z,
@@ -702,19 +735,7 @@ impl Looper {
         recorder: &mut Option<Recorder>,
     ) -> Result<(), ProcessError> {
         let t0 = Instant::now();
-        let door_torque = if self.info.scenario_start >= 0.0 {
-            drive.torque(world.sample_time(world.time() - self.info.scenario_start))
-        } else {
-            0.0
-        };
-        if let Some(frame) = self.push_frame {
-            let f = if self.info.scenario_start >= 0.0 {
-                drive.hand_force(world.time() - self.info.scenario_start)
-            } else {
-                [0.0; 3]
-            };
-            world.set_push(frame, nalgebra::Vector3::from(f))?;
-        }
+        let door_torque = apply_scenario(world, drive, self.push_frame, self.info.scenario_start)?;
         let rep = world.step(&self.tau, door_torque)?;
         let dt_step = t0.elapsed().as_secs_f64();
         self.timing.record(Duration::from_secs_f64(dt_step));
