@@ -11,6 +11,7 @@ use std::time::Duration;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use upc::config::{Config, ControllerKind};
+use upc::control::CorrectionSettings;
 
 // The tests' rig; the bench uses a part of it.
 #[allow(dead_code)]
@@ -25,11 +26,27 @@ fn bench(c: &mut Criterion) {
         .sample_size(50);
     // C1 with and without the forecast correction (docs/forecast_correction.md): the state's
     // hand force is the forecast's, so the estimator runs its full window every 5th tick.
+    let parts = &config.controller.parts;
+    let correction: CorrectionSettings = parts.get().expect("defaults");
     let mut uncorrected = config.clone();
-    uncorrected.controller.forecast_correction.enabled = false;
+    uncorrected
+        .controller
+        .parts
+        .set(&CorrectionSettings {
+            enabled: false,
+            ..correction
+        })
+        .expect("settings");
     // Without the forecast's record (FC-5): its cost is c1_tick's less this one's.
     let mut no_record = config.clone();
-    no_record.controller.forecast_correction.skill_time = 0.0;
+    no_record
+        .controller
+        .parts
+        .set(&CorrectionSettings {
+            skill_time: 0.0,
+            ..correction
+        })
+        .expect("settings");
     let weight = upc::robot::Robot::embedded_default()
         .expect("robot")
         .derived

@@ -11,7 +11,10 @@
 //! - [`forecast`]: the reference force forecaster process.
 //! - [`robot`]: robot descriptions: URDF, feet, hand, home posture, and what follows from them.
 //! - [`sim`]: the simulator process (humanoid on the ground, door on a spherical joint).
-//! - [`control`]: the control server's loop pieces (tick, C2 thread, timing, real-time setup).
+//! - [`control`]: the control server's loop pieces (tick, its parts, C2 thread, logger, loop).
+//! - [`estimation`]: the floating base from the IMU, the joints and the foot wrenches.
+//! - [`capability`]: the largest push each controller withstands, swept (`upc capability`).
+//! - [`logging`]: the processes' diagnostics (tracing), never blocking the real-time loop.
 //! - [`shutdown`]: SIGINT/SIGTERM handling shared by the processes.
 //! - [`channels`]: the iceoryx2 channel contract shared by every process.
 //! - [`bridge`]: the contract over Zenoh, for forecasters and viewers on other hosts.

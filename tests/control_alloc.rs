@@ -62,7 +62,11 @@ fn controller_tick_with_the_base_estimator_allocations() {
     let count = allocations(|| {
         assert_eq!(r.tick_frozen(5..25), 0);
     });
-    let e = r.core.estimator_counts().expect("the estimator ran");
+    let e = r
+        .core
+        .part::<upc::control::base_estimation::BaseEstimation>()
+        .and_then(|p| p.counts())
+        .expect("the estimator ran");
     eprintln!("with the estimator: {count} allocations in 20 ticks, {e:?}");
     assert_eq!(e.ticks, 25);
     assert!(count <= 20, "{count} allocations in 20 ticks");

@@ -12,7 +12,7 @@ use serde_json::Value;
 use support::procs::{csv_without, freeze, serial, venv_python};
 
 /// Columns of `controller.csv` that are wall-clock measurements.
-const TIMING_COLUMNS: [&str; 2] = ["tick_us", "wbc_us"];
+const TIMING_COLUMNS: [&str; 3] = ["tick_us", "wbc_us", "c2_solve_ms"];
 /// Summary fields that are wall-clock measurements, or identify a process run.
 const TIMING_FIELDS: [&str; 26] = [
     "tick_p50_us",

@@ -7,7 +7,6 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use upc::config::ControllerKind;
-use upc::control::logger::CSV_HEADER;
 use upc::offline::ReducedLoop;
 use upc::report::{CompareOptions, ConfigLayers, ReportError, compare};
 use upc::scenario::Scenario;
@@ -42,11 +41,30 @@ fn fresh_dir(name: &str) -> PathBuf {
     dir
 }
 
+/// The columns of `controller.csv` as the controller writes them (its records' own).
+fn csv_header() -> Vec<&'static str> {
+    let robot = upc::robot::Robot::embedded_default().expect("robot");
+    let config = upc::config::Config::embedded_default().expect("config");
+    let core = upc::control::ControllerCore::new(
+        &robot,
+        &config,
+        ControllerKind::C1,
+        0.001,
+        [100.0, 20.0],
+        [0.0, 0.0],
+    )
+    .expect("core");
+    upc::control::server::record_columns(&core)
+        .iter()
+        .map(|c| c.name)
+        .collect()
+}
+
 /// One controller's CSV with the logger's own header: a ZMP that moves with the impact, the
 /// predicted ZMP 20 mm beyond the support's front edge for C0 only.
 fn csv(controller: usize) -> String {
-    let header: Vec<&str> = CSV_HEADER.split(',').collect();
-    let mut s = format!("{CSV_HEADER}\n");
+    let header = csv_header();
+    let mut s = format!("{}\n", header.join(","));
     for k in 0..60 {
         let t = 0.01 * (k + 1) as f64;
         let bump = (-((t - 0.3) / 0.08).powi(2)).exp();

@@ -41,7 +41,9 @@ impl ConfigArgs {
         for s in extra.iter().chain(&self.sets) {
             layers.push_override(s)?;
         }
-        layers.build()
+        let config = layers.build()?;
+        upc::control::parts::check(&config, &layers)?;
+        Ok(config)
     }
 }
 

@@ -3,13 +3,12 @@
 
 mod controller_settings;
 mod layers;
+mod parts;
 mod schema;
 
-pub use controller_settings::{
-    ComObserverSettings, CorrectionSettings, EstimatorMode, EstimatorSettings, RealtimeSettings,
-    ViabilitySettings, WristTareSettings,
-};
+pub use controller_settings::RealtimeSettings;
 pub use layers::{ConfigError, Layers};
+pub use parts::{PartSettings, PartTables, embedded_part};
 pub use schema::*;
 
 /// The defaults shipped inside the binary, so `upc` runs with no files around it.

@@ -348,9 +348,9 @@ pub enum LoopMode {
     Realtime,
 }
 
-/// The control server (`upc controller`).
+/// The control server (`upc controller`). Its unknown keys are refused by
+/// [`super::PartTables::check_keys`] (`deny_unknown_fields` does not go with `flatten`).
 #[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
 pub struct ControllerConfig {
     pub kind: ControllerKind,
     pub mode: LoopMode,
@@ -409,16 +409,10 @@ pub struct ControllerConfig {
     /// Control ticks between two rerun records (and 10× that between plan records).
     pub log_every: usize,
     pub realtime: super::RealtimeSettings,
-    /// The forecast corrected by the measured hand force (docs/forecast_correction.md).
-    pub forecast_correction: super::CorrectionSettings,
-    /// The CoM disturbance observer (docs/forecast_correction.md, "CoM observer").
-    pub com_observer: super::ComObserverSettings,
-    /// The capture-point guard on unconfirmed forecasts (docs/forecast_correction.md, VG).
-    pub viability: super::ViabilitySettings,
-    /// The wrist sensor's offset, taken while the hand is unloaded (`control::wrist_tare`).
-    pub wrist_tare: super::WristTareSettings,
-    /// The floating-base estimator (docs/estimation.md).
-    pub estimator: super::EstimatorSettings,
+    /// The parts' tables (`[controller.forecast_correction]`, `[controller.estimator]`, …), each
+    /// read and checked by its part ([`super::PartSettings`], `crate::control::parts`).
+    #[serde(flatten)]
+    pub parts: super::PartTables,
 }
 
 impl ControllerConfig {
@@ -470,21 +464,7 @@ impl ControllerConfig {
         if !(0..=99).contains(&self.realtime.fifo_priority) {
             return Err(l.range_error("controller.realtime.fifo_priority", "must be in 0..=99"));
         }
-        if let Err((key, why)) = self.forecast_correction.check() {
-            return Err(l.range_error(&format!("controller.forecast_correction.{key}"), why));
-        }
-        if let Err((key, why)) = self.wrist_tare.check() {
-            return Err(l.range_error(&format!("controller.wrist_tare.{key}"), why));
-        }
-        if let Err((key, why)) = self.viability.check() {
-            return Err(l.range_error(&format!("controller.viability.{key}"), why));
-        }
-        if let Err((key, why)) = self.com_observer.check() {
-            return Err(l.range_error(&format!("controller.com_observer.{key}"), why));
-        }
-        if let Err((key, why)) = self.estimator.check() {
-            return Err(l.range_error(&format!("controller.estimator.{key}"), why));
-        }
+        self.parts.check_keys(l)?;
         Ok(())
     }
 }

@@ -9,7 +9,15 @@
 //! s² + 2ζω s + ω² put both poles at the bandwidth ω (OB-2); its estimate enters the preview as
 //! M d̂ e^{−s/T_d} over the horizon, as the forecast correction's offset does.
 
-pub use crate::config::ComObserverSettings;
+use std::any::Any;
+
+use serde::{Deserialize, Serialize};
+
+use super::core::TickError;
+use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
+use super::record::Record;
+use crate::col;
+use crate::config::ControllerKind;
 
 /// The observer's state, both horizontal axes.
 #[derive(Debug, Clone)]
@@ -78,6 +86,113 @@ impl ComObserver {
     /// F_obs = M d̂ (N), per axis.
     pub fn force(&self) -> [f64; 2] {
         self.d.map(|d| d * self.mass)
+    }
+}
+
+/// The CoM observer as a controller part (`enabled`; for C0 too): its force, decaying over the
+/// horizon, is added to the preview's disturbance.
+pub struct Observer {
+    observer: Option<ComObserver>,
+}
+
+/// This part in `super::parts::PIPELINE`.
+pub const PART: PartEntry = PartEntry::new::<ComObserverSettings>(build);
+
+fn build(
+    s: &PartSetup,
+) -> Result<Box<dyn ControllerPart>, Box<dyn std::error::Error + Send + Sync>> {
+    let settings: ComObserverSettings = s.config.controller.parts.get()?;
+    let c = s.cart;
+    Ok(Box::new(Observer {
+        observer: settings
+            .enabled
+            .then(|| ComObserver::new(settings, c.mass, c.gravity, c.com_height, s.dt)),
+    }))
+}
+
+impl ControllerPart for Observer {
+    fn name(&self) -> &'static str {
+        "com_observer"
+    }
+
+    fn stage(&self) -> Stage {
+        Stage::Disturbance
+    }
+
+    fn reset(&mut self) {
+        if let Some(o) = self.observer.as_mut() {
+            o.reset();
+        }
+    }
+
+    /// Against the disturbance the preview modelled at the last tick (none for C0).
+    fn update(&mut self, _inputs: &TickInputs, frame: &mut TickFrame) -> Result<(), TickError> {
+        let Some(o) = self.observer.as_mut() else {
+            return Ok(());
+        };
+        let known = if frame.kind == ControllerKind::C0 {
+            [0.0; 2]
+        } else {
+            frame.known_disturbance
+        };
+        let (com, vcom) = (frame.com, frame.com_vel);
+        o.update([com[0], com[1]], [vcom[0], vcom[1]], frame.cop, known);
+        frame.com_force = o.force();
+        frame.com_force_decay = Some((-frame.period / o.settings().decay).exp());
+        Ok(())
+    }
+
+    fn record(&self, out: &mut Record) {
+        let f = self.observer.as_ref().map_or([0.0; 2], |o| o.force());
+        out.put(col!(fixed("f_obs_x", 3).plot("observer/f_x")), f[0]);
+        out.put(col!(fixed("f_obs_y", 3).plot("observer/f_y")), f[1]);
+    }
+
+    fn summarize(&self, _out: &mut serde_json::Map<String, serde_json::Value>) {}
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
+
+/// `[controller.com_observer]`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ComObserverSettings {
+    /// Estimate and preview pushes on the CoM that nothing forecasts (C0, C1, C2).
+    pub enabled: bool,
+    /// Bandwidth of the observer (Hz).
+    pub bandwidth: f64,
+    /// Damping ratio of its error dynamics.
+    pub damping: f64,
+    /// Time constant of the estimate's decay over the horizon (s).
+    pub decay: f64,
+    /// Largest force the estimate may take, per axis (N): a tipping foot breaks eq. (OB-1).
+    pub max_force: f64,
+}
+
+impl Default for ComObserverSettings {
+    /// The embedded `config/default.toml`'s table (their one home).
+    fn default() -> Self {
+        crate::config::embedded_part()
+    }
+}
+
+impl crate::config::PartSettings for ComObserverSettings {
+    const TABLE: &'static str = "com_observer";
+
+    fn check(&self) -> Result<(), (&'static str, String)> {
+        for (key, v) in [
+            ("bandwidth", self.bandwidth),
+            ("damping", self.damping),
+            ("decay", self.decay),
+            ("max_force", self.max_force),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err((key, format!("must be finite and > 0, got {v}")));
+            }
+        }
+        Ok(())
     }
 }
 

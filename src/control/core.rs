@@ -18,26 +18,28 @@
 //! - C1 and C2 preview the forecast as corrected by the measured hand force
 //!   ([`ForecastCorrector`], on by default); the CoM observer ([`ComObserver`], off by default)
 //!   adds the push nothing forecasts, for C0 too (docs/forecast_correction.md).
+//! - Those, the base estimator and the wrist tare are the controller's parts (`super::parts`):
+//!   the tick runs them at their stages; the state is read from the contract once
+//!   (`super::contract`), and the tick and the parts work on the [`RobotState`].
 
-use nalgebra::{DVector, Matrix3, Vector3};
+use nalgebra::{Matrix3, Vector3};
 
-use super::com_observer::ComObserver;
-use super::forecast_correction::{CorrectionEstimate, ForecastCorrector};
+use super::TickRecord;
 use super::forecast_window::ForecastWindow;
 use super::gain_thread::StampedSchedule;
-use super::viability::ViabilityGuard;
-use super::wrist_tare::{WristTare, task_time};
-use crate::channels::{MAX_DOF, STATE_FLAG_BASE_UNMEASURED, STATE_FLAG_HOLD, StateMsg};
-use crate::config::{Config, ControllerKind, EstimatorMode};
+use super::parts::{self, ControllerPart, PartSetup, Stage, TickFrame, TickInputs};
+use super::record::Record;
+use crate::channels::{MAX_DOF, StateMsg};
+use crate::config::{Config, ControllerKind};
 use crate::dynamics::{
     Data, DynamicsError, Model, OpSpaceWorkspace, ReferenceFrame, center_of_mass_velocity,
     frame_velocity,
 };
-use crate::estimation::{BaseEstimate, BaseEstimator, EstimatorCounts, EstimatorError};
+use crate::estimation::EstimatorError;
 use crate::preview::{
     AxisState, GainSchedule, HandPreviewer, HandState, PreviewError, PreviewPlan, ZmpPreview,
 };
-use crate::robot::Robot;
+use crate::robot::{Robot, RobotState};
 use crate::wbc::{FallbackReason, WbcCommand, WbcStatus, WholeBodyController};
 
 /// Errors of a tick: the state message does not fit the model.
@@ -68,52 +70,6 @@ pub enum TickError {
     BaseUnmeasured,
 }
 
-/// What one tick produced, for logging and the summary.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct TickRecord {
-    pub time: f64,
-    pub com: [f64; 3],
-    pub com_vel: [f64; 3],
-    pub com_acc_cmd: [f64; 3],
-    pub zmp_ref: [f64; 2],
-    /// ZMP the preview predicts for the next preview step.
-    pub zmp_pred: [f64; 2],
-    /// Measured ZMP: the state's, or the base estimator's from the foot wrenches when it runs.
-    pub zmp_meas: [f64; 2],
-    pub hand_pos: [f64; 3],
-    pub hand_err: f64,
-    pub kp: f64,
-    pub kd: f64,
-    /// F_dis forecast at the first preview step and the hand force forecast there.
-    pub f_dis: [f64; 3],
-    pub f_ext: [f64; 3],
-    pub wbc_solved: bool,
-    pub wbc_iterations: u32,
-    pub wbc_time: f64,
-    /// The preview fell back to C0 this tick (invalid disturbance forecast).
-    pub preview_fallback: bool,
-    pub schedule_age: f64,
-    /// Support rectangle (latched at the first tick, then following the feet), [[x_min, x_max],
-    /// [y_min, y_max]] (world frame), so that logs can draw the ZMP against it.
-    pub support: [[f64; 2]; 2],
-    /// The hand force measured this tick, and the forecast as received for the first preview
-    /// step (`f_ext` is the forecast the previewer used: corrected, when the correction is on).
-    pub f_meas: [f64; 3],
-    pub f_raw: [f64; 3],
-    /// The forecast correction's estimate (κ̂, τ̂, d̂; default when off or C0).
-    pub correction: CorrectionEstimate,
-    /// The CoM observer's force (N, x and y; zero when off).
-    pub f_obs: [f64; 2],
-    /// The capture-point guard's scale of the forecast's unmeasured part (x, y; 1 when off or
-    /// not fading) and the capture point under the measured force (m; NaN when off).
-    pub viability_scale: [f64; 2],
-    pub capture_point: [f64; 2],
-    /// The robot is fallen: this tick held joint damping, without preview or QP.
-    pub fallen: bool,
-    /// The base estimator's estimate, when it ran this tick.
-    pub base: Option<BaseEstimate>,
-}
-
 /// The controller's state between ticks.
 pub struct ControllerCore {
     pub model: Model,
@@ -136,13 +92,13 @@ pub struct ControllerCore {
     /// direction (from its apparent mass, [`Self::with_held_mass`]); `None`: eq. (17) as is.
     hand_free_dir: Option<Matrix3<f64>>,
     decoupled_stiffness: bool,
-    /// The wrist sensor's offset, removed from every measured hand force used.
-    tare: WristTare,
-    q: DVector<f64>,
-    v: DVector<f64>,
+    /// The robot as measured this tick (read from the contract once), the tick's shared
+    /// quantities and the parts that work on them (`super::parts`).
+    sensed: RobotState,
+    frame: TickFrame,
+    parts: Vec<Box<dyn ControllerPart>>,
     zmp_ref: Vec<[f64; 2]>,
     hand_desired: Vec<HandState>,
-    f_ext: Vec<[f64; 3]>,
     nominal: GainSchedule,
     schedule: GainSchedule,
     plan: PreviewPlan,
@@ -152,12 +108,6 @@ pub struct ControllerCore {
     hand_acc_cmd: Vector3<f64>,
     latched: Option<Latched>,
     zmp_offset: [f64; 2],
-    /// The forecast corrected by the measured hand force (C1, C2), when on.
-    correction: Option<ForecastCorrector>,
-    /// The capture-point guard on the forecast's unmeasured part (C1, C2 with the correction).
-    viability: Option<ViabilityGuard>,
-    /// The CoM disturbance observer, when on, and the total CoM disturbance horizon it adds to.
-    observer: Option<ComObserver>,
     f_dis_total: Vec<[f64; 3]>,
     /// Ticks where the disturbance forecast was invalid and C0 ran instead.
     pub preview_fallbacks: u64,
@@ -171,11 +121,6 @@ pub struct ControllerCore {
     fallen: bool,
     pub falls: u64,
     pub fallen_ticks: u64,
-    /// The floating-base estimator and when it runs (`controller.estimator`).
-    estimator: BaseEstimator,
-    estimator_mode: EstimatorMode,
-    /// The estimator ran on the last state.
-    estimating: bool,
     pub last: TickRecord,
 }
 
@@ -214,35 +159,20 @@ impl ControllerCore {
         let wbc = WholeBodyController::new(&model, &config.wbc, &frames)?;
         let hand_frame = model.frame_id(&frames.hand)?;
         let nominal = GainSchedule::constant(n, config.hand.kp, config.nominal_kd(config.hand.kp));
-        let cc = &config.controller;
-        let correction =
-            (cc.forecast_correction.enabled && kind != ControllerKind::C0).then(|| {
-                let weight = cart.mass * cart.gravity;
-                ForecastCorrector::new(cc.forecast_correction, p.period, control_period, weight)
-            });
-        let viability = (correction.is_some() && cc.viability.enabled)
-            .then(|| ViabilityGuard::new(cc.viability, cart.mass, cart.gravity, cart.com_height));
-        let observer = cc.com_observer.enabled.then(|| {
-            ComObserver::new(
-                cc.com_observer,
-                cart.mass,
-                cart.gravity,
-                cart.com_height,
-                control_period,
-            )
-        });
-        let estimator = BaseEstimator::new(
-            &model,
-            wbc.contact_frames(),
-            cart.mass * cart.gravity,
-            control_period,
-            robot.imu_frame,
-            cc.estimator,
-        );
+        let parts = parts::build_all(&PartSetup {
+            config,
+            kind,
+            model: &model,
+            cart: &cart,
+            dt: control_period,
+            contact_frames: wbc.contact_frames(),
+            imu_frame: robot.imu_frame,
+        })?;
         Ok(Self {
             data: Data::new(&model),
-            q: DVector::zeros(model.nq),
-            v: DVector::zeros(model.nv),
+            sensed: RobotState::new(model.nq, model.nv),
+            frame: TickFrame::new(kind, model.nq, model.nv, n),
+            parts,
             op,
             wbc,
             zmp: ZmpPreview::new(cart, p.q_e, p.r, n, crate::config::LqSolverKind::Riccati),
@@ -257,10 +187,8 @@ impl ControllerCore {
             force_feedback: config.controller.hand_force_feedback,
             hand_free_dir: None,
             decoupled_stiffness: config.hand.stiffness == crate::config::HandStiffness::Decoupled,
-            tare: WristTare::new(config.controller.wrist_tare),
             zmp_ref: vec![[0.0; 2]; n],
             hand_desired: vec![HandState::default(); n],
-            f_ext: vec![[0.0; 3]; n],
             schedule: nominal.clone(),
             nominal,
             plan: PreviewPlan::with_capacity(n),
@@ -269,9 +197,6 @@ impl ControllerCore {
             hand_acc_cmd: Vector3::zeros(),
             latched: None,
             zmp_offset,
-            correction,
-            viability,
-            observer,
             f_dis_total: vec![[0.0; 3]; n],
             preview_fallbacks: 0,
             fall_drop: config.controller.fall_drop,
@@ -280,9 +205,6 @@ impl ControllerCore {
             fallen: false,
             falls: 0,
             fallen_ticks: 0,
-            estimator,
-            estimator_mode: cc.estimator.mode,
-            estimating: false,
             last: TickRecord::default(),
             model,
         })
@@ -299,7 +221,9 @@ impl ControllerCore {
     /// taken out of the measured hand force by the forecast correction (FC-1).
     pub fn with_held_mass(mut self, held_mass: Matrix3<f64>) -> Self {
         let rows = [0, 1, 2].map(|r| [0, 1, 2].map(|c| held_mass[(r, c)]));
-        self.correction = self.correction.map(|c| c.with_held_mass(rows));
+        for p in self.parts.iter_mut() {
+            p.held_object(&rows);
+        }
         // A door's apparent mass is m e eᵀ: its trace is m, and it over m projects onto e.
         let m = held_mass.trace();
         self.hand_free_dir =
@@ -332,39 +256,39 @@ impl ControllerCore {
         self.wbc.reset();
         self.com_acc_cmd = Vector3::zeros();
         self.hand_acc_cmd = Vector3::zeros();
-        self.tare.reset();
         self.last_x = [Vector3::zeros(); 2];
         self.last = TickRecord::default();
-        if let Some(c) = self.correction.as_mut() {
-            c.reset();
+        for p in self.parts.iter_mut() {
+            p.reset();
         }
-        if let Some(o) = self.observer.as_mut() {
-            o.reset();
+    }
+
+    /// Add a part after those of `super::parts::PIPELINE` (a lab's own observer, without
+    /// editing upc): it runs at its stage after theirs, and records and reports as they do.
+    pub fn add_part(&mut self, part: Box<dyn ControllerPart>) {
+        self.parts.push(part);
+    }
+
+    /// The part of type `T` (`super::parts::PIPELINE`), for tests and tools that look inside.
+    pub fn part<T: 'static>(&self) -> Option<&T> {
+        self.parts
+            .iter()
+            .find_map(|p| p.as_any().downcast_ref::<T>())
+    }
+
+    /// The last tick's values: the core's columns, then each part's, in pipeline order.
+    pub fn record(&self, out: &mut Record) {
+        self.last.record(out);
+        for p in &self.parts {
+            p.record(out);
         }
-        if let Some(g) = self.viability.as_mut() {
-            g.reset();
+    }
+
+    /// The parts' entries of `summary.json`.
+    pub fn summarize(&self, out: &mut serde_json::Map<String, serde_json::Value>) {
+        for p in &self.parts {
+            p.summarize(out);
         }
-        self.estimator.reset();
-    }
-
-    /// The wrist sensor's tare (its offset, its refusals).
-    pub fn wrist_tare(&self) -> &WristTare {
-        &self.tare
-    }
-
-    /// The base estimator's counters (`None` when it never ran).
-    pub fn estimator_counts(&self) -> Option<EstimatorCounts> {
-        (self.estimator.counts.ticks > 0).then_some(self.estimator.counts)
-    }
-
-    /// The capture-point guard's counters (`None` when it is off).
-    pub fn viability_counts(&self) -> Option<super::viability::ViabilityCounts> {
-        self.viability.as_ref().map(|g| g.counts)
-    }
-
-    /// The forecast correction's counters (`None` when it is off).
-    pub fn correction_counts(&self) -> Option<super::forecast_correction::CorrectionCounts> {
-        self.correction.as_ref().map(|c| c.counts)
     }
 
     /// Roll out the last tick's predicted horizon and copy it into a log record.
@@ -401,7 +325,7 @@ impl ControllerCore {
         out.m_e = *self.previewer.effective_mass();
         out.zmp_ref.copy_from_slice(&self.zmp_ref);
         out.hand_desired.copy_from_slice(&self.hand_desired);
-        out.f_ext.copy_from_slice(&self.f_ext);
+        out.f_ext.copy_from_slice(&self.frame.f_ext);
         out.applied = [self.last.kp, self.last.kd];
     }
 
@@ -415,9 +339,10 @@ impl ControllerCore {
         .lin
     }
 
-    /// One tick: read the state → model quantities → horizon inputs (forecast corrected,
-    /// observer) → gain schedule → preview (C0 / C1 on the CoM) → whole-body QP → record.
-    /// `tau` receives the actuated torques (length nv − 6). Returns the WBC status.
+    /// One tick: read the state → parts estimating the base → model quantities → parts on the
+    /// measured forces and the horizon's → gain schedule → preview (C0 / C1 on the CoM) →
+    /// whole-body QP → record. `tau` receives the actuated torques (length nv − 6). Returns the
+    /// WBC status.
     pub fn tick(
         &mut self,
         state: &StateMsg,
@@ -425,54 +350,58 @@ impl ControllerCore {
         c2: Option<&StampedSchedule>,
         tau: &mut [f64],
     ) -> Result<WbcStatus, TickError> {
-        self.read_state(state)?;
-        let t = state.time;
+        super::contract::read_state(state, self.robot_hash, &mut self.sensed)?;
+        self.sense(forecast)?;
+        let t = self.sensed.time;
         // Model quantities: CoM (with velocity), hand placement and velocity, M_e.
-        let (com, vcom) = center_of_mass_velocity(&self.model, &mut self.data, &self.q, &self.v)?;
+        let (q, v) = (&self.frame.q, &self.frame.v);
+        let (com, vcom) = center_of_mass_velocity(&self.model, &mut self.data, q, v)?;
         let hand = HandState {
             pos: self.data.o_m_f[self.hand_frame].trans,
             vel: self.hand_vel(),
             acc: self.hand_acc_cmd,
         };
         let latched = self.latch(com.z, hand.pos);
+        self.frame.com = com.into();
+        self.frame.com_vel = vcom.into();
+        self.frame.hand_vel = hand.vel.into();
+        self.frame.support = latched.support;
         if self.detect_fall(t, latched.com_height - com.z, latched.com_height) {
-            return Ok(self.hold_fallen(state, [com, vcom], &hand, &latched, tau));
+            let inputs = TickInputs {
+                sensed: &self.sensed,
+                forecast,
+            };
+            parts::run_stage(&mut self.parts, Stage::Measure, &inputs, &mut self.frame)?;
+            return Ok(self.hold_fallen([com, vcom], &hand, &latched, tau));
         }
-        let m_e = *self.op.compute(&self.model, &mut self.data, &self.q)?;
+        let m_e = *self
+            .op
+            .compute(&self.model, &mut self.data, &self.frame.q)?;
         let m_e_ok = self.previewer.set_effective_mass(m_e).is_ok();
-
-        let held = state.flags & STATE_FLAG_HOLD != 0;
-        let f_meas = self.tare.apply(
-            task_time(t, state.scenario_hash, state.scenario_start),
-            state.hand_force,
-            forecast.at(t),
-            hand.vel.norm(),
-            held,
-            self.dt,
-        );
-        let zref = self.horizon_inputs(t, &latched, forecast, f_meas, hand.vel.into());
-        if let (Some(g), Some(c)) = (self.viability.as_mut(), self.correction.as_ref()) {
-            let push = c.measured_push();
-            g.apply(
-                t,
-                [com.x, com.y],
-                [vcom.x, vcom.y],
-                latched.support,
-                push,
-                &mut self.f_ext,
-            );
+        let zref = self.horizon_references(&latched);
+        self.frame.known_disturbance = [self.last.f_dis[0], self.last.f_dis[1]];
+        let inputs = TickInputs {
+            sensed: &self.sensed,
+            forecast,
+        };
+        for stage in [Stage::Measure, Stage::Forecast, Stage::Disturbance] {
+            parts::run_stage(&mut self.parts, stage, &inputs, &mut self.frame)?;
+            if stage == Stage::Measure && !self.frame.f_ext_filled {
+                // Without a part correcting it, the horizon's hand force is the forecast's.
+                for (i, f) in self.frame.f_ext.iter_mut().enumerate() {
+                    *f = forecast.at(t + (i + 1) as f64 * self.period);
+                }
+            }
         }
-        let zmp_meas = self.measured_zmp(state);
-        let f_obs = self.observe([com.x, com.y], [vcom.x, vcom.y], zmp_meas);
         let age = self.take_schedule(t, c2);
         let x: [AxisState; 2] = [0, 1].map(|a| Vector3::new(com[a], vcom[a], self.com_acc_cmd[a]));
-        let (u, fallback) = self.preview(&x, &hand, m_e_ok, f_obs);
+        let (u, fallback) = self.preview(&x, &hand, m_e_ok);
         for a in 0..2 {
             self.com_acc_cmd[a] += u[a] * self.dt;
         }
         let [kpz, kdz] = self.height_gains;
         self.com_acc_cmd.z = kpz * (latched.com_height - com.z) - kdz * vcom.z;
-        let (status, iterations, wbc_time) = self.whole_body(f_meas, &latched, &hand, m_e_ok, tau);
+        let (status, iterations, wbc_time) = self.whole_body(&latched, &hand, m_e_ok, tau);
 
         // The ZMP one preview step ahead, for the logs: O(1). The whole plan is rolled out
         // only when a log record asks for it (`fill_plan`), off the per-tick path.
@@ -495,36 +424,53 @@ impl ControllerCore {
             com_acc_cmd: self.com_acc_cmd.into(),
             zmp_ref: zref,
             zmp_pred,
-            zmp_meas,
+            zmp_meas: self.frame.cop,
             hand_pos: hand.pos.into(),
             hand_err: (hand.pos - latched.hand_target).norm(),
             kp,
             kd,
             f_dis,
-            f_ext: self.f_ext[0],
+            f_ext: self.frame.f_ext[0],
             wbc_solved: status == WbcStatus::Solved,
             wbc_iterations: iterations,
             wbc_time,
             preview_fallback: fallback,
             schedule_age: age,
             support: latched.support,
-            f_meas,
+            f_meas: self.frame.hand_force,
             f_raw: forecast.at(t + self.period),
-            correction: self
-                .correction
-                .as_ref()
-                .map(|c| *c.estimate())
-                .unwrap_or_default(),
-            f_obs,
-            viability_scale: self.viability.as_ref().map_or([1.0; 2], |g| g.last_scale),
-            capture_point: self
-                .viability
-                .as_ref()
-                .map_or([f64::NAN; 2], |g| g.last_capture),
             fallen: false,
-            base: self.estimating.then_some(self.estimator.last),
         };
         Ok(status)
+    }
+
+    /// The tick's frame from the measured state, then the parts of [`Stage::Estimate`] (the
+    /// floating base); refuses a state whose configuration or velocity is then not finite.
+    fn sense(&mut self, forecast: &ForecastWindow) -> Result<(), TickError> {
+        let (s, f) = (&self.sensed, &mut self.frame);
+        f.t = s.time;
+        f.dt = self.dt;
+        f.period = self.period;
+        f.q.copy_from(&s.q);
+        f.v.copy_from(&s.v);
+        f.estimate_base = false;
+        f.cop = s.cop;
+        f.hand_force = s.hand_force;
+        f.hand_force_trusted = true;
+        f.f_ext_filled = false;
+        f.measured_push = None;
+        f.com_force = [0.0; 2];
+        f.com_force_decay = None;
+        let inputs = TickInputs {
+            sensed: &self.sensed,
+            forecast,
+        };
+        parts::run_stage(&mut self.parts, Stage::Estimate, &inputs, &mut self.frame)?;
+        let f = &self.frame;
+        if !f.q.iter().chain(f.v.iter()).all(|x| x.is_finite()) {
+            return Err(TickError::NotFinite);
+        }
+        Ok(())
     }
 
     /// Whether the robot is fallen: its CoM `drop` (m) below the height latched at the
@@ -549,89 +495,28 @@ impl ControllerCore {
     /// no QP; the record keeps what was measured.
     fn hold_fallen(
         &mut self,
-        state: &StateMsg,
         [com, vcom]: [Vector3<f64>; 2],
         hand: &HandState,
         latched: &Latched,
         tau: &mut [f64],
     ) -> WbcStatus {
         self.fallen_ticks += 1;
-        for (t, v) in tau.iter_mut().zip(self.v.iter().skip(6)) {
+        for (t, v) in tau.iter_mut().zip(self.frame.v.iter().skip(6)) {
             *t = -self.fallen_damping * v;
         }
         self.last = TickRecord {
-            time: state.time,
+            time: self.sensed.time,
             com: com.into(),
             com_vel: vcom.into(),
-            zmp_meas: self.measured_zmp(state),
+            zmp_meas: self.frame.cop,
             hand_pos: hand.pos.into(),
             hand_err: (hand.pos - latched.hand_target).norm(),
             support: latched.support,
-            f_meas: {
-                let b = self.tare.offset();
-                [0, 1, 2].map(|k| state.hand_force[k] - b[k])
-            },
+            f_meas: self.frame.hand_force,
             fallen: true,
-            base: self.estimating.then_some(self.estimator.last),
-            viability_scale: [1.0; 2],
-            capture_point: [f64::NAN; 2],
             ..TickRecord::default()
         };
         WbcStatus::Fallback(FallbackReason::Fallen)
-    }
-
-    /// Checks the state against the model (sizes, robot, finiteness) and copies q and v.
-    fn read_state(&mut self, state: &StateMsg) -> Result<(), TickError> {
-        let (nq, nv) = (self.model.nq, self.model.nv);
-        // The message's arrays hold MAX_DOF values: a size beyond them is refused before any
-        // slice by it (a model larger than the message would otherwise match it).
-        let fits = |n: u32| n as usize <= MAX_DOF;
-        if !fits(state.nq) || !fits(state.nv) || state.nq as usize != nq || state.nv as usize != nv
-        {
-            return Err(TickError::Dimensions {
-                nq: state.nq,
-                nv: state.nv,
-                model_nq: nq,
-                model_nv: nv,
-            });
-        }
-        if state.robot_hash != 0 && self.robot_hash != 0 && state.robot_hash != self.robot_hash {
-            return Err(TickError::Robot {
-                plant: state.robot_hash,
-                mine: self.robot_hash,
-            });
-        }
-        let unmeasured = state.flags & STATE_FLAG_BASE_UNMEASURED != 0;
-        self.estimating = match self.estimator_mode {
-            EstimatorMode::On => true,
-            EstimatorMode::Auto => unmeasured,
-            EstimatorMode::Off if unmeasured => return Err(TickError::BaseUnmeasured),
-            EstimatorMode::Off => false,
-        };
-        // An estimated base is NaN in the state: its coordinates are checked once estimated.
-        let (base_q, base_v) = if self.estimating { (7, 6) } else { (0, 0) };
-        if !state.q[base_q..nq]
-            .iter()
-            .chain(&state.v[base_v..nv])
-            .all(|x| x.is_finite())
-        {
-            return Err(TickError::NotFinite);
-        }
-        self.q.as_mut_slice().copy_from_slice(&state.q[..nq]);
-        self.v.as_mut_slice().copy_from_slice(&state.v[..nv]);
-        if self.estimating {
-            self.estimator.update(state, &mut self.q, &mut self.v)?;
-        }
-        Ok(())
-    }
-
-    /// The measured centre of pressure: from the foot wrenches at the estimated soles when the
-    /// base is estimated (as a robot computes it), the state's otherwise.
-    fn measured_zmp(&self, state: &StateMsg) -> [f64; 2] {
-        match self.estimator.cop {
-            Some(cop) if self.estimating => cop,
-            _ => state.zmp,
-        }
     }
 
     /// The support rectangle of the sole corners where the state puts them,
@@ -678,17 +563,9 @@ impl ControllerCore {
         *l
     }
 
-    /// The horizon's inputs at t + (i+1)·T: ZMP reference, hand set-point and the hand force
-    /// (the forecast, corrected by the measured force `f_meas` with the hand moving at
-    /// `hand_vel`). Returns the ZMP reference.
-    fn horizon_inputs(
-        &mut self,
-        t: f64,
-        latched: &Latched,
-        forecast: &ForecastWindow,
-        f_meas: [f64; 3],
-        hand_vel: [f64; 3],
-    ) -> [f64; 2] {
+    /// The horizon's references at t + (i+1)·T: the ZMP reference and the hand set-point.
+    /// Returns the ZMP reference.
+    fn horizon_references(&mut self, latched: &Latched) -> [f64; 2] {
         let zref = [
             latched.zmp_center[0] + self.zmp_offset[0],
             latched.zmp_center[1] + self.zmp_offset[1],
@@ -701,35 +578,7 @@ impl ControllerCore {
             self.zmp_ref[i] = zref;
             self.hand_desired[i] = target;
         }
-        // The hand force over the horizon: the forecast, corrected by the measured force.
-        match self.correction.as_mut() {
-            Some(c) => {
-                c.update(t, forecast, Some(f_meas), hand_vel);
-                c.fill(t, self.period, forecast, &mut self.f_ext);
-            }
-            None => {
-                for i in 0..self.horizon {
-                    self.f_ext[i] = forecast.at(t + (i + 1) as f64 * self.period);
-                }
-            }
-        }
         zref
-    }
-
-    /// The CoM observer, against the disturbance the preview modelled at the last tick.
-    fn observe(&mut self, com: [f64; 2], vcom: [f64; 2], zmp: [f64; 2]) -> [f64; 2] {
-        match self.observer.as_mut() {
-            Some(o) => {
-                let known = if self.kind == ControllerKind::C0 {
-                    [0.0; 2]
-                } else {
-                    [self.last.f_dis[0], self.last.f_dis[1]]
-                };
-                o.update(com, vcom, zmp, known);
-                o.force()
-            }
-            None => [0.0; 2],
-        }
     }
 
     /// The gain schedule: C2's, shifted to now, or the nominal one. Returns C2's age (s).
@@ -756,19 +605,13 @@ impl ControllerCore {
     }
 
     /// C0 / C1 on the CoM: the jerk u of each axis, and whether C1 fell back to C0.
-    fn preview(
-        &mut self,
-        x: &[AxisState; 2],
-        hand: &HandState,
-        m_e_ok: bool,
-        f_obs: [f64; 2],
-    ) -> ([f64; 2], bool) {
+    fn preview(&mut self, x: &[AxisState; 2], hand: &HandState, m_e_ok: bool) -> ([f64; 2], bool) {
         let mut fallback = false;
-        let observed = self.observer.as_ref().map(|o| {
-            let decay = (-self.period / o.settings().decay).exp();
-            (f_obs, decay)
-        });
-        // Σ: F_dis (C1, C2; zero for C0) plus the observer's force decaying over the horizon.
+        let observed = self
+            .frame
+            .com_force_decay
+            .map(|decay| (self.frame.com_force, decay));
+        // Σ: F_dis (C1, C2; zero for C0) plus the parts' CoM force decaying over the horizon.
         let add_observed =
             |base: &[[f64; 3]], out: &mut [[f64; 3]], (f, decay): ([f64; 2], f64)| {
                 let mut w = 1.0;
@@ -795,7 +638,7 @@ impl ControllerCore {
                             hand,
                             &self.hand_desired,
                             &self.schedule,
-                            &self.f_ext,
+                            &self.frame.f_ext,
                             self.horizon,
                         )
                         .and_then(|()| match observed {
@@ -833,7 +676,6 @@ impl ControllerCore {
     /// `tau`. Returns the status, the solver's iterations and the QP's time (s).
     fn whole_body(
         &mut self,
-        f_meas: [f64; 3],
         latched: &Latched,
         hand: &HandState,
         m_e_ok: bool,
@@ -844,10 +686,12 @@ impl ControllerCore {
         // and the hand task asks for the impedance law's own response to it, eq. (23):
         // M_e ẍ = F_ext + M_e ẍ_cmd, i.e. ẍ = ẍ_cmd + M_e⁻¹ F_ext. Without it the QP ignores the
         // force, which then folds the arm's lightest joints instead of acting through M_e.
-        let f_hand = Vector3::from(f_meas);
-        // Only a force the tare vouches for (not while it is taken, nor after a refused one).
-        let fed_back =
-            self.force_feedback && self.tare.trusted() && f_hand.iter().all(|x| x.is_finite());
+        let f_hand = Vector3::from(self.frame.hand_force);
+        // Only a force the parts vouch for (the wrist tare: not while it is taken, nor after a
+        // refused one).
+        let fed_back = self.force_feedback
+            && self.frame.hand_force_trusted
+            && f_hand.iter().all(|x| x.is_finite());
         let f_hand = if fed_back { f_hand } else { Vector3::zeros() };
         let acc_ext = if m_e_ok {
             self.op.lambda_inv * f_hand
@@ -879,9 +723,13 @@ impl ControllerCore {
             hand_force: f_hand,
             posture_ref: None,
         };
-        let out = self
-            .wbc
-            .solve(&self.model, &mut self.data, &self.q, &self.v, &cmd);
+        let out = self.wbc.solve(
+            &self.model,
+            &mut self.data,
+            &self.frame.q,
+            &self.frame.v,
+            &cmd,
+        );
         let n = out.tau.len().min(tau.len());
         tau[..n].copy_from_slice(&out.tau.as_slice()[..n]);
         (out.status, out.iterations, out.tick_time.as_secs_f64())

@@ -30,7 +30,15 @@
 
 use super::forecast_window::ForecastWindow;
 
-pub use crate::config::CorrectionSettings;
+use std::any::Any;
+
+use serde::{Deserialize, Serialize};
+
+use super::core::TickError;
+use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
+use super::record::Record;
+use crate::col;
+use crate::config::ControllerKind;
 
 /// The correction's current estimate, for logs and the summary.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -599,6 +607,19 @@ impl ForecastCorrector {
     /// (κ, b) under y_j = κ g(t_j − τ) + b + noise, priors κ ~ N(κ₀, σ_κ²), b ~ N(d̂, σ_b²),
     /// then τ̂ the candidate of least cost with prior τ ~ N(τ₀, σ_τ²), refined by a parabola.
     fn estimate_factor_and_shift(&mut self, window: &ForecastWindow) {
+        self.fill_timeline(window);
+        let fit = self.search_shift();
+        let tau = self.refine_shift(fit.mi);
+        let evidence = self.remember(&fit, tau);
+        self.judge_contradiction(fit.kappa, tau, evidence);
+        let kappa = fit.kappa;
+        self.counts.estimations += 1;
+        self.counts.factor_min = self.counts.factor_min.min(kappa);
+        self.counts.factor_max = self.counts.factor_max.max(kappa);
+    }
+
+    /// The forecast's timeline over the window and the candidate shifts, and its prefix sums.
+    fn fill_timeline(&mut self, window: &ForecastWindow) {
         let (n_w, m) = (self.n_w, self.m);
         // The timeline: g[i] is the forecast for the bin centred at
         // t_c(i) = t_newest − (n_W − 1 + M − i) T_b, i = 0 … n_W + 2M − 1; recorded bins for
@@ -626,6 +647,11 @@ impl ForecastCorrector {
             axpy(&mut s, 1.0, &self.g[i]);
             self.p1[i + 1] = s;
         }
+    }
+
+    /// Every candidate shift's MAP fit and cost (`self.costs`); the best one.
+    fn search_shift(&mut self) -> ShiftFit {
+        let (n_w, m) = (self.n_w, self.m);
         // Sums over the window of the measurement alone.
         let mut sy = [0.0; 3];
         let mut syy = 0.0;
@@ -690,6 +716,18 @@ impl ForecastCorrector {
             self.costs[mi] = cost;
         }
         let (_, mi, kappa) = best;
+        ShiftFit {
+            mi,
+            kappa,
+            var,
+            evidence: evidence_at_best,
+            energy: energy_at_best,
+        }
+    }
+
+    /// τ̂ of candidate `mi`, refined between its neighbours.
+    fn refine_shift(&self, mi: usize) -> f64 {
+        let m = self.m;
         let mut tau = (mi as f64 - m as f64) * self.bin;
         // Sub-bin refinement: the vertex of the parabola through the three costs.
         let at = |i: Option<usize>| i.and_then(|i| self.costs.get(i)).copied();
@@ -702,6 +740,14 @@ impl ForecastCorrector {
         if cm.is_finite() && cp.is_finite() && curv > 0.0 {
             tau += 0.5 * self.bin * ((cm - cp) / curv).clamp(-1.0, 1.0);
         }
+        tau
+    }
+
+    /// The estimate, and the next estimation's priors where the window gave evidence (returned).
+    fn remember(&mut self, fit: &ShiftFit, tau: f64) -> bool {
+        let (n_w, m) = (self.n_w, self.m);
+        let (mi, kappa, var) = (fit.mi, fit.kappa, fit.var);
+        let (evidence_at_best, energy_at_best) = (fit.evidence, fit.energy);
         self.est.factor = kappa;
         self.est.shift = tau;
         // The forecast levels κ̂ was fitted on (FC-4b): the window's largest at the chosen
@@ -742,6 +788,11 @@ impl ForecastCorrector {
             self.est.factor = self.prior_factor;
             self.est.shift = self.prior_shift;
         }
+        evidence
+    }
+
+    /// Whether the measured force contradicts the forecast (with the window's evidence).
+    fn judge_contradiction(&mut self, kappa: f64, tau: f64, evidence: bool) {
         // Contradicted: κ̂ far from 1 with the window's evidence (posterior sd of κ below
         // half the threshold), not merely from a prior; it stays so until the factor the
         // estimator remembers is back within the threshold (evidence of agreement, or the
@@ -769,9 +820,6 @@ impl ForecastCorrector {
             // A weak window does not lift a contradicted forecast's weight: its memory does.
             self.est.factor = self.prior_factor;
         }
-        self.counts.estimations += 1;
-        self.counts.factor_min = self.counts.factor_min.min(kappa);
-        self.counts.factor_max = self.counts.factor_max.max(kappa);
     }
 
     /// The corrected hand force over the horizon (FC-4): `out[i]` for t + (i + 1) `period`.
@@ -820,6 +868,283 @@ impl ForecastCorrector {
                     self.counts.lift_capped
                 );
             }
+        }
+    }
+}
+
+/// `[controller.forecast_correction]`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CorrectionSettings {
+    /// Correct the forecast (C1, C2); off: the forecast as received.
+    pub enabled: bool,
+    /// Length W of the estimation window (s).
+    pub window: f64,
+    /// Largest |τ| searched (s).
+    pub max_shift: f64,
+    /// σ: standard deviation of one measured force sample (N), the estimation's noise model.
+    pub force_noise: f64,
+    /// ε: the part of the force no amplitude and shift explain (the door's and the arm's own
+    /// dynamics), relative to the forecast's RMS over the window; adds (ε·RMS)² to a bin's
+    /// variance.
+    pub model_error: f64,
+    /// A window whose forecast RMS (at τ̂) is below this (N) never becomes the estimator's
+    /// memory: the tail of a push says little about its amplitude.
+    pub min_force: f64,
+    /// σ_κ: how far κ may plausibly be from its prior mean (1, or the last estimate).
+    pub factor_sd: f64,
+    /// σ_τ: how far τ may plausibly be from its prior mean (0, or the last estimate), s.
+    pub shift_sd: f64,
+    /// σ_b: how far the window's offset may be from the offset observer's estimate (N).
+    pub offset_sd: f64,
+    /// Bounds of κ̂.
+    pub factor_bounds: [f64; 2],
+    /// Time constant (s) with which the priors return to κ = 1, τ = 0 without evidence.
+    pub forget: f64,
+    /// Time constant T_o of the offset observer (s).
+    pub offset_time_constant: f64,
+    /// Time constant T_d of the offset's decay over the horizon (s).
+    pub offset_decay: f64,
+    /// Length (s) of the window of the trend fit: a line through the last bins of what the
+    /// forecast leaves unexplained (FC-3b).
+    pub trend_window: f64,
+    /// T_r (s): how far ahead the unexplained force's trend is extrapolated before it levels
+    /// off (FC-4); 0 turns the trend off.
+    pub trend_horizon: f64,
+    /// |κ̂ − 1| beyond this, with the window's evidence, is a contradicted forecast.
+    pub contradiction: f64,
+    /// The corrected horizon's upward force is capped at this fraction of the robot's weight
+    /// M g: the hand force of a robot tipping over (or a biased sensor) must not preview as a
+    /// force lifting it (eq. (10) needs M g − F_z > 0), which the forecast intake refuses too.
+    pub max_lift: f64,
+    /// FC-5: the memory (s) of the forecast's and the measurement's prediction errors from which
+    /// the forecast's weight is judged; 0 always believes the corrected forecast (w = 1).
+    pub skill_time: f64,
+}
+
+impl Default for CorrectionSettings {
+    /// The embedded `config/default.toml`'s table (their one home).
+    fn default() -> Self {
+        crate::config::embedded_part()
+    }
+}
+
+impl crate::config::PartSettings for CorrectionSettings {
+    const TABLE: &'static str = "forecast_correction";
+
+    fn check(&self) -> Result<(), (&'static str, String)> {
+        for (key, v) in [
+            ("window", self.window),
+            ("force_noise", self.force_noise),
+            ("model_error", self.model_error),
+            ("min_force", self.min_force),
+            ("factor_sd", self.factor_sd),
+            ("shift_sd", self.shift_sd),
+            ("offset_sd", self.offset_sd),
+            ("forget", self.forget),
+            ("offset_time_constant", self.offset_time_constant),
+            ("offset_decay", self.offset_decay),
+            ("trend_window", self.trend_window),
+            ("contradiction", self.contradiction),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err((key, format!("must be finite and > 0, got {v}")));
+            }
+        }
+        for (key, v) in [
+            ("max_shift", self.max_shift),
+            ("trend_horizon", self.trend_horizon),
+            ("skill_time", self.skill_time),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err((key, format!("must be finite and ≥ 0, got {v}")));
+            }
+        }
+        if !(self.max_lift > 0.0 && self.max_lift < 1.0) {
+            return Err((
+                "max_lift",
+                format!("must be in (0, 1), got {}", self.max_lift),
+            ));
+        }
+        let [lo, hi] = self.factor_bounds;
+        if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo < hi) {
+            return Err(("factor_bounds", format!("need 0 ≤ lo < hi, got {lo}, {hi}")));
+        }
+        Ok(())
+    }
+}
+
+/// One shift search's outcome: the best candidate, its κ̂, the bin variance it was judged
+/// with, its posterior curvature (evidence) and the window's forecast energy there.
+struct ShiftFit {
+    mi: usize,
+    kappa: f64,
+    var: f64,
+    evidence: f64,
+    energy: f64,
+}
+
+/// The forecast correction as a controller part (C1, C2 with `enabled`; inactive otherwise):
+/// it fills the horizon's hand force from the forecast and the measured force.
+pub struct Correction {
+    corrector: Option<ForecastCorrector>,
+}
+
+/// This part in `super::parts::PIPELINE`.
+pub const PART: PartEntry = PartEntry::new::<CorrectionSettings>(build);
+
+fn build(
+    s: &PartSetup,
+) -> Result<Box<dyn ControllerPart>, Box<dyn std::error::Error + Send + Sync>> {
+    let settings: CorrectionSettings = s.config.controller.parts.get()?;
+    let p = &s.config.preview;
+    let corrector = (settings.enabled && s.kind != ControllerKind::C0)
+        .then(|| ForecastCorrector::new(settings, p.period, s.dt, s.cart.mass * s.cart.gravity));
+    Ok(Box::new(Correction { corrector }))
+}
+
+impl Correction {
+    pub fn corrector(&self) -> Option<&ForecastCorrector> {
+        self.corrector.as_ref()
+    }
+}
+
+impl ControllerPart for Correction {
+    fn name(&self) -> &'static str {
+        "forecast_correction"
+    }
+
+    fn stage(&self) -> Stage {
+        Stage::Forecast
+    }
+
+    fn reset(&mut self) {
+        if let Some(c) = self.corrector.as_mut() {
+            c.reset();
+        }
+    }
+
+    fn update(&mut self, inputs: &TickInputs, frame: &mut TickFrame) -> Result<(), TickError> {
+        let Some(c) = self.corrector.as_mut() else {
+            return Ok(());
+        };
+        c.update(
+            frame.t,
+            inputs.forecast,
+            Some(frame.hand_force),
+            frame.hand_vel,
+        );
+        c.fill(frame.t, frame.period, inputs.forecast, &mut frame.f_ext);
+        frame.f_ext_filled = true;
+        frame.measured_push = Some(c.measured_push());
+        Ok(())
+    }
+
+    fn record(&self, out: &mut Record) {
+        let e = self
+            .corrector
+            .as_ref()
+            .map(|c| *c.estimate())
+            .unwrap_or_default();
+        out.put(
+            col!(fixed("corr_factor", 4).plot("correction/factor")),
+            e.factor,
+        );
+        out.put(
+            col!(fixed("corr_shift", 4).plot("correction/shift")),
+            e.shift,
+        );
+        out.put(
+            col!(fixed("corr_offset_x", 3).plot("correction/offset_x")),
+            e.offset[0],
+        );
+        out.put(col!(fixed("corr_offset_y", 3)), e.offset[1]);
+        out.put(col!(fixed("corr_offset_z", 3)), e.offset[2]);
+        out.flag(
+            col!(plain("corr_contradicted").plot("correction/contradicted")),
+            e.contradicted,
+        );
+        out.put(
+            col!(fixed("corr_trend_x", 2).plot("correction/trend_x")),
+            e.trend[0],
+        );
+        out.put(col!(fixed("corr_trend_y", 2)), e.trend[1]);
+        out.put(
+            col!(fixed("corr_weight", 4).plot("correction/weight")),
+            e.weight,
+        );
+        out.put(
+            col!(fixed("corr_error_forecast", 3).plot("correction/error_forecast")),
+            e.error_forecast,
+        );
+        out.put(
+            col!(fixed("corr_error_measured", 3).plot("correction/error_measured")),
+            e.error_measured,
+        );
+    }
+
+    fn summarize(&self, out: &mut serde_json::Map<String, serde_json::Value>) {
+        if let Some(c) = &self.corrector {
+            let s = CorrectionSummary::of(c.counts, c.estimate());
+            out.insert("forecast_correction".into(), serde_json::json!(s));
+        }
+    }
+
+    fn held_object(&mut self, apparent_mass: &[[f64; 3]; 3]) {
+        self.corrector = self
+            .corrector
+            .take()
+            .map(|c| c.with_held_mass(*apparent_mass));
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
+
+/// What the forecast correction did over a run.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
+#[serde(default)]
+pub struct CorrectionSummary {
+    /// Times the measured hand force contradicted the forecast, and the plant time it did.
+    pub contradictions: u64,
+    pub contradicted_time: f64,
+    /// κ̂: smallest, largest and last; τ̂ last (s); d̂ last (N).
+    pub factor_min: f64,
+    pub factor_max: f64,
+    pub factor_last: f64,
+    pub shift_last: f64,
+    pub offset_last: [f64; 3],
+    /// Estimations of κ̂, τ̂; ticks whose measured force was not finite.
+    pub estimations: u64,
+    pub bad_measurements: u64,
+    /// Ticks whose corrected horizon was capped at `max_lift` M g upward.
+    #[serde(default)]
+    pub lift_capped: u64,
+    /// FC-5: the forecast's smallest weight against measurement only, times it was
+    /// discounted (weight below 0.5) and the plant time it stayed so (s).
+    pub weight_min: f64,
+    pub discounts: u64,
+    pub discounted_time: f64,
+}
+
+impl CorrectionSummary {
+    /// From the corrector's counters and its last estimate.
+    pub fn of(c: CorrectionCounts, e: &CorrectionEstimate) -> Self {
+        Self {
+            contradictions: c.contradictions,
+            contradicted_time: c.contradicted_time,
+            factor_min: c.factor_min,
+            factor_max: c.factor_max,
+            factor_last: e.factor,
+            shift_last: e.shift,
+            offset_last: e.offset,
+            estimations: c.estimations,
+            bad_measurements: c.bad_measurements,
+            lift_capped: c.lift_capped,
+            weight_min: c.weight_min,
+            discounts: c.discounts,
+            discounted_time: c.discounted_time,
         }
     }
 }

@@ -1,12 +1,18 @@
 //! The control server: a fixed-rate loop that turns robot state and the hand force forecast
 //! into joint torques (C0/C1 every tick, C2's gain search in its own thread, the whole-body QP).
 //!
-//! - [`core`]: one tick without IPC ([`ControllerCore`]).
+//! - [`core`]: one tick without IPC ([`ControllerCore`]); [`contract`]: the one place the
+//!   state message is read (into a [`crate::robot::RobotState`]); [`tick_record`]: what a
+//!   tick produced.
+//! - [`parts`]: the controller's parts behind one trait, run by stage in the order of
+//!   [`parts::PIPELINE`]; [`record`]: self-describing records (name, format and value together)
+//!   for the CSV, rerun and tests. The parts:
+//!   - [`base_estimation`]: the floating base from the IMU, joints and foot wrenches;
+//!   - [`wrist_tare`]: the wrist sensor's offset, taken while the hand is unloaded;
+//!   - [`forecast_correction`]: the forecast corrected by the measured hand force;
+//!   - [`viability`]: the capture-point guard on the forecast's unmeasured part;
+//!   - [`com_observer`]: the push on the CoM that nothing forecasts, from the measured CoP.
 //! - [`forecast_window`]: validated copy of the latest force forecast.
-//! - [`forecast_correction`]: the forecast corrected by the measured hand force.
-//! - [`viability`]: the capture-point guard on the forecast's unmeasured part.
-//! - [`wrist_tare`]: the wrist sensor's offset, taken while the hand is unloaded.
-//! - [`com_observer`]: the push on the CoM that nothing forecasts, from the measured CoP.
 //! - [`gain_thread`]: C2 in a lower-priority thread behind wait-free triple buffers.
 //! - [`logger`]: the rerun log, from its own thread, never blocking the loop.
 //! - [`server`]: the loop over iceoryx2 (`upc controller`), lockstep or real time, as named
@@ -15,27 +21,35 @@
 //! - [`timing`]: absolute-deadline ticker and latency histogram.
 //! - [`realtime`]: SCHED_FIFO, mlockall, CPU affinity (degrading with a warning).
 
+pub mod base_estimation;
 pub mod com_observer;
+pub mod contract;
 pub mod core;
 pub mod forecast_correction;
 pub mod forecast_intake;
 pub mod forecast_window;
 pub mod gain_thread;
 pub mod logger;
+pub mod parts;
 pub mod plant_link;
 pub mod realtime;
+pub mod record;
 pub mod run_metrics;
 pub mod server;
 pub mod summary;
+pub mod tick_record;
 pub mod timing;
 pub mod viability;
 pub mod wrist_tare;
 
 pub use com_observer::{ComObserver, ComObserverSettings};
-pub use core::{ControllerCore, TickError, TickRecord};
+pub use core::{ControllerCore, TickError};
 pub use forecast_correction::{
     CorrectionCounts, CorrectionEstimate, CorrectionSettings, ForecastCorrector,
 };
 pub use forecast_window::{ForecastRejection, ForecastWindow};
 pub use gain_thread::{GainHandoff, GainSnapshot, StampedSchedule};
+pub use parts::{ControllerPart, Stage};
+pub use record::{Column, Record};
+pub use tick_record::TickRecord;
 pub use timing::{LatencyHistogram, Ticker};

@@ -25,18 +25,20 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+pub use super::forecast_correction::CorrectionSummary;
 use super::forecast_intake::ForecastIntake;
 use super::gain_thread::GainSolver;
 use super::logger::{ControlLogger, TickLog};
 use super::plant_link::{LinkTimeouts, PlantLink, Verdict};
+use super::record::{Column, Record};
 use super::run_metrics::RunMetrics;
-pub use super::summary::{CorrectionSummary, ServerSummary};
-use super::wrist_tare::{TareState, WristTare};
+pub use super::summary::ServerSummary;
 use super::{ControllerCore, ForecastWindow, GainHandoff, Ticker};
 use crate::channels::{
     Bus, ChannelError, ForecastMsg, Listener, MAX_DOF, Notifier, Publisher, STATE_FLAG_HOLD,
     ServiceKind, StateMsg, Subscriber, TORQUE_FLAG_FALLBACK, TorqueMsg,
 };
+use crate::col;
 use crate::config::{Config, ControllerKind, LoopMode};
 use crate::preview::ReducedModel;
 use crate::robot::Robot;
@@ -257,7 +259,7 @@ impl<'a> ControlLoop<'a> {
         let horizon_time = config.preview.horizon as f64 * config.preview.period;
         let intake = forecast_intake(config, &bus, robot_mass, horizon_time)?;
         let c2 = start_c2(config, &robot.reduced(), c2_solver)?;
-        let logger = start_logger(config, opts)?;
+        let logger = start_logger(config, opts, &core)?;
         let status_every = Duration::from_secs_f64(cc.status_every);
         Ok(ControlLoop {
             config,
@@ -561,12 +563,7 @@ impl<'a> ControlLoop<'a> {
         inputs.c2_log =
             schedule.map(|sch| (sch.cost, sch.nominal_cost, sch.iterations, sch.solve_time));
         let tau = &mut self.tau[..self.n_tau];
-        let tare_before = self.core.wrist_tare().state();
         let result = self.core.tick(state, &self.intake.window, schedule, tau);
-        let tare = self.core.wrist_tare();
-        if tare.state() != tare_before {
-            log_tare(tare, state.time);
-        }
         match result {
             Ok(WbcStatus::Solved) => 0,
             Ok(WbcStatus::Fallback(FallbackReason::Fallen)) => TORQUE_FLAG_FALLBACK,
@@ -658,15 +655,12 @@ impl<'a> ControlLoop<'a> {
         // state is at t = 0), the instants the plant's ground truth is recorded at.
         let ticks = self.metrics.ticks.saturating_sub(1);
         if ticks.is_multiple_of(every) {
-            let (c2_cost, c2_nominal_cost, c2_iterations, c2_solve_time) =
-                c2_log.unwrap_or_default();
+            let mut record = Record::default();
+            self.core.record(&mut record);
+            loop_columns(&mut record, tick_time, c2_log.unwrap_or_default());
             l.tick(TickLog {
-                core: self.core.last,
-                tick_time: tick_time.as_secs_f64(),
-                c2_cost,
-                c2_nominal_cost,
-                c2_iterations,
-                c2_solve_time,
+                time: self.core.last.time,
+                record,
             });
         }
         if ticks.is_multiple_of(10 * every) {
@@ -742,28 +736,7 @@ impl<'a> ControlLoop<'a> {
         }
         s.preview_fallbacks = self.core.preview_fallbacks;
         (s.falls, s.fallen_ticks) = (self.core.falls, self.core.fallen_ticks);
-        s.wrist_tare_offset = self.core.wrist_tare().offset();
-        s.wrist_tare_refusals = self.core.wrist_tare().refusals();
-        s.estimator = self.core.estimator_counts();
-        s.viability = self.core.viability_counts();
-        s.forecast_correction = self.core.correction_counts().map(|c| {
-            let e = self.core.last.correction;
-            CorrectionSummary {
-                contradictions: c.contradictions,
-                contradicted_time: c.contradicted_time,
-                factor_min: c.factor_min,
-                factor_max: c.factor_max,
-                factor_last: e.factor,
-                shift_last: e.shift,
-                offset_last: e.offset,
-                estimations: c.estimations,
-                bad_measurements: c.bad_measurements,
-                lift_capped: c.lift_capped,
-                weight_min: c.weight_min,
-                discounts: c.discounts,
-                discounted_time: c.discounted_time,
-            }
-        });
+        self.core.summarize(&mut s.parts);
         let wc = self.core.wbc_counters();
         s.wbc_torque_limited_ticks = wc.torque_limited;
         s.wbc_condensation_failures = wc.condensation_failures;
@@ -847,6 +820,37 @@ fn forecast_intake(
     ))
 }
 
+/// The loop's own columns of a tick record: the tick's compute time and the latest C2 result
+/// (eq. (26) cost, docs/gain_search.md; nominal cost; iterations; solve time).
+fn loop_columns(r: &mut Record, tick_time: Duration, c2: (f64, f64, u32, f64)) {
+    let (cost, nominal, iterations, solve) = c2;
+    r.put(
+        col!(fixed("tick_us", 1).plot("timing/tick_us")),
+        tick_time.as_secs_f64() * 1e6,
+    );
+    r.put(col!(sci("c2_cost", 5).plot("c2/cost")), cost);
+    r.put(
+        col!(sci("c2_nominal_cost", 5).plot("c2/nominal_cost")),
+        nominal,
+    );
+    r.put(
+        col!(plain("c2_iterations").plot("c2/iterations")),
+        f64::from(iterations),
+    );
+    r.put(
+        col!(fixed("c2_solve_ms", 3).plot("c2/solve_ms")),
+        solve * 1e3,
+    );
+}
+
+/// The columns of the controller's records (`controller.csv`'s header), from a record of `core`.
+pub fn record_columns(core: &ControllerCore) -> Vec<&'static Column> {
+    let mut r = Record::default();
+    core.record(&mut r);
+    loop_columns(&mut r, Duration::ZERO, (0.0, 0.0, 0, 0.0));
+    r.columns()
+}
+
 /// The rerun log and CSV, if asked for. Lockstep keeps every tick record (the CSV is part of
 /// what reruns reproduce), so its logger must get CPU time when the machine is loaded: the
 /// normal class. In real time its threads (ours and the rerun SDK's) run in the idle class,
@@ -854,8 +858,10 @@ fn forecast_intake(
 fn start_logger(
     config: &Config,
     opts: &ServerOptions,
+    core: &ControllerCore,
 ) -> Result<Option<ControlLogger>, Box<dyn std::error::Error + Send + Sync>> {
     let Some(p) = &opts.rrd else { return Ok(None) };
+    let columns = record_columns(core);
     let lockstep = config.controller.mode == LoopMode::Lockstep;
     let start = || {
         ControlLogger::start(
@@ -865,6 +871,7 @@ fn start_logger(
             opts.live.as_deref(),
             config.preview.horizon,
             lockstep,
+            columns.clone(),
         )
     };
     Ok(Some(if lockstep {
@@ -872,29 +879,6 @@ fn start_logger(
     } else {
         super::realtime::in_background(start)?
     }))
-}
-
-/// The wrist tare's outcome, once per plant session.
-fn log_tare(tare: &WristTare, t: f64) {
-    let b = tare.offset();
-    match tare.state() {
-        TareState::Taken => tracing::info!(
-            "wrist tared at t = {t:.3} s: offset ({:.2}, {:.2}, {:.2}) N removed from the measured hand force",
-            b[0],
-            b[1],
-            b[2]
-        ),
-        TareState::Refused => tracing::warn!(
-            "wrist tare refused at t = {t:.3} s: the quiet hand measures more than \
-             controller.wrist_tare.max_offset (a load, or an offset too large to be one); \
-             the hand force is not fed back to the whole-body QP this session"
-        ),
-        TareState::Skipped => tracing::info!(
-            "wrist tare skipped: no quiet second at the task's start (a controller that \
-             joined a running task); the measured hand force is used as it is"
-        ),
-        TareState::Pending => {}
-    }
 }
 
 #[cfg(test)]

@@ -113,45 +113,9 @@ pub struct ServerSummary {
     pub dropped_log_lines: u64,
     pub realtime: super::realtime::RealtimeReport,
     pub stopped_by: String,
-    /// The forecast correction (docs/forecast_correction.md); `None`: off (or C0).
-    pub forecast_correction: Option<CorrectionSummary>,
-    /// The capture-point guard on the forecast's unmeasured part (docs/forecast_correction.md,
-    /// VG); `None`: off (or C0).
-    #[serde(default)]
-    pub viability: Option<super::viability::ViabilityCounts>,
-    /// The wrist sensor's offset removed at the last tare (N; zero when none was taken), and
-    /// the tares refused as loads (`control::wrist_tare`).
-    #[serde(default)]
-    pub wrist_tare_offset: [f64; 3],
-    #[serde(default)]
-    pub wrist_tare_refusals: u64,
-    /// The base estimator's counters (docs/estimation.md); `None`: the base was measured.
-    #[serde(default)]
-    pub estimator: Option<crate::estimation::EstimatorCounts>,
-}
-
-/// What the forecast correction did over a run.
-#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
-#[serde(default)]
-pub struct CorrectionSummary {
-    /// Times the measured hand force contradicted the forecast, and the plant time it did.
-    pub contradictions: u64,
-    pub contradicted_time: f64,
-    /// κ̂: smallest, largest and last; τ̂ last (s); d̂ last (N).
-    pub factor_min: f64,
-    pub factor_max: f64,
-    pub factor_last: f64,
-    pub shift_last: f64,
-    pub offset_last: [f64; 3],
-    /// Estimations of κ̂, τ̂; ticks whose measured force was not finite.
-    pub estimations: u64,
-    pub bad_measurements: u64,
-    /// Ticks whose corrected horizon was capped at `max_lift` M g upward.
-    #[serde(default)]
-    pub lift_capped: u64,
-    /// FC-5: the forecast's smallest weight against measurement only, times it was
-    /// discounted (weight below 0.5) and the plant time it stayed so (s).
-    pub weight_min: f64,
-    pub discounts: u64,
-    pub discounted_time: f64,
+    /// The controller parts' entries, each under the part's own keys
+    /// (`crate::control::parts`): `forecast_correction`, `viability`, `estimator` (absent when
+    /// off or never run), `wrist_tare_offset`, `wrist_tare_refusals`.
+    #[serde(flatten)]
+    pub parts: serde_json::Map<String, serde_json::Value>,
 }

@@ -27,7 +27,15 @@
 //! ξ_m comes within `ease_margin` of that edge (off by default: an exact forecast's easing is what
 //! lets a short impact's lean come back in time). Allocation-free.
 
-pub use crate::config::ViabilitySettings;
+use std::any::Any;
+
+use serde::{Deserialize, Serialize};
+
+use super::core::TickError;
+use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
+use super::record::Record;
+use crate::col;
+use crate::config::ControllerKind;
 
 type V3 = [f64; 3];
 
@@ -165,6 +173,134 @@ impl ViabilityGuard {
             }
         }
         self.fading = faded;
+    }
+}
+
+/// The capture-point guard as a controller part: on with the forecast correction (C1, C2),
+/// whose measured push it needs; inactive otherwise.
+pub struct Guard {
+    guard: Option<ViabilityGuard>,
+}
+
+/// This part in `super::parts::PIPELINE`.
+pub const PART: PartEntry = PartEntry::new::<ViabilitySettings>(build);
+
+fn build(
+    s: &PartSetup,
+) -> Result<Box<dyn ControllerPart>, Box<dyn std::error::Error + Send + Sync>> {
+    let settings: ViabilitySettings = s.config.controller.parts.get()?;
+    let correction: super::forecast_correction::CorrectionSettings =
+        s.config.controller.parts.get()?;
+    let on = settings.enabled && correction.enabled && s.kind != ControllerKind::C0;
+    let c = s.cart;
+    Ok(Box::new(Guard {
+        guard: on.then(|| ViabilityGuard::new(settings, c.mass, c.gravity, c.com_height)),
+    }))
+}
+
+impl ControllerPart for Guard {
+    fn name(&self) -> &'static str {
+        "viability"
+    }
+
+    fn stage(&self) -> Stage {
+        Stage::Forecast
+    }
+
+    fn reset(&mut self) {
+        if let Some(g) = self.guard.as_mut() {
+            g.reset();
+        }
+    }
+
+    fn update(&mut self, _inputs: &TickInputs, frame: &mut TickFrame) -> Result<(), TickError> {
+        if let (Some(g), Some(push)) = (self.guard.as_mut(), frame.measured_push) {
+            let (com, vcom) = (frame.com, frame.com_vel);
+            g.apply(
+                frame.t,
+                [com[0], com[1]],
+                [vcom[0], vcom[1]],
+                frame.support,
+                push,
+                &mut frame.f_ext,
+            );
+        }
+        Ok(())
+    }
+
+    fn record(&self, out: &mut Record) {
+        let (scale, capture) = self.guard.as_ref().map_or(([1.0; 2], [f64::NAN; 2]), |g| {
+            (g.last_scale, g.last_capture)
+        });
+        out.put(
+            col!(fixed("guard_x", 3).plot("viability/scale_x")),
+            scale[0],
+        );
+        out.put(
+            col!(fixed("guard_y", 3).plot("viability/scale_y")),
+            scale[1],
+        );
+        out.put(
+            col!(fixed("capture_x", 5).plot("viability/capture_x")),
+            capture[0],
+        );
+        out.put(col!(fixed("capture_y", 5)), capture[1]);
+    }
+
+    fn summarize(&self, out: &mut serde_json::Map<String, serde_json::Value>) {
+        if let Some(g) = &self.guard {
+            out.insert("viability".into(), serde_json::json!(g.counts));
+        }
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
+
+/// `[controller.viability]`: the capture-point guard on unconfirmed forecasts
+/// (`control::viability`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ViabilitySettings {
+    /// Fade the forecast's unmeasured part as the capture point nears an edge (C1, C2).
+    pub enabled: bool,
+    /// Distance to the nearer support edge (fraction of the half-length) at which the
+    /// unmeasured forecast is gone.
+    pub margin: f64,
+    /// Width of the fade (fraction of the half-length) beyond the margin.
+    pub band: f64,
+    /// The margin for a forecast easing the measured push (VG-3): the robot eases off the push
+    /// before it does, and the edge at risk is the one the push drives it toward if it does not
+    /// ease. Negative (the default: it costs the 0.3 s impact's κ × τ map up to a quarter,
+    /// docs/forecast_correction.md): easing is never faded.
+    pub ease_margin: f64,
+}
+
+impl Default for ViabilitySettings {
+    /// The embedded `config/default.toml`'s table (their one home).
+    fn default() -> Self {
+        crate::config::embedded_part()
+    }
+}
+
+impl crate::config::PartSettings for ViabilitySettings {
+    const TABLE: &'static str = "viability";
+
+    fn check(&self) -> Result<(), (&'static str, String)> {
+        if !(0.0..1.0).contains(&self.margin) {
+            return Err(("margin", format!("must be in [0, 1), got {}", self.margin)));
+        }
+        if !(self.ease_margin.is_finite() && self.ease_margin < 1.0) {
+            return Err((
+                "ease_margin",
+                format!("must be finite and < 1, got {}", self.ease_margin),
+            ));
+        }
+        if !(self.band.is_finite() && self.band > 0.0) {
+            return Err(("band", format!("must be finite and > 0, got {}", self.band)));
+        }
+        Ok(())
     }
 }
 

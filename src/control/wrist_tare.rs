@@ -14,28 +14,21 @@
 //! (a held weight, a push the forecast missed): it is refused, counted, and nothing is removed.
 //! What the tare cannot remove is the sensor's drift after it (and its noise).
 
-use crate::config::WristTareSettings;
+use std::any::Any;
+
+use serde::{Deserialize, Serialize};
+
+use super::core::TickError;
+use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
+use super::record::Record;
 
 /// Ticks count toward the tare only while the forecast's force is below this (N)...
 const QUIET_FORCE: f64 = 1.0;
 /// ... and the hand moves slower than this (m/s).
 const QUIET_SPEED: f64 = 0.05;
-/// The tare is taken only in the task's first second (its clock: [`task_time`]): a controller
+/// The tare is taken only in the task's first second (its clock: [`RobotState::task_time`](crate::robot::RobotState)): a controller
 /// that joins a running task (restarted mid-task) meets a hand already at work, and skips it.
 const TARE_BEFORE: f64 = 1.0;
-
-/// The task's clock for the tare (s), from a state's time, scenario hash and scenario start:
-/// the scenario's time when the plant announces one, `None` while it announces one not started
-/// yet (a real-time plant holds the robot and starts its scenario when a controller has taken
-/// the robot over: a controller that joins during that start-up hold tares after it); the
-/// plant's time when it announces none (a real robot: its session is the task).
-pub fn task_time(time: f64, scenario_hash: u64, scenario_start: f64) -> Option<f64> {
-    match scenario_hash {
-        0 => Some(time),
-        _ if scenario_start >= 0.0 => Some(time - scenario_start),
-        _ => None,
-    }
-}
 
 /// The tare's state: accumulating, taken, or refused.
 #[derive(Debug, Clone)]
@@ -84,7 +77,7 @@ impl WristTare {
     }
 
     /// The measured force less the offset; accumulates the tare while it is pending. `t`: the
-    /// task's time ([`task_time`]; s); `dt`: the tick's period (s); `expected`: the forecast's force now;
+    /// task's time (`RobotState::task_time`; s); `dt`: the tick's period (s); `expected`: the forecast's force now;
     /// `hand_speed` (m/s); `held`: the plant holds the robot (its hold loads the hand as it
     /// pleases: not quiet). A non-finite measurement is returned as it is (the callers refuse
     /// it) and not accumulated.
@@ -158,12 +151,132 @@ impl WristTare {
     }
 }
 
+/// This part in `super::parts::PIPELINE`.
+pub const PART: PartEntry = PartEntry::new::<WristTareSettings>(build);
+
+fn build(
+    s: &PartSetup,
+) -> Result<Box<dyn ControllerPart>, Box<dyn std::error::Error + Send + Sync>> {
+    Ok(Box::new(WristTare::new(s.config.controller.parts.get()?)))
+}
+
+impl ControllerPart for WristTare {
+    fn name(&self) -> &'static str {
+        "wrist_tare"
+    }
+
+    fn stage(&self) -> Stage {
+        Stage::Measure
+    }
+
+    fn reset(&mut self) {
+        WristTare::reset(self);
+    }
+
+    /// The measured hand force less the offset, and whether it may be fed back.
+    fn update(&mut self, inputs: &TickInputs, frame: &mut TickFrame) -> Result<(), TickError> {
+        let before = self.state;
+        let sensed = inputs.sensed;
+        frame.hand_force = self.apply(
+            sensed.task_time,
+            frame.hand_force,
+            inputs.forecast.at(frame.t),
+            nalgebra::Vector3::from(frame.hand_vel).norm(),
+            sensed.held,
+            frame.dt,
+        );
+        frame.hand_force_trusted = self.trusted();
+        if self.state != before {
+            self.log_transition(frame.t);
+        }
+        Ok(())
+    }
+
+    fn record(&self, _out: &mut Record) {}
+
+    fn summarize(&self, out: &mut serde_json::Map<String, serde_json::Value>) {
+        out.insert("wrist_tare_offset".into(), serde_json::json!(self.offset));
+        out.insert(
+            "wrist_tare_refusals".into(),
+            serde_json::json!(self.refusals),
+        );
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
+
+impl WristTare {
+    /// Says what the tare did, once per change (the loop's diagnostics never block it).
+    fn log_transition(&self, t: f64) {
+        let b = self.offset;
+        match self.state {
+            TareState::Taken => tracing::info!(
+                "wrist tared at t = {t:.3} s: offset ({:.2}, {:.2}, {:.2}) N removed from the measured hand force",
+                b[0],
+                b[1],
+                b[2]
+            ),
+            TareState::Refused => tracing::warn!(
+                "wrist tare refused at t = {t:.3} s: the quiet hand measures more than \
+                 controller.wrist_tare.max_offset (a load, or an offset too large to be one); \
+                 the hand force is not fed back to the whole-body QP this session"
+            ),
+            TareState::Skipped => tracing::info!(
+                "wrist tare skipped: no quiet second at the task's start (a controller that \
+                 joined a running task); the measured hand force is used as it is"
+            ),
+            TareState::Pending => {}
+        }
+    }
+}
+
 fn norm(v: [f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
+/// `[controller.wrist_tare]`: the wrist sensor's offset, taken while the hand is unloaded
+/// (`control::wrist_tare`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct WristTareSettings {
+    /// Quiet time averaged (s) at the start of each plant session; 0: no tare.
+    pub duration: f64,
+    /// Largest offset taken (N): a larger average is a load, and is refused.
+    pub max_offset: f64,
+}
+
+impl Default for WristTareSettings {
+    /// The embedded `config/default.toml`'s table (their one home).
+    fn default() -> Self {
+        crate::config::embedded_part()
+    }
+}
+
+impl crate::config::PartSettings for WristTareSettings {
+    const TABLE: &'static str = "wrist_tare";
+
+    fn check(&self) -> Result<(), (&'static str, String)> {
+        if !(self.duration.is_finite() && self.duration >= 0.0) {
+            return Err((
+                "duration",
+                format!("must be finite and ≥ 0, got {}", self.duration),
+            ));
+        }
+        if !(self.max_offset.is_finite() && self.max_offset > 0.0) {
+            return Err((
+                "max_offset",
+                format!("must be finite and > 0, got {}", self.max_offset),
+            ));
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    use super::super::contract::task_time;
     use super::*;
 
     fn tare(duration: f64) -> WristTare {

@@ -16,16 +16,18 @@
 //! with the base at the identity). Allocation-free after [`BaseEstimator::new`].
 
 mod accuracy;
+mod settings;
 
 pub use accuracy::{BaseAccuracy, base_accuracy};
+pub use settings::{EstimatorMode, EstimatorSettings};
 
 use nalgebra::{DVector, Matrix3, Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
 
-use crate::channels::{N_CONTACTS, SENSOR_IMU, StateMsg};
-use crate::config::EstimatorSettings;
+use crate::channels::N_CONTACTS;
 use crate::dynamics::{
     Data, DynamicsError, Model, ReferenceFrame, forward_kinematics_velocity, frame_velocity,
 };
+use crate::robot::RobotState;
 
 const NX: usize = 12;
 
@@ -91,6 +93,18 @@ pub struct BaseEstimate {
     pub stance: [bool; 2],
     /// The tick's normalised innovation (χ²).
     pub innovation: f64,
+}
+
+/// Both feet's geometry at one tick (base frame, base at the identity): each sole's centre and
+/// rotation, the contact point on the sole (sole frame, from its centre) and relative to the
+/// base, that point's velocity, and whether a stance foot is flat on the floor (EST-5).
+struct Feet {
+    foot: [Vector3<f64>; 2],
+    sole_rot: [Matrix3<f64>; 2],
+    local: [Vector3<f64>; 2],
+    point: [Vector3<f64>; 2],
+    point_vel: [Vector3<f64>; 2],
+    flat: [bool; 2],
 }
 
 /// A stance foot is flat (EST-5) while its CoP is within this fraction of its sole's half
@@ -218,7 +232,7 @@ impl BaseEstimator {
     /// hold the state's joints already.
     pub fn update(
         &mut self,
-        state: &StateMsg,
+        state: &RobotState,
         q: &mut DVector<f64>,
         v: &mut DVector<f64>,
     ) -> Result<(), EstimatorError> {
@@ -234,68 +248,23 @@ impl BaseEstimator {
         {
             return Err(EstimatorError::NotFinite);
         }
-        // Joint velocities: a first-order low-pass (its state starts on the first sample).
-        let cutoff = self.settings.joint_velocity_cutoff;
-        let alpha = if cutoff > 0.0 && self.started {
-            1.0 - (-std::f64::consts::TAU * cutoff * self.dt).exp()
-        } else {
-            1.0
-        };
-        for k in 0..joints {
-            self.joint_v[k] += alpha * (v[6 + k] - self.joint_v[k]);
-        }
-        // The legs' kinematics with the base at the identity: each foot's centre relative to
-        // the base and its velocity relative to the base (base frame).
-        self.q
-            .rows_mut(7, q.len() - 7)
-            .copy_from(&q.rows(7, q.len() - 7));
-        self.v.rows_mut(6, joints).copy_from(&self.joint_v);
-        forward_kinematics_velocity(&self.model, &mut self.data, &self.q, &self.v)?;
+        self.leg_kinematics(q, v)?;
         let (r, gyro, accel) = match self.imu_frame {
             Some(f) => self.imu_to_base(f, r, gyro, accel),
             None => (r, gyro, accel),
         };
-        let gyro = self.unbias(state.stamps[SENSOR_IMU], r, gyro);
+        let gyro = self.unbias(state.stamps.imu, r, gyro);
         // Stance from the normal force of each foot's wrench.
         let stance =
             [0, 1].map(|i| state.foot_wrenches[i][2] > self.settings.contact_load * self.weight);
-        let mut foot = [Vector3::zeros(); 2];
-        let mut sole_rot = [Matrix3::identity(); 2];
-        let mut local = [Vector3::zeros(); 2];
-        let mut point = [Vector3::zeros(); 2];
-        let mut point_vel = [Vector3::zeros(); 2];
-        // A stance foot whose CoP is well inside its sole: flat on the floor (EST-5).
-        let mut flat = [false; 2];
-        for (i, ids) in self.corners.iter().enumerate() {
-            let c = |k: usize| self.data.o_m_f[ids[k]].trans;
-            foot[i] = (c(0) + c(1) + c(2) + c(3)) / 4.0;
-            sole_rot[i] = crate::robot::sole_frame(c(0), c(1), c(2), c(3));
-            // The contact point: the foot's CoP from its wrench, inside its sole; the sole's
-            // centre in the air. A foot rocking on an edge pivots about it: that point, not the
-            // centre, stays put (EST-3) and on the floor (EST-4).
-            if stance[i] {
-                let w = &state.foot_wrenches[i];
-                let half = (0..4).fold(Vector3::zeros(), |h: Vector3<f64>, k| {
-                    h.sup(&(sole_rot[i].transpose() * (c(k) - foot[i])).abs())
-                });
-                let cop = [-w[4] / w[2], w[3] / w[2]];
-                local[i] = Vector3::new(
-                    cop[0].clamp(-half.x, half.x),
-                    cop[1].clamp(-half.y, half.y),
-                    0.0,
-                );
-                flat[i] = cop[0].abs() < FLAT_COP * half.x && cop[1].abs() < FLAT_COP * half.y;
-            }
-            point[i] = foot[i] + sole_rot[i] * local[i];
-            let m = frame_velocity(
-                &self.model,
-                &self.data,
-                ids[0],
-                ReferenceFrame::LocalWorldAligned,
-            );
-            // The velocity of the foot's material point there, relative to the base.
-            point_vel[i] = m.lin + m.ang.cross(&(point[i] - c(0)));
-        }
+        let Feet {
+            foot,
+            sole_rot,
+            local,
+            point,
+            point_vel,
+            flat,
+        } = self.feet(state, stance);
         if self.started && stance != self.stance {
             self.counts.stance_changes += 1;
         }
@@ -356,8 +325,80 @@ impl BaseEstimator {
         Ok(())
     }
 
+    /// Joint velocities through a first-order low-pass (its state starts on the first sample),
+    /// then the legs' kinematics with the base at the identity: each foot's centre relative to
+    /// the base and its velocity relative to the base (base frame).
+    fn leg_kinematics(&mut self, q: &DVector<f64>, v: &DVector<f64>) -> Result<(), EstimatorError> {
+        let joints = v.len() - 6;
+        let cutoff = self.settings.joint_velocity_cutoff;
+        let alpha = if cutoff > 0.0 && self.started {
+            1.0 - (-std::f64::consts::TAU * cutoff * self.dt).exp()
+        } else {
+            1.0
+        };
+        for k in 0..joints {
+            self.joint_v[k] += alpha * (v[6 + k] - self.joint_v[k]);
+        }
+        self.q
+            .rows_mut(7, q.len() - 7)
+            .copy_from(&q.rows(7, q.len() - 7));
+        self.v.rows_mut(6, joints).copy_from(&self.joint_v);
+        forward_kinematics_velocity(&self.model, &mut self.data, &self.q, &self.v)?;
+        Ok(())
+    }
+
+    /// Each foot's geometry from the legs' kinematics (base at the identity) and its contact
+    /// point from its wrench.
+    fn feet(&self, state: &RobotState, stance: [bool; 2]) -> Feet {
+        let mut foot = [Vector3::zeros(); 2];
+        let mut sole_rot = [Matrix3::identity(); 2];
+        let mut local = [Vector3::zeros(); 2];
+        let mut point = [Vector3::zeros(); 2];
+        let mut point_vel = [Vector3::zeros(); 2];
+        // A stance foot whose CoP is well inside its sole: flat on the floor (EST-5).
+        let mut flat = [false; 2];
+        for (i, ids) in self.corners.iter().enumerate() {
+            let c = |k: usize| self.data.o_m_f[ids[k]].trans;
+            foot[i] = (c(0) + c(1) + c(2) + c(3)) / 4.0;
+            sole_rot[i] = crate::robot::sole_frame(c(0), c(1), c(2), c(3));
+            // The contact point: the foot's CoP from its wrench, inside its sole; the sole's
+            // centre in the air. A foot rocking on an edge pivots about it: that point, not the
+            // centre, stays put (EST-3) and on the floor (EST-4).
+            if stance[i] {
+                let w = &state.foot_wrenches[i];
+                let half = (0..4).fold(Vector3::zeros(), |h: Vector3<f64>, k| {
+                    h.sup(&(sole_rot[i].transpose() * (c(k) - foot[i])).abs())
+                });
+                let cop = [-w[4] / w[2], w[3] / w[2]];
+                local[i] = Vector3::new(
+                    cop[0].clamp(-half.x, half.x),
+                    cop[1].clamp(-half.y, half.y),
+                    0.0,
+                );
+                flat[i] = cop[0].abs() < FLAT_COP * half.x && cop[1].abs() < FLAT_COP * half.y;
+            }
+            point[i] = foot[i] + sole_rot[i] * local[i];
+            let m = frame_velocity(
+                &self.model,
+                &self.data,
+                ids[0],
+                ReferenceFrame::LocalWorldAligned,
+            );
+            // The velocity of the foot's material point there, relative to the base.
+            point_vel[i] = m.lin + m.ang.cross(&(point[i] - c(0)));
+        }
+        Feet {
+            foot,
+            sole_rot,
+            local,
+            point,
+            point_vel,
+            flat,
+        }
+    }
+
     /// The IMU's orientation, angular velocity and specific force, checked.
-    fn imu(&mut self, state: &StateMsg) -> Result<ImuSample, EstimatorError> {
+    fn imu(&mut self, state: &RobotState) -> Result<ImuSample, EstimatorError> {
         let o = state.imu_orientation;
         let quat = Quaternion::new(o[3], o[0], o[1], o[2]);
         let (w, a) = (
@@ -373,7 +414,7 @@ impl BaseEstimator {
             self.counts.imu_lost += 1;
             return Err(EstimatorError::ImuInvalid);
         }
-        let stamp = state.stamps[SENSOR_IMU];
+        let stamp = state.stamps.imu;
         let age = state.time - stamp;
         if age > self.settings.imu_timeout {
             self.counts.imu_lost += 1;
@@ -667,7 +708,7 @@ impl BaseEstimator {
     /// load, not over its own.
     fn centre_of_pressure(
         &self,
-        state: &StateMsg,
+        state: &RobotState,
         rot: &Matrix3<f64>,
         foot: &[Vector3<f64>; 2],
         sole_rot: &[Matrix3<f64>; 2],
@@ -691,7 +732,7 @@ impl BaseEstimator {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::channels::STATE_FLAG_BASE_UNMEASURED;
+    use crate::channels::{STATE_FLAG_BASE_UNMEASURED, StateMsg};
     use crate::robot::Robot;
 
     struct Bench {
@@ -753,7 +794,10 @@ mod tests {
             let (nq, nv) = (self.q.len(), self.v.len());
             self.q.as_mut_slice().copy_from_slice(&self.state.q[..nq]);
             self.v.as_mut_slice().copy_from_slice(&self.state.v[..nv]);
-            self.est.update(&self.state, &mut self.q, &mut self.v)
+            let mut sensed = RobotState::new(nq, nv);
+            crate::control::contract::read_state(&self.state, 0, &mut sensed)
+                .expect("the bench's state fits its robot");
+            self.est.update(&sensed, &mut self.q, &mut self.v)
         }
 
         /// The estimate's first `n` coordinates of the configuration are the home pose's.

@@ -30,7 +30,9 @@ impl ConfigLayers {
         for s in &self.sets {
             layers.push_override(s)?;
         }
-        Ok(layers.build()?)
+        let config = layers.build()?;
+        crate::control::parts::check(&config, &layers)?;
+        Ok(config)
     }
 }
 

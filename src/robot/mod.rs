@@ -9,6 +9,7 @@ pub mod description;
 pub mod feet;
 pub mod packages;
 pub mod physical;
+mod state;
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -16,6 +17,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::{DVector, Matrix3, Vector3};
 
 pub use description::RobotDescription;
+pub use state::{RobotState, SensorStamps};
 
 use crate::config::{ConfigError, Layers};
 use crate::dynamics::{

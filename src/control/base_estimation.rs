@@ -1,0 +1,146 @@
+//! The floating-base estimator as a controller part (docs/estimation.md): when the plant does
+//! not measure the base (or `controller.estimator.mode = "on"`), the base of the tick's
+//! configuration and velocity is estimated from the IMU, the joints and the foot wrenches, and
+//! the measured centre of pressure is the foot wrenches' at the estimated soles.
+
+use std::any::Any;
+
+use super::core::TickError;
+use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
+use super::record::Record;
+use crate::col;
+use crate::estimation::{BaseEstimate, BaseEstimator, EstimatorMode, EstimatorSettings};
+
+pub struct BaseEstimation {
+    estimator: BaseEstimator,
+    mode: EstimatorMode,
+    /// The estimator ran on the last state.
+    ran: bool,
+}
+
+/// This part in `super::parts::PIPELINE`.
+pub const PART: PartEntry = PartEntry::new::<EstimatorSettings>(build);
+
+fn build(
+    s: &PartSetup,
+) -> Result<Box<dyn ControllerPart>, Box<dyn std::error::Error + Send + Sync>> {
+    let settings: EstimatorSettings = s.config.controller.parts.get()?;
+    Ok(Box::new(BaseEstimation {
+        estimator: BaseEstimator::new(
+            s.model,
+            s.contact_frames,
+            s.cart.mass * s.cart.gravity,
+            s.dt,
+            s.imu_frame,
+            settings,
+        ),
+        mode: settings.mode,
+        ran: false,
+    }))
+}
+
+impl BaseEstimation {
+    /// The estimator's counters (`None` when it never ran).
+    pub fn counts(&self) -> Option<crate::estimation::EstimatorCounts> {
+        (self.estimator.counts.ticks > 0).then_some(self.estimator.counts)
+    }
+}
+
+impl ControllerPart for BaseEstimation {
+    fn name(&self) -> &'static str {
+        "base_estimation"
+    }
+
+    fn stage(&self) -> Stage {
+        Stage::Estimate
+    }
+
+    fn reset(&mut self) {
+        self.estimator.reset();
+    }
+
+    fn update(&mut self, inputs: &TickInputs, frame: &mut TickFrame) -> Result<(), TickError> {
+        let unmeasured = !inputs.sensed.base_measured;
+        self.ran = match self.mode {
+            EstimatorMode::On => true,
+            EstimatorMode::Auto => unmeasured,
+            EstimatorMode::Off if unmeasured => return Err(TickError::BaseUnmeasured),
+            EstimatorMode::Off => false,
+        };
+        frame.estimate_base = self.ran;
+        if !self.ran {
+            return Ok(());
+        }
+        // The joints are the measurement's; the base is what this part makes of them.
+        if !(frame.q.iter().skip(7))
+            .chain(frame.v.iter().skip(6))
+            .all(|x| x.is_finite())
+        {
+            return Err(TickError::NotFinite);
+        }
+        self.estimator
+            .update(inputs.sensed, &mut frame.q, &mut frame.v)?;
+        if let Some(cop) = self.estimator.cop {
+            frame.cop = cop;
+        }
+        Ok(())
+    }
+
+    fn record(&self, out: &mut Record) {
+        // NaN when the base was measured: the truth is in the simulator's recording.
+        let b = if self.ran {
+            self.estimator.last
+        } else {
+            BaseEstimate::UNKNOWN
+        };
+        out.put(
+            col!(fixed("est_x", 6).plot("base/position_x")),
+            b.position[0],
+        );
+        out.put(
+            col!(fixed("est_y", 6).plot("base/position_y")),
+            b.position[1],
+        );
+        out.put(
+            col!(fixed("est_z", 6).plot("base/position_z")),
+            b.position[2],
+        );
+        out.put(
+            col!(fixed("est_vx", 6).plot("base/velocity_x")),
+            b.velocity[0],
+        );
+        out.put(
+            col!(fixed("est_vy", 6).plot("base/velocity_y")),
+            b.velocity[1],
+        );
+        out.put(
+            col!(fixed("est_vz", 6).plot("base/velocity_z")),
+            b.velocity[2],
+        );
+        out.put(col!(fixed("est_roll", 6).plot("base/roll")), b.rpy[0]);
+        out.put(col!(fixed("est_pitch", 6).plot("base/pitch")), b.rpy[1]);
+        out.put(col!(fixed("est_yaw", 6).plot("base/yaw")), b.rpy[2]);
+        out.put(
+            col!(fixed("est_innovation", 3).plot("base/innovation")),
+            b.innovation,
+        );
+        out.flag(
+            col!(plain("est_stance_left").plot("base/stance_left")),
+            b.stance[0],
+        );
+        out.flag(
+            col!(plain("est_stance_right").plot("base/stance_right")),
+            b.stance[1],
+        );
+    }
+
+    fn summarize(&self, out: &mut serde_json::Map<String, serde_json::Value>) {
+        if let Some(c) = self.counts() {
+            out.insert("estimator".into(), serde_json::json!(c));
+        }
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}

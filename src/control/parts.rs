@@ -1,0 +1,200 @@
+//! The controller's parts behind one seam (as an observer pipeline): each part — the base
+//! estimator, the wrist tare, the forecast correction, the capture-point guard, the CoM
+//! observer — declares its settings (its table, [`crate::config::PartSettings`]), its reset,
+//! its update on the tick's shared quantities ([`TickFrame`]) at its [`Stage`], the values it
+//! records ([`Record`]) and its counters for `summary.json`. The tick runs the parts of each
+//! stage in [`PIPELINE`] order; reset, records and the summary come from the same list.
+//!
+//! A new part: one file implementing [`ControllerPart`] and one line in [`PIPELINE`] (its
+//! settings' table in `config/default.toml`, its docs).
+
+use std::any::Any;
+
+use nalgebra::DVector;
+
+use super::core::TickError;
+use super::forecast_window::ForecastWindow;
+use super::record::Record;
+use crate::channels::N_CONTACTS;
+use crate::config::{Config, ConfigError, ControllerKind, Layers, PartSettings, PartTables};
+use crate::dynamics::Model;
+use crate::preview::CartTable;
+use crate::robot::RobotState;
+
+/// Where in the tick a part runs (in this order).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stage {
+    /// On the measured state, before the model's kinematics: the floating base.
+    Estimate,
+    /// After the kinematics: what the controller makes of the measured forces.
+    Measure,
+    /// The hand force over the horizon.
+    Forecast,
+    /// Forces on the CoM that the preview adds to its disturbance.
+    Disturbance,
+}
+
+/// What a part is built from.
+pub struct PartSetup<'a> {
+    pub config: &'a Config,
+    pub kind: ControllerKind,
+    /// The controller's model (its gravity set).
+    pub model: &'a Model,
+    /// The preview's cart-table (mass, gravity, CoM height).
+    pub cart: &'a CartTable,
+    /// Control period (s).
+    pub dt: f64,
+    /// The sole corners' frames (four per foot, left first).
+    pub contact_frames: [usize; N_CONTACTS],
+    /// The IMU's frame; `None`: on the base.
+    pub imu_frame: Option<usize>,
+}
+
+/// The tick's read-only inputs.
+pub struct TickInputs<'a> {
+    pub sensed: &'a RobotState,
+    pub forecast: &'a ForecastWindow,
+}
+
+/// The tick's shared quantities: written by the core and by the parts in stage order, read by
+/// the later ones. Preallocated once; refilled every tick.
+pub struct TickFrame {
+    pub kind: ControllerKind,
+    /// Plant time (s), control period (s), preview period (s).
+    pub t: f64,
+    pub dt: f64,
+    pub period: f64,
+    /// `Estimate`: the configuration and velocity the controller uses (the measured ones, the
+    /// base estimated when `estimate_base`), and the measured centre of pressure.
+    pub q: DVector<f64>,
+    pub v: DVector<f64>,
+    pub estimate_base: bool,
+    pub cop: [f64; 2],
+    /// From `Measure` on: the model's CoM (position, velocity), the hand's velocity, the
+    /// support rectangle [[x_min, x_max], [y_min, y_max]].
+    pub com: [f64; 3],
+    pub com_vel: [f64; 3],
+    pub hand_vel: [f64; 3],
+    pub support: [[f64; 2]; 2],
+    /// `Measure`: the hand force the controller uses (N) and whether it may be fed back.
+    pub hand_force: [f64; 3],
+    pub hand_force_trusted: bool,
+    /// `Forecast`: the hand force over the horizon at t + (i+1)·T (filled from the forecast as
+    /// received unless a part filled it) and the push measured now, when a part knows it.
+    pub f_ext: Vec<[f64; 3]>,
+    pub f_ext_filled: bool,
+    pub measured_push: Option<[f64; 3]>,
+    /// `Disturbance`: the disturbance the preview modelled at the last tick (x, y; N), and the
+    /// force a part adds to it with its decay per preview step.
+    pub known_disturbance: [f64; 2],
+    pub com_force: [f64; 2],
+    pub com_force_decay: Option<f64>,
+}
+
+impl TickFrame {
+    pub fn new(kind: ControllerKind, nq: usize, nv: usize, horizon: usize) -> Self {
+        Self {
+            kind,
+            t: 0.0,
+            dt: 0.0,
+            period: 0.0,
+            q: DVector::zeros(nq),
+            v: DVector::zeros(nv),
+            estimate_base: false,
+            cop: [0.0; 2],
+            com: [0.0; 3],
+            com_vel: [0.0; 3],
+            hand_vel: [0.0; 3],
+            support: [[0.0; 2]; 2],
+            hand_force: [0.0; 3],
+            hand_force_trusted: true,
+            f_ext: vec![[0.0; 3]; horizon],
+            f_ext_filled: false,
+            measured_push: None,
+            known_disturbance: [0.0; 2],
+            com_force: [0.0; 2],
+            com_force_decay: None,
+        }
+    }
+}
+
+/// One part of the controller. Allocation-free in `update`, `record` and `reset`.
+pub trait ControllerPart: Send {
+    fn name(&self) -> &'static str;
+    fn stage(&self) -> Stage;
+    /// A new plant session: start over.
+    fn reset(&mut self);
+    /// This tick's work at the part's stage.
+    fn update(&mut self, inputs: &TickInputs, frame: &mut TickFrame) -> Result<(), TickError>;
+    /// This tick's values (the same columns every tick, also when inactive).
+    fn record(&self, out: &mut Record);
+    /// The part's entries of `summary.json` (none when it did not run).
+    fn summarize(&self, out: &mut serde_json::Map<String, serde_json::Value>);
+    /// The held object's apparent mass at the hand (world, kg), when the scene gives it.
+    fn held_object(&mut self, _apparent_mass: &[[f64; 3]; 3]) {}
+    /// For tests and tools that look inside a part ([`super::ControllerCore::part`]).
+    fn as_any(&self) -> &dyn Any;
+}
+
+/// Builds a part (it may be inactive for this controller or these settings: it then records
+/// its neutral values and runs nothing).
+pub type PartBuilder =
+    fn(&PartSetup) -> Result<Box<dyn ControllerPart>, Box<dyn std::error::Error + Send + Sync>>;
+
+/// A part as the pipeline lists it: how to build it, and how to check its settings when the
+/// config is loaded (before any controller is built).
+pub struct PartEntry {
+    pub build: PartBuilder,
+    pub check: fn(&PartTables) -> Result<(), ConfigError>,
+}
+
+impl PartEntry {
+    /// A part whose settings are `S`.
+    pub const fn new<S: PartSettings>(build: PartBuilder) -> Self {
+        Self {
+            build,
+            check: |t| t.get::<S>().map(|_| ()),
+        }
+    }
+}
+
+/// The controller's parts, in the order the tick runs them within each stage.
+pub const PIPELINE: &[PartEntry] = &[
+    super::base_estimation::PART,
+    super::wrist_tare::PART,
+    super::forecast_correction::PART,
+    super::viability::PART,
+    super::com_observer::PART,
+];
+
+/// Every part of [`PIPELINE`] for `setup`.
+pub fn build_all(
+    setup: &PartSetup,
+) -> Result<Vec<Box<dyn ControllerPart>>, Box<dyn std::error::Error + Send + Sync>> {
+    PIPELINE.iter().map(|p| (p.build)(setup)).collect()
+}
+
+/// Every part's settings in `config` deserialize and pass their checks; the error names the
+/// key and the layer it came from.
+pub fn check(config: &Config, layers: &Layers) -> Result<(), ConfigError> {
+    for p in PIPELINE {
+        (p.check)(&config.controller.parts).map_err(|e| match e {
+            ConfigError::Key { key, message, .. } => layers.range_error(&key, message),
+            e => e,
+        })?;
+    }
+    Ok(())
+}
+
+/// Run the parts of `stage`, in order.
+pub fn run_stage(
+    parts: &mut [Box<dyn ControllerPart>],
+    stage: Stage,
+    inputs: &TickInputs,
+    frame: &mut TickFrame,
+) -> Result<(), TickError> {
+    for p in parts.iter_mut().filter(|p| p.stage() == stage) {
+        p.update(inputs, frame)?;
+    }
+    Ok(())
+}
