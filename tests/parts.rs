@@ -25,13 +25,13 @@ impl ControllerPart for ConstantPush {
     fn name(&self) -> &'static str {
         "constant_push"
     }
-    fn stage(&self) -> Stage {
-        Stage::Disturbance
+    fn stages(&self) -> &'static [Stage] {
+        &[Stage::Disturbance]
     }
     fn reset(&mut self) {
         self.resets.fetch_add(1, Ordering::Relaxed);
     }
-    fn update(&mut self, _: &TickInputs, frame: &mut TickFrame) -> Result<(), TickError> {
+    fn update(&mut self, _: Stage, _: &TickInputs, frame: &mut TickFrame) -> Result<(), TickError> {
         self.updates.fetch_add(1, Ordering::Relaxed);
         frame.com_force = [self.force, 0.0];
         frame.com_force_decay = Some(1.0);
@@ -115,7 +115,7 @@ fn the_records_columns_are_unique_for_every_controller() {
             assert!(names.contains(&part), "{kind:?}: {part} missing");
         }
     }
-    assert_eq!(PIPELINE.len(), 5);
+    assert_eq!(PIPELINE.len(), 6);
 }
 
 /// A part's settings: a misspelt key is refused when the config is built, a value out of

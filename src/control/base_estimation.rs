@@ -51,15 +51,20 @@ impl ControllerPart for BaseEstimation {
         "base_estimation"
     }
 
-    fn stage(&self) -> Stage {
-        Stage::Estimate
+    fn stages(&self) -> &'static [Stage] {
+        &[Stage::Estimate]
     }
 
     fn reset(&mut self) {
         self.estimator.reset();
     }
 
-    fn update(&mut self, inputs: &TickInputs, frame: &mut TickFrame) -> Result<(), TickError> {
+    fn update(
+        &mut self,
+        _: Stage,
+        inputs: &TickInputs,
+        frame: &mut TickFrame,
+    ) -> Result<(), TickError> {
         let unmeasured = !inputs.sensed.base_measured;
         self.ran = match self.mode {
             EstimatorMode::On => true,
@@ -78,8 +83,9 @@ impl ControllerPart for BaseEstimation {
         {
             return Err(TickError::NotFinite);
         }
+        let feet = frame.foot_wrenches;
         self.estimator
-            .update(inputs.sensed, &mut frame.q, &mut frame.v)?;
+            .update(inputs.sensed, &feet, &mut frame.q, &mut frame.v)?;
         if let Some(cop) = self.estimator.cop {
             frame.cop = cop;
         }

@@ -115,8 +115,8 @@ impl ControllerPart for Observer {
         "com_observer"
     }
 
-    fn stage(&self) -> Stage {
-        Stage::Disturbance
+    fn stages(&self) -> &'static [Stage] {
+        &[Stage::Disturbance]
     }
 
     fn reset(&mut self) {
@@ -126,7 +126,12 @@ impl ControllerPart for Observer {
     }
 
     /// Against the disturbance the preview modelled at the last tick (none for C0).
-    fn update(&mut self, _inputs: &TickInputs, frame: &mut TickFrame) -> Result<(), TickError> {
+    fn update(
+        &mut self,
+        _: Stage,
+        _inputs: &TickInputs,
+        frame: &mut TickFrame,
+    ) -> Result<(), TickError> {
         let Some(o) = self.observer.as_mut() else {
             return Ok(());
         };

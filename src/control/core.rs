@@ -160,6 +160,7 @@ impl ControllerCore {
         let hand_frame = model.frame_id(&frames.hand)?;
         let nominal = GainSchedule::constant(n, config.hand.kp, config.nominal_kd(config.hand.kp));
         let parts = parts::build_all(&PartSetup {
+            robot,
             config,
             kind,
             model: &model,
@@ -372,7 +373,9 @@ impl ControllerCore {
                 forecast,
             };
             parts::run_stage(&mut self.parts, Stage::Measure, &inputs, &mut self.frame)?;
-            return Ok(self.hold_fallen([com, vcom], &hand, &latched, tau));
+            let status = self.hold_fallen([com, vcom], &hand, &latched, tau);
+            self.keep_command(tau);
+            return Ok(status);
         }
         let m_e = *self
             .op
@@ -441,6 +444,7 @@ impl ControllerCore {
             f_raw: forecast.at(t + self.period),
             fallen: false,
         };
+        self.keep_command(tau);
         Ok(status)
     }
 
@@ -455,6 +459,7 @@ impl ControllerCore {
         f.v.copy_from(&s.v);
         f.estimate_base = false;
         f.cop = s.cop;
+        f.foot_wrenches = s.foot_wrenches;
         f.hand_force = s.hand_force;
         f.hand_force_trusted = true;
         f.f_ext_filled = false;
@@ -471,6 +476,13 @@ impl ControllerCore {
             return Err(TickError::NotFinite);
         }
         Ok(())
+    }
+
+    /// The torques commanded this tick, for the parts of the next (a robot without torque
+    /// sensing knows what it asked for).
+    fn keep_command(&mut self, tau: &[f64]) {
+        let n = tau.len().min(self.frame.tau_commanded.len());
+        self.frame.tau_commanded.as_mut_slice()[..n].copy_from_slice(&tau[..n]);
     }
 
     /// Whether the robot is fallen: its CoM `drop` (m) below the height latched at the

@@ -1014,8 +1014,8 @@ impl ControllerPart for Correction {
         "forecast_correction"
     }
 
-    fn stage(&self) -> Stage {
-        Stage::Forecast
+    fn stages(&self) -> &'static [Stage] {
+        &[Stage::Forecast]
     }
 
     fn reset(&mut self) {
@@ -1024,7 +1024,12 @@ impl ControllerPart for Correction {
         }
     }
 
-    fn update(&mut self, inputs: &TickInputs, frame: &mut TickFrame) -> Result<(), TickError> {
+    fn update(
+        &mut self,
+        _: Stage,
+        inputs: &TickInputs,
+        frame: &mut TickFrame,
+    ) -> Result<(), TickError> {
         let Some(c) = self.corrector.as_mut() else {
             return Ok(());
         };

@@ -7,6 +7,8 @@
 //! - [`parts`]: the controller's parts behind one trait, run by stage in the order of
 //!   [`parts::PIPELINE`]; [`record`]: self-describing records (name, format and value together)
 //!   for the CSV, rerun and tests. The parts:
+//!   - [`wrench_estimation`]: the feet's wrenches, the CoP and the hand force from the joint
+//!     torques, for a robot without force sensors;
 //!   - [`base_estimation`]: the floating base from the IMU, joints and foot wrenches;
 //!   - [`wrist_tare`]: the wrist sensor's offset, taken while the hand is unloaded;
 //!   - [`forecast_correction`]: the forecast corrected by the measured hand force;
@@ -40,6 +42,7 @@ pub mod summary;
 pub mod tick_record;
 pub mod timing;
 pub mod viability;
+pub mod wrench_estimation;
 pub mod wrist_tare;
 
 pub use com_observer::{ComObserver, ComObserverSettings};

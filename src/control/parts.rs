@@ -1,5 +1,5 @@
-//! The controller's parts behind one seam (as an observer pipeline): each part — the base
-//! estimator, the wrist tare, the forecast correction, the capture-point guard, the CoM
+//! The controller's parts behind one seam (as an observer pipeline): each part — the wrench
+//! observer, the base estimator, the wrist tare, the forecast correction, the capture-point guard, the CoM
 //! observer — declares its settings (its table, [`crate::config::PartSettings`]), its reset,
 //! its update on the tick's shared quantities ([`TickFrame`]) at its [`Stage`], the values it
 //! records ([`Record`]) and its counters for `summary.json`. The tick runs the parts of each
@@ -19,7 +19,7 @@ use crate::channels::N_CONTACTS;
 use crate::config::{Config, ConfigError, ControllerKind, Layers, PartSettings, PartTables};
 use crate::dynamics::Model;
 use crate::preview::CartTable;
-use crate::robot::RobotState;
+use crate::robot::{Robot, RobotState};
 
 /// Where in the tick a part runs (in this order).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -36,6 +36,9 @@ pub enum Stage {
 
 /// What a part is built from.
 pub struct PartSetup<'a> {
+    /// The robot: its description, frames and model as loaded (the controller's model below
+    /// has the config's gravity).
+    pub robot: &'a Robot,
     pub config: &'a Config,
     pub kind: ControllerKind,
     /// The controller's model (its gravity set).
@@ -70,6 +73,11 @@ pub struct TickFrame {
     pub v: DVector<f64>,
     pub estimate_base: bool,
     pub cop: [f64; 2],
+    /// Each foot's wrench (`RobotState::foot_wrenches`' convention): the measured ones, or a
+    /// part's estimate where the robot has no foot sensors.
+    pub foot_wrenches: [[f64; 6]; 2],
+    /// The joint torques the controller commanded at the last tick (nv − 6; zero before).
+    pub tau_commanded: DVector<f64>,
     /// From `Measure` on: the model's CoM (position, velocity), the hand's velocity, the
     /// support rectangle [[x_min, x_max], [y_min, y_max]].
     pub com: [f64; 3],
@@ -102,6 +110,8 @@ impl TickFrame {
             v: DVector::zeros(nv),
             estimate_base: false,
             cop: [0.0; 2],
+            foot_wrenches: [[0.0; 6]; 2],
+            tau_commanded: DVector::zeros(nv.saturating_sub(6)),
             com: [0.0; 3],
             com_vel: [0.0; 3],
             hand_vel: [0.0; 3],
@@ -121,11 +131,17 @@ impl TickFrame {
 /// One part of the controller. Allocation-free in `update`, `record` and `reset`.
 pub trait ControllerPart: Send {
     fn name(&self) -> &'static str;
-    fn stage(&self) -> Stage;
+    /// The stages the part runs at (most at one).
+    fn stages(&self) -> &'static [Stage];
     /// A new plant session: start over.
     fn reset(&mut self);
-    /// This tick's work at the part's stage.
-    fn update(&mut self, inputs: &TickInputs, frame: &mut TickFrame) -> Result<(), TickError>;
+    /// This tick's work at `stage`, one of [`Self::stages`].
+    fn update(
+        &mut self,
+        stage: Stage,
+        inputs: &TickInputs,
+        frame: &mut TickFrame,
+    ) -> Result<(), TickError>;
     /// This tick's values (the same columns every tick, also when inactive).
     fn record(&self, out: &mut Record);
     /// The part's entries of `summary.json` (none when it did not run).
@@ -160,6 +176,7 @@ impl PartEntry {
 
 /// The controller's parts, in the order the tick runs them within each stage.
 pub const PIPELINE: &[PartEntry] = &[
+    super::wrench_estimation::PART,
     super::base_estimation::PART,
     super::wrist_tare::PART,
     super::forecast_correction::PART,
@@ -193,8 +210,8 @@ pub fn run_stage(
     inputs: &TickInputs,
     frame: &mut TickFrame,
 ) -> Result<(), TickError> {
-    for p in parts.iter_mut().filter(|p| p.stage() == stage) {
-        p.update(inputs, frame)?;
+    for p in parts.iter_mut().filter(|p| p.stages().contains(&stage)) {
+        p.update(stage, inputs, frame)?;
     }
     Ok(())
 }

@@ -203,8 +203,8 @@ impl ControllerPart for Guard {
         "viability"
     }
 
-    fn stage(&self) -> Stage {
-        Stage::Forecast
+    fn stages(&self) -> &'static [Stage] {
+        &[Stage::Forecast]
     }
 
     fn reset(&mut self) {
@@ -213,7 +213,12 @@ impl ControllerPart for Guard {
         }
     }
 
-    fn update(&mut self, _inputs: &TickInputs, frame: &mut TickFrame) -> Result<(), TickError> {
+    fn update(
+        &mut self,
+        _: Stage,
+        _inputs: &TickInputs,
+        frame: &mut TickFrame,
+    ) -> Result<(), TickError> {
         if let (Some(g), Some(push)) = (self.guard.as_mut(), frame.measured_push) {
             let (com, vcom) = (frame.com, frame.com_vel);
             g.apply(

@@ -165,8 +165,8 @@ impl ControllerPart for WristTare {
         "wrist_tare"
     }
 
-    fn stage(&self) -> Stage {
-        Stage::Measure
+    fn stages(&self) -> &'static [Stage] {
+        &[Stage::Measure]
     }
 
     fn reset(&mut self) {
@@ -174,7 +174,12 @@ impl ControllerPart for WristTare {
     }
 
     /// The measured hand force less the offset, and whether it may be fed back.
-    fn update(&mut self, inputs: &TickInputs, frame: &mut TickFrame) -> Result<(), TickError> {
+    fn update(
+        &mut self,
+        _: Stage,
+        inputs: &TickInputs,
+        frame: &mut TickFrame,
+    ) -> Result<(), TickError> {
         let before = self.state;
         let sensed = inputs.sensed;
         frame.hand_force = self.apply(

@@ -17,6 +17,7 @@
 
 mod accuracy;
 mod settings;
+pub mod wrench_observer;
 
 pub use accuracy::{BaseAccuracy, base_accuracy};
 pub use settings::{EstimatorMode, EstimatorSettings};
@@ -146,6 +147,8 @@ pub struct BaseEstimator {
     local: [Vector3<f64>; 2],
     last_imu_stamp: f64,
     disagreeing_run: u32,
+    /// The foot wrenches of this tick (measured, or estimated from the joint torques).
+    feet: [[f64; 6]; 2],
     /// The centre of pressure of the last tick's foot wrenches (world x, y), when loaded.
     pub cop: Option<[f64; 2]>,
     pub counts: EstimatorCounts,
@@ -208,6 +211,7 @@ impl BaseEstimator {
             local: [Vector3::zeros(); 2],
             last_imu_stamp: f64::NEG_INFINITY,
             disagreeing_run: 0,
+            feet: [[0.0; 6]; 2],
             cop: None,
             counts: EstimatorCounts::default(),
             last: BaseEstimate::default(),
@@ -233,10 +237,12 @@ impl BaseEstimator {
     pub fn update(
         &mut self,
         state: &RobotState,
+        feet: &[[f64; 6]; 2],
         q: &mut DVector<f64>,
         v: &mut DVector<f64>,
     ) -> Result<(), EstimatorError> {
         self.counts.ticks += 1;
+        self.feet = *feet;
         let (r, gyro, accel) = self.imu(state)?;
         let joints = v.len() - 6;
         if !(v
@@ -244,7 +250,7 @@ impl BaseEstimator {
             .skip(6)
             .chain(q.iter().skip(7))
             .all(|x| x.is_finite())
-            && state.foot_wrenches.iter().flatten().all(|x| x.is_finite()))
+            && self.feet.iter().flatten().all(|x| x.is_finite()))
         {
             return Err(EstimatorError::NotFinite);
         }
@@ -255,8 +261,7 @@ impl BaseEstimator {
         };
         let gyro = self.unbias(state.stamps.imu, r, gyro);
         // Stance from the normal force of each foot's wrench.
-        let stance =
-            [0, 1].map(|i| state.foot_wrenches[i][2] > self.settings.contact_load * self.weight);
+        let stance = [0, 1].map(|i| self.feet[i][2] > self.settings.contact_load * self.weight);
         let Feet {
             foot,
             sole_rot,
@@ -264,7 +269,7 @@ impl BaseEstimator {
             point,
             point_vel,
             flat,
-        } = self.feet(state, stance);
+        } = self.feet(stance);
         if self.started && stance != self.stance {
             self.counts.stance_changes += 1;
         }
@@ -316,7 +321,7 @@ impl BaseEstimator {
         q[5] = r.k;
         q[6] = r.w;
         v.rows_mut(6, joints).copy_from(&self.joint_v);
-        self.cop = self.centre_of_pressure(state, &rot, &foot, &sole_rot);
+        self.cop = self.centre_of_pressure(&rot, &foot, &sole_rot);
         let (roll, pitch, yaw) = r.euler_angles();
         self.last.position = [p_b[0], p_b[1], p_b[2]];
         self.last.velocity = [v_b[0], v_b[1], v_b[2]];
@@ -349,7 +354,7 @@ impl BaseEstimator {
 
     /// Each foot's geometry from the legs' kinematics (base at the identity) and its contact
     /// point from its wrench.
-    fn feet(&self, state: &RobotState, stance: [bool; 2]) -> Feet {
+    fn feet(&self, stance: [bool; 2]) -> Feet {
         let mut foot = [Vector3::zeros(); 2];
         let mut sole_rot = [Matrix3::identity(); 2];
         let mut local = [Vector3::zeros(); 2];
@@ -365,7 +370,7 @@ impl BaseEstimator {
             // centre in the air. A foot rocking on an edge pivots about it: that point, not the
             // centre, stays put (EST-3) and on the floor (EST-4).
             if stance[i] {
-                let w = &state.foot_wrenches[i];
+                let w = &self.feet[i];
                 let half = (0..4).fold(Vector3::zeros(), |h: Vector3<f64>, k| {
                     h.sup(&(sole_rot[i].transpose() * (c(k) - foot[i])).abs())
                 });
@@ -708,7 +713,6 @@ impl BaseEstimator {
     /// load, not over its own.
     fn centre_of_pressure(
         &self,
-        state: &RobotState,
         rot: &Matrix3<f64>,
         foot: &[Vector3<f64>; 2],
         sole_rot: &[Matrix3<f64>; 2],
@@ -716,7 +720,7 @@ impl BaseEstimator {
         let p_b = Vector3::new(self.x[0], self.x[1], self.x[2]);
         let (mut total, mut sum) = (0.0, Vector3::zeros());
         for i in 0..2 {
-            let w = &state.foot_wrenches[i];
+            let w = &self.feet[i];
             if w[2] <= 0.0 {
                 continue;
             }
@@ -797,7 +801,8 @@ mod tests {
             let mut sensed = RobotState::new(nq, nv);
             crate::control::contract::read_state(&self.state, 0, &mut sensed)
                 .expect("the bench's state fits its robot");
-            self.est.update(&sensed, &mut self.q, &mut self.v)
+            self.est
+                .update(&sensed, &sensed.foot_wrenches, &mut self.q, &mut self.v)
         }
 
         /// The estimate's first `n` coordinates of the configuration are the home pose's.

@@ -68,6 +68,10 @@ pub struct RobotDescription {
     /// The robot's own low-level bus (`upc bus`, docs/bus.md), if upc can drive it there.
     #[serde(default)]
     pub bus: Option<BusSpec>,
+    /// What the robot measures besides its joints and its IMU (docs/sensing.md, "What a robot
+    /// measures"): a plant on `realistic` sensing publishes exactly that.
+    #[serde(default)]
+    pub sensors: SensorSpec,
 }
 
 /// How the robot's own bus addresses its drives.
@@ -148,6 +152,47 @@ pub struct HandSpec {
     pub frame: String,
     /// The body the arm chain of M_e starts from (its joints are the chain's, exclusive).
     pub chain_root: String,
+}
+
+/// How a robot measures its feet's loads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FootSensors {
+    /// A force sensor under each sole corner.
+    Corners,
+    /// A six-axis force/torque sensor per ankle.
+    SixAxis,
+    /// None (the Unitree G1): the controller estimates the feet's wrenches.
+    None,
+}
+
+/// `[sensors]`: what a robot measures besides its joint encoders and its IMU (`[imu]`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorSpec {
+    /// The feet; absent: as the plant's `sim.sensors.feet` says.
+    #[serde(default)]
+    pub feet: Option<FootSensors>,
+    /// A six-axis force/torque sensor at the hand's wrist.
+    #[serde(default = "yes")]
+    pub wrist: bool,
+    /// Each drive's torque estimate (from its motor current).
+    #[serde(default = "yes")]
+    pub joint_torques: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+impl Default for SensorSpec {
+    fn default() -> Self {
+        Self {
+            feet: None,
+            wrist: true,
+            joint_torques: true,
+        }
+    }
 }
 
 /// The IMU's mounting.

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{DVector, Matrix3, Vector3};
 
-pub use description::RobotDescription;
+pub use description::{FootSensors, RobotDescription, SensorSpec};
 pub use state::{RobotState, SensorStamps};
 
 use crate::config::{ConfigError, Layers};
@@ -32,7 +32,7 @@ pub const DEFAULT: &str = "icub_like";
 
 /// The descriptions shipped with upc (name, TOML): usable from any directory. Their URDFs are
 /// embedded (the iCub-like) or come from a registry package (`scripts/setup.sh`).
-pub const EMBEDDED: [(&str, &str); 6] = [
+pub const EMBEDDED: [(&str, &str); 7] = [
     (
         "icub_like",
         include_str!("../../config/robots/icub_like.toml"),
@@ -44,6 +44,10 @@ pub const EMBEDDED: [(&str, &str); 6] = [
     (
         "romeo_locked",
         include_str!("../../config/robots/romeo_locked.toml"),
+    ),
+    (
+        "icub_like_joint_torques",
+        include_str!("../../config/robots/icub_like_joint_torques.toml"),
     ),
 ];
 

@@ -41,9 +41,11 @@ use super::config::{Mode, Push, SimConfig};
 use super::hold::{CommandClock, HoldStats, Phase, Supervisor};
 use super::physics::{Engine, Physics};
 use super::record::{Recorder, RecorderStats};
+use super::robot_sensing::RobotSensing;
 use super::scene::{DoorDrive, default_scene};
-use super::sensors::{ImuMount, SensorCounts, Sensors};
+use super::sensors::{FootSensing, ImuMount, Sensing, SensorCounts, Sensors, SensorsConfig};
 use super::world::{SimError, StepReport};
+use crate::robot::{FootSensors, Robot};
 
 /// Errors that end a run.
 #[derive(Debug, thiserror::Error)]
@@ -526,11 +528,41 @@ struct Looper {
     /// The sensor block of the published state and the models it passes through (on
     /// `realistic`), and the sole corners' positions for them (scratch).
     sensors: Sensors,
+    /// What the robot measures (its description's `[sensors]`) and its torque estimates.
+    robot_sensing: RobotSensing,
     points: [[f64; 3]; N_CONTACTS],
     /// The plant's step (s).
     dt: f64,
     /// The state last published, as measured.
     last_state: Box<StateMsg>,
+}
+
+/// The sensor models' settings, the feet as the robot's description says when it says.
+fn sensors_of(cfg: &SimConfig, robot: &Robot) -> SensorsConfig {
+    let mut s = cfg.sensors;
+    match robot.description.sensors.feet {
+        Some(FootSensors::Corners) => s.feet = FootSensing::Corners,
+        Some(FootSensors::SixAxis) => s.feet = FootSensing::SixAxis,
+        // No foot sensor: the corners' models run and `RobotSensing` publishes NaN.
+        Some(FootSensors::None) | None => {}
+    }
+    s
+}
+
+/// Each velocity coordinate's effort limit (N·m; 0 for the base and unlimited joints).
+fn effort_limits(model: &crate::dynamics::Model) -> Vec<f64> {
+    let mut e = vec![0.0; model.nv];
+    for j in &model.joints {
+        let limit = j.limits.effort;
+        for k in j.idx_v..j.idx_v + j.nv() {
+            e[k] = if limit.is_finite() && limit > 0.0 {
+                limit
+            } else {
+                0.0
+            };
+        }
+    }
+    e
 }
 
 fn log_transition(from: Phase, to: Phase, t: f64, cfg: &SimConfig) {
@@ -645,9 +677,16 @@ impl Looper {
             record_every: (cfg.record_period / cfg.dt).round().max(1.0) as u64,
             push_frame: push_frame(cfg, robot)?,
             sensors: Sensors::new(
-                &cfg.sensors,
+                &sensors_of(cfg, robot),
                 -world.robot().gravity.z,
                 robot.imu_frame.map(|f| ImuMount::new(&robot.model, f)),
+            ),
+            robot_sensing: RobotSensing::new(
+                robot.description.sensors,
+                cfg.sensors.sensing == Sensing::Realistic,
+                cfg.sensors.motor_torques,
+                effort_limits(world.robot()),
+                cfg.sensors.seed,
             ),
             points: [[0.0; 3]; N_CONTACTS],
             dt: cfg.dt,
@@ -780,14 +819,16 @@ impl Looper {
             *p = [c.x, c.y, c.z];
         }
         let (sensors, points, dt) = (&mut self.sensors, &self.points, self.dt);
-        let (last, tau) = (&mut self.last_state, &self.tau);
+        let (last, tau, robot_sensing) = (&mut self.last_state, &self.tau, &mut self.robot_sensing);
         ep.state.send_with(|m| {
             fill_state(m, world, info, zmp, hand);
+            robot_sensing.take_truth(m);
             sensors.apply(m, dt, points);
             // The torques applied over the step: what the drives' torque sensing reads.
             m.joint_torques.fill(f64::NAN);
             let base = m.nv as usize - tau.len();
             m.joint_torques[base..base + tau.len()].copy_from_slice(tau.as_slice());
+            robot_sensing.apply(m);
             **last = *m;
         })?;
         let stats = self.gate.stats;

@@ -158,6 +158,8 @@ pub struct SensorsConfig {
     pub soles: ForceSensorConfig,
     /// Each foot's six-axis sensor (`feet = "six_axis"`), in the sole's frame.
     pub foot_ft: WrenchSensorConfig,
+    /// Each drive's torque estimate, for a robot that has them (`super::robot_sensing`).
+    pub motor_torques: super::robot_sensing::MotorTorqueConfig,
 }
 
 impl SensorsConfig {
@@ -233,6 +235,9 @@ impl SensorsConfig {
                     format!("at most {MAX_LATENCY} steps, got {latency}"),
                 ));
             }
+        }
+        if let Some((key, why)) = self.motor_torques.invalid() {
+            return Some((format!("motor_torques.{key}"), why));
         }
         let e = &self.encoders;
         if e.bits > 32 {

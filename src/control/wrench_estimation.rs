@@ -1,0 +1,252 @@
+//! The feet's wrenches, the centre of pressure and the hand's force estimated from the joint
+//! torques (`crate::estimation::wrench_observer`, docs/estimation.md, WO), for a robot that
+//! does not measure them: a Unitree G1 reports its joints, its motors' torque estimates and an
+//! IMU, and no foot or wrist force sensor.
+//!
+//! At [`Stage::Estimate`] the last tick's feet estimate stands in for the unmeasured foot
+//! wrenches (the base estimator's stance and centre of pressure read them); at
+//! [`Stage::Measure`], on the base as estimated, the observer updates and its estimates replace
+//! what the robot does not measure (in `auto`), before the wrist tare and every later part.
+
+use std::any::Any;
+
+use serde::{Deserialize, Serialize};
+
+use super::core::TickError;
+use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
+use super::record::Record;
+use crate::col;
+use crate::estimation::wrench_observer::{ContactWrenches, WrenchObserver, WrenchObserverGains};
+
+/// When the observer's estimates are used (`controller.wrench_observer.mode`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WrenchMode {
+    /// For each wrench the robot does not measure (NaN in its state).
+    Auto,
+    /// For every wrench, over the measured ones (to compare them).
+    On,
+    /// Never: the observer does not run.
+    Off,
+}
+
+/// `[controller.wrench_observer]`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct WrenchObserverSettings {
+    pub mode: WrenchMode,
+    /// K of WO-2 (1/s): the estimates follow a step with this bandwidth.
+    pub gain: f64,
+    /// σ of the base's linear velocity (m/s), its angular velocity (rad/s) and the joints'
+    /// velocities (rad/s) as the controller has them, and of a joint's torque (N·m): WO-4's
+    /// weights.
+    pub velocity_noise: [f64; 3],
+    pub torque_noise: f64,
+}
+
+impl Default for WrenchObserverSettings {
+    /// The embedded `config/default.toml`'s table (their one home).
+    fn default() -> Self {
+        crate::config::embedded_part()
+    }
+}
+
+impl crate::config::PartSettings for WrenchObserverSettings {
+    const TABLE: &'static str = "wrench_observer";
+
+    fn check(&self) -> Result<(), (&'static str, String)> {
+        if !(self.gain.is_finite() && self.gain > 0.0) {
+            return Err(("gain", format!("must be finite and > 0, got {}", self.gain)));
+        }
+        let sizes = [self.velocity_noise.as_slice(), &[self.torque_noise]].concat();
+        if !sizes.iter().all(|x| x.is_finite() && *x >= 0.0) {
+            return Err((
+                "velocity_noise",
+                "the noise sizes must be finite and ≥ 0".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// This part in `super::parts::PIPELINE`.
+pub const PART: PartEntry = PartEntry::new::<WrenchObserverSettings>(build);
+
+fn build(
+    s: &PartSetup,
+) -> Result<Box<dyn ControllerPart>, Box<dyn std::error::Error + Send + Sync>> {
+    let settings: WrenchObserverSettings = s.config.controller.parts.get()?;
+    let hand = s.model.frame_id(&s.robot.frames().hand)?;
+    let gains = WrenchObserverGains {
+        gain: settings.gain,
+        velocity_noise: settings.velocity_noise,
+        torque_noise: settings.torque_noise,
+    };
+    Ok(Box::new(WrenchEstimation {
+        observer: WrenchObserver::new(s.model, s.contact_frames, hand, gains),
+        mode: settings.mode,
+        estimated: Estimated::default(),
+        counts: WrenchCounts::default(),
+        last_time: None,
+    }))
+}
+
+/// What the observer stood in for at the last tick.
+#[derive(Debug, Clone, Copy, Default)]
+struct Estimated {
+    feet: bool,
+    cop: bool,
+    hand: bool,
+}
+
+/// What the observer did over a run (`summary.json`'s `wrench_observer`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct WrenchCounts {
+    pub updates: u64,
+    /// Ticks whose feet wrenches, centre of pressure and hand force were the observer's.
+    pub feet_ticks: u64,
+    pub cop_ticks: u64,
+    pub hand_ticks: u64,
+    /// Updates on the commanded torques (the state measured none).
+    pub commanded_torque_ticks: u64,
+    /// Updates that failed (a state the model refused): the last estimate stood.
+    pub failures: u64,
+}
+
+pub struct WrenchEstimation {
+    observer: WrenchObserver,
+    mode: WrenchMode,
+    estimated: Estimated,
+    pub counts: WrenchCounts,
+    last_time: Option<f64>,
+}
+
+impl WrenchEstimation {
+    /// The last estimate.
+    pub fn estimate(&self) -> &ContactWrenches {
+        &self.observer.last
+    }
+
+    /// Whether to stand in for a quantity the robot measures (`measured`) or not.
+    fn replaces(&self, measured: bool) -> bool {
+        match self.mode {
+            WrenchMode::On => true,
+            WrenchMode::Auto => !measured,
+            WrenchMode::Off => false,
+        }
+    }
+
+    /// WO on this tick's configuration and velocity (the base estimated), on the measured
+    /// joint torques, or the commanded ones where the robot measures none.
+    fn observe(&mut self, inputs: &TickInputs, frame: &TickFrame) {
+        let measured = &inputs.sensed.joint_torques;
+        let torques = measured.as_slice().get(6..).unwrap_or(&[]);
+        let tau = if !torques.is_empty() && torques.iter().all(|x| x.is_finite()) {
+            torques
+        } else {
+            self.counts.commanded_torque_ticks += 1;
+            frame.tau_commanded.as_slice()
+        };
+        let dt = self.last_time.map_or(0.0, |t0| frame.t - t0);
+        self.last_time = Some(frame.t);
+        match self.observer.update(&frame.q, &frame.v, tau, dt) {
+            Ok(_) => self.counts.updates += 1,
+            Err(e) => {
+                self.counts.failures += 1;
+                if self.counts.failures.is_power_of_two() {
+                    tracing::warn!("wrench observer: {e} ({} so far)", self.counts.failures);
+                }
+            }
+        }
+    }
+}
+
+impl ControllerPart for WrenchEstimation {
+    fn name(&self) -> &'static str {
+        "wrench_observer"
+    }
+
+    fn stages(&self) -> &'static [Stage] {
+        &[Stage::Estimate, Stage::Measure]
+    }
+
+    fn reset(&mut self) {
+        self.observer.reset();
+        self.last_time = None;
+    }
+
+    fn update(
+        &mut self,
+        stage: Stage,
+        inputs: &TickInputs,
+        frame: &mut TickFrame,
+    ) -> Result<(), TickError> {
+        if self.mode == WrenchMode::Off {
+            return Ok(());
+        }
+        let s = inputs.sensed;
+        let feet_measured = s.foot_wrenches.iter().flatten().all(|x| x.is_finite());
+        match stage {
+            Stage::Estimate => {
+                // The last tick's feet, for the base estimator's stance and CoP.
+                if self.replaces(feet_measured) {
+                    frame.foot_wrenches = self.observer.last.feet;
+                }
+            }
+            _ => {
+                let e = Estimated {
+                    feet: self.replaces(feet_measured),
+                    cop: self.replaces(s.cop.iter().all(|x| x.is_finite())),
+                    hand: self.replaces(s.hand_force.iter().all(|x| x.is_finite())),
+                };
+                self.estimated = e;
+                if !(e.feet || e.cop || e.hand) {
+                    return Ok(()); // the robot measures them all: nothing to stand in for
+                }
+                self.observe(inputs, frame);
+                let w = self.observer.last;
+                if e.feet {
+                    frame.foot_wrenches = w.feet;
+                    self.counts.feet_ticks += 1;
+                }
+                if let (true, Some(cop)) = (e.cop, w.cop) {
+                    frame.cop = cop;
+                    self.counts.cop_ticks += 1;
+                }
+                if e.hand {
+                    frame.hand_force = w.hand;
+                    self.counts.hand_ticks += 1;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn record(&self, out: &mut Record) {
+        let w = &self.observer.last;
+        let cop = w.cop.unwrap_or([f64::NAN; 2]);
+        out.put(col!(fixed("wo_hand_x", 3).plot("wrench/hand_x")), w.hand[0]);
+        out.put(col!(fixed("wo_hand_y", 3).plot("wrench/hand_y")), w.hand[1]);
+        out.put(col!(fixed("wo_hand_z", 3).plot("wrench/hand_z")), w.hand[2]);
+        out.put(
+            col!(fixed("wo_fz_left", 2).plot("wrench/fz_left")),
+            w.feet[0][2],
+        );
+        out.put(
+            col!(fixed("wo_fz_right", 2).plot("wrench/fz_right")),
+            w.feet[1][2],
+        );
+        out.put(col!(fixed("wo_cop_x", 5).plot("wrench/cop_x")), cop[0]);
+        out.put(col!(fixed("wo_cop_y", 5).plot("wrench/cop_y")), cop[1]);
+    }
+
+    fn summarize(&self, out: &mut serde_json::Map<String, serde_json::Value>) {
+        if self.counts.updates + self.counts.failures > 0 {
+            out.insert("wrench_observer".into(), serde_json::json!(self.counts));
+        }
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
