@@ -38,8 +38,7 @@ use crate::channels::{
     ServiceKind, StateMsg, Subscriber, TORQUE_FLAG_FALLBACK, TorqueMsg,
 };
 use crate::config::{Config, ControllerKind, LoopMode};
-use crate::preview::ReducedModel;
-use crate::robot::Robot;
+use crate::robot::{ReducedModel, Robot};
 use crate::wbc::{FallbackReason, WbcStatus};
 
 /// The phase lock's lead and step, as a fraction of the period: 1/8, well inside the grace

@@ -66,7 +66,7 @@ use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Quaternion, UnitQuaternion, V
 
 use super::com_bias::{com_drift_from_pass, drift_pass, frame_drift_from_pass};
 use super::condensed::{CondensedError, CondensedQp, Problem};
-pub use super::outcome::{BodyFrames, CORNERS, FallbackReason, N_CONTACTS, WbcCounters, WbcStatus};
+pub use super::outcome::{FallbackReason, N_CONTACTS, WbcCounters, WbcStatus};
 use super::pattern::Pattern;
 use super::qp::QpInstance;
 use super::tasks::{
@@ -79,9 +79,8 @@ use crate::dynamics::{
     forward_kinematics, get_frame_jacobian, gravity_torques, jacobian_center_of_mass,
     nonlinear_effects, update_frame_placements,
 };
+use crate::robot::{BodyFrames, CORNERS};
 
-/// Number of point contacts: 4 sole corners on each of 2 feet, one home for the QP and the
-/// channel contract's arrays.
 /// Warnings about fallbacks are emitted at most once per this many ticks.
 const WARN_EVERY_TICKS: u64 = 1000;
 
