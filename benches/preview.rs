@@ -7,7 +7,8 @@ use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use nalgebra::Vector3;
 use upc::config::{Config, GainSolverKind, LqSolverKind};
 use upc::preview::gain_search::{GainSearch, GainSearchInputs};
-use upc::preview::{CartTable, GainSchedule, HandPreviewer, HandState, ReducedModel, ZmpPreview};
+use upc::preview::{CartTable, GainSchedule, HandPreviewer, HandState, ZmpPreview};
+use upc::robot::ReducedModel;
 use upc::scenario::Scenario;
 
 fn config(sets: &[String]) -> Config {

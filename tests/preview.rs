@@ -9,8 +9,9 @@ use upc::preview::dense::CondensedHorizon;
 use upc::preview::gain_search::{GainSearch, GainSearchInputs};
 use upc::preview::{
     AxisState, CartTable, GainSchedule, HandPreviewer, HandState, PreviewError, PreviewPlan,
-    ReducedModel, Riccati, ZmpPreview,
+    Riccati, ZmpPreview,
 };
+use upc::robot::ReducedModel;
 use upc::scenario::{ForceProfile, Impact, Scenario};
 
 fn config_with(sets: &[&str]) -> Config {

@@ -20,7 +20,7 @@ fn config() -> WbcConfig {
 }
 
 /// The iCub-like's contact, sole and hand frames (its description names them).
-fn frames() -> upc::wbc::BodyFrames {
+fn frames() -> upc::robot::BodyFrames {
     upc::robot::Robot::embedded_default()
         .expect("robot")
         .frames()

@@ -10,7 +10,7 @@ use upc::dynamics::{Data, forward_kinematics, icub_like};
 use upc::wbc::{WbcCommand, WbcStatus, WholeBodyController};
 
 /// The iCub-like's contact, sole and hand frames (its description names them).
-fn frames() -> upc::wbc::BodyFrames {
+fn frames() -> upc::robot::BodyFrames {
     upc::robot::Robot::embedded_default()
         .expect("robot")
         .frames()

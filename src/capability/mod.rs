@@ -12,7 +12,8 @@
 
 use crate::config::{Config, ControllerKind};
 use crate::offline::ReducedLoop;
-use crate::preview::{PreviewError, ReducedModel};
+use crate::preview::PreviewError;
+use crate::robot::ReducedModel;
 use crate::scenario::{ForceProfile, Impact, Scenario};
 
 /// Time of the impact's start (s): the controller has settled by then.

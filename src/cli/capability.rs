@@ -117,6 +117,81 @@ struct Row {
 pub(super) type BoxError = Box<dyn std::error::Error + Send + Sync>;
 
 pub fn run(args: CapabilityArgs) -> CliResult {
+    let (variants, directions) = checked_lists(&args)?;
+    let criteria = Criteria {
+        max_edge_time: args.edge_time,
+        max_com_drop: args.com_drop,
+    };
+    let robot = args.robot.load()?;
+    let config = args.config.load(&robot, None, &[])?;
+    let reduced = robot.reduced();
+    let out = args.out.clone().unwrap_or_else(|| {
+        let secs = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        PathBuf::from(format!("runs/capability-{secs}"))
+    });
+    std::fs::create_dir_all(out.join("cases"))?;
+    let cases = sweep_cases(&args, &variants, &directions);
+    let per_case = 1
+        + ((args.max / args.tol).log2().ceil().max(0.0) as u64)
+        + args
+            .monotone
+            .map_or(0, |step| (args.max / step).ceil() as u64);
+    let bar = runs_bar(args.quiet, cases.len() as u64 * per_case);
+    let jobs = args
+        .jobs
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .max(1);
+    let exe = std::env::current_exe()?;
+    let sweep = Sweep {
+        args: &args,
+        config: &config,
+        reduced,
+        criteria: &criteria,
+        exe: &exe,
+        out: &out,
+        per_case,
+        bar: &bar,
+    };
+    let start = Instant::now();
+    let rows = sweep.run(cases, jobs);
+    bar.finish_and_clear();
+    let mut rows = rows?;
+    let wall = start.elapsed().as_secs_f64();
+    let order = |r: &Row| {
+        (
+            r.model as u8,
+            r.direction,
+            variants.iter().position(|v| v.label() == r.controller),
+        )
+    };
+    rows.sort_by(|a, b| {
+        order(a)
+            .cmp(&order(b))
+            .then(a.duration.total_cmp(&b.duration))
+    });
+    write_outputs(
+        &out,
+        &args,
+        &robot,
+        &criteria,
+        &rows,
+        &variants,
+        &directions,
+        wall,
+        jobs,
+    )?;
+    println!(
+        "wrote {}/capability.md ({wall:.0} s, {jobs} at a time)",
+        out.display()
+    );
+    Ok(())
+}
+
+/// The controllers and directions named on the command line, once the search's values are
+/// checked.
+fn checked_lists(args: &CapabilityArgs) -> Result<(Vec<Variant>, Vec<Direction>), BoxError> {
     let variants = args
         .controllers
         .iter()
@@ -150,20 +225,11 @@ pub fn run(args: CapabilityArgs) -> CliResult {
     {
         return Err(format!("--monotone must be > 0, got {step}").into());
     }
-    let criteria = Criteria {
-        max_edge_time: args.edge_time,
-        max_com_drop: args.com_drop,
-    };
-    let robot = args.robot.load()?;
-    let config = args.config.load(&robot, None, &[])?;
-    let reduced = robot.reduced();
-    let out = args.out.clone().unwrap_or_else(|| {
-        let secs = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_secs());
-        PathBuf::from(format!("runs/capability-{secs}"))
-    });
-    std::fs::create_dir_all(out.join("cases"))?;
+    Ok((variants, directions))
+}
+
+/// Every model × controller × direction × duration the sweep searches.
+fn sweep_cases(args: &CapabilityArgs, variants: &[Variant], directions: &[Direction]) -> Vec<Case> {
     let models: &[Model] = match args.models {
         Models::Reduced => &[Model::Reduced],
         Models::Full => &[Model::Full],
@@ -171,7 +237,7 @@ pub fn run(args: CapabilityArgs) -> CliResult {
     };
     let mut cases = Vec::new();
     for &model in models {
-        for &variant in &variants {
+        for &variant in variants {
             // The door pushes the hand through its hinge, along the tangent of the hinge's
             // circle (x at the handle); pushes along y are applied at the hand instead
             // (`sim.push = "hand"`), which only upc's own simulator does.
@@ -189,117 +255,104 @@ pub fn run(args: CapabilityArgs) -> CliResult {
             }
         }
     }
-    let per_case = 1
-        + ((args.max / args.tol).log2().ceil().max(0.0) as u64)
-        + args
-            .monotone
-            .map_or(0, |step| (args.max / step).ceil() as u64);
-    let bar = runs_bar(args.quiet, cases.len() as u64 * per_case);
-    let jobs = args
-        .jobs
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
-        .max(1);
-    let exe = std::env::current_exe()?;
-    let queue = Mutex::new(cases.clone());
-    let rows = Mutex::new(Vec::<Row>::new());
-    let first_error = Mutex::new(None::<String>);
-    let start = Instant::now();
-    std::thread::scope(|scope| {
-        for _ in 0..jobs {
-            scope.spawn(|| {
-                loop {
-                    let Some(case) = queue.lock().unwrap_or_else(|p| p.into_inner()).pop() else {
-                        return;
-                    };
-                    let t0 = Instant::now();
-                    let mut survives = |a: f64| -> Result<bool, BoxError> {
-                        bar.inc(1);
-                        match case.model {
-                            Model::Reduced => Ok(survives_reduced(
-                                &config,
-                                reduced,
-                                case.variant,
-                                a,
-                                case.duration,
-                                case.direction,
-                            )?),
-                            Model::Full => full_case(
-                                &exe,
-                                &FullCase {
-                                    robot: &args.robot.robot,
-                                    plant: args.plant,
-                                    variant: case.variant,
-                                    duration: case.duration,
-                                    direction: case.direction,
-                                    forecast: ForecastCase::EXACT,
-                                    config: &args.config,
-                                    sensing: args.sensing,
-                                    sim_sets: &args.sim_sets,
-                                },
-                                &out,
-                                a,
-                                &criteria,
-                            )
-                            .map(|r| r.survived),
-                        }
-                    };
-                    match search(args.max, args.tol, args.monotone, &mut survives) {
-                        Ok(c) => {
-                            // The bar counted the longest search: settle the difference.
-                            bar.inc(per_case.saturating_sub(c.runs as u64));
-                            rows.lock().unwrap_or_else(|p| p.into_inner()).push(Row {
-                                model: case.model,
-                                controller: case.variant.label(),
-                                duration: case.duration,
-                                direction: case.direction.label(),
-                                capability: c,
-                                wall_time: t0.elapsed().as_secs_f64(),
-                            })
-                        }
-                        Err(e) => {
-                            let mut first = first_error.lock().unwrap_or_else(|p| p.into_inner());
-                            first.get_or_insert(format!("{case:?}: {e}"));
+    cases
+}
+
+/// What every case of the sweep shares: the reduced models run in-process, the full
+/// simulation as an `upc run` each.
+struct Sweep<'a> {
+    args: &'a CapabilityArgs,
+    config: &'a upc::config::Config,
+    reduced: upc::robot::ReducedModel,
+    criteria: &'a Criteria,
+    exe: &'a Path,
+    out: &'a Path,
+    /// Runs the progress bar counts per case (the longest search).
+    per_case: u64,
+    bar: &'a ProgressBar,
+}
+
+impl Sweep<'_> {
+    /// Searches every case, `jobs` at a time, taken from the end of `cases`; the first error
+    /// stops the sweep.
+    fn run(&self, cases: Vec<Case>, jobs: usize) -> Result<Vec<Row>, BoxError> {
+        let queue = Mutex::new(cases);
+        let rows = Mutex::new(Vec::<Row>::new());
+        let first_error = Mutex::new(None::<String>);
+        std::thread::scope(|scope| {
+            for _ in 0..jobs {
+                scope.spawn(|| {
+                    loop {
+                        let Some(case) = queue.lock().unwrap_or_else(|p| p.into_inner()).pop()
+                        else {
                             return;
+                        };
+                        match self.search_case(case) {
+                            Ok(row) => rows.lock().unwrap_or_else(|p| p.into_inner()).push(row),
+                            Err(e) => {
+                                let mut first =
+                                    first_error.lock().unwrap_or_else(|p| p.into_inner());
+                                first.get_or_insert(format!("{case:?}: {e}"));
+                                return;
+                            }
                         }
                     }
-                }
-            });
+                });
+            }
+        });
+        if let Some(e) = first_error.into_inner().unwrap_or_else(|p| p.into_inner()) {
+            return Err(e.into());
         }
-    });
-    bar.finish_and_clear();
-    if let Some(e) = first_error.into_inner().unwrap_or_else(|p| p.into_inner()) {
-        return Err(e.into());
+        Ok(rows.into_inner().unwrap_or_else(|p| p.into_inner()))
     }
-    let wall = start.elapsed().as_secs_f64();
-    let mut rows = rows.into_inner().unwrap_or_else(|p| p.into_inner());
-    let order = |r: &Row| {
-        (
-            r.model as u8,
-            r.direction,
-            variants.iter().position(|v| v.label() == r.controller),
-        )
-    };
-    rows.sort_by(|a, b| {
-        order(a)
-            .cmp(&order(b))
-            .then(a.duration.total_cmp(&b.duration))
-    });
-    write_outputs(
-        &out,
-        &args,
-        &robot,
-        &criteria,
-        &rows,
-        &variants,
-        &directions,
-        wall,
-        jobs,
-    )?;
-    println!(
-        "wrote {}/capability.md ({wall:.0} s, {jobs} at a time)",
-        out.display()
-    );
-    Ok(())
+
+    /// One case's bisection over [0, `--max`].
+    fn search_case(&self, case: Case) -> Result<Row, BoxError> {
+        let args = self.args;
+        let t0 = Instant::now();
+        let mut survives = |a: f64| -> Result<bool, BoxError> {
+            self.bar.inc(1);
+            match case.model {
+                Model::Reduced => Ok(survives_reduced(
+                    self.config,
+                    self.reduced,
+                    case.variant,
+                    a,
+                    case.duration,
+                    case.direction,
+                )?),
+                Model::Full => full_case(
+                    self.exe,
+                    &FullCase {
+                        robot: &args.robot.robot,
+                        plant: args.plant,
+                        variant: case.variant,
+                        duration: case.duration,
+                        direction: case.direction,
+                        forecast: ForecastCase::EXACT,
+                        config: &args.config,
+                        sensing: args.sensing,
+                        sim_sets: &args.sim_sets,
+                    },
+                    self.out,
+                    a,
+                    self.criteria,
+                )
+                .map(|r| r.survived),
+            }
+        };
+        let c = search(args.max, args.tol, args.monotone, &mut survives)?;
+        // The bar counted the longest search: settle the difference.
+        self.bar.inc(self.per_case.saturating_sub(c.runs as u64));
+        Ok(Row {
+            model: case.model,
+            controller: case.variant.label(),
+            duration: case.duration,
+            direction: case.direction.label(),
+            capability: c,
+            wall_time: t0.elapsed().as_secs_f64(),
+        })
+    }
 }
 
 /// A progress bar counting `len` simulation runs (hidden when `quiet`).
@@ -387,6 +440,22 @@ pub(super) fn full_case(
         impact_toml(amplitude, case.duration, case.direction),
     )?;
     let kind = case.variant.kind();
+    let run = case_run_args(case, &name, &scenario, &dir);
+    let mut cmd = Command::new(exe);
+    cmd.args(Argv::of("run", &run)).env("RUST_LOG", "warn");
+    let status = cmd.output()?;
+    let run_dir = dir.join(&name).join(kind.name());
+    let result = case_result(case, &name, &run_dir, status.status, criteria)?;
+    // Keep the directory only for inspection of the last cases; the sweep makes hundreds.
+    let _ = std::fs::remove_dir_all(dir.join(&name));
+    let _ = std::fs::remove_file(&scenario);
+    Ok(result)
+}
+
+/// The `upc run` of a case named `name`, its scenario written at `scenario`, its run directory
+/// under `dir`.
+fn case_run_args(case: &FullCase, name: &str, scenario: &Path, dir: &Path) -> RunArgs {
+    let f = case.forecast;
     let mut sim_sets = case.sim_sets.to_vec();
     if case.direction == Direction::Y {
         sim_sets.push("sim.push=\"hand\"".to_string());
@@ -394,17 +463,17 @@ pub(super) fn full_case(
     if f.phantom {
         sim_sets.push("sim.push=\"none\"".to_string());
     }
-    let run = RunArgs {
+    RunArgs {
         scenario: scenario.display().to_string(),
-        controller: match kind {
+        controller: match case.variant.kind() {
             ControllerKind::C0 => Which::C0,
             ControllerKind::C1 => Which::C1,
             ControllerKind::C2 => Which::C2,
         },
         realtime: false,
         duration: None,
-        name: Some(name.clone()),
-        out: dir.clone(),
+        name: Some(name.to_owned()),
+        out: dir.to_path_buf(),
         forecaster: None,
         forecaster_over_zenoh: false,
         no_forecaster: false,
@@ -432,11 +501,18 @@ pub(super) fn full_case(
         },
         bus: None,
         bus_settings: Default::default(),
-    };
-    let mut cmd = Command::new(exe);
-    cmd.args(Argv::of("run", &run)).env("RUST_LOG", "warn");
-    let status = cmd.output()?;
-    let run_dir = dir.join(&name).join(kind.name());
+    }
+}
+
+/// What a finished case's run directory `run_dir` says, the process having ended with
+/// `status`; an error when the case never ran or was killed (the sweep cannot go on).
+fn case_result(
+    case: &FullCase,
+    name: &str,
+    run_dir: &Path,
+    status: std::process::ExitStatus,
+    criteria: &Criteria,
+) -> Result<CaseResult, BoxError> {
     let summary = std::fs::read_to_string(run_dir.join("controller.json"));
     let parsed: Option<serde_json::Value> = match &summary {
         Ok(text) => Some(serde_json::from_str(text)?),
@@ -484,7 +560,7 @@ pub(super) fn full_case(
         // A run whose controller ticked but wrote no summary: a failure of the case, not of the
         // sweep, when the process ran (a simulation that diverged); otherwise the sweep cannot
         // go on.
-        None if status.status.code().is_some() => {
+        None if status.code().is_some() => {
             tracing::debug!("{name}: no controller summary");
             CaseResult {
                 survived: false,
@@ -493,9 +569,6 @@ pub(super) fn full_case(
         }
         None => return Err(format!("{name}: the run was killed by a signal").into()),
     };
-    // Keep the directory only for inspection of the last cases; the sweep makes hundreds.
-    let _ = std::fs::remove_dir_all(dir.join(&name));
-    let _ = std::fs::remove_file(&scenario);
     Ok(result)
 }
 
@@ -508,6 +581,30 @@ fn write_outputs(
     rows: &[Row],
     variants: &[Variant],
     directions: &[Direction],
+    wall: f64,
+    jobs: usize,
+) -> Result<(), BoxError> {
+    write_data(out, args, criteria, rows, wall, jobs)?;
+    let fig_dir = out.join("figures");
+    std::fs::create_dir_all(&fig_dir)?;
+    let mut md = preamble(args, robot, criteria, wall, jobs);
+    for model in [Model::Reduced, Model::Full] {
+        let of_model: Vec<&Row> = rows.iter().filter(|r| r.model == model).collect();
+        if of_model.is_empty() {
+            continue;
+        }
+        model_section(&mut md, &fig_dir, model, &of_model, variants, directions)?;
+    }
+    std::fs::write(out.join("capability.md"), md)?;
+    Ok(())
+}
+
+/// `capability.json` (the rows and the sweep's settings) and `capability.csv`.
+fn write_data(
+    out: &Path,
+    args: &CapabilityArgs,
+    criteria: &Criteria,
+    rows: &[Row],
     wall: f64,
     jobs: usize,
 ) -> Result<(), BoxError> {
@@ -544,9 +641,18 @@ fn write_outputs(
         );
     }
     std::fs::write(out.join("capability.csv"), csv)?;
+    Ok(())
+}
 
-    let fig_dir = out.join("figures");
-    std::fs::create_dir_all(&fig_dir)?;
+/// The report's title, the impact and the survival criteria, and what the user layered over
+/// the defaults.
+fn preamble(
+    args: &CapabilityArgs,
+    robot: &upc::robot::Robot,
+    criteria: &Criteria,
+    wall: f64,
+    jobs: usize,
+) -> String {
     let mut md = format!(
         "# Balance capability — robot `{}`, full simulation on the `{}` plant\n\n\
          Largest single impact on the hand survived (N), by bisection over [0, {}] N to {} N. \
@@ -586,105 +692,121 @@ fn write_outputs(
              bisection's figure is then a pocket of survival above a fall.\n\n"
         );
     }
-    for model in [Model::Reduced, Model::Full] {
-        let of_model: Vec<&Row> = rows.iter().filter(|r| r.model == model).collect();
-        if of_model.is_empty() {
-            continue;
-        }
-        let title = match model {
-            Model::Reduced => "Reduced models",
-            Model::Full => "Full simulation",
-        };
-        md += &format!("## {title}\n\n");
-        if model == Model::Full && directions.contains(&Direction::Y) {
-            md += "Along x the door pushes, as in the paper's scenarios. It pushes the hand \
-                   through its hinge, along the tangent of the hinge's circle (x at the handle): \
-                   a force along y is along the lever and would reach the hand as a tenth of \
-                   itself. Along y the force is applied at the hand itself, without the door \
-                   (`sim.push = \"hand\"`, upc's simulator only).\n\n";
-        }
-        let mut durations: Vec<f64> = of_model.iter().map(|r| r.duration).collect();
-        durations.sort_by(f64::total_cmp);
-        durations.dedup();
-        md += "| direction | duration (s) |";
-        for v in variants {
-            md += &format!(" {} (N) |", v.label());
-        }
-        md += " C1/C0 | C2/C1 |\n|---|---|";
-        md += &"---|".repeat(variants.len() + 2);
-        md += "\n";
-        let cell = |d: Direction, dur: f64, v: Variant| {
-            of_model
-                .iter()
-                .find(|r| {
-                    r.direction == d.label() && r.duration == dur && r.controller == v.label()
-                })
-                .map(|r| r.capability)
-        };
-        let present: Vec<Direction> = directions
+    md
+}
+
+/// One model's rows (`of_model`, not empty): its table, direction × duration against the
+/// controllers, and a figure per direction (written to `fig_dir`).
+fn model_section(
+    md: &mut String,
+    fig_dir: &Path,
+    model: Model,
+    of_model: &[&Row],
+    variants: &[Variant],
+    directions: &[Direction],
+) -> Result<(), BoxError> {
+    let title = match model {
+        Model::Reduced => "Reduced models",
+        Model::Full => "Full simulation",
+    };
+    *md += &format!("## {title}\n\n");
+    if model == Model::Full && directions.contains(&Direction::Y) {
+        *md += "Along x the door pushes, as in the paper's scenarios. It pushes the hand \
+               through its hinge, along the tangent of the hinge's circle (x at the handle): \
+               a force along y is along the lever and would reach the hand as a tenth of \
+               itself. Along y the force is applied at the hand itself, without the door \
+               (`sim.push = \"hand\"`, upc's simulator only).\n\n";
+    }
+    let mut durations: Vec<f64> = of_model.iter().map(|r| r.duration).collect();
+    durations.sort_by(f64::total_cmp);
+    durations.dedup();
+    let cell = |d: Direction, dur: f64, v: Variant| {
+        of_model
             .iter()
-            .copied()
-            .filter(|d| of_model.iter().any(|r| r.direction == d.label()))
+            .find(|r| r.direction == d.label() && r.duration == dur && r.controller == v.label())
+            .map(|r| r.capability)
+    };
+    let present: Vec<Direction> = directions
+        .iter()
+        .copied()
+        .filter(|d| of_model.iter().any(|r| r.direction == d.label()))
+        .collect();
+    capability_table(md, &present, &durations, variants, &cell);
+    for &d in &present {
+        let series: Vec<Series> = variants
+            .iter()
+            .map(|&v| {
+                let pts: Vec<(f64, f64)> = durations
+                    .iter()
+                    .filter_map(|&dur| cell(d, dur, v).map(|c| (dur, c.survived)))
+                    .collect();
+                Series::from_columns(
+                    v.label(),
+                    pts.iter().map(|p| p.0).collect(),
+                    vec![(Quantity::MaxForce, pts.iter().map(|p| p.1).collect())],
+                )
+            })
             .collect();
-        for &d in &present {
-            for &dur in &durations {
-                md += &format!("| {} | {dur} |", d.label());
-                for &v in variants {
-                    md += &match cell(d, dur, v) {
-                        Some(c) => format!(" {} |", c.text()),
-                        None => " – |".into(),
-                    };
-                }
-                let ratio = |a: Variant, b: Variant| match (cell(d, dur, a), cell(d, dur, b)) {
-                    (Some(x), Some(y)) if y.survived > 0.0 => {
-                        format!(" {:.2} |", x.survived / y.survived)
-                    }
-                    _ => " – |".into(),
-                };
-                md += &ratio(Variant::C1, Variant::C0);
-                md += &ratio(Variant::C2, Variant::C1);
-                md += "\n";
-            }
-        }
-        md += "\n";
-        for &d in &present {
-            let series: Vec<Series> = variants
-                .iter()
-                .map(|&v| {
-                    let pts: Vec<(f64, f64)> = durations
-                        .iter()
-                        .filter_map(|&dur| cell(d, dur, v).map(|c| (dur, c.survived)))
-                        .collect();
-                    Series::from_columns(
-                        v.label(),
-                        pts.iter().map(|p| p.0).collect(),
-                        vec![(Quantity::MaxForce, pts.iter().map(|p| p.1).collect())],
-                    )
-                })
-                .collect();
-            let sources: Vec<&dyn SeriesSource> =
-                series.iter().map(|s| s as &dyn SeriesSource).collect();
-            let model_tag = match model {
-                Model::Reduced => "reduced",
-                Model::Full => "full",
-            };
-            let fig = Figure {
-                name: format!("capability_{model_tag}_{}", d.label()),
-                title: format!("Largest impact survived along {} — {title}", d.label()),
-                x_label: "impact duration (s)",
-                panels: vec![Panel {
-                    title: "largest impact survived",
-                    y_label: "force (N)",
-                    scale: 1.0,
-                    lines: vec![Line::PerSource(Quantity::MaxForce)],
-                    support_axis: None,
-                }],
-            };
-            if let Some(w) = write_figure(&fig_dir, &fig, &sources, true)? {
-                md += &format!("![{}](figures/{})\n\n", w.title, w.svg);
-            }
+        let sources: Vec<&dyn SeriesSource> =
+            series.iter().map(|s| s as &dyn SeriesSource).collect();
+        let model_tag = match model {
+            Model::Reduced => "reduced",
+            Model::Full => "full",
+        };
+        let fig = Figure {
+            name: format!("capability_{model_tag}_{}", d.label()),
+            title: format!("Largest impact survived along {} — {title}", d.label()),
+            x_label: "impact duration (s)",
+            panels: vec![Panel {
+                title: "largest impact survived",
+                y_label: "force (N)",
+                scale: 1.0,
+                lines: vec![Line::PerSource(Quantity::MaxForce)],
+                support_axis: None,
+            }],
+        };
+        if let Some(w) = write_figure(fig_dir, &fig, &sources, true)? {
+            *md += &format!("![{}](figures/{})\n\n", w.title, w.svg);
         }
     }
-    std::fs::write(out.join("capability.md"), md)?;
     Ok(())
+}
+
+/// The table of one model: a line per direction and duration, the capability of each
+/// controller (`cell`), and the ratios C1/C0, C2/C1.
+fn capability_table(
+    md: &mut String,
+    present: &[Direction],
+    durations: &[f64],
+    variants: &[Variant],
+    cell: &dyn Fn(Direction, f64, Variant) -> Option<Capability>,
+) {
+    *md += "| direction | duration (s) |";
+    for v in variants {
+        *md += &format!(" {} (N) |", v.label());
+    }
+    *md += " C1/C0 | C2/C1 |\n|---|---|";
+    *md += &"---|".repeat(variants.len() + 2);
+    *md += "\n";
+    for &d in present {
+        for &dur in durations {
+            *md += &format!("| {} | {dur} |", d.label());
+            for &v in variants {
+                *md += &match cell(d, dur, v) {
+                    Some(c) => format!(" {} |", c.text()),
+                    None => " – |".into(),
+                };
+            }
+            let ratio = |a: Variant, b: Variant| match (cell(d, dur, a), cell(d, dur, b)) {
+                (Some(x), Some(y)) if y.survived > 0.0 => {
+                    format!(" {:.2} |", x.survived / y.survived)
+                }
+                _ => " – |".into(),
+            };
+            *md += &ratio(Variant::C1, Variant::C0);
+            *md += &ratio(Variant::C2, Variant::C1);
+            *md += "\n";
+        }
+    }
+    *md += "\n";
 }

@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;
 
+use indicatif::ProgressBar;
 use upc::capability::{Capability, Criteria, Direction, Variant, search};
 use upc::forecast::ForecastShape;
 
@@ -125,34 +126,8 @@ fn default_max(duration: f64) -> f64 {
 }
 
 pub fn run(args: RobustnessArgs) -> CliResult {
-    let variants = args
-        .controllers
-        .iter()
-        .map(|c| Variant::parse(c).ok_or_else(|| format!("unknown controller `{c}`")))
-        .collect::<Result<Vec<_>, _>>()?;
-    if args
-        .durations
-        .iter()
-        .chain(&args.scales)
-        .chain(&args.shifts)
-        .any(|v| !v.is_finite())
-        || args.durations.iter().any(|d| *d <= 0.0)
-        || args.scales.iter().any(|k| *k < 0.0)
-    {
-        return Err("durations must be > 0, scales ≥ 0, all finite".into());
-    }
-    if let Some(step) = args.monotone
-        && !(step.is_finite() && step > 0.0)
-    {
-        return Err(format!("--monotone must be > 0, got {step}").into());
-    }
-    let mut max_for = Vec::new();
-    for m in &args.max {
-        let (d, n) = m
-            .split_once('=')
-            .ok_or_else(|| format!("--max takes DURATION=N, got `{m}`"))?;
-        max_for.push((d.parse::<f64>()?, n.parse::<f64>()?));
-    }
+    let variants = checked_variants(&args)?;
+    let max_for = max_bounds(&args.max)?;
     let max_of = |d: f64| {
         max_for
             .iter()
@@ -179,9 +154,110 @@ pub fn run(args: RobustnessArgs) -> CliResult {
     let start = Instant::now();
 
     // Phase 1: the error grid (C0 and C0+obs ignore the forecast: one bisection each).
+    let mut cells = grid_cells(&args, &variants);
+    // MuJoCo's scene pushes through the door only: it cannot play a phantom (no push at all).
+    let no_phantom = args.no_phantom || args.plant == PlantChoice::Mujoco;
+    if no_phantom && !args.no_phantom {
+        eprintln!(
+            "robustness: no phantoms on the MuJoCo plant (it pushes through the door only); run them on upc's plant"
+        );
+    }
+    let forecasting = args.durations.len() * variants.iter().filter(|v| v.uses_forecast()).count();
+    let phantoms = if no_phantom { 0 } else { forecasting };
+    cells.extend(shape_cells(&args, &variants));
+    let per_case = 1
+        + ((args.max_bound() / args.tol).log2().ceil().max(0.0) as u64)
+        + args
+            .monotone
+            .map_or(0, |step| (args.max_bound() / step).ceil() as u64);
+    let bar = runs_bar(args.quiet, (cells.len() + phantoms) as u64 * per_case);
+    let sweep = Sweep {
+        args: &args,
+        exe: &exe,
+        out: &out,
+        jobs,
+        per_case,
+        bar: &bar,
+    };
+    let mut rows = sweep.run_cells(
+        cells
+            .iter()
+            .rev()
+            .map(|c| (*c, max_of(c.duration), criteria))
+            .collect(),
+    )?;
+
+    // Phase 2: phantoms up to twice C1's capability with an exact forecast (the forecast as
+    // received, when swept; else the variant's own).
+    if !no_phantom {
+        let ph = phantom_cells(&args, &variants, &rows, max_of, phantom_criteria);
+        rows.extend(sweep.run_cells(ph)?);
+    }
+    bar.finish_and_clear();
+    let wall = start.elapsed().as_secs_f64();
+    let order = |r: &Row| {
+        (
+            (r.duration * 1e6) as i64,
+            variants.iter().position(|v| v.label() == r.controller),
+            r.phantom,
+            r.shape.to_string(),
+            (r.scale * 1e6) as i64,
+            (r.shift * 1e6) as i64,
+        )
+    };
+    rows.sort_by_key(order);
+    write_outputs(&out, &args, &variants, &rows, wall, jobs)?;
+    println!(
+        "wrote {}/robustness.md ({wall:.0} s, {jobs} at a time)",
+        out.display()
+    );
+    Ok(())
+}
+
+/// The controllers named by `--controllers`, once the grid's values are checked.
+fn checked_variants(args: &RobustnessArgs) -> Result<Vec<Variant>, BoxError> {
+    let variants = args
+        .controllers
+        .iter()
+        .map(|c| Variant::parse(c).ok_or_else(|| format!("unknown controller `{c}`")))
+        .collect::<Result<Vec<_>, _>>()?;
+    if args
+        .durations
+        .iter()
+        .chain(&args.scales)
+        .chain(&args.shifts)
+        .any(|v| !v.is_finite())
+        || args.durations.iter().any(|d| *d <= 0.0)
+        || args.scales.iter().any(|k| *k < 0.0)
+    {
+        return Err("durations must be > 0, scales ≥ 0, all finite".into());
+    }
+    if let Some(step) = args.monotone
+        && !(step.is_finite() && step > 0.0)
+    {
+        return Err(format!("--monotone must be > 0, got {step}").into());
+    }
+    Ok(variants)
+}
+
+/// `--max`'s DURATION=N pairs.
+fn max_bounds(max: &[String]) -> Result<Vec<(f64, f64)>, BoxError> {
+    let mut max_for = Vec::new();
+    for m in max {
+        let (d, n) = m
+            .split_once('=')
+            .ok_or_else(|| format!("--max takes DURATION=N, got `{m}`"))?;
+        max_for.push((d.parse::<f64>()?, n.parse::<f64>()?));
+    }
+    Ok(max_for)
+}
+
+/// The κ × τ map's cells: every duration × controller × scale × shift, one cell for a
+/// controller that ignores the forecast.
+fn grid_cells(args: &RobustnessArgs, variants: &[Variant]) -> Vec<Cell> {
     let mut cells = Vec::new();
     for &duration in &args.durations {
-        for &variant in &variants {
+        for &variant in variants {
             if !variant.uses_forecast() {
                 cells.push(Cell {
                     variant,
@@ -205,16 +281,12 @@ pub fn run(args: RobustnessArgs) -> CliResult {
             }
         }
     }
-    // MuJoCo's scene pushes through the door only: it cannot play a phantom (no push at all).
-    let no_phantom = args.no_phantom || args.plant == PlantChoice::Mujoco;
-    if no_phantom && !args.no_phantom {
-        eprintln!(
-            "robustness: no phantoms on the MuJoCo plant (it pushes through the door only); run them on upc's plant"
-        );
-    }
-    let forecasting = args.durations.len() * variants.iter().filter(|v| v.uses_forecast()).count();
-    let phantoms = if no_phantom { 0 } else { forecasting };
-    // The shape cells: each forecasting controller and duration, each shape, κ = 1 and τ = 0.
+    cells
+}
+
+/// The shape cells: each forecasting controller and duration, each shape, κ = 1 and τ = 0.
+fn shape_cells(args: &RobustnessArgs, variants: &[Variant]) -> Vec<Cell> {
+    let mut cells = Vec::new();
     for &duration in &args.durations {
         for &variant in variants.iter().filter(|v| v.uses_forecast()) {
             for &shape in &args.shapes {
@@ -229,19 +301,70 @@ pub fn run(args: RobustnessArgs) -> CliResult {
             }
         }
     }
-    let per_case = 1
-        + ((args.max_bound() / args.tol).log2().ceil().max(0.0) as u64)
-        + args
-            .monotone
-            .map_or(0, |step| (args.max_bound() / step).ceil() as u64);
-    let bar = runs_bar(args.quiet, (cells.len() + phantoms) as u64 * per_case);
-    let robot = args.robot.robot.as_str();
-    let run_cells = |cells: Vec<(Cell, f64, Criteria)>| -> Result<Vec<Row>, BoxError> {
+    cells
+}
+
+/// The phantom cells, each searched up to twice C1's capability with an exact forecast from
+/// phase 1 (C1 raw's, else C1's, else the variant's own; else the default bound's share).
+fn phantom_cells(
+    args: &RobustnessArgs,
+    variants: &[Variant],
+    rows: &[Row],
+    max_of: impl Fn(f64) -> f64,
+    criteria: Criteria,
+) -> Vec<(Cell, f64, Criteria)> {
+    let exact = |label: &str, d: f64| {
+        rows.iter()
+            .find(|r| {
+                r.controller == label
+                    && r.duration == d
+                    && r.scale == 1.0
+                    && r.shift == 0.0
+                    && on_map(r)
+            })
+            .map(|r| r.capability.survived)
+    };
+    let mut ph = Vec::new();
+    for &duration in &args.durations {
+        for &variant in variants.iter().filter(|v| v.uses_forecast()) {
+            let cap = exact(Variant::C1Raw.label(), duration)
+                .or_else(|| exact(Variant::C1.label(), duration))
+                .or_else(|| exact(variant.label(), duration))
+                .unwrap_or(max_of(duration) / 2.5);
+            let cell = Cell {
+                variant,
+                duration,
+                forecast: ForecastCase {
+                    phantom: true,
+                    ..ForecastCase::EXACT
+                },
+            };
+            ph.push((cell, (2.0 * cap).max(args.tol), criteria));
+        }
+    }
+    ph
+}
+
+/// What every cell of a sweep shares: its cases run `jobs` at a time, each an `upc run`.
+struct Sweep<'a> {
+    args: &'a RobustnessArgs,
+    exe: &'a Path,
+    out: &'a Path,
+    jobs: usize,
+    /// Runs the progress bar counts per cell (the longest search).
+    per_case: u64,
+    bar: &'a ProgressBar,
+}
+
+impl Sweep<'_> {
+    /// Searches each cell (cell, upper bound, criteria), taken from the end of `cells`; the
+    /// first error stops the sweep.
+    fn run_cells(&self, cells: Vec<(Cell, f64, Criteria)>) -> Result<Vec<Row>, BoxError> {
         let queue = Mutex::new(cells);
         let rows = Mutex::new(Vec::new());
         let first_error = Mutex::new(None::<String>);
         std::thread::scope(|scope| {
-            for _ in 0..jobs {
+            for _ in 0..self.jobs {
                 scope.spawn(|| {
                     loop {
                         let Some((cell, max, crit)) =
@@ -249,50 +372,8 @@ pub fn run(args: RobustnessArgs) -> CliResult {
                         else {
                             return;
                         };
-                        let t0 = Instant::now();
-                        let case = FullCase {
-                            robot,
-                            plant: args.plant,
-                            variant: cell.variant,
-                            duration: cell.duration,
-                            direction: Direction::X,
-                            forecast: cell.forecast,
-                            config: &args.config,
-                            sensing: args.sensing,
-                            sim_sets: &args.sim_sets,
-                        };
-                        let mut at_max = None;
-                        let mut survives = |a: f64| -> Result<bool, BoxError> {
-                            bar.inc(1);
-                            let r = full_case(&exe, &case, &out, a, &crit)?;
-                            if a == max && cell.forecast.phantom {
-                                let num = |k: &str| {
-                                    r.summary
-                                        .as_ref()
-                                        .and_then(|s| s.get(k))
-                                        .and_then(serde_json::Value::as_f64)
-                                        .unwrap_or(f64::NAN)
-                                };
-                                at_max = Some((num("com_height_drop"), num("min_zmp_margin")));
-                            }
-                            Ok(r.survived)
-                        };
-                        match search(max, args.tol, args.monotone, &mut survives) {
-                            Ok(c) => {
-                                bar.inc(per_case.saturating_sub(c.runs as u64));
-                                rows.lock().unwrap_or_else(|p| p.into_inner()).push(Row {
-                                    controller: cell.variant.label(),
-                                    duration: cell.duration,
-                                    scale: cell.forecast.scale,
-                                    shift: cell.forecast.shift,
-                                    phantom: cell.forecast.phantom,
-                                    shape: cell.forecast.shape,
-                                    max,
-                                    capability: c,
-                                    at_max,
-                                    wall_time: t0.elapsed().as_secs_f64(),
-                                });
-                            }
+                        match self.search_cell(cell, max, &crit) {
+                            Ok(row) => rows.lock().unwrap_or_else(|p| p.into_inner()).push(row),
                             Err(e) => {
                                 first_error
                                     .lock()
@@ -309,68 +390,55 @@ pub fn run(args: RobustnessArgs) -> CliResult {
             return Err(e.into());
         }
         Ok(rows.into_inner().unwrap_or_else(|p| p.into_inner()))
-    };
-    let mut rows = run_cells(
-        cells
-            .iter()
-            .rev()
-            .map(|c| (*c, max_of(c.duration), criteria))
-            .collect(),
-    )?;
-
-    // Phase 2: phantoms up to twice C1's capability with an exact forecast (the forecast as
-    // received, when swept; else the variant's own).
-    if !no_phantom {
-        let exact = |label: &str, d: f64| {
-            rows.iter()
-                .find(|r| {
-                    r.controller == label
-                        && r.duration == d
-                        && r.scale == 1.0
-                        && r.shift == 0.0
-                        && on_map(r)
-                })
-                .map(|r| r.capability.survived)
-        };
-        let mut ph = Vec::new();
-        for &duration in &args.durations {
-            for &variant in variants.iter().filter(|v| v.uses_forecast()) {
-                let cap = exact(Variant::C1Raw.label(), duration)
-                    .or_else(|| exact(Variant::C1.label(), duration))
-                    .or_else(|| exact(variant.label(), duration))
-                    .unwrap_or(max_of(duration) / 2.5);
-                let cell = Cell {
-                    variant,
-                    duration,
-                    forecast: ForecastCase {
-                        phantom: true,
-                        ..ForecastCase::EXACT
-                    },
-                };
-                ph.push((cell, (2.0 * cap).max(args.tol), phantom_criteria));
-            }
-        }
-        rows.extend(run_cells(ph)?);
     }
-    bar.finish_and_clear();
-    let wall = start.elapsed().as_secs_f64();
-    let order = |r: &Row| {
-        (
-            (r.duration * 1e6) as i64,
-            variants.iter().position(|v| v.label() == r.controller),
-            r.phantom,
-            r.shape.to_string(),
-            (r.scale * 1e6) as i64,
-            (r.shift * 1e6) as i64,
-        )
-    };
-    rows.sort_by_key(order);
-    write_outputs(&out, &args, &variants, &rows, wall, jobs)?;
-    println!(
-        "wrote {}/robustness.md ({wall:.0} s, {jobs} at a time)",
-        out.display()
-    );
-    Ok(())
+
+    /// One cell's bisection up to `max`; a phantom's row keeps the summary of its case at
+    /// `max`.
+    fn search_cell(&self, cell: Cell, max: f64, crit: &Criteria) -> Result<Row, BoxError> {
+        let args = self.args;
+        let t0 = Instant::now();
+        let case = FullCase {
+            robot: args.robot.robot.as_str(),
+            plant: args.plant,
+            variant: cell.variant,
+            duration: cell.duration,
+            direction: Direction::X,
+            forecast: cell.forecast,
+            config: &args.config,
+            sensing: args.sensing,
+            sim_sets: &args.sim_sets,
+        };
+        let mut at_max = None;
+        let mut survives = |a: f64| -> Result<bool, BoxError> {
+            self.bar.inc(1);
+            let r = full_case(self.exe, &case, self.out, a, crit)?;
+            if a == max && cell.forecast.phantom {
+                let num = |k: &str| {
+                    r.summary
+                        .as_ref()
+                        .and_then(|s| s.get(k))
+                        .and_then(serde_json::Value::as_f64)
+                        .unwrap_or(f64::NAN)
+                };
+                at_max = Some((num("com_height_drop"), num("min_zmp_margin")));
+            }
+            Ok(r.survived)
+        };
+        let c = search(max, args.tol, args.monotone, &mut survives)?;
+        self.bar.inc(self.per_case.saturating_sub(c.runs as u64));
+        Ok(Row {
+            controller: cell.variant.label(),
+            duration: cell.duration,
+            scale: cell.forecast.scale,
+            shift: cell.forecast.shift,
+            phantom: cell.forecast.phantom,
+            shape: cell.forecast.shape,
+            max,
+            capability: c,
+            at_max,
+            wall_time: t0.elapsed().as_secs_f64(),
+        })
+    }
 }
 
 impl RobustnessArgs {
@@ -386,6 +454,40 @@ fn write_outputs(
     out: &Path,
     args: &RobustnessArgs,
     variants: &[Variant],
+    rows: &[Row],
+    wall: f64,
+    jobs: usize,
+) -> Result<(), BoxError> {
+    write_data(out, args, rows, wall, jobs)?;
+    let fig_dir = out.join("figures");
+    std::fs::create_dir_all(&fig_dir)?;
+    let mut md = preamble(args, wall, jobs);
+    for &d in &args.durations {
+        let _ = writeln!(md, "## {d} s impact\n");
+        for &v in variants {
+            if !v.uses_forecast() {
+                if let Some(c) = map_capability(rows, v.label(), d) {
+                    let _ = writeln!(
+                        md,
+                        "**{}**: {} N at every κ and τ (ignores the forecast).\n",
+                        v.label(),
+                        Capability::text(&c)
+                    );
+                }
+                continue;
+            }
+            forecasting_section(&mut md, &fig_dir, args, rows, v, d)?;
+        }
+        shape_table(&mut md, args, variants, rows, d);
+    }
+    std::fs::write(out.join("robustness.md"), md)?;
+    Ok(())
+}
+
+/// `robustness.json` (the rows and the sweep's settings) and `robustness.csv`.
+fn write_data(
+    out: &Path,
+    args: &RobustnessArgs,
     rows: &[Row],
     wall: f64,
     jobs: usize,
@@ -426,9 +528,11 @@ fn write_outputs(
         );
     }
     std::fs::write(out.join("robustness.csv"), csv)?;
-    let fig_dir = out.join("figures");
-    std::fs::create_dir_all(&fig_dir)?;
+    Ok(())
+}
 
+/// The report's title, what its figures mean, and what the user layered over the defaults.
+fn preamble(args: &RobustnessArgs, wall: f64, jobs: usize) -> String {
     let mut md = format!(
         "# Robustness to forecast errors — robot `{}`, `{}` plant\n\n\
          Largest single impact along x survived (N; full simulation, `upc capability`'s \
@@ -465,98 +569,109 @@ fn write_outputs(
              bisection's result. The heat maps show the bisection's.\n"
         );
     }
-    for &d in &args.durations {
-        let _ = writeln!(md, "## {d} s impact\n");
-        let c0 = |label: &str| {
-            rows.iter()
-                .find(|r| r.controller == label && r.duration == d && on_map(r))
-                .map(|r| r.capability)
-        };
-        for &v in variants {
-            if !v.uses_forecast() {
-                if let Some(c) = c0(v.label()) {
-                    let _ = writeln!(
-                        md,
-                        "**{}**: {} N at every κ and τ (ignores the forecast).\n",
-                        v.label(),
-                        Capability::text(&c)
-                    );
-                }
-                continue;
-            }
-            let _ = writeln!(md, "**{}**\n", v.label());
-            md += "| κ \\ τ (ms) |";
-            for s in &args.shifts {
-                let _ = write!(md, " {:+.0} |", s * 1e3);
-            }
-            md += "\n|---|";
-            md += &"---|".repeat(args.shifts.len());
-            md += "\n";
-            let mut grid = Vec::new();
-            for &k in &args.scales {
-                let _ = write!(md, "| {k} |");
-                let mut line = Vec::new();
-                for &s in &args.shifts {
-                    let c = rows
-                        .iter()
-                        .find(|r| {
-                            r.controller == v.label()
-                                && r.duration == d
-                                && on_map(r)
-                                && r.scale == k
-                                && r.shift == s
-                        })
-                        .map(|r| r.capability);
-                    let _ = write!(md, " {} |", c.map_or("–".into(), |c| Capability::text(&c)));
-                    line.push(c.map(|c| c.survived));
-                }
-                md += "\n";
-                grid.push(line);
-            }
-            if let Some(p) = rows
-                .iter()
-                .find(|r| r.controller == v.label() && r.duration == d && r.phantom)
-            {
-                let _ = write!(
-                    md,
-                    "\nPhantom: survived up to {} N of {:.0} N searched",
-                    Capability::text(&p.capability),
-                    p.max
-                );
-                if let Some((drop, margin)) = p.at_max {
-                    let _ = write!(
-                        md,
-                        " (at {:.0} N: CoM drop {:.1} mm, min CoP margin {:.1} mm)",
-                        p.max,
-                        drop * 1e3,
-                        margin * 1e3
-                    );
-                }
-                md += ".\n";
-            }
-            let name = format!(
-                "robustness_{}_{:.0}ms",
-                v.label().replace(['+', ' '], "_").to_lowercase(),
-                d * 1e3
+    md
+}
+
+/// The capability of controller `label` at duration `d` on the κ × τ map (the first such row:
+/// a controller that ignores the forecast has one).
+fn map_capability(rows: &[Row], label: &str, d: f64) -> Option<Capability> {
+    rows.iter()
+        .find(|r| r.controller == label && r.duration == d && on_map(r))
+        .map(|r| r.capability)
+}
+
+/// A forecasting controller at duration `d`: its κ × τ table, its phantom, and its heat map
+/// (written to `fig_dir`).
+fn forecasting_section(
+    md: &mut String,
+    fig_dir: &Path,
+    args: &RobustnessArgs,
+    rows: &[Row],
+    v: Variant,
+    d: f64,
+) -> Result<(), BoxError> {
+    let _ = writeln!(md, "**{}**\n", v.label());
+    let grid = kappa_tau_table(md, args, rows, v, d);
+    if let Some(p) = rows
+        .iter()
+        .find(|r| r.controller == v.label() && r.duration == d && r.phantom)
+    {
+        let _ = write!(
+            md,
+            "\nPhantom: survived up to {} N of {:.0} N searched",
+            Capability::text(&p.capability),
+            p.max
+        );
+        if let Some((drop, margin)) = p.at_max {
+            let _ = write!(
+                md,
+                " (at {:.0} N: CoM drop {:.1} mm, min CoP margin {:.1} mm)",
+                p.max,
+                drop * 1e3,
+                margin * 1e3
             );
-            let c0_cap = c0(Variant::C0.label()).map(|c| c.survived);
-            std::fs::write(
-                fig_dir.join(format!("{name}.svg")),
-                heat_map(
-                    &format!("{} — {d} s impact: largest survived (N)", v.label()),
-                    &args.scales,
-                    &args.shifts,
-                    &grid,
-                    max_or(rows, d),
-                    c0_cap,
-                ),
-            )?;
-            let _ = writeln!(md, "\n![{}](figures/{name}.svg)\n", v.label());
         }
-        shape_table(&mut md, args, variants, rows, d);
+        *md += ".\n";
     }
-    std::fs::write(out.join("robustness.md"), md)?;
+    let name = format!(
+        "robustness_{}_{:.0}ms",
+        v.label().replace(['+', ' '], "_").to_lowercase(),
+        d * 1e3
+    );
+    let c0_cap = map_capability(rows, Variant::C0.label(), d).map(|c| c.survived);
+    std::fs::write(
+        fig_dir.join(format!("{name}.svg")),
+        heat_map(
+            &format!("{} — {d} s impact: largest survived (N)", v.label()),
+            &args.scales,
+            &args.shifts,
+            &grid,
+            max_or(rows, d),
+            c0_cap,
+        ),
+    )?;
+    let _ = writeln!(md, "\n![{}](figures/{name}.svg)\n", v.label());
     Ok(())
+}
+
+/// The κ × τ table of controller `v` at duration `d`; returns the amplitudes survived, a line
+/// per κ (the heat map's cells).
+fn kappa_tau_table(
+    md: &mut String,
+    args: &RobustnessArgs,
+    rows: &[Row],
+    v: Variant,
+    d: f64,
+) -> Vec<Vec<Option<f64>>> {
+    *md += "| κ \\ τ (ms) |";
+    for s in &args.shifts {
+        let _ = write!(md, " {:+.0} |", s * 1e3);
+    }
+    *md += "\n|---|";
+    *md += &"---|".repeat(args.shifts.len());
+    *md += "\n";
+    let mut grid = Vec::new();
+    for &k in &args.scales {
+        let _ = write!(md, "| {k} |");
+        let mut line = Vec::new();
+        for &s in &args.shifts {
+            let c = rows
+                .iter()
+                .find(|r| {
+                    r.controller == v.label()
+                        && r.duration == d
+                        && on_map(r)
+                        && r.scale == k
+                        && r.shift == s
+                })
+                .map(|r| r.capability);
+            let _ = write!(md, " {} |", c.map_or("–".into(), |c| Capability::text(&c)));
+            line.push(c.map(|c| c.survived));
+        }
+        *md += "\n";
+        grid.push(line);
+    }
+    grid
 }
 
 /// A row of the κ × τ map (not a phantom, not a shape error).

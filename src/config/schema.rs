@@ -18,7 +18,7 @@ pub struct Config {
 
 /// The world the controller believes the robot in. What follows from the robot itself (mass,
 /// CoM height, support, M_e, frames) is no setting: it comes from the robot's model
-/// (`crate::preview::ReducedModel`, `crate::robot::Robot`).
+/// (`crate::robot::ReducedModel`, `crate::robot::Robot`).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RobotConfig {

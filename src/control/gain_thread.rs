@@ -164,7 +164,7 @@ impl GainHandoff {
     /// `config`.
     pub fn spawn(
         config: &Config,
-        robot: &crate::preview::ReducedModel,
+        robot: &crate::robot::ReducedModel,
     ) -> Result<Self, crate::preview::PreviewError> {
         Self::spawn_with(config, Box::new(GainSearch::from_config(config, robot)?))
     }

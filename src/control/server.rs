@@ -40,8 +40,7 @@ use crate::channels::{
 };
 use crate::col;
 use crate::config::{Config, ControllerKind, LoopMode};
-use crate::preview::ReducedModel;
-use crate::robot::Robot;
+use crate::robot::{ReducedModel, Robot};
 use crate::wbc::{FallbackReason, WbcStatus};
 
 /// The phase lock's lead and step, as a fraction of the period: 1/8, well inside the grace

@@ -14,9 +14,8 @@ pub use metrics::{Metrics, Row};
 use crate::config::{Config, ControllerKind};
 use crate::preview::constrained::ConstrainedPreview;
 use crate::preview::gain_search::{GainSearch, GainSearchInputs, GainSearchReport};
-use crate::preview::{
-    AxisState, GainSchedule, HandPreviewer, HandState, PreviewError, ReducedModel, ZmpPreview,
-};
+use crate::preview::{AxisState, GainSchedule, HandPreviewer, HandState, PreviewError, ZmpPreview};
+use crate::robot::ReducedModel;
 use crate::scenario::Scenario;
 
 /// A finished run.

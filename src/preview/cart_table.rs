@@ -3,6 +3,8 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+use crate::robot::ReducedModel;
+
 /// Cart-table model: state x̂ = [x, ẋ, ẍ], input u = CoM jerk, sampling period T.
 #[derive(Debug, Clone, Copy)]
 pub struct CartTable {
@@ -48,5 +50,20 @@ impl CartTable {
     /// ZMP of a state under a disturbance (eq. 10): p = x − M z_c α0 ẍ + z_c α.
     pub fn zmp(&self, x: &Vector3<f64>, alpha0: f64, alpha: f64) -> f64 {
         x[0] + self.output_acc_coeff(alpha0) * x[2] + self.com_height * alpha
+    }
+}
+
+// The robot owns the figures (`crate::robot::ReducedModel`); the cart-table made of them is the
+// preview's, so its constructor lives here and the robot needs nothing from the preview.
+impl ReducedModel {
+    /// The cart-table of eq. (1)–(3) sampled at `period` under gravity `gravity` (a setting of
+    /// the world, `robot.gravity` of the config).
+    pub fn cart_table(&self, period: f64, gravity: f64) -> CartTable {
+        CartTable {
+            period,
+            com_height: self.com_height,
+            mass: self.mass,
+            gravity,
+        }
     }
 }

@@ -9,7 +9,9 @@
 //! - [`HandPreviewer`]: hand impedance over the horizon and the equivalent CoM disturbance (eq. 24–25).
 //! - [`gain_search`]: C2, gains as decision variables (eq. 26).
 //! - [`constrained`]: the optional ZMP-bounded C1 (Wieber 2006) as a QP.
-//! - [`ReducedModel`]: what these models take from the robot, computed from its model.
+//!
+//! What these models take from the robot (mass, CoM height, support, M_e) is the robot's:
+//! [`crate::robot::ReducedModel`], from [`crate::robot::Robot::reduced`].
 
 mod cart_table;
 pub mod constrained;
@@ -18,7 +20,6 @@ mod disturbance;
 mod error;
 pub mod gain_search;
 mod hand;
-mod reduced_model;
 mod riccati;
 mod zmp_preview;
 
@@ -26,6 +27,5 @@ pub use cart_table::CartTable;
 pub use disturbance::Disturbance;
 pub use error::PreviewError;
 pub use hand::{GainSchedule, HandPreviewer, HandState};
-pub use reduced_model::ReducedModel;
 pub use riccati::Riccati;
 pub use zmp_preview::{AxisState, PreviewPlan, ZmpPreview};

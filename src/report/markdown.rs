@@ -8,7 +8,7 @@ use super::reduced::min_support_margin;
 use super::rundir::RunDir;
 use super::series::{Quantity, ReducedRun, SeriesSource};
 use crate::config::Config;
-use crate::preview::ReducedModel;
+use crate::robot::ReducedModel;
 use crate::scenario::{ForceProfile, Scenario};
 
 /// `v` with `prec` decimals, "–" when unknown or not finite.

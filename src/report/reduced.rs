@@ -6,8 +6,7 @@ use std::path::PathBuf;
 use super::ReportError;
 use super::series::ReducedRun;
 use crate::config::{Config, ControllerKind};
-use crate::preview::ReducedModel;
-use crate::robot::Robot;
+use crate::robot::{ReducedModel, Robot};
 use crate::scenario::Scenario;
 
 /// Config layers as `upc` builds them: defaults ← the robot's ← files ← the scenario's

@@ -1,14 +1,17 @@
 //! The four contact points under each sole, as frames of the model named `<sole>_fl`, `_fr`,
-//! `_rl`, `_rr` (front/rear, left/right in the sole frame: the whole-body controller's
-//! [`CORNERS`], which it and the simulator look up). Given as frames of the URDF, as points, or derived from the foot's
-//! collision geometry.
+//! `_rl`, `_rr` (front/rear, left/right in the sole frame: [`CORNERS`], which the whole-body
+//! controller and the simulator look up). Given as frames of the URDF, as points, or derived
+//! from the foot's collision geometry.
 
 use nalgebra::{Matrix3, Vector3};
 
 use super::RobotError;
 use super::description::{ContactSpec, FootSpec};
 use crate::dynamics::{Model, SE3};
-use crate::wbc::CORNERS;
+
+/// Corner frame suffixes, front/rear and left/right in the sole frame: the order of each foot's
+/// four contact forces in the channel contract and in the whole-body controller's output.
+pub const CORNERS: [&str; 4] = ["fl", "fr", "rl", "rr"];
 
 /// Placement of link or frame `name` in its carrying body, and the body's joint.
 fn on_body(model: &Model, name: &str) -> Option<(Option<usize>, SE3)> {

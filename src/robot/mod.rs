@@ -9,6 +9,7 @@ pub mod description;
 pub mod feet;
 pub mod packages;
 pub mod physical;
+mod reduced_model;
 mod state;
 
 use std::collections::HashMap;
@@ -17,15 +18,15 @@ use std::path::{Path, PathBuf};
 use nalgebra::{DVector, Matrix3, Vector3};
 
 pub use description::{FootSensors, RobotDescription, SensorSpec};
+pub use feet::CORNERS;
+pub use reduced_model::ReducedModel;
 pub use state::{RobotState, SensorStamps};
 
 use crate::config::{ConfigError, Layers};
 use crate::dynamics::{
     BaseJoint, Data, DynamicsError, Model, OpSpaceWorkspace, center_of_mass, forward_kinematics,
 };
-use crate::preview::ReducedModel;
 use crate::scenario::ContentHash;
-use crate::wbc::BodyFrames;
 
 /// The robot every process uses without `--robot`.
 pub const DEFAULT: &str = "icub_like";
@@ -116,6 +117,20 @@ pub struct Derived {
     pub sole_tilt: f64,
     /// Sole centres' distance (m).
     pub feet_distance: f64,
+}
+
+/// The frames the whole-body QP's contacts and hand task act on, named by the robot's description
+/// ([`Robot::frames`]), not by the config.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct BodyFrames {
+    /// Sole frames of the two feet; the contact points are the frames `<foot>_fl`, `_fr`, `_rl`,
+    /// `_rr` (the sole corners, [`CORNERS`]), the contact normal is the sole frame's z axis.
+    pub feet: [String; 2],
+    /// Frame of the hand impedance task.
+    pub hand: String,
+    /// The body the hand's arm chain starts from (M_e of the chain root → hand,
+    /// docs/hand_previewer.md, eq. (21)–(23)).
+    pub hand_chain_root: String,
 }
 
 /// A resolved robot: immutable after loading.

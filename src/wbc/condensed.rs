@@ -219,8 +219,16 @@ impl CondensedQp {
         Ok(almost)
     }
 
-    /// Builds the reduced QP's P, q, cone rows from the tick's data (see the module docs).
+    /// Builds the reduced QP's P, q, cone rows from the tick's data (see the module docs): the
+    /// unconstrained optimum in q̈, the equality rows' Schur complement, then the QP in f.
     fn reduce(&mut self, pb: &Problem) -> Result<(), CondensedError> {
+        self.unconstrained(pb)?;
+        self.schur_complement(pb)?;
+        self.force_qp(pb)
+    }
+
+    /// H (factored in place into L) and `u = −H⁻¹ g`: the optimum of the q̈ cost terms alone.
+    fn unconstrained(&mut self, pb: &Problem) -> Result<(), CondensedError> {
         let nv = self.nv;
         // H = D + Σ w JᵀJ, lower triangle (all the Cholesky reads).
         {
@@ -256,6 +264,13 @@ impl CondensedQp {
         self.l_h.solve_lower_triangular_unchecked_mut(&mut self.u);
         self.l_h
             .tr_solve_lower_triangular_unchecked_mut(&mut self.u);
+        Ok(())
+    }
+
+    /// Of the equality rows `C q̈ = d₀ + E f` at the unconstrained optimum: ρ = d₀ − C u,
+    /// W = L⁻¹ Cᵀ, S = Wᵀ W (factored in place), then S⁻¹ ρ and X = S⁻¹[:, 0..6].
+    fn schur_complement(&mut self, pb: &Problem) -> Result<(), CondensedError> {
+        let nv = self.nv;
         // Cᵀ = [M[:, 0..6], J_sᵀ] (M symmetric), d₀ = [−h_u; b_s].
         for c in 0..6 {
             for i in 0..nv {
@@ -295,6 +310,12 @@ impl CondensedQp {
         self.l_s.solve_lower_triangular_unchecked_mut(&mut self.x6);
         self.l_s
             .tr_solve_lower_triangular_unchecked_mut(&mut self.x6);
+        Ok(())
+    }
+
+    /// The QP in the forces handed to clarabel: P, the rows `Bᵀ f − δ = y*` and the friction
+    /// cones, scaled by the force unit.
+    fn force_qp(&mut self, pb: &Problem) -> Result<(), CondensedError> {
         // B = J_c,u. The cost ½ fᵀ (B X_u Bᵀ + w_f I) f + ((S⁻¹ρ)_u)ᵀ Bᵀ f is, up to a
         // constant, ½ δᵀ X_u δ + ½ w_f ‖f‖² with δ = Bᵀ f − y*, y* = −X_u⁻¹ (S⁻¹ρ)_u: the
         // contacts' wrench on the base against the one the tasks ask for. Written so (δ as 6

@@ -66,7 +66,7 @@ use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Quaternion, UnitQuaternion, V
 
 use super::com_bias::{com_drift_from_pass, drift_pass, frame_drift_from_pass};
 use super::condensed::{CondensedError, CondensedQp, Problem};
-pub use super::outcome::{BodyFrames, CORNERS, FallbackReason, N_CONTACTS, WbcCounters, WbcStatus};
+pub use super::outcome::{FallbackReason, N_CONTACTS, WbcCounters, WbcStatus};
 use super::pattern::Pattern;
 use super::qp::QpInstance;
 use super::tasks::{
@@ -79,9 +79,8 @@ use crate::dynamics::{
     forward_kinematics, get_frame_jacobian, gravity_torques, jacobian_center_of_mass,
     nonlinear_effects, update_frame_placements,
 };
+use crate::robot::{BodyFrames, CORNERS};
 
-/// Number of point contacts: 4 sole corners on each of 2 feet, one home for the QP and the
-/// channel contract's arrays.
 /// Warnings about fallbacks are emitted at most once per this many ticks.
 const WARN_EVERY_TICKS: u64 = 1000;
 
@@ -175,6 +174,81 @@ struct Params {
     formulation: WbcFormulation,
 }
 
+impl Params {
+    fn of(config: &WbcConfig) -> Self {
+        Params {
+            friction: config.friction,
+            contact_damping: config.contact_damping,
+            w_reg_force: config.w_reg_force,
+            base_kp: config.base_kp,
+            base_kd: config.base_kd,
+            posture_kp: config.posture_kp,
+            posture_kd: config.posture_kd,
+            fallback_damping: config.fallback_damping,
+            reuse_solver: config.reuse_solver,
+            formulation: config.formulation,
+        }
+    }
+}
+
+/// The actuated joints as the QP sees them.
+struct Actuation {
+    /// Configuration index of each actuated dof.
+    q_index: Vec<usize>,
+    /// Effort limit of each actuated dof (∞ when unlimited).
+    tau_max: DVector<f64>,
+    /// Velocity indices of the joints with a torque row and their limits (N·m, scaled).
+    limited: Vec<(usize, f64)>,
+}
+
+impl Actuation {
+    /// Every joint after the free flyer must be 1-DoF (the torque rows and the posture task
+    /// index them by one velocity).
+    fn of(model: &Model, config: &WbcConfig) -> Result<Self, WbcError> {
+        let na = model.nv - 6;
+        let mut q_index = Vec::with_capacity(na);
+        let mut tau_max = DVector::from_element(na, f64::INFINITY);
+        let mut limited = Vec::new();
+        for j in &model.joints[1..] {
+            if j.nv() != 1 || j.nq() != 1 {
+                return Err(WbcError::UnsupportedJoint(j.name.clone()));
+            }
+            q_index.push(j.idx_q);
+            let e = j.limits.effort * config.torque_limit_scale;
+            // An effort of 0 (URDF's "unspecified") or ∞ means no torque row.
+            if e.is_finite() && e > 0.0 {
+                limited.push((j.idx_v, e));
+                tau_max[j.idx_v - 6] = e;
+            }
+        }
+        Ok(Actuation {
+            q_index,
+            tau_max,
+            limited,
+        })
+    }
+}
+
+/// Frame ids of the two soles, of their corners (`<foot>_<corner>`, left foot first, each in
+/// [`CORNERS`] order) and of the hand.
+fn frame_ids(
+    model: &Model,
+    frames: &BodyFrames,
+) -> Result<([usize; 2], [usize; N_CONTACTS], usize), WbcError> {
+    let foot_ids = [
+        model.frame_id(&frames.feet[0])?,
+        model.frame_id(&frames.feet[1])?,
+    ];
+    let mut corner_ids = [0; N_CONTACTS];
+    for (k, foot) in frames.feet.iter().enumerate() {
+        for (s, suffix) in CORNERS.iter().enumerate() {
+            corner_ids[4 * k + s] = model.frame_id(&format!("{foot}_{suffix}"))?;
+        }
+    }
+    let hand_id = model.frame_id(&frames.hand)?;
+    Ok((foot_ids, corner_ids, hand_id))
+}
+
 /// The whole-body torque controller. See the module documentation for the problem.
 pub struct WholeBodyController {
     p: Params,
@@ -243,32 +317,12 @@ impl WholeBodyController {
         }
         let nv = model.nv;
         let na = nv - 6;
-        let mut q_index = Vec::with_capacity(na);
-        let mut tau_max = DVector::from_element(na, f64::INFINITY);
-        let mut limited = Vec::new();
-        for j in &model.joints[1..] {
-            if j.nv() != 1 || j.nq() != 1 {
-                return Err(WbcError::UnsupportedJoint(j.name.clone()));
-            }
-            q_index.push(j.idx_q);
-            let e = j.limits.effort * config.torque_limit_scale;
-            // An effort of 0 (URDF's "unspecified") or ∞ means no torque row.
-            if e.is_finite() && e > 0.0 {
-                limited.push((j.idx_v, e));
-                tau_max[j.idx_v - 6] = e;
-            }
-        }
-        let foot_ids = [
-            model.frame_id(&frames.feet[0])?,
-            model.frame_id(&frames.feet[1])?,
-        ];
-        let mut corner_ids = [0; N_CONTACTS];
-        for (k, foot) in frames.feet.iter().enumerate() {
-            for (s, suffix) in CORNERS.iter().enumerate() {
-                corner_ids[4 * k + s] = model.frame_id(&format!("{foot}_{suffix}"))?;
-            }
-        }
-        let hand_id = model.frame_id(&frames.hand)?;
+        let Actuation {
+            q_index,
+            tau_max,
+            limited,
+        } = Actuation::of(model, config)?;
+        let (foot_ids, corner_ids, hand_id) = frame_ids(model, frames)?;
 
         let tasks = TaskList::new(
             nv,
@@ -290,18 +344,7 @@ impl WholeBodyController {
         let settings = clarabel_settings(config);
         let condensed = CondensedQp::new(nv, model.total_mass() * model.gravity.norm());
         let mut wbc = Self {
-            p: Params {
-                friction: config.friction,
-                contact_damping: config.contact_damping,
-                w_reg_force: config.w_reg_force,
-                base_kp: config.base_kp,
-                base_kd: config.base_kd,
-                posture_kp: config.posture_kp,
-                posture_kd: config.posture_kd,
-                fallback_damping: config.fallback_damping,
-                reuse_solver: config.reuse_solver,
-                formulation: config.formulation,
-            },
+            p: Params::of(config),
             settings,
             nq: model.nq,
             layout,
@@ -340,23 +383,28 @@ impl WholeBodyController {
             last_warn_tick: None,
         };
         if wbc.p.reuse_solver {
-            // The middle of every joint's range first: straight legs (the neutral
-            // configuration of most humanoids) make the condensed problem singular.
-            let mut data = Data::new(model);
-            let mut prepared = Err(WbcError::NoFloatingBase);
-            for q in [mid_range(model), model.neutral()] {
-                prepared = wbc.prepare(model, &mut data, &q);
-                if prepared.is_ok() {
-                    break;
-                }
-            }
-            if let Err(e) = prepared {
-                // Not fatal: a solver missing here is built by the first tick that needs it
-                // (counted in `solver_builds`).
-                tracing::warn!("whole-body controller: {e}; the first ticks will build them");
-            }
+            wbc.prepare_at_construction(model);
         }
         Ok(wbc)
+    }
+
+    /// [`Self::prepare`] at the middle of every joint's range, else at the neutral
+    /// configuration: straight legs (the neutral configuration of most humanoids) make the
+    /// condensed problem singular.
+    fn prepare_at_construction(&mut self, model: &Model) {
+        let mut data = Data::new(model);
+        let mut prepared = Err(WbcError::NoFloatingBase);
+        for q in [mid_range(model), model.neutral()] {
+            prepared = self.prepare(model, &mut data, &q);
+            if prepared.is_ok() {
+                break;
+            }
+        }
+        if let Err(e) = prepared {
+            // Not fatal: a solver missing here is built by the first tick that needs it
+            // (counted in `solver_builds`).
+            tracing::warn!("whole-body controller: {e}; the first ticks will build them");
+        }
     }
 
     /// Builds every clarabel solver the configured formulation may use — the condensed one

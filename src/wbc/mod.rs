@@ -9,8 +9,8 @@
 //! - [`controller`]: [`WholeBodyController`], its command / output / status types, the fallback.
 //! - `condensed`: the same QP condensed onto the 24 contact forces (the default; the full one
 //!   stays as the reference and the fallback).
-//! - [`outcome`]: what both formulations share: the contact layout, a tick's status and
-//!   counters.
+//! - [`outcome`]: what both formulations share: the contact count, a tick's status and
+//!   counters (the contact frames are the robot's: `crate::robot::BodyFrames`, `CORNERS`).
 //! - `tasks`: the QP's tasks as data and the layout of its variables and rows, decided once
 //!   and read by both formulations.
 //! - `qp`: one clarabel problem with a fixed sparsity pattern, updated in place each tick.
@@ -25,6 +25,6 @@ mod qp;
 mod tasks;
 
 pub use controller::{
-    BodyFrames, CORNERS, FallbackReason, N_CONTACTS, WbcCommand, WbcCounters, WbcError, WbcOutput,
-    WbcStatus, WholeBodyController,
+    FallbackReason, N_CONTACTS, WbcCommand, WbcCounters, WbcError, WbcOutput, WbcStatus,
+    WholeBodyController,
 };

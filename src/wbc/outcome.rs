@@ -1,27 +1,13 @@
-//! What the whole-body QP's formulations share: the contact layout of the contract, and what a
+//! What the whole-body QP's formulations share: the contact count of the contract, and what a
 //! tick's solve can end with and counts (the full problem in `controller.rs`, the condensed
 //! one in `condensed.rs`, clarabel's wrapper in `qp.rs`).
 
 use clarabel::solver::SolverStatus;
 
 pub use crate::channels::N_CONTACTS;
-/// Corner frame suffixes, in the order of [`super::WbcOutput::contact_forces`] for each foot.
-pub const CORNERS: [&str; 4] = ["fl", "fr", "rl", "rr"];
+use crate::robot::CORNERS;
+// The contract's contacts are the robot's sole corners, two feet of them.
 const _: () = assert!(N_CONTACTS == 2 * CORNERS.len());
-
-/// The frames the QP's contacts and hand task act on, named by the robot's description
-/// (`crate::robot::Robot::frames`), not by the config.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct BodyFrames {
-    /// Sole frames of the two feet; the contact points are the frames `<foot>_fl`, `_fr`, `_rl`,
-    /// `_rr` (the sole corners), the contact normal is the sole frame's z axis.
-    pub feet: [String; 2],
-    /// Frame of the hand impedance task.
-    pub hand: String,
-    /// The body the hand's arm chain starts from (M_e of the chain root → hand,
-    /// docs/hand_previewer.md, eq. (21)–(23)).
-    pub hand_chain_root: String,
-}
 
 /// Why a tick fell back to the safe torque.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

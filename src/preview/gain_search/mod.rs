@@ -18,8 +18,9 @@ use std::time::{Duration, Instant};
 pub use cost::{Eq26, Eq26Weights, GainSearchInputs};
 pub use schedule::KnotSchedule;
 
-use super::{GainSchedule, HandPreviewer, PreviewError, ReducedModel, ZmpPreview};
+use super::{GainSchedule, HandPreviewer, PreviewError, ZmpPreview};
 use crate::config::{Config, GainSolverKind};
+use crate::robot::ReducedModel;
 
 /// What one solver run reports.
 #[derive(Debug, Clone, Copy)]
