@@ -9,6 +9,9 @@ use crate::channels::{
 };
 use crate::robot::{RobotState, SensorStamps};
 
+// The contract carries each of the robot's contact points (its sole corners).
+const _: () = assert!(crate::channels::N_CONTACTS == crate::robot::N_CONTACTS);
+
 /// Fill `out` (sized for the robot) from `msg`. Refuses a message of other dimensions than the
 /// robot's, or announcing another robot than `robot_hash` (0 on either side: not checked).
 /// Finiteness is the tick's to judge (an unmeasured base is NaN until estimated).

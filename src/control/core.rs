@@ -410,15 +410,6 @@ impl ControllerCore {
         // only when a log record asks for it (`fill_plan`), off the per-tick path.
         let zmp_pred = self.zmp.next_zmp(&x, u);
         self.last_x = x;
-        let f_dis = if self.kind == ControllerKind::C0 {
-            [0.0; 3]
-        } else {
-            self.previewer
-                .disturbance()
-                .first()
-                .copied()
-                .unwrap_or([0.0; 3])
-        };
         let (kp, kd) = (self.schedule.kp[0], self.schedule.kd[0]);
         self.last = TickRecord {
             time: t,
@@ -432,7 +423,7 @@ impl ControllerCore {
             hand_err: (hand.pos - latched.hand_target).norm(),
             kp,
             kd,
-            f_dis,
+            f_dis: self.first_disturbance(),
             f_ext: self.frame.f_ext[0],
             wbc_solved: status == WbcStatus::Solved,
             wbc_iterations: iterations,
@@ -476,6 +467,18 @@ impl ControllerCore {
             return Err(TickError::NotFinite);
         }
         Ok(())
+    }
+
+    /// F_dis at the first preview step (none for C0), for the record.
+    fn first_disturbance(&self) -> [f64; 3] {
+        if self.kind == ControllerKind::C0 {
+            return [0.0; 3];
+        }
+        self.previewer
+            .disturbance()
+            .first()
+            .copied()
+            .unwrap_or([0.0; 3])
     }
 
     /// The torques commanded this tick, for the parts of the next (a robot without torque

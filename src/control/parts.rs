@@ -15,10 +15,10 @@ use nalgebra::DVector;
 use super::core::TickError;
 use super::forecast_window::ForecastWindow;
 use super::record::Record;
-use crate::channels::N_CONTACTS;
 use crate::config::{Config, ConfigError, ControllerKind, Layers, PartSettings, PartTables};
 use crate::dynamics::Model;
 use crate::preview::CartTable;
+use crate::robot::N_CONTACTS;
 use crate::robot::{Robot, RobotState};
 
 /// Where in the tick a part runs (in this order).

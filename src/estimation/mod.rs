@@ -24,10 +24,10 @@ pub use settings::{EstimatorMode, EstimatorSettings};
 
 use nalgebra::{DVector, Matrix3, Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
 
-use crate::channels::N_CONTACTS;
 use crate::dynamics::{
     Data, DynamicsError, Model, ReferenceFrame, forward_kinematics_velocity, frame_velocity,
 };
+use crate::robot::N_CONTACTS;
 use crate::robot::RobotState;
 
 const NX: usize = 12;

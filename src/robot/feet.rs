@@ -13,6 +13,10 @@ use crate::dynamics::{Model, SE3};
 /// four contact forces in the channel contract and in the whole-body controller's output.
 pub const CORNERS: [&str; 4] = ["fl", "fr", "rl", "rr"];
 
+/// The contact points of a biped: each foot's corners (the whole-body QP's contact count, the
+/// base estimator's; the channel contract carries as many, checked in `control::contract`).
+pub const N_CONTACTS: usize = 2 * CORNERS.len();
+
 /// Placement of link or frame `name` in its carrying body, and the body's joint.
 fn on_body(model: &Model, name: &str) -> Option<(Option<usize>, SE3)> {
     let f = &model.frames[model.frame_id(name).ok()?];

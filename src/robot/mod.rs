@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::{DVector, Matrix3, Vector3};
 
 pub use description::{FootSensors, RobotDescription, SensorSpec};
-pub use feet::CORNERS;
+pub use feet::{CORNERS, N_CONTACTS};
 pub use reduced_model::ReducedModel;
 pub use state::{RobotState, SensorStamps};
 

@@ -836,6 +836,14 @@ mod tests {
                 latency: 0,
                 dropout: 0.0,
             },
+            motor_torques: crate::sim::robot_sensing::MotorTorqueConfig {
+                noise: 0.0,
+                friction: 0.0,
+                friction_velocity: 0.05,
+                viscous: 0.0,
+                resolution: 0.0,
+                latency: 0,
+            },
         }
     }
 

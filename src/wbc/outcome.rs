@@ -1,13 +1,10 @@
-//! What the whole-body QP's formulations share: the contact count of the contract, and what a
+//! What the whole-body QP's formulations share: the robot's contact count, and what a
 //! tick's solve can end with and counts (the full problem in `controller.rs`, the condensed
 //! one in `condensed.rs`, clarabel's wrapper in `qp.rs`).
 
 use clarabel::solver::SolverStatus;
 
-pub use crate::channels::N_CONTACTS;
-use crate::robot::CORNERS;
-// The contract's contacts are the robot's sole corners, two feet of them.
-const _: () = assert!(N_CONTACTS == 2 * CORNERS.len());
+pub use crate::robot::N_CONTACTS;
 
 /// Why a tick fell back to the safe torque.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
