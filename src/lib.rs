@@ -11,7 +11,8 @@
 //! - [`forecast`]: the reference force forecaster process.
 //! - [`robot`]: robot descriptions: URDF, feet, hand, home posture, and what follows from them.
 //! - [`sim`]: the simulator process (humanoid on the ground, door on a spherical joint).
-//! - [`control`]: the control server's loop pieces (tick, C2 thread, timing, real-time setup).
+//! - [`control`]: the control server's loop pieces (tick, C2 thread, deadline ticker).
+//! - [`realtime`]: real-time setup and loop latency statistics, shared by every process's loop.
 //! - [`shutdown`]: SIGINT/SIGTERM handling shared by the processes.
 //! - [`channels`]: the iceoryx2 channel contract shared by every process.
 //! - [`bridge`]: the contract over Zenoh, for forecasters and viewers on other hosts.
@@ -34,6 +35,7 @@ pub mod forecast;
 pub mod logging;
 pub mod offline;
 pub mod preview;
+pub mod realtime;
 pub mod recording;
 pub mod report;
 pub mod robot;

@@ -12,8 +12,8 @@
 //! - [`server`]: the loop over iceoryx2 (`upc controller`), lockstep or real time, as named
 //!   steps; [`plant_link`]: which state is new, a restarted or silent plant (a state machine);
 //!   [`run_metrics`]: the run's figures, tick by tick; [`summary`]: what a run reports.
-//! - [`timing`]: absolute-deadline ticker and latency histogram.
-//! - [`realtime`]: SCHED_FIFO, mlockall, CPU affinity (degrading with a warning).
+//! - [`timing`]: absolute-deadline ticker (the latency histogram and the real-time setup are
+//!   [`crate::realtime`]'s).
 
 pub mod com_observer;
 pub mod core;
@@ -23,7 +23,6 @@ pub mod forecast_window;
 pub mod gain_thread;
 pub mod logger;
 pub mod plant_link;
-pub mod realtime;
 pub mod run_metrics;
 pub mod server;
 pub mod summary;
@@ -38,4 +37,4 @@ pub use forecast_correction::{
 };
 pub use forecast_window::{ForecastRejection, ForecastWindow};
 pub use gain_thread::{GainHandoff, GainSnapshot, StampedSchedule};
-pub use timing::{LatencyHistogram, Ticker};
+pub use timing::Ticker;

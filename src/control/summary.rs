@@ -111,7 +111,7 @@ pub struct ServerSummary {
     /// read fast enough (see [`crate::logging`]); the loop never waits on stderr.
     #[serde(default)]
     pub dropped_log_lines: u64,
-    pub realtime: super::realtime::RealtimeReport,
+    pub realtime: crate::realtime::RealtimeReport,
     pub stopped_by: String,
     /// The forecast correction (docs/forecast_correction.md); `None`: off (or C0).
     pub forecast_correction: Option<CorrectionSummary>,
