@@ -39,11 +39,10 @@ use crate::channels::{
 use super::command::{CommandGate, CommandOrigin, CommandStats};
 use super::config::{Mode, Push, SimConfig};
 use super::hold::{CommandClock, HoldStats, Phase, Supervisor};
-use super::physics::{Engine, Physics};
+use super::physics::{Engine, Physics, SimError, StepReport};
 use super::record::{Recorder, RecorderStats};
 use super::scene::{DoorDrive, default_scene};
 use super::sensors::{ImuMount, SensorCounts, Sensors};
-use super::world::{SimError, StepReport};
 
 /// Errors that end a run.
 #[derive(Debug, thiserror::Error)]
