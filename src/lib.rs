@@ -15,6 +15,7 @@
 //! - [`estimation`]: the floating base from the IMU, the joints and the foot wrenches.
 //! - [`capability`]: the largest push each controller withstands, swept (`upc capability`).
 //! - [`logging`]: the processes' diagnostics (tracing), never blocking the real-time loop.
+//! - [`realtime`]: real-time setup and loop latency statistics, shared by every process's loop.
 //! - [`shutdown`]: SIGINT/SIGTERM handling shared by the processes.
 //! - [`channels`]: the iceoryx2 channel contract shared by every process.
 //! - [`bridge`]: the contract over Zenoh, for forecasters and viewers on other hosts.
@@ -37,6 +38,7 @@ pub mod forecast;
 pub mod logging;
 pub mod offline;
 pub mod preview;
+pub mod realtime;
 pub mod recording;
 pub mod report;
 pub mod robot;

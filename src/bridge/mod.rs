@@ -35,7 +35,7 @@ use wire::{WireError, WireMessage, decode_into, encode};
 use crate::channels::{
     Bus, ChannelError, ForecastMsg, GroundTruthMsg, ServiceKind, StateMsg, TorqueMsg,
 };
-use crate::control::LatencyHistogram;
+use crate::realtime::LatencyHistogram;
 
 /// Why the bridge stopped.
 #[derive(Debug, thiserror::Error)]

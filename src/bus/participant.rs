@@ -34,7 +34,7 @@ use crate::channels::{
     Bus, ChannelError, N_CONTACTS, STATE_FLAG_BASE_UNMEASURED, STATE_FLAG_DAMPING, STATE_FLAG_HOLD,
     ServiceKind, StateMsg, TORQUE_FLAG_FALLBACK, TorqueMsg,
 };
-use crate::control::timing::LatencyHistogram;
+use crate::realtime::LatencyHistogram;
 use crate::sim::command::{CommandGate, CommandOrigin, CommandStats};
 use crate::sim::process::PlantInfo;
 use crate::sim::sensors::{ImuMount, Sensing, Sensors, SensorsConfig};
@@ -92,7 +92,7 @@ pub enum Drive {
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct BusSummary {
     /// What of `bus.realtime` the OS granted.
-    pub realtime: crate::control::realtime::RealtimeReport,
+    pub realtime: crate::realtime::RealtimeReport,
     pub robot: String,
     pub domain: u16,
     pub interface: String,
@@ -211,7 +211,7 @@ pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError>
     let cfg = &opts.bus;
     let map = MotorMap::new(&opts.robot).map_err(BusError::Setup)?;
     // Before the participant: the DDS library's threads inherit the scheduling.
-    let realtime = crate::control::realtime::apply(&cfg.realtime);
+    let realtime = crate::realtime::apply(&cfg.realtime);
     let mut summary = BusSummary {
         realtime,
         robot: opts.robot.name().into(),

@@ -100,7 +100,7 @@ fn run_on_bus<P: Physics>(
     let map = MotorMap::new(&opts.robot).map_err(ProcessError::Setup)?;
     // A robot's loop has its own computer: `bus.realtime` gives the simulated one its priority
     // (before the participant, whose threads inherit it).
-    crate::control::realtime::apply(&bus.realtime);
+    crate::realtime::apply(&bus.realtime);
     let dp = participant(bus.network()).map_err(dds)?;
     let mut robot = BusRobot::new(opts, plant, map, &dp)?;
     tracing::info!(
@@ -220,7 +220,7 @@ impl<'a, P: Physics> BusRobot<'a, P> {
         let push_frame = push_frame(cfg, &opts.robot)?;
         let recorder = match &opts.rrd {
             Some(path) => Some(
-                crate::control::realtime::in_background(|| {
+                crate::realtime::in_background(|| {
                     crate::sim::record::Recorder::spawn(
                         path,
                         opts.recording_id.as_deref(),

@@ -194,7 +194,7 @@ impl GainHandoff {
         let worker = std::thread::Builder::new()
             .name("upc-c2".into())
             .spawn(move || {
-                super::realtime::lower_priority(10);
+                crate::realtime::lower_priority(10);
                 let mut last_time: Option<f64> = None;
                 while !stop_w.load(Ordering::Relaxed) {
                     if !snap_out.update() {

@@ -94,9 +94,9 @@ impl ControlLogger {
             .name("upc-ctl-log".into())
             .spawn(move || {
                 if !lossless {
-                    super::realtime::lower_priority(15);
+                    crate::realtime::lower_priority(15);
                 }
-                super::realtime::drain_periodically(&rx, DRAIN_PERIOD, |item| match item {
+                crate::realtime::drain_periodically(&rx, DRAIN_PERIOD, |item| match item {
                     Item::Tick(t) => {
                         log_tick(&rec, &t);
                         if let Some(w) = csv.as_mut() {

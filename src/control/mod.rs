@@ -20,8 +20,8 @@
 //! - [`server`]: the loop over iceoryx2 (`upc controller`), lockstep or real time, as named
 //!   steps; [`plant_link`]: which state is new, a restarted or silent plant (a state machine);
 //!   [`run_metrics`]: the run's figures, tick by tick; [`summary`]: what a run reports.
-//! - [`timing`]: absolute-deadline ticker and latency histogram.
-//! - [`realtime`]: SCHED_FIFO, mlockall, CPU affinity (degrading with a warning).
+//! - [`timing`]: absolute-deadline ticker (the latency histogram and the real-time setup are
+//!   [`crate::realtime`]'s).
 
 pub mod base_estimation;
 pub mod com_observer;
@@ -34,7 +34,6 @@ pub mod gain_thread;
 pub mod logger;
 pub mod parts;
 pub mod plant_link;
-pub mod realtime;
 pub mod record;
 pub mod run_metrics;
 pub mod server;
@@ -55,4 +54,4 @@ pub use gain_thread::{GainHandoff, GainSnapshot, StampedSchedule};
 pub use parts::{ControllerPart, Stage};
 pub use record::{Column, Record};
 pub use tick_record::TickRecord;
-pub use timing::{LatencyHistogram, Ticker};
+pub use timing::Ticker;

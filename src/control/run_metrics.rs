@@ -5,7 +5,8 @@
 use std::time::Duration;
 
 use super::summary::ServerSummary;
-use super::{LatencyHistogram, StampedSchedule, TickRecord};
+use super::{StampedSchedule, TickRecord};
+use crate::realtime::LatencyHistogram;
 
 /// A measured CoP closer than this to the support edge counts as at the edge (m).
 pub const EDGE_BAND: f64 = 1e-3;

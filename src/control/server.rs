@@ -285,7 +285,7 @@ impl<'a> ControlLoop<'a> {
                 robot: opts.robot_name.clone(),
                 robot_mass,
                 mode: format!("{:?}", cc.mode).to_lowercase(),
-                realtime: super::realtime::apply(&cc.realtime),
+                realtime: crate::realtime::apply(&cc.realtime),
                 ..Default::default()
             },
             n_tau,
@@ -876,7 +876,7 @@ fn start_logger(
     Ok(Some(if lockstep {
         start()?
     } else {
-        super::realtime::in_background(start)?
+        crate::realtime::in_background(start)?
     }))
 }
 

@@ -111,7 +111,7 @@ pub struct ServerSummary {
     /// read fast enough (see [`crate::logging`]); the loop never waits on stderr.
     #[serde(default)]
     pub dropped_log_lines: u64,
-    pub realtime: super::realtime::RealtimeReport,
+    pub realtime: crate::realtime::RealtimeReport,
     pub stopped_by: String,
     /// The controller parts' entries, each under the part's own keys
     /// (`crate::control::parts`): `forecast_correction`, `viability`, `estimator` (absent when

@@ -14,6 +14,7 @@
 
 pub mod aba;
 pub mod com;
+pub mod cop;
 pub mod crba;
 pub mod data;
 pub mod error;
@@ -30,6 +31,7 @@ pub mod urdf;
 
 pub use aba::{aba, aba_with_external_forces};
 pub use com::{center_of_mass, center_of_mass_velocity, jacobian_center_of_mass};
+pub use cop::{Pressure, PressureLoad, center_of_pressure};
 pub use crba::crba;
 pub use data::Data;
 pub use error::DynamicsError;

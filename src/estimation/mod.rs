@@ -718,18 +718,19 @@ impl BaseEstimator {
         sole_rot: &[Matrix3<f64>; 2],
     ) -> Option<[f64; 2]> {
         let p_b = Vector3::new(self.x[0], self.x[1], self.x[2]);
-        let (mut total, mut sum) = (0.0, Vector3::zeros());
-        for i in 0..2 {
+        // The wrenches are finite here (checked on entry): `> 0` keeps what `<= 0` skipped.
+        let loads = (0..2).filter(|&i| self.feet[i][2] > 0.0).map(|i| {
             let w = &self.feet[i];
-            if w[2] <= 0.0 {
-                continue;
-            }
             // On the sole: f_z · (x, y) = (−τ_y, τ_x).
             let moment = Vector3::new(-w[4], w[3], 0.0);
-            total += w[2];
-            sum += w[2] * (p_b + rot * foot[i]) + rot * sole_rot[i] * moment;
-        }
-        (total > self.settings.contact_load * self.weight).then(|| [sum.x / total, sum.y / total])
+            crate::dynamics::PressureLoad {
+                normal: w[2],
+                at: p_b + rot * foot[i],
+                moment: rot * sole_rot[i] * moment,
+            }
+        });
+        let p = crate::dynamics::center_of_pressure(loads);
+        (p.total > self.settings.contact_load * self.weight).then(|| p.point())
     }
 }
 

@@ -18,8 +18,8 @@ use std::time::{Duration, Instant};
 use nalgebra::DVector;
 
 use super::config::{HoldConfig, HoldKind};
+use super::physics::SimError;
 use super::scene::PosturePd;
-use super::world::SimError;
 use crate::dynamics::Model;
 
 /// Who drives the robot this step.

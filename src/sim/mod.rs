@@ -30,6 +30,6 @@ pub mod world;
 pub use command::{CommandGate, CommandOrigin, CommandStats, Rejection, validate_command};
 pub use config::{HoldConfig, HoldKind, Mode, Push, SimConfig};
 pub use hold::{HoldStats, Phase, Supervisor};
-pub use physics::{Engine, Physics};
+pub use physics::{Engine, Physics, SimError, StepReport};
 pub use scene::{DoorDrive, PlacedDoor, PosturePd, Scene, humanoid_scene, place_door, robot_scene};
-pub use world::{DoorSpec, PhysicsParams, Plane, SimError, StepReport, World, WorldSpec};
+pub use world::{DoorSpec, PhysicsParams, Plane, World, WorldSpec};

@@ -1,48 +1,82 @@
-//! The physics engine behind the plant runtime ([`super::process`]): upc's own [`World`] or
+//! The physics engine behind the plant runtime ([`super::process`]): upc's own [`super::World`] or
 //! MuJoCo ([`super::mujoco::MujocoPlant`]). The runtime (command gate, supervisor, command
 //! clock, lockstep and real-time loops, ground truth, summary) is written once against this.
 //!
 //! Conventions are the channel contract's (`services/CHANNELS.md`): `q` = base position,
 //! quaternion x y z w, joints; `v` = base linear and angular velocity in the base frame, joint
 //! rates; contact forces in the robot description's contact order, ground on robot, world frame.
+//!
+//! The engines' shared types live here with the trait ([`SimError`], [`StepReport`]), so an
+//! engine's file depends on this one and never on another engine's.
 
 use nalgebra::{DVector, Vector3};
 
-use super::world::{SimError, StepReport, World};
-use crate::dynamics::{Model, SE3};
+use super::factor::NotPositiveDefinite;
+use crate::dynamics::{DynamicsError, Model, SE3};
 
 /// Which engine a plant runs (`upc sim --plant`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Engine {
-    /// upc's own simulator ([`World`]).
+    /// upc's own simulator ([`super::World`]).
     #[default]
     Upc,
     /// MuJoCo, through its C library.
     Mujoco,
 }
 
-/// The centre of pressure on flat ground of vertical loads `(f_z, [x, y])`: the total load, the
-/// CoP when anything is loaded, and the loaded points. A load ≤ 0 carries nothing. Shared by
-/// the MuJoCo plant and the sensor models (which take it from the measured forces).
-pub fn centre_of_pressure(
-    loads: impl IntoIterator<Item = (f64, [f64; 2])>,
-) -> (f64, Option<[f64; 2]>, u32) {
-    let (mut total, mut cx, mut cy, mut active) = (0.0, 0.0, 0.0, 0u32);
-    for (fz, p) in loads {
-        if fz > 0.0 {
-            total += fz;
-            cx += fz * p[0];
-            cy += fz * p[1];
-            active += 1;
-        }
-    }
-    (
-        total,
-        (active > 0).then(|| [cx / total, cy / total]),
-        active,
-    )
+/// Errors of building or stepping an engine (upc's [`super::World`], MuJoCo).
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
+pub enum SimError {
+    #[error(transparent)]
+    Dynamics(#[from] DynamicsError),
+    #[error("torque vector has length {got}, the robot has {expected} actuated joints")]
+    TorqueLength { expected: usize, got: usize },
+    #[error("{what} is not finite at index {index}")]
+    NonFinite { what: &'static str, index: usize },
+    #[error(transparent)]
+    Singular(#[from] NotPositiveDefinite),
+    #[error("the state diverged (non-finite velocity at dof {0}); the step was not applied")]
+    Diverged(usize),
+    #[error("invalid scene: {0}")]
+    Scene(String),
+    /// The physics engine gave up (MuJoCo's own divergence warnings).
+    #[error("{0}")]
+    Engine(String),
 }
 
+/// What one step did (all plain values; no allocation).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepReport {
+    /// Steps done so far (this step included) and simulated time after it.
+    pub step: u64,
+    pub time: f64,
+    /// Gauss–Seidel sweeps of the constraint solver (0 when the direct all-stick solve was the
+    /// solution, or without constraints).
+    pub solver_iterations: u32,
+    /// Largest impulse change in the solver's last sweep (N·s).
+    pub solver_change: f64,
+    /// Contacts carrying load and joint limits engaged.
+    pub active_contacts: u32,
+    pub active_limits: u32,
+    /// Deepest penetration below the plane after the step (m, ≥ 0).
+    pub max_penetration: f64,
+    /// Fastest tangential speed of a loaded contact point at the end of the step (m/s).
+    pub max_slip_speed: f64,
+    /// Hand–handle distance after the step (m); 0 without a door.
+    pub loop_error: f64,
+    /// Centre of pressure of the contact forces on the plane (world x, y), if any load.
+    pub zmp: Option<[f64; 2]>,
+    /// Sum of the normal contact forces (N).
+    pub total_normal_force: f64,
+    /// Force of the door (or of the push) on the hand (N, world).
+    pub hand_force: [f64; 3],
+    /// Hinge torque applied (N·m).
+    pub door_torque: f64,
+    /// Robot centre of mass after the step (m, world).
+    pub com: [f64; 3],
+}
+
+/// One physics engine as the plant runtime steps it.
 pub trait Physics {
     /// Which engine (`upc`, `mujoco`), for logs and summaries.
     fn engine(&self) -> &'static str;
@@ -78,58 +112,4 @@ pub trait Physics {
     fn robot_frame_placements(&mut self) -> &[SE3];
     /// World placements of every door frame at the current state.
     fn door_frame_placements(&mut self) -> Option<&[SE3]>;
-}
-
-impl Physics for World {
-    fn engine(&self) -> &'static str {
-        "upc"
-    }
-    fn robot(&self) -> &Model {
-        World::robot(self)
-    }
-    fn q(&self) -> &DVector<f64> {
-        World::q(self)
-    }
-    fn v(&self) -> &DVector<f64> {
-        World::v(self)
-    }
-    fn time(&self) -> f64 {
-        World::time(self)
-    }
-    fn steps(&self) -> u64 {
-        World::steps(self)
-    }
-    fn n_actuated(&self) -> usize {
-        World::n_actuated(self)
-    }
-    fn contact_forces(&self) -> &[Vector3<f64>] {
-        World::contact_forces(self)
-    }
-    fn contact_points(&self) -> &[Vector3<f64>] {
-        World::contact_points(self)
-    }
-    fn last_report(&self) -> &StepReport {
-        World::last_report(self)
-    }
-    fn door_angle(&self) -> f64 {
-        World::door_angle(self)
-    }
-    fn door_velocity(&self) -> f64 {
-        World::door_velocity(self)
-    }
-    fn door_model(&self) -> Option<&Model> {
-        self.door().map(|(m, _)| m)
-    }
-    fn set_push(&mut self, frame: usize, force: Vector3<f64>) -> Result<(), SimError> {
-        World::set_push(self, frame, force)
-    }
-    fn step(&mut self, tau: &DVector<f64>, door_torque: f64) -> Result<StepReport, SimError> {
-        World::step(self, tau, door_torque)
-    }
-    fn robot_frame_placements(&mut self) -> &[SE3] {
-        World::robot_frame_placements(self)
-    }
-    fn door_frame_placements(&mut self) -> Option<&[SE3]> {
-        World::door_frame_placements(self)
-    }
 }

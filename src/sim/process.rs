@@ -29,7 +29,7 @@ use std::time::{Duration, Instant};
 
 use nalgebra::DVector;
 
-use crate::control::timing::LatencyHistogram;
+use crate::realtime::LatencyHistogram;
 
 use crate::channels::{
     Bus, ChannelError, GroundTruthMsg, MAX_DOF, N_CONTACTS, STATE_FLAG_DAMPING, STATE_FLAG_HOLD,
@@ -39,12 +39,11 @@ use crate::channels::{
 use super::command::{CommandGate, CommandOrigin, CommandStats};
 use super::config::{Mode, Push, SimConfig};
 use super::hold::{CommandClock, HoldStats, Phase, Supervisor};
-use super::physics::{Engine, Physics};
+use super::physics::{Engine, Physics, SimError, StepReport};
 use super::record::{Recorder, RecorderStats};
 use super::robot_sensing::RobotSensing;
 use super::scene::{DoorDrive, default_scene};
 use super::sensors::{FootSensing, ImuMount, Sensing, SensorCounts, Sensors, SensorsConfig};
-use super::world::{SimError, StepReport};
 use crate::robot::{FootSensors, Robot};
 
 /// Errors that end a run.
@@ -429,7 +428,7 @@ fn start_recorder(
     // Real time: its threads in the idle class, they must not delay the steps. Lockstep must
     // end on a loaded machine too, where idle-class threads hardly run.
     let rec = match opts.config.mode {
-        Mode::Realtime => crate::control::realtime::in_background(spawn),
+        Mode::Realtime => crate::realtime::in_background(spawn),
         Mode::Lockstep => spawn(),
     };
     rec.map(Some)

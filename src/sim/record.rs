@@ -297,7 +297,7 @@ fn logger(
     let mut written = 0;
     let mut failed = false;
     // Polled, not `recv`: see `drain_periodically` (the queue holds 64 frames, 0.64 s).
-    crate::control::realtime::drain_periodically(&rx, std::time::Duration::from_millis(20), |f| {
+    crate::realtime::drain_periodically(&rx, std::time::Duration::from_millis(20), |f| {
         match write_frame(&rec, &f, &robot, &door) {
             Ok(()) => written += 1,
             Err(e) if !failed => {

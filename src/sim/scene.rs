@@ -22,7 +22,8 @@ use crate::robot::Robot;
 use crate::scenario::{ForceProfile, Scenario};
 
 use super::config::SimConfig;
-use super::world::{DoorSpec, PhysicsParams, Plane, SimError, World, WorldSpec};
+use super::physics::SimError;
+use super::world::{DoorSpec, PhysicsParams, Plane, World, WorldSpec};
 
 /// The door frame the robot's hand holds.
 pub const HANDLE_FRAME: &str = "handle";

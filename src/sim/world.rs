@@ -44,36 +44,21 @@
 use nalgebra::{DMatrix, DVector, Vector3};
 
 use crate::dynamics::{
-    DynamicsError, JointKind, Model, SE3, crba, integrate, kinematics, nonlinear_effects,
+    JointKind, Model, PressureLoad, SE3, center_of_pressure, crba, integrate, kinematics,
+    nonlinear_effects,
 };
 
 use super::config::SimConfig;
 use super::contact::{BlockKind, ConstraintSystem, SolverSettings};
-use super::factor::{LtdlFactor, NotPositiveDefinite};
+use super::factor::LtdlFactor;
+use super::physics::{Physics, SimError, StepReport};
 
 /// Fixed-point passes of the midpoint evaluation of `h` after the predictor (module doc: one
 /// pass is the explicit midpoint rule, which slowly gains energy; two lose a little).
 const MIDPOINT_PASSES: usize = 2;
 
-/// Errors of building or stepping a [`World`].
-#[derive(Debug, thiserror::Error, Clone, PartialEq)]
-pub enum SimError {
-    #[error(transparent)]
-    Dynamics(#[from] DynamicsError),
-    #[error("torque vector has length {got}, the robot has {expected} actuated joints")]
-    TorqueLength { expected: usize, got: usize },
-    #[error("{what} is not finite at index {index}")]
-    NonFinite { what: &'static str, index: usize },
-    #[error(transparent)]
-    Singular(#[from] NotPositiveDefinite),
-    #[error("the state diverged (non-finite velocity at dof {0}); the step was not applied")]
-    Diverged(usize),
-    #[error("invalid scene: {0}")]
-    Scene(String),
-    /// The physics engine gave up (MuJoCo's own divergence warnings).
-    #[error("{0}")]
-    Engine(String),
-}
+/// Normal force (N) above which a contact carries load (its impulse over `dt`).
+const LOADED: f64 = 1e-9;
 
 /// A plane `{x : n·x = offset}` (unit normal `n`, pointing out of the ground).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -98,6 +83,20 @@ impl Plane {
             normal: Vector3::new(angle.sin(), 0.0, angle.cos()),
             offset: 0.0,
         }
+    }
+
+    /// The same plane with a unit normal; refused for a zero or non-finite normal or offset.
+    fn normalised(self) -> Result<Self, SimError> {
+        let n = self.normal.norm();
+        if !(n > 0.0 && n.is_finite() && self.offset.is_finite()) {
+            return Err(SimError::Scene(
+                "ground normal must be a non-zero vector".into(),
+            ));
+        }
+        Ok(Plane {
+            normal: self.normal / n,
+            offset: self.offset / n,
+        })
     }
 
     /// Signed distance of a point (positive above).
@@ -201,38 +200,6 @@ pub struct WorldSpec {
     pub params: PhysicsParams,
 }
 
-/// What one step did (all plain values; no allocation).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct StepReport {
-    /// Steps done so far (this step included) and simulated time after it.
-    pub step: u64,
-    pub time: f64,
-    /// Gauss–Seidel sweeps of the constraint solver (0 when the direct all-stick solve was the
-    /// solution, or without constraints).
-    pub solver_iterations: u32,
-    /// Largest impulse change in the solver's last sweep (N·s).
-    pub solver_change: f64,
-    /// Contacts carrying load and joint limits engaged.
-    pub active_contacts: u32,
-    pub active_limits: u32,
-    /// Deepest penetration below the plane after the step (m, ≥ 0).
-    pub max_penetration: f64,
-    /// Fastest tangential speed of a loaded contact point at the end of the step (m/s).
-    pub max_slip_speed: f64,
-    /// Hand–handle distance after the step (m); 0 without a door.
-    pub loop_error: f64,
-    /// Centre of pressure of the contact forces on the plane (world x, y), if any load.
-    pub zmp: Option<[f64; 2]>,
-    /// Sum of the normal contact forces (N).
-    pub total_normal_force: f64,
-    /// Force of the door (or of the push) on the hand (N, world).
-    pub hand_force: [f64; 3],
-    /// Hinge torque applied (N·m).
-    pub door_torque: f64,
-    /// Robot centre of mass after the step (m, world).
-    pub com: [f64; 3],
-}
-
 #[derive(Clone, Copy, Debug)]
 struct ContactPoint {
     joint: usize,
@@ -260,6 +227,37 @@ struct Door {
     vh: DVector<f64>,
     handle: ContactPoint,
     hand: ContactPoint,
+}
+
+impl Door {
+    /// The door of `spec` placed in the world, at its neutral configuration and at rest, joined
+    /// to `robot`'s hand frame.
+    fn new(spec: DoorSpec, robot: &Model) -> Result<Door, SimError> {
+        let mut model = spec.model;
+        if model.has_floating_base() {
+            return Err(SimError::Scene(
+                "the door model must have a fixed base".into(),
+            ));
+        }
+        rebase(&mut model, &spec.base);
+        let handle = point_of(&model, &spec.handle_frame)?;
+        let hand = point_of(robot, &spec.hand_frame)?;
+        let data = crate::dynamics::Data::new(&model);
+        let q = model.neutral();
+        let v = DVector::zeros(model.nv);
+        let q_next = q.clone();
+        let vh = v.clone();
+        Ok(Door {
+            model,
+            data,
+            q,
+            v,
+            q_next,
+            vh,
+            handle,
+            hand,
+        })
+    }
 }
 
 /// The simulated scene and its preallocated workspace.
@@ -304,6 +302,21 @@ pub struct World {
     /// Tests: make the next steps fail at their last fallible stage (after the integration).
     #[cfg(test)]
     fail_after_integration: bool,
+}
+
+/// The viscous damping of each of the `nvt` combined dofs: the robot's `nv` joints (not a
+/// floating base's six) then the door's.
+fn joint_damping(params: &PhysicsParams, floating: bool, nv: usize, nvt: usize) -> DVector<f64> {
+    let mut damping = DVector::zeros(nvt);
+    for k in 0..nv {
+        if !(floating && k < 6) {
+            damping[k] = params.joint_damping;
+        }
+    }
+    for k in nv..nvt {
+        damping[k] = params.door_damping;
+    }
+    damping
 }
 
 fn dof_parents(model: &Model, offset: usize, out: &mut Vec<Option<usize>>) {
@@ -409,16 +422,7 @@ impl World {
                 params.dt
             )));
         }
-        let n = ground.normal.norm();
-        if !(n > 0.0 && n.is_finite() && ground.offset.is_finite()) {
-            return Err(SimError::Scene(
-                "ground normal must be a non-zero vector".into(),
-            ));
-        }
-        let ground = Plane {
-            normal: ground.normal / n,
-            offset: ground.offset / n,
-        };
+        let ground = ground.normalised()?;
         let floating = robot
             .joints
             .first()
@@ -441,48 +445,19 @@ impl World {
         let door = match door {
             None => None,
             Some(d) => {
-                let mut model = d.model;
-                if model.has_floating_base() {
-                    return Err(SimError::Scene(
-                        "the door model must have a fixed base".into(),
-                    ));
-                }
-                rebase(&mut model, &d.base);
-                let handle = point_of(&model, &d.handle_frame)?;
-                let hand = point_of(&robot, &d.hand_frame)?;
-                dof_parents(&model, robot.nv, &mut parents);
+                let door = Door::new(d, &robot)?;
+                // The door's dofs follow the robot's in the combined velocity.
+                dof_parents(&door.model, robot.nv, &mut parents);
                 if params.joint_limits {
-                    limited_dofs(&model, robot.nv, true, &mut limits);
+                    limited_dofs(&door.model, robot.nv, true, &mut limits);
                 }
-                let data = crate::dynamics::Data::new(&model);
-                let q = model.neutral();
-                let v = DVector::zeros(model.nv);
-                let q_next = q.clone();
-                let vh = v.clone();
-                Some(Door {
-                    model,
-                    data,
-                    q,
-                    v,
-                    q_next,
-                    vh,
-                    handle,
-                    hand,
-                })
+                Some(door)
             }
         };
         let nvt = parents.len();
         let factor = LtdlFactor::new(parents)
             .ok_or_else(|| SimError::Scene("joints are not ordered parents first".into()))?;
-        let mut damping = DVector::zeros(nvt);
-        for k in 0..robot.nv {
-            if !(floating && k < 6) {
-                damping[k] = params.joint_damping;
-            }
-        }
-        for k in robot.nv..nvt {
-            damping[k] = params.door_damping;
-        }
+        let damping = joint_damping(&params, floating, robot.nv, nvt);
         let max_rows = 3 * contacts.len() + if door.is_some() { 3 } else { 0 } + limits.len();
         let nc = contacts.len();
         let data = crate::dynamics::Data::new(&robot);
@@ -565,8 +540,50 @@ impl World {
     /// Advances one step under joint torques `tau` (length [`World::n_actuated`]) and the
     /// door's hinge torque. On error the state (q, v, time, steps, the door's, the contact
     /// points and the warm start) is unchanged: every fallible stage writes scratch only, and
-    /// the new state is committed after the last of them.
+    /// the new state is committed after the last of them. The stages are the module doc's.
     pub fn step(&mut self, tau: &DVector<f64>, door_torque: f64) -> Result<StepReport, SimError> {
+        self.check_inputs(tau, door_torque)?;
+        // 1. M(q) (CRBA) of the robot and the door, and the factor of M + dt D.
+        self.factor_mass_matrix()?;
+        self.applied_forces(tau, door_torque);
+        // 2. Free velocity with h(q, ·) at the midpoint v̄ = ½(v + v*).
+        self.free_velocity()?;
+        // 3. Constraint rows.
+        self.sys.clear();
+        self.contact_rows()?;
+        let loop_row = self.loop_rows()?;
+        let active_limits = self.limit_rows();
+        // 4. Impulses.
+        self.sys
+            .assemble(&self.factor, self.params.solver.regularisation);
+        let stats = self.sys.solve(&self.params.solver);
+        // 5. Velocity update, checked before anything is committed.
+        self.constrained_velocity()?;
+        // 6. Positions from the new velocities, into scratch.
+        self.integrate_positions()?;
+        #[cfg(test)]
+        if self.fail_after_integration {
+            return Err(SimError::Diverged(0));
+        }
+        // 7. Commit: nothing below fails.
+        self.commit();
+        let mut report = StepReport {
+            step: self.steps,
+            time: self.time,
+            solver_iterations: stats.iterations as u32,
+            solver_change: stats.last_change,
+            active_limits,
+            door_torque,
+            ..StepReport::default()
+        };
+        self.report_forces(&mut report, loop_row);
+        self.refresh_points_after(&mut report);
+        self.last = report;
+        Ok(report)
+    }
+
+    /// Refuses torques of the wrong length and non-finite inputs before anything runs.
+    fn check_inputs(&self, tau: &DVector<f64>, door_torque: f64) -> Result<(), SimError> {
         if tau.len() != self.n_act {
             return Err(SimError::TorqueLength {
                 expected: self.n_act,
@@ -585,12 +602,14 @@ impl World {
                 index: 0,
             });
         }
+        Ok(())
+    }
+
+    /// Stage 1: `M + dt D` (block-diagonal: robot, door) into the factor, factorised. CRBA
+    /// leaves the robot's world Jacobian columns in `data.j` for the push.
+    fn factor_mass_matrix(&mut self) -> Result<(), SimError> {
         let dt = self.params.dt;
         let nv = self.robot.nv;
-        let nvt = self.nvt;
-        let start = nv - self.n_act;
-
-        // 1. M(q) (CRBA) of the robot and the door, and the factor of M + dt D.
         crba(&self.robot, &mut self.data, &self.q)?;
         {
             let mm = self.factor.matrix_mut();
@@ -606,14 +625,19 @@ impl World {
         }
         {
             let mm = self.factor.matrix_mut();
-            for k in 0..nvt {
+            for k in 0..self.nvt {
                 mm[(k, k)] += dt * self.damping[k];
             }
         }
         self.factor.factor()?;
+        Ok(())
+    }
 
-        // Applied forces, independent of the velocity at which h is taken: Sᵀτ − D v and the
-        // hinge torque.
+    /// Applied forces into `force`, independent of the velocity at which h is taken: Sᵀτ − D v
+    /// (τ within the effort limits), the push's Jᵀ f and the hinge torque.
+    fn applied_forces(&mut self, tau: &DVector<f64>, door_torque: f64) {
+        let nv = self.robot.nv;
+        let start = nv - self.n_act;
         for k in 0..nv {
             self.force[k] = -self.damping[k] * self.v[k];
         }
@@ -650,9 +674,13 @@ impl World {
                 self.force[nv] += door_torque;
             }
         }
+    }
 
-        // 2. Free velocity with h(q, ·) at the midpoint v̄ = ½(v + v*): predictor with h at v,
-        //    then fixed-point passes with v̄ from the previous pass's v* (module doc).
+    /// Stage 2: the free velocity `vstar` with h(q, ·) at the midpoint v̄ = ½(v + v*): predictor
+    /// with h at v, then fixed-point passes with v̄ from the previous pass's v* (module doc).
+    fn free_velocity(&mut self) -> Result<(), SimError> {
+        let dt = self.params.dt;
+        let nv = self.robot.nv;
         for pass in 0..=MIDPOINT_PASSES {
             if pass == 0 {
                 nonlinear_effects(&self.robot, &mut self.data, &self.q, &self.v)?;
@@ -689,9 +717,13 @@ impl World {
                 }
             }
         }
+        Ok(())
+    }
 
-        // 3. Constraint rows.
-        self.sys.clear();
+    /// Stage 3, contacts: normal and two tangent rows per contact point, warm-started from the
+    /// last step's impulses; the points go to `step_points`.
+    fn contact_rows(&mut self) -> Result<(), SimError> {
+        let dt = self.params.dt;
         let n = self.ground.normal;
         let (t1, t2) = self.tangents;
         let beta = self.params.contact_stabilisation;
@@ -726,46 +758,58 @@ impl World {
                 self.sys.lambda[r + k] = self.warm[3 * ci + k];
             }
         }
-        let nc = self.contacts.len();
-        let mut loop_row = None;
-        if let Some(d) = &self.door {
-            let ph = world_point(&self.data, &d.hand);
-            let pd = world_point(&d.data, &d.handle);
-            let Some(r) = self.sys.push(BlockKind::Bilateral3) else {
-                return Err(SimError::Scene("constraint capacity exhausted".into()));
-            };
-            let axes = [Vector3::x(), Vector3::y(), Vector3::z()];
-            point_rows(
-                &self.robot,
-                &self.data,
-                d.hand.joint,
-                &ph,
-                &axes,
-                1.0,
-                0,
-                &mut self.sys.jt,
-                r,
-            );
-            point_rows(
-                &d.model,
-                &d.data,
-                d.handle.joint,
-                &pd,
-                &axes,
-                -1.0,
-                nv,
-                &mut self.sys.jt,
-                r,
-            );
-            let e = ph - pd;
-            let gamma = self.params.loop_stabilisation;
-            for k in 0..3 {
-                let target = -gamma * e[k] / dt;
-                self.sys.bias[r + k] = self.sys.jt.column(r + k).dot(&self.vstar) - target;
-                self.sys.lambda[r + k] = self.warm[3 * nc + k];
-            }
-            loop_row = Some(r);
+        Ok(())
+    }
+
+    /// Stage 3, the door: the hand–handle point constraint's three rows; their first row.
+    fn loop_rows(&mut self) -> Result<Option<usize>, SimError> {
+        let Some(d) = &self.door else {
+            return Ok(None);
+        };
+        let (dt, nv, nc) = (self.params.dt, self.robot.nv, self.contacts.len());
+        let ph = world_point(&self.data, &d.hand);
+        let pd = world_point(&d.data, &d.handle);
+        let Some(r) = self.sys.push(BlockKind::Bilateral3) else {
+            return Err(SimError::Scene("constraint capacity exhausted".into()));
+        };
+        let axes = [Vector3::x(), Vector3::y(), Vector3::z()];
+        point_rows(
+            &self.robot,
+            &self.data,
+            d.hand.joint,
+            &ph,
+            &axes,
+            1.0,
+            0,
+            &mut self.sys.jt,
+            r,
+        );
+        point_rows(
+            &d.model,
+            &d.data,
+            d.handle.joint,
+            &pd,
+            &axes,
+            -1.0,
+            nv,
+            &mut self.sys.jt,
+            r,
+        );
+        let e = ph - pd;
+        let gamma = self.params.loop_stabilisation;
+        for k in 0..3 {
+            let target = -gamma * e[k] / dt;
+            self.sys.bias[r + k] = self.sys.jt.column(r + k).dot(&self.vstar) - target;
+            self.sys.lambda[r + k] = self.warm[3 * nc + k];
         }
+        Ok(Some(r))
+    }
+
+    /// Stage 3, joint limits: a row for each limit the free motion is about to cross; how
+    /// many.
+    fn limit_rows(&mut self) -> u32 {
+        let dt = self.params.dt;
+        let beta = self.params.contact_stabilisation;
         let mut active_limits = 0;
         for l in &self.limits {
             let qk = match (&self.door, l.door) {
@@ -794,24 +838,29 @@ impl World {
             };
             self.sys.bias[r] = sign * vk - target;
         }
+        active_limits
+    }
 
-        // 4. Impulses.
-        self.sys
-            .assemble(&self.factor, self.params.solver.regularisation);
-        let stats = self.sys.solve(&self.params.solver);
-
-        // 5. Velocity update, checked before anything is committed.
+    /// Stage 5: `vstar` ← v* + (M + dt D)⁻¹ Jᵀ λ, refused if not finite.
+    fn constrained_velocity(&mut self) -> Result<(), SimError> {
         self.sys.generalized_impulse(&mut self.dv);
         self.factor.solve(self.dv.as_mut_slice());
-        for k in 0..nvt {
+        for k in 0..self.nvt {
             let x = self.vstar[k] + self.dv[k];
             if !x.is_finite() {
                 return Err(SimError::Diverged(k));
             }
             self.vstar[k] = x;
         }
-        // 6. Positions from the new velocities, into scratch (`vh`, `q_next`): the integration
-        //    may fail, and nothing is committed before it has succeeded for robot and door.
+        Ok(())
+    }
+
+    /// Stage 6: positions from the new velocities, into scratch (`vh`, `q_next`): the
+    /// integration may fail, and nothing is committed before it has succeeded for robot and
+    /// door.
+    fn integrate_positions(&mut self) -> Result<(), SimError> {
+        let dt = self.params.dt;
+        let nv = self.robot.nv;
         for k in 0..nv {
             self.vh[k] = self.vstar[k];
         }
@@ -822,12 +871,11 @@ impl World {
             }
             integrate(&d.model, &d.q, &d.vh, dt, &mut d.q_next)?;
         }
-        #[cfg(test)]
-        if self.fail_after_integration {
-            return Err(SimError::Diverged(0));
-        }
+        Ok(())
+    }
 
-        // 7. Commit: nothing below fails.
+    /// Stage 7: the new state, the contact points of the step, time.
+    fn commit(&mut self) {
         self.v.copy_from(&self.vh);
         std::mem::swap(&mut self.q, &mut self.q_next);
         if let Some(d) = &mut self.door {
@@ -835,20 +883,17 @@ impl World {
             std::mem::swap(&mut d.q, &mut d.q_next);
         }
         self.points.copy_from_slice(&self.step_points);
-        self.time += dt;
+        self.time += self.params.dt;
         self.steps += 1;
+    }
 
-        // Report: forces at q, geometry after the step.
-        let mut report = StepReport {
-            step: self.steps,
-            time: self.time,
-            solver_iterations: stats.iterations as u32,
-            solver_change: stats.last_change,
-            active_limits,
-            door_torque,
-            ..StepReport::default()
-        };
-        let (mut fz, mut cx, mut cy) = (0.0, 0.0, 0.0);
+    /// The report's forces, at q: the warm start kept, each contact's force, the loaded
+    /// contacts, their slip and centre of pressure; the hand's force (door and push).
+    fn report_forces(&mut self, report: &mut StepReport, loop_row: Option<usize>) {
+        let dt = self.params.dt;
+        let n = self.ground.normal;
+        let (t1, t2) = self.tangents;
+        let nc = self.contacts.len();
         for ci in 0..nc {
             let r = 3 * ci;
             let l = &self.sys.lambda;
@@ -857,20 +902,21 @@ impl World {
             self.warm[r + 2] = l[r + 2];
             let f = (n * l[r] + t1 * l[r + 1] + t2 * l[r + 2]) / dt;
             self.forces[ci] = f;
-            let fn_ = l[r] / dt;
-            if fn_ > 1e-9 {
+            if l[r] / dt > LOADED {
                 report.active_contacts += 1;
-                fz += fn_;
-                cx += fn_ * self.points[ci].x;
-                cy += fn_ * self.points[ci].y;
                 let ut1 = self.sys.jt.column(r + 1).dot(&self.vstar);
                 let ut2 = self.sys.jt.column(r + 2).dot(&self.vstar);
                 report.max_slip_speed = report.max_slip_speed.max(ut1.hypot(ut2));
             }
         }
-        report.total_normal_force = fz;
-        if fz > 1e-9 {
-            report.zmp = Some([cx / fz, cy / fz]);
+        let loads = (0..nc)
+            .map(|ci| (self.sys.lambda[3 * ci] / dt, self.points[ci]))
+            .filter(|&(normal, _)| normal > LOADED)
+            .map(|(normal, at)| PressureLoad::point(normal, at));
+        let pressure = center_of_pressure(loads);
+        report.total_normal_force = pressure.total;
+        if pressure.loads > 0 {
+            report.zmp = Some(pressure.point());
         }
         if let Some(r) = loop_row {
             for k in 0..3 {
@@ -883,9 +929,6 @@ impl World {
                 report.hand_force[k] += f[k];
             }
         }
-        self.refresh_points_after(&mut report);
-        self.last = report;
-        Ok(report)
     }
 
     /// Post-step kinematics: penetration, loop error, CoM.
@@ -1039,6 +1082,60 @@ impl World {
             e += one(&d.model, &mut d.data, &d.q, &d.v)?;
         }
         Ok(e)
+    }
+}
+
+impl Physics for World {
+    fn engine(&self) -> &'static str {
+        "upc"
+    }
+    fn robot(&self) -> &Model {
+        World::robot(self)
+    }
+    fn q(&self) -> &DVector<f64> {
+        World::q(self)
+    }
+    fn v(&self) -> &DVector<f64> {
+        World::v(self)
+    }
+    fn time(&self) -> f64 {
+        World::time(self)
+    }
+    fn steps(&self) -> u64 {
+        World::steps(self)
+    }
+    fn n_actuated(&self) -> usize {
+        World::n_actuated(self)
+    }
+    fn contact_forces(&self) -> &[Vector3<f64>] {
+        World::contact_forces(self)
+    }
+    fn contact_points(&self) -> &[Vector3<f64>] {
+        World::contact_points(self)
+    }
+    fn last_report(&self) -> &StepReport {
+        World::last_report(self)
+    }
+    fn door_angle(&self) -> f64 {
+        World::door_angle(self)
+    }
+    fn door_velocity(&self) -> f64 {
+        World::door_velocity(self)
+    }
+    fn door_model(&self) -> Option<&Model> {
+        self.door().map(|(m, _)| m)
+    }
+    fn set_push(&mut self, frame: usize, force: Vector3<f64>) -> Result<(), SimError> {
+        World::set_push(self, frame, force)
+    }
+    fn step(&mut self, tau: &DVector<f64>, door_torque: f64) -> Result<StepReport, SimError> {
+        World::step(self, tau, door_torque)
+    }
+    fn robot_frame_placements(&mut self) -> &[SE3] {
+        World::robot_frame_placements(self)
+    }
+    fn door_frame_placements(&mut self) -> Option<&[SE3]> {
+        World::door_frame_placements(self)
     }
 }
 

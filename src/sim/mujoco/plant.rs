@@ -13,14 +13,14 @@
 
 use nalgebra::{DVector, Vector3};
 
-use super::MujocoScene;
 use super::ffi::{Mj, Obj};
+use super::scene::{CONNECT, MujocoScene, PlantFile};
 use crate::channels::N_CONTACTS;
 use crate::dynamics::kinematics::{placements_unchecked, update_frame_placements};
-use crate::dynamics::{Data, Model, SE3};
+use crate::dynamics::{Data, Model, PressureLoad, SE3, center_of_pressure};
 use crate::robot::Robot;
-use crate::sim::physics::Physics;
-use crate::sim::world::{SimError, StepReport, rebase};
+use crate::sim::physics::{Physics, SimError, StepReport};
+use crate::sim::world::rebase;
 
 /// Simulated time the robot settles onto its soft contacts before a run starts (s).
 pub const SETTLE_TIME: f64 = 0.5;
@@ -86,7 +86,7 @@ struct Addresses {
     dadr: Vec<usize>,
 }
 
-fn addresses(mj: &Mj, p: &super::PlantFile, nv: usize) -> Result<Addresses, SimError> {
+fn addresses(mj: &Mj, p: &PlantFile, nv: usize) -> Result<Addresses, SimError> {
     let base = lookup(mj, Obj::Joint, &p.base_joint)?;
     let (free, bq, bv, base_joint_body) = mj.joint(base);
     let base_body = lookup(mj, Obj::Body, &p.base_body)?;
@@ -137,13 +137,13 @@ fn door_ids(mj: &Mj, scene: &MujocoScene) -> Result<Option<DoorIds>, SimError> {
         return Ok(None);
     };
     let (_, hq, hv, _) = mj.joint(lookup(mj, Obj::Joint, joint)?);
-    let connect = match mj.id(Obj::Equality, super::CONNECT) {
+    let connect = match mj.id(Obj::Equality, CONNECT) {
         Some(c) => c,
         None if mj.neq() == 1 => 0,
         None => {
             return Err(SimError::Scene(format!(
                 "no equality `{}` joining hand and handle",
-                super::CONNECT
+                CONNECT
             )));
         }
     };
@@ -363,12 +363,19 @@ impl MujocoPlant {
     }
 
     /// The CoP of the loaded points, at the spheres' lowest points (their centres in x, y):
-    /// the total normal force, the CoP if any load, and the loaded points.
+    /// the total normal force, the CoP if any load, and the loaded points. A load ≤ 0 carries
+    /// nothing.
     fn centre_of_pressure(&self) -> (f64, Option<[f64; 2]>, u32) {
-        crate::sim::physics::centre_of_pressure(self.spheres.iter().enumerate().map(|(k, &g)| {
+        let loaded = self
+            .spheres
+            .iter()
+            .enumerate()
+            .filter(|&(k, _)| self.forces[k].z > 0.0);
+        let p = center_of_pressure(loaded.map(|(k, &g)| {
             let p = self.mj.geom_xpos(g);
-            (self.forces[k].z, [p[0], p[1]])
-        }))
+            PressureLoad::point(self.forces[k].z, Vector3::new(p[0], p[1], 0.0))
+        }));
+        (p.total, (p.loads > 0).then(|| p.point()), p.loads)
     }
 
     /// The door's force on the hand. Equality rows come first; the connect's residual is
@@ -544,7 +551,7 @@ mod tests {
         let scenario = Scenario::load(&cfg.scenario)
             .expect("scenario")
             .with_force_scale(robot.force_scale().expect("scale"));
-        let scene = super::super::build(&robot, &cfg, &scenario).expect("scene");
+        let scene = super::super::scene::build(&robot, &cfg, &scenario).expect("scene");
         let plant = MujocoPlant::new(&robot, &scene).expect("plant");
         (robot, plant)
     }

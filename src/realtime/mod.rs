@@ -1,7 +1,16 @@
-//! Real-time process setup: SCHED_FIFO priority, locked memory, CPU affinity. Each step that
-//! the OS refuses (no CAP_SYS_NICE, container limits) degrades with a warning, never an error.
+//! Real-time process setup, shared by every process with a loop (controller, plant, bridge, bus):
+//! SCHED_FIFO priority, locked memory, CPU affinity, background and lower-priority threads, the
+//! log threads' drain loop, and loop latency statistics ([`latency`]). Each step that the OS
+//! refuses (no CAP_SYS_NICE, container limits) degrades with a warning, never an error.
+//!
+//! A bottom module: it depends on [`crate::config`] only, so the plant and the transports time
+//! their loops without depending on the controller.
 
-pub use crate::config::RealtimeSettings;
+pub mod latency;
+
+pub use latency::LatencyHistogram;
+
+use crate::config::RealtimeSettings;
 
 /// What was actually applied.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]

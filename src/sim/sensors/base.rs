@@ -1,0 +1,38 @@
+//! The floating base as a robot publishes it: not measured, unless a motion-capture system
+//! stands in for the sensor (`mocap`).
+
+use rand_chacha::ChaCha8Rng;
+
+use super::{SensorCounts, SensorModel, Truth};
+use crate::channels::{STATE_FLAG_BASE_UNMEASURED, StateMsg};
+
+/// Without `mocap`, writes NaN into the base's `q[..7]` and `v[..6]` and sets
+/// `STATE_FLAG_BASE_UNMEASURED` in `flags`; with it, leaves the true base. Draws nothing.
+pub(super) struct UnmeasuredBase {
+    mocap: bool,
+}
+
+impl SensorModel for UnmeasuredBase {
+    /// `sim.sensors.mocap`.
+    type Settings = bool;
+
+    fn new(mocap: &bool) -> Self {
+        Self { mocap: *mocap }
+    }
+
+    fn reset(&mut self, _rng: &mut ChaCha8Rng) {}
+
+    fn apply(
+        &mut self,
+        _truth: &Truth,
+        m: &mut StateMsg,
+        _rng: &mut ChaCha8Rng,
+        _counts: &mut SensorCounts,
+    ) {
+        if !self.mocap {
+            m.q[..7].fill(f64::NAN);
+            m.v[..6].fill(f64::NAN);
+            m.flags |= STATE_FLAG_BASE_UNMEASURED;
+        }
+    }
+}

@@ -1,0 +1,123 @@
+//! What a sensor's samples go through on their way out, shared by the force, wrench and IMU
+//! models: a constant bias with signs drawn from the seed, and the fieldbus's latency and
+//! dropouts ([`Transport`]); and the three-axis force channel of the wrist and the sole corners.
+
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::Deserialize;
+
+/// One three-axis force sensor's model (per axis).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ForceSensorConfig {
+    /// σ of the white noise of one sample (N).
+    pub noise: f64,
+    /// Magnitude of the constant bias per axis (N); its signs are drawn from the seed.
+    pub bias: f64,
+    /// Bias random walk (N/√s): after t seconds the bias has wandered by drift·√t (1σ).
+    pub drift: f64,
+    /// Resolution (N): samples are rounded to a multiple of it (0: none).
+    pub resolution: f64,
+    /// Delay in plant steps.
+    pub latency: usize,
+    /// Probability that a sample is lost (the previous one is published again).
+    pub dropout: f64,
+}
+
+/// A delay line of `latency + 1` samples of N values, and the sample last published: what a
+/// fieldbus does to a sensor's samples (late, sometimes lost).
+#[derive(Debug, Clone)]
+pub(super) struct Transport<const N: usize> {
+    line: Vec<[f64; N]>,
+    last: [f64; N],
+    primed: bool,
+}
+
+impl<const N: usize> Transport<N> {
+    pub(super) fn new(latency: usize) -> Self {
+        Self {
+            line: vec![[0.0; N]; latency + 1],
+            last: [0.0; N],
+            primed: false,
+        }
+    }
+
+    /// Empty, as before the first sample (in place: no allocation).
+    pub(super) fn reset(&mut self) {
+        self.line.fill([0.0; N]);
+        self.last = [0.0; N];
+        self.primed = false;
+    }
+
+    /// Writes step `step`'s sample `x`, replaces it with the one published at that step, and
+    /// returns whether the sample was lost (`u`: a uniform draw, lost when below `dropout`).
+    pub(super) fn pass(&mut self, step: u64, x: &mut [f64; N], u: f64, dropout: f64) -> bool {
+        // Write this step's sample, read the one `latency` steps old (the oldest written so far
+        // while the line fills).
+        let len = self.line.len() as u64;
+        self.line[(step % len) as usize] = *x;
+        let old = (step + 1).saturating_sub(len);
+        let delayed = self.line[(old % len) as usize];
+        let lost = self.primed && u < dropout;
+        if !lost {
+            self.last = delayed;
+        }
+        self.primed = true;
+        *x = self.last;
+        lost
+    }
+}
+
+/// A bias of `size` per axis with signs drawn from `rng`.
+pub(super) fn signed_bias(size: f64, rng: &mut ChaCha8Rng) -> [f64; 3] {
+    [0; 3].map(|_| {
+        let u: f64 = StandardNormal.sample(rng);
+        size * u.signum()
+    })
+}
+
+/// One three-axis force channel: its bias and its transport.
+#[derive(Debug, Clone)]
+pub(super) struct ForceChannel {
+    bias: [f64; 3],
+    transport: Transport<3>,
+}
+
+impl ForceChannel {
+    pub(super) fn new(s: &ForceSensorConfig) -> Self {
+        Self {
+            bias: [0.0; 3],
+            transport: Transport::new(s.latency),
+        }
+    }
+
+    /// The start of a run: the bias's signs drawn from `rng` (three draws), nothing sent yet.
+    pub(super) fn reset(&mut self, s: &ForceSensorConfig, rng: &mut ChaCha8Rng) {
+        self.bias = signed_bias(s.bias, rng);
+        self.transport.reset();
+    }
+
+    /// The sample published at `step` for the true force `f`: returns whether it was lost.
+    pub(super) fn measure(
+        &mut self,
+        s: &ForceSensorConfig,
+        step: u64,
+        dt: f64,
+        rng: &mut ChaCha8Rng,
+        f: &mut [f64; 3],
+    ) -> bool {
+        let walk = s.drift * dt.sqrt();
+        for c in 0..3 {
+            let (n, w): (f64, f64) = (StandardNormal.sample(rng), StandardNormal.sample(rng));
+            self.bias[c] += walk * w;
+            let mut y = f[c] + self.bias[c] + s.noise * n;
+            if s.resolution > 0.0 {
+                y = (y / s.resolution).round() * s.resolution;
+            }
+            f[c] = y;
+        }
+        let u: f64 = rng.random();
+        self.transport.pass(step, f, u, s.dropout)
+    }
+}

@@ -1,0 +1,446 @@
+//! The sensor models through the runtime, as a plant applies them.
+
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+
+use super::feet::fill_foot_wrenches;
+use super::*;
+use crate::channels::{
+    N_CONTACTS, SENSOR_HAND, SENSOR_IMU, SENSOR_JOINTS, STATE_FLAG_BASE_UNMEASURED,
+};
+
+fn cfg() -> SensorsConfig {
+    let force = ForceSensorConfig {
+        noise: 0.5,
+        bias: 2.0,
+        drift: 0.0,
+        resolution: 0.0,
+        latency: 0,
+        dropout: 0.0,
+    };
+    SensorsConfig {
+        sensing: Sensing::Realistic,
+        seed: 7,
+        mocap: true,
+        encoders: EncoderConfig {
+            bits: 12,
+            velocity_noise: 0.01,
+        },
+        imu: ImuConfig {
+            gyro_noise_density: 2.4e-4,
+            gyro_bias: 1e-3,
+            gyro_bias_drift: 0.0,
+            accel_noise_density: 1.7e-3,
+            accel_bias: 0.02,
+            accel_bias_drift: 0.0,
+            tilt_error: 3.5e-3,
+            orientation_noise: 0.0,
+            yaw_drift: 0.0,
+            latency: 0,
+            dropout: 0.0,
+        },
+        wrist: force,
+        feet: FootSensing::Corners,
+        soles: force,
+        foot_ft: WrenchSensorConfig {
+            noise: 0.3,
+            bias: 2.0,
+            drift: 0.0,
+            resolution: 0.0,
+            moment_noise: 0.01,
+            moment_bias: 0.1,
+            moment_drift: 0.0,
+            moment_resolution: 0.0,
+            latency: 0,
+            dropout: 0.0,
+        },
+        motor_torques: crate::sim::robot_sensing::MotorTorqueConfig {
+            noise: 0.0,
+            friction: 0.0,
+            friction_velocity: 0.05,
+            viscous: 0.0,
+            resolution: 0.0,
+            latency: 0,
+        },
+    }
+}
+
+fn state(t_step: u64, hand: [f64; 3]) -> Box<StateMsg> {
+    let mut m: Box<StateMsg> = Box::default();
+    m.step = t_step;
+    m.nq = 10;
+    m.nv = 9;
+    m.q[6] = 1.0;
+    m.q[7] = 0.3;
+    m.hand_force = hand;
+    m
+}
+
+/// Statistics of the wrist over many samples: the mean is the truth plus the bias
+/// (±2 N per axis), the spread the noise's σ.
+#[test]
+fn a_force_sensor_has_its_bias_and_noise() {
+    let mut s = Sensors::new(&cfg(), 9.81, None);
+    let n = 20_000;
+    let (mut sum, mut sum2) = ([0.0; 3], [0.0; 3]);
+    for k in 0..n {
+        let mut m = state(k, [-10.0, 0.0, 5.0]);
+        s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+        for c in 0..3 {
+            sum[c] += m.hand_force[c];
+            sum2[c] += m.hand_force[c] * m.hand_force[c];
+        }
+    }
+    for (c, truth) in [-10.0, 0.0, 5.0].into_iter().enumerate() {
+        let mean = sum[c] / n as f64;
+        let sd = (sum2[c] / n as f64 - mean * mean).sqrt();
+        assert!(
+            ((mean - truth).abs() - 2.0).abs() < 0.02,
+            "axis {c}: mean {mean}"
+        );
+        assert!((sd - 0.5).abs() < 0.02, "axis {c}: σ {sd}");
+    }
+}
+
+/// The bias's random walk: its spread over independent runs after T seconds is drift √T.
+#[test]
+fn the_bias_drifts_as_a_random_walk() {
+    let mut c = cfg();
+    (c.wrist.noise, c.wrist.bias, c.wrist.drift) = (0.0, 0.0, 0.1);
+    let (runs, steps, dt) = (400, 1000, 1e-3);
+    let mut sum2 = 0.0;
+    for seed in 0..runs {
+        c.seed = seed;
+        let mut s = Sensors::new(&c, 9.81, None);
+        let mut last = 0.0;
+        for k in 0..steps {
+            let mut m = state(k, [0.0; 3]);
+            s.apply(&mut m, dt, &[[0.0; 3]; N_CONTACTS]);
+            last = m.hand_force[0];
+        }
+        sum2 += last * last;
+    }
+    let sd = (sum2 / runs as f64).sqrt();
+    let expected = 0.1 * (steps as f64 * dt).sqrt();
+    assert!(
+        (sd / expected - 1.0).abs() < 0.15,
+        "{sd} against {expected}"
+    );
+}
+
+/// A latency of L steps publishes, at step k, the sample of step k − L; a resolution rounds.
+#[test]
+fn latency_delays_and_resolution_rounds() {
+    let mut c = cfg();
+    (
+        c.wrist.noise,
+        c.wrist.bias,
+        c.wrist.latency,
+        c.wrist.resolution,
+    ) = (0.0, 0.0, 3, 0.25);
+    let mut s = Sensors::new(&c, 9.81, None);
+    let mut out = Vec::new();
+    for k in 0..10 {
+        let mut m = state(k, [k as f64 + 0.1, 0.0, 0.0]);
+        s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+        out.push(m.hand_force[0]);
+    }
+    assert_eq!(&out[3..], &[0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+    assert_eq!(
+        &out[..3],
+        &[0.0, 0.0, 0.0],
+        "the first sample until the line fills"
+    );
+}
+
+/// Encoders: positions on the 2π / 2^bits grid, the base untouched; velocities noisy.
+#[test]
+fn encoders_quantise_joints_only() {
+    let mut s = Sensors::new(&cfg(), 9.81, None);
+    let mut m = state(0, [0.0; 3]);
+    m.q[0] = 0.123456789;
+    s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+    let step = std::f64::consts::TAU / 4096.0;
+    assert_eq!(m.q[0], 0.123456789, "the base is no joint");
+    assert!((m.q[7] / step - (m.q[7] / step).round()).abs() < 1e-9);
+    assert!((m.q[7] - 0.3).abs() <= step / 2.0);
+    assert!(m.v[6] != 0.0 && m.v[6].abs() < 0.1, "{}", m.v[6]);
+}
+
+/// Dropouts hold the previous sample and are counted; the same seed gives the same bytes.
+#[test]
+fn dropouts_hold_and_a_seed_reproduces() {
+    let mut c = cfg();
+    c.wrist.dropout = 0.2;
+    let run = |c: &SensorsConfig| {
+        let mut s = Sensors::new(c, 9.81, None);
+        let mut out = Vec::new();
+        for k in 0..2000 {
+            let mut m = state(k, [k as f64, 0.0, 0.0]);
+            s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+            out.push(m.hand_force[0].to_bits());
+        }
+        (out, s.counts.wrist_dropouts)
+    };
+    let (a, lost) = run(&c);
+    assert!((300..500).contains(&lost), "{lost} of 2000 lost at p = 0.2");
+    assert_eq!(a, run(&c).0);
+    c.seed += 1;
+    assert_ne!(a, run(&c).0);
+}
+
+/// The centre of pressure follows the measured forces.
+#[test]
+fn the_centre_of_pressure_is_the_measured_forces() {
+    let mut c = cfg();
+    (c.soles.noise, c.soles.bias) = (0.0, 0.0);
+    let mut s = Sensors::new(&c, 9.81, None);
+    let mut m = state(0, [0.0; 3]);
+    let mut points = [[0.0; 3]; N_CONTACTS];
+    for (k, p) in points.iter_mut().enumerate() {
+        *p = [k as f64 * 0.01, 0.1, 0.0];
+        m.contact_forces[k] = [0.0, 0.0, if k < 2 { 10.0 } else { 0.0 }];
+    }
+    s.apply(&mut m, 1e-3, &points);
+    assert!((m.zmp[0] - 0.005).abs() < 1e-12 && (m.zmp[1] - 0.1).abs() < 1e-12);
+}
+
+/// The IMU of a base at rest, tilted about x: its accelerometer reads g along the world's
+/// up in its own frame, plus its bias; its gyro reads its bias; its orientation is the truth
+/// turned by the attitude filter's tilt error. On `truth` it reads the truth exactly.
+#[test]
+fn an_imu_at_rest_reads_gravity_in_its_frame() {
+    let tilt = 0.3_f64;
+    let at = |k: u64| {
+        let mut m = state(k, [0.0; 3]);
+        let r = UnitQuaternion::from_euler_angles(tilt, 0.0, 0.0);
+        m.q[3..7].copy_from_slice(&[r.i, r.j, r.k, r.w]);
+        m
+    };
+    let up = UnitQuaternion::from_euler_angles(tilt, 0.0, 0.0).inverse() * Vector3::z() * 9.81;
+    let mut c = cfg();
+    let mut exact = c;
+    exact.sensing = Sensing::Truth;
+    let mut s = Sensors::new(&exact, 9.81, None);
+    for k in 0..3 {
+        let mut m = at(k);
+        s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+        for a in 0..3 {
+            assert!((m.imu_linear_acceleration[a] - up[a]).abs() < 1e-12);
+            assert_eq!(m.imu_angular_velocity[a], 0.0);
+        }
+        assert_eq!(m.stamps, [0.0; 4]);
+    }
+    (c.imu.gyro_noise_density, c.imu.accel_noise_density) = (0.0, 0.0);
+    let mut s = Sensors::new(&c, 9.81, None);
+    let mut m = at(5);
+    s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+    for a in 0..3 {
+        let bias = m.imu_linear_acceleration[a] - up[a];
+        assert!((bias.abs() - 0.02).abs() < 1e-12, "accel bias {bias}");
+        assert!((m.imu_angular_velocity[a].abs() - 1e-3).abs() < 1e-12);
+    }
+    let o = m.imu_orientation;
+    let meas = UnitQuaternion::from_quaternion(Quaternion::new(o[3], o[0], o[1], o[2]));
+    let err = (meas * UnitQuaternion::from_euler_angles(tilt, 0.0, 0.0).inverse()).scaled_axis();
+    assert!((err.x.abs() - 3.5e-3).abs() < 1e-9 && (err.y.abs() - 3.5e-3).abs() < 1e-9);
+    assert!(err.z.abs() < 1e-12, "no yaw drift configured: {err}");
+}
+
+/// A base accelerating at 2 m/s² along x: the accelerometer reads (2, 0, g) once it has two
+/// states to difference.
+#[test]
+fn the_accelerometer_reads_the_base_acceleration() {
+    let mut c = cfg();
+    c.sensing = Sensing::Truth;
+    let mut s = Sensors::new(&c, 9.81, None);
+    let mut read = [0.0; 3];
+    for k in 0..5 {
+        let mut m = state(k, [0.0; 3]);
+        m.v[0] = 2.0 * k as f64 * 1e-3;
+        s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+        read = m.imu_linear_acceleration;
+    }
+    assert!(
+        (read[0] - 2.0).abs() < 1e-9 && read[1].abs() < 1e-12,
+        "{read:?}"
+    );
+    assert!((read[2] - 9.81).abs() < 1e-12);
+}
+
+/// A foot's wrench is its corners' forces in the sole frame about their centroid: a foot
+/// turned by 90° about z, loaded on its two front corners.
+#[test]
+fn a_foot_wrench_is_its_corners_in_the_sole_frame() {
+    let mut c = cfg();
+    c.sensing = Sensing::Truth;
+    let mut s = Sensors::new(&c, 9.81, None);
+    let mut m = state(0, [0.0; 3]);
+    // Toes along +y: front-left (−x side), front-right, rear-left, rear-right; 0.2 × 0.1 m.
+    let mut points = [[0.0; 3]; N_CONTACTS];
+    points[..4].copy_from_slice(&[
+        [-0.05, 0.1, 0.0],
+        [0.05, 0.1, 0.0],
+        [-0.05, -0.1, 0.0],
+        [0.05, -0.1, 0.0],
+    ]);
+    m.contact_forces[0] = [1.0, 0.0, 50.0];
+    m.contact_forces[1] = [1.0, 0.0, 50.0];
+    s.apply(&mut m, 1e-3, &points);
+    let w = m.foot_wrenches[0];
+    // In the sole frame: x = world y, y = world −x, z = world z. The moment about the
+    // centre, Σ p × f = (10, 0, −0.2) in the world: the load on the toes (CoP x = −τy / fz
+    // = 0.1 m, the front edge).
+    let expected = [0.0, -2.0, 100.0, 0.0, -10.0, -0.2];
+    for (a, e) in w.iter().zip(expected) {
+        assert!((a - e).abs() < 1e-12, "{w:?}");
+    }
+    assert_eq!(
+        m.foot_wrenches[1], [0.0; 6],
+        "a degenerate sole reads nothing"
+    );
+}
+
+/// Two feet 0.2 × 0.1 m, toes along +x, 0.1 m either side of y = 0, and their corner
+/// forces: the left foot on its toes (CoP x = +0.1), the right flat with a sideways pull.
+fn two_feet(m: &mut StateMsg) -> [[f64; 3]; N_CONTACTS] {
+    let mut points = [[0.0; 3]; N_CONTACTS];
+    for (foot, y) in [(0, 0.1), (1, -0.1)] {
+        let corners = [[0.1, 0.05], [0.1, -0.05], [-0.1, 0.05], [-0.1, -0.05]];
+        for (i, [cx, cy]) in corners.into_iter().enumerate() {
+            points[4 * foot + i] = [cx, y + cy, 0.0];
+        }
+    }
+    for i in 0..2 {
+        m.contact_forces[i] = [0.0, 0.0, 60.0];
+    }
+    for i in 4..8 {
+        m.contact_forces[i] = [0.0, 2.0, 30.0];
+    }
+    points
+}
+
+/// A six-axis sensor per foot: over many samples its mean is the true wrench plus the bias
+/// (±2 N, ±0.1 N m per axis), its spread the configured σ; the corners are not published;
+/// without noise the CoP of its wrenches is the CoP of the true corner forces.
+#[test]
+fn a_six_axis_foot_sensor_measures_the_wrench() {
+    let mut c = cfg();
+    c.feet = FootSensing::SixAxis;
+    let n = 20_000;
+    let mut s = Sensors::new(&c, 9.81, None);
+    let (mut sum, mut sum2) = ([0.0; 6], [0.0; 6]);
+    let mut truth = [0.0; 6];
+    for k in 0..n {
+        let mut m = state(k, [0.0; 3]);
+        let points = two_feet(&mut m);
+        fill_foot_wrenches(&mut m, &points);
+        truth = m.foot_wrenches[0];
+        s.apply(&mut m, 1e-3, &points);
+        assert!(m.contact_forces.iter().flatten().all(|f| f.is_nan()));
+        for a in 0..6 {
+            sum[a] += m.foot_wrenches[0][a];
+            sum2[a] += m.foot_wrenches[0][a].powi(2);
+        }
+    }
+    for a in 0..6 {
+        let (bias, sigma) = if a < 3 { (2.0, 0.3) } else { (0.1, 0.01) };
+        let mean = sum[a] / n as f64;
+        let sd = (sum2[a] / n as f64 - mean * mean).sqrt();
+        let off = (mean - truth[a]).abs();
+        assert!(
+            (off - bias).abs() < 0.02 * bias,
+            "axis {a}: mean {mean} of {truth:?}"
+        );
+        assert!((sd / sigma - 1.0).abs() < 0.05, "axis {a}: σ {sd}");
+    }
+    // Exact sensors: the wrenches' CoP is the corners' (left 120 N at x = 0.1, y = 0.1;
+    // right 120 N at x = 0, y = −0.1).
+    let c = SensorsConfig {
+        foot_ft: WrenchSensorConfig {
+            bias: 0.0,
+            noise: 0.0,
+            moment_bias: 0.0,
+            moment_noise: 0.0,
+            ..c.foot_ft
+        },
+        ..c
+    };
+    let mut s = Sensors::new(&c, 9.81, None);
+    let mut m = state(0, [0.0; 3]);
+    let points = two_feet(&mut m);
+    s.apply(&mut m, 1e-3, &points);
+    assert!(
+        (m.zmp[0] - 0.05).abs() < 1e-12 && m.zmp[1].abs() < 1e-12,
+        "{:?}",
+        m.zmp
+    );
+    assert_eq!(s.counts.foot_ft_dropouts, 0);
+}
+
+/// An IMU in the head of the embedded robot at home, its torso pitched by 0.2 rad (neck
+/// straight): at rest its accelerometer reads g tilted 0.2 rad from what one on the base
+/// reads, and its orientation is 0.2 rad from the base's.
+#[test]
+fn a_mounted_imu_reads_its_own_frame() {
+    let robot = crate::robot::Robot::embedded_default().unwrap();
+    let model = &robot.model;
+    let mut c = cfg();
+    c.sensing = Sensing::Truth;
+    let read = |mount: Option<ImuMount>| {
+        let mut s = Sensors::new(&c, 9.81, mount);
+        let mut m: Box<StateMsg> = Box::default();
+        (m.nq, m.nv) = (model.nq as u32, model.nv as u32);
+        m.q[..model.nq].copy_from_slice(robot.home.as_slice());
+        let torso = model.joints[model.joint_id("torso_pitch").unwrap()].idx_q;
+        m.q[torso] = 0.2;
+        s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+        let o = m.imu_orientation;
+        let r = UnitQuaternion::from_quaternion(Quaternion::new(o[3], o[0], o[1], o[2]));
+        (r, Vector3::from(m.imu_linear_acceleration))
+    };
+    let head = model.frame_id("head").unwrap();
+    let (r_base, f_base) = read(None);
+    let (r_head, f_head) = read(Some(ImuMount::new(model, head)));
+    assert!((f_head.norm() - 9.81).abs() < 1e-9, "at rest: {f_head}");
+    assert!((f_head.angle(&f_base) - 0.2).abs() < 1e-9);
+    assert!((r_head.angle_to(&r_base) - 0.2).abs() < 1e-9);
+    // A state that does not fit the mount's model: no sample (NaN), counted.
+    let mut s = Sensors::new(&c, 9.81, Some(ImuMount::new(model, head)));
+    let mut m: Box<StateMsg> = Box::default();
+    (m.nq, m.nv) = (model.nq as u32 - 1, model.nv as u32);
+    s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+    assert!(m.imu_orientation.iter().all(|x| x.is_nan()));
+    assert_eq!(s.counts.imu_mount_failures, 1);
+}
+
+/// A setting out of range is named by its key.
+#[test]
+fn an_invalid_setting_is_named() {
+    assert_eq!(cfg().invalid(), None);
+    let mut c = cfg();
+    c.foot_ft.moment_noise = -1.0;
+    assert_eq!(c.invalid().unwrap().0, "foot_ft.moment_noise");
+    let mut c = cfg();
+    c.imu.dropout = 1.0;
+    assert_eq!(c.invalid().unwrap().0, "imu.dropout");
+    let mut c = cfg();
+    c.soles.latency = MAX_LATENCY + 1;
+    assert_eq!(c.invalid().unwrap().0, "soles.latency");
+}
+
+/// A robot does not measure its base: without `mocap` the base is NaN and the flag says so;
+/// stamps lag by the latency.
+#[test]
+fn without_mocap_the_base_is_not_published() {
+    let mut c = cfg();
+    (c.mocap, c.imu.latency, c.wrist.latency) = (false, 2, 1);
+    let mut s = Sensors::new(&c, 9.81, None);
+    let mut m = state(10, [0.0; 3]);
+    m.time = 0.01;
+    s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+    assert!(m.q[..7].iter().chain(&m.v[..6]).all(|x| x.is_nan()));
+    assert!(m.q[7].is_finite() && m.flags & STATE_FLAG_BASE_UNMEASURED != 0);
+    assert!((m.stamps[SENSOR_IMU] - 0.008).abs() < 1e-12);
+    assert!((m.stamps[SENSOR_HAND] - 0.009).abs() < 1e-12);
+    assert_eq!(m.stamps[SENSOR_JOINTS], 0.01);
+}

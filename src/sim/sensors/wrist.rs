@@ -1,0 +1,52 @@
+//! The wrist's three-axis force sensor: the hand force as the robot measures it.
+
+use rand_chacha::ChaCha8Rng;
+
+use super::channel::{ForceChannel, ForceSensorConfig};
+use super::{SensorCounts, SensorModel, Truth};
+use crate::channels::{SENSOR_HAND, StateMsg};
+
+/// Writes `hand_force` (noise, bias and its drift, resolution, latency, dropouts) and
+/// `stamps[SENSOR_HAND]` (the time of the sample published); counts `wrist_dropouts`. Draws
+/// six normals and one uniform a step, three normals at reset.
+pub(super) struct WristForce {
+    settings: ForceSensorConfig,
+    channel: ForceChannel,
+    stamp: f64,
+}
+
+impl SensorModel for WristForce {
+    type Settings = ForceSensorConfig;
+
+    fn new(settings: &ForceSensorConfig) -> Self {
+        Self {
+            settings: *settings,
+            channel: ForceChannel::new(settings),
+            stamp: 0.0,
+        }
+    }
+
+    fn reset(&mut self, rng: &mut ChaCha8Rng) {
+        self.channel.reset(&self.settings, rng);
+        self.stamp = 0.0;
+    }
+
+    fn apply(
+        &mut self,
+        truth: &Truth,
+        m: &mut StateMsg,
+        rng: &mut ChaCha8Rng,
+        counts: &mut SensorCounts,
+    ) {
+        let s = &self.settings;
+        if self
+            .channel
+            .measure(s, truth.step, truth.dt, rng, &mut m.hand_force)
+        {
+            counts.wrist_dropouts += 1;
+        } else {
+            self.stamp = truth.stamp(s.latency);
+        }
+        m.stamps[SENSOR_HAND] = self.stamp;
+    }
+}
