@@ -47,6 +47,13 @@ fn bench(c: &mut Criterion) {
             ..correction
         })
         .expect("settings");
+    // Every force sensor replaced by the wrench observer (docs/estimation.md, WO): what a
+    // robot without them pays per tick.
+    let mut wrenches = config.clone();
+    let mut wo: upc::control::wrench_estimation::WrenchObserverSettings =
+        parts.get().expect("defaults");
+    wo.mode = upc::control::wrench_estimation::WrenchMode::On;
+    wrenches.controller.parts.set(&wo).expect("settings");
     let weight = upc::robot::Robot::embedded_default()
         .expect("robot")
         .derived
@@ -72,6 +79,13 @@ fn bench(c: &mut Criterion) {
             true,
         ),
         ("c1_tick_phantom", ControllerKind::C1, &config, false, false),
+        (
+            "c1_tick_estimated_wrenches",
+            ControllerKind::C1,
+            &wrenches,
+            false,
+            true,
+        ),
         (
             "c1_tick_estimated_base",
             ControllerKind::C1,
