@@ -3,7 +3,7 @@
 
 use rand_chacha::ChaCha8Rng;
 
-use super::{SensorCounts, SensorModel, Truth};
+use super::model::{SensorCounts, SensorModel, Truth};
 use crate::channels::{STATE_FLAG_BASE_UNMEASURED, StateMsg};
 
 /// Without `mocap`, writes NaN into the base's `q[..7]` and `v[..6]` and sets

@@ -4,7 +4,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::Deserialize;
 
-use super::{SensorCounts, SensorModel, Truth};
+use super::model::{SensorCounts, SensorModel, Truth};
 use crate::channels::{MAX_DOF, SENSOR_JOINTS, StateMsg};
 
 /// The joint encoders' model (the base's six coordinates are not joints).

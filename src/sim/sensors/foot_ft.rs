@@ -9,7 +9,7 @@ use serde::Deserialize;
 
 use super::channel::{Transport, signed_bias};
 use super::feet::{fill_foot_wrenches, sole};
-use super::{SensorCounts, SensorModel, Truth};
+use super::model::{SensorCounts, SensorModel, Truth};
 use crate::channels::{N_CONTACTS, SENSOR_FEET, StateMsg};
 use crate::dynamics::{PressureLoad, center_of_pressure};
 

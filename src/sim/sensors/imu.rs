@@ -10,7 +10,7 @@ use rand_distr::{Distribution, StandardNormal};
 use serde::Deserialize;
 
 use super::channel::{Transport, signed_bias};
-use super::{SensorCounts, SensorModel, Truth};
+use super::model::{SensorCounts, SensorModel, Truth};
 use crate::channels::{MAX_DOF, SENSOR_IMU, StateMsg};
 use crate::dynamics::{Data, Model, ReferenceFrame, forward_kinematics_velocity, frame_velocity};
 

@@ -2,8 +2,8 @@
 //! state a plant publishes passes through these models before it leaves, as a robot's SDK would
 //! hand it over. Ground truth keeps going out on its own channel.
 //!
-//! Each kind of sensor is one part, a [`SensorModel`] in a file of its own, stating which
-//! fields of the published state it writes:
+//! Each kind of sensor is one part, a [`model::SensorModel`] in a file of its own, stating
+//! which fields of the published state it writes:
 //! - [`encoders`]: the joint encoders (quantised positions; velocities from the drives with
 //!   white noise);
 //! - [`wrist`]: the wrist's force sensor (white noise, a constant bias, a bias drifting as a
@@ -18,8 +18,9 @@
 //! - [`base`]: unless `mocap`, the floating base is not published: a robot does not measure it.
 //!
 //! The engines give the truth; [`Sensors`], the runtime, applies the declared models in turn.
-//! The shared pieces: [`channel`] (bias signs, the fieldbus's latency and dropouts, the
-//! three-axis force channel) and [`feet`] (the soles' geometry and corner wrenches).
+//! The shared pieces: [`model`] (the seam: the trait, the truth a model reads, the counters),
+//! [`channel`] (bias signs, the fieldbus's latency and dropouts, the three-axis force channel)
+//! and [`feet`] (the soles' geometry and corner wrenches).
 //!
 //! The sensor block (IMU, foot wrenches, sample times) is filled from the truth on `truth` too,
 //! so an estimator can run on exact sensors.
@@ -34,6 +35,7 @@ mod encoders;
 mod feet;
 mod foot_ft;
 mod imu;
+mod model;
 mod soles;
 mod wrist;
 
@@ -45,6 +47,7 @@ pub use channel::ForceSensorConfig;
 pub use encoders::EncoderConfig;
 pub use foot_ft::WrenchSensorConfig;
 pub use imu::{ImuConfig, ImuMount};
+pub use model::SensorCounts;
 
 use crate::channels::StateMsg;
 
@@ -52,6 +55,7 @@ use base::UnmeasuredBase;
 use encoders::JointEncoders;
 use foot_ft::FootForceTorque;
 use imu::{Imu, ImuTruth, publish_imu};
+use model::{SensorModel, Truth};
 use soles::SoleCorners;
 use wrist::WristForce;
 
@@ -211,62 +215,6 @@ type Channel<'a> = (&'a str, &'a [(&'a str, f64)], f64, usize);
 
 /// Longest latency modelled (steps).
 pub const MAX_LATENCY: usize = 64;
-
-/// Counters of a run.
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
-pub struct SensorCounts {
-    /// Samples lost (the previous one published again): wrist, sole corners, the feet's
-    /// six-axis sensors and IMU.
-    pub wrist_dropouts: u64,
-    pub sole_dropouts: u64,
-    pub foot_ft_dropouts: u64,
-    pub imu_dropouts: u64,
-    /// Samples of a mounted IMU whose frame could not be placed in the state (it does not fit
-    /// the model, or its kinematics failed): published as NaN, which the estimator refuses.
-    pub imu_mount_failures: u64,
-}
-
-/// One kind of sensor: what it makes of the truth at each step. Its doc comment names the
-/// fields of [`StateMsg`] it writes, and what it draws from the run's generator.
-trait SensorModel {
-    /// Its settings under `[sim.sensors]`.
-    type Settings;
-    /// The model with `settings`, allocated once; [`SensorModel::reset`] starts a run.
-    fn new(settings: &Self::Settings) -> Self;
-    /// The start of a run: its constant errors (bias signs, the attitude filter's tilt) drawn
-    /// from `rng`, its delay line empty, nothing published yet.
-    fn reset(&mut self, rng: &mut ChaCha8Rng);
-    /// Writes its fields of `m` as published at this step, from the truth (`truth`, and those
-    /// fields as the engine filled them), its noise drawn from `rng`; counts what it lost.
-    fn apply(
-        &mut self,
-        truth: &Truth,
-        m: &mut StateMsg,
-        rng: &mut ChaCha8Rng,
-        counts: &mut SensorCounts,
-    );
-}
-
-/// The truth of one plant step that is not in the state's own fields, or that a sensor
-/// before this one may have overwritten.
-struct Truth<'a> {
-    step: u64,
-    /// Plant time (s) and period (s).
-    time: f64,
-    dt: f64,
-    /// The sole corners (world), in the robot description's contact order.
-    contact_points: &'a [[f64; 3]],
-    /// The IMU's true sample where it sits: orientation xyzw, angular velocity and specific
-    /// force in its frame (taken before the encoders quantise the joints it is placed from).
-    imu: [f64; 10],
-}
-
-impl Truth<'_> {
-    /// The time of a sample that left `latency` steps ago.
-    fn stamp(&self, latency: usize) -> f64 {
-        self.time - latency as f64 * self.dt
-    }
-}
 
 /// The sensors of one plant run: the models declared below (the sensor block alone on
 /// `truth`).

@@ -6,7 +6,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::channel::{ForceChannel, ForceSensorConfig};
 use super::feet::fill_foot_wrenches;
-use super::{SensorCounts, SensorModel, Truth};
+use super::model::{SensorCounts, SensorModel, Truth};
 use crate::channels::{N_CONTACTS, SENSOR_FEET, StateMsg};
 use crate::dynamics::{PressureLoad, center_of_pressure};
 

@@ -3,7 +3,7 @@
 use rand_chacha::ChaCha8Rng;
 
 use super::channel::{ForceChannel, ForceSensorConfig};
-use super::{SensorCounts, SensorModel, Truth};
+use super::model::{SensorCounts, SensorModel, Truth};
 use crate::channels::{SENSOR_HAND, StateMsg};
 
 /// Writes `hand_force` (noise, bias and its drift, resolution, latency, dropouts) and
