@@ -163,7 +163,8 @@ impl WrenchObserver {
         update_frame_placements(&self.model, &mut self.data);
         self.tau_full.fill(0.0);
         self.tau_full.rows_mut(6, nv - 6).copy_from_slice(tau);
-        let starting = !self.started || !(dt > 0.0);
+        // A step that is not a positive time (a repeated or reordered state) starts over too.
+        let starting = !self.started || dt.is_nan() || dt <= 0.0;
         if starting {
             self.data.m.mul_to(v, &mut self.p0);
             self.mdot_v.fill(0.0);

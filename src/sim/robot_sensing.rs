@@ -250,8 +250,10 @@ mod tests {
     #[test]
     fn truth_sensing_publishes_everything() {
         let mut s = RobotSensing::new(spec(), false, cfg(), vec![0.0, 50.0], 1);
-        let mut m = StateMsg::default();
-        m.hand_force = [1.0; 3];
+        let mut m = StateMsg {
+            hand_force: [1.0; 3],
+            ..Default::default()
+        };
         m.joint_torques[1] = 3.0;
         s.take_truth(&m);
         s.apply(&mut m);
