@@ -71,3 +71,32 @@ fn controller_tick_with_the_base_estimator_allocations() {
     assert_eq!(e.ticks, 25);
     assert!(count <= 20, "{count} allocations in 20 ticks");
 }
+
+/// The same on a robot without force sensors (docs/estimation.md, WO): the base estimated and
+/// the feet's wrenches, the CoP and the hand force estimated from the joint torques every tick
+/// add no allocation.
+#[test]
+fn controller_tick_with_the_wrench_observer_allocations() {
+    let config = Config::embedded_default().expect("defaults");
+    let mut r = rig(&config, ControllerKind::C1);
+    let robot = upc::robot::Robot::embedded_default().expect("robot");
+    r.without_base(robot.derived.mass * 9.81);
+    // What a G1 publishes: no foot wrench, CoP or hand force; the drives' torques.
+    r.state.foot_wrenches = [[f64::NAN; 6]; 2];
+    r.state.zmp = [f64::NAN; 2];
+    r.state.hand_force = [f64::NAN; 3];
+    r.state.joint_torques[6..robot.model.nv].fill(1.0);
+    r.offer_push(-40.0);
+    assert_eq!(r.tick_frozen(0..5), 0, "a warm-up tick failed");
+    let count = allocations(|| {
+        assert_eq!(r.tick_frozen(5..25), 0);
+    });
+    let wo = r
+        .core
+        .part::<upc::control::wrench_estimation::WrenchEstimation>()
+        .expect("the part")
+        .counts;
+    eprintln!("with the wrench observer: {count} allocations in 20 ticks, {wo:?}");
+    assert_eq!((wo.updates, wo.hand_ticks, wo.feet_ticks), (25, 25, 25));
+    assert!(count <= 20, "{count} allocations in 20 ticks");
+}

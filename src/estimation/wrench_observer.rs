@@ -244,7 +244,10 @@ impl WrenchObserver {
         let mut normal = SMatrix::<f64, NW, NW>::zeros();
         let mut rhs = SVector::<f64, NW>::zeros();
         for i in 0..NW {
-            rhs[i] = self.aw.row(i).dot(&self.residual.transpose());
+            // Element by element: a transposed view of the residual would be a new vector.
+            rhs[i] = (0..self.model.nv)
+                .map(|k| self.aw[(i, k)] * self.residual[k])
+                .sum();
             for j in 0..=i {
                 let x = self.aw.row(i).dot(&self.a.row(j));
                 normal[(i, j)] = x;
