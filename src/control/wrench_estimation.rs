@@ -85,14 +85,13 @@ fn build(
     Ok(Box::new(WrenchEstimation {
         observer: WrenchObserver::new(s.model, s.contact_frames, hand, gains),
         mode: settings.mode,
-        estimated: Estimated::default(),
         counts: WrenchCounts::default(),
         last_time: None,
     }))
 }
 
-/// What the observer stood in for at the last tick.
-#[derive(Debug, Clone, Copy, Default)]
+/// What the observer stands in for this tick.
+#[derive(Debug, Clone, Copy)]
 struct Estimated {
     feet: bool,
     cop: bool,
@@ -116,7 +115,6 @@ pub struct WrenchCounts {
 pub struct WrenchEstimation {
     observer: WrenchObserver,
     mode: WrenchMode,
-    estimated: Estimated,
     pub counts: WrenchCounts,
     last_time: Option<f64>,
 }
@@ -199,7 +197,6 @@ impl ControllerPart for WrenchEstimation {
                     cop: self.replaces(s.cop.iter().all(|x| x.is_finite())),
                     hand: self.replaces(s.hand_force.iter().all(|x| x.is_finite())),
                 };
-                self.estimated = e;
                 if !(e.feet || e.cop || e.hand) {
                     return Ok(()); // the robot measures them all: nothing to stand in for
                 }
