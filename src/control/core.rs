@@ -453,6 +453,7 @@ impl ControllerCore {
         f.foot_wrenches = s.foot_wrenches;
         f.hand_force = s.hand_force;
         f.hand_force_trusted = true;
+        f.hand_force_lag = 0.0;
         f.f_ext_filled = false;
         f.measured_push = None;
         f.com_force = [0.0; 2];

@@ -87,6 +87,9 @@ pub struct TickFrame {
     /// `Measure`: the hand force the controller uses (N) and whether it may be fed back.
     pub hand_force: [f64; 3],
     pub hand_force_trusted: bool,
+    /// `Measure`: how far (s) `hand_force` lags the force on the hand (an estimate's filter;
+    /// 0 for a sensor's).
+    pub hand_force_lag: f64,
     /// `Forecast`: the hand force over the horizon at t + (i+1)·T (filled from the forecast as
     /// received unless a part filled it) and the push measured now, when a part knows it.
     pub f_ext: Vec<[f64; 3]>,
@@ -118,6 +121,7 @@ impl TickFrame {
             support: [[0.0; 2]; 2],
             hand_force: [0.0; 3],
             hand_force_trusted: true,
+            hand_force_lag: 0.0,
             f_ext: vec![[0.0; 3]; horizon],
             f_ext_filled: false,
             measured_push: None,

@@ -16,7 +16,9 @@ use super::core::TickError;
 use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
 use super::record::Record;
 use crate::col;
-use crate::estimation::wrench_observer::{ContactWrenches, WrenchObserver, WrenchObserverGains};
+use crate::estimation::wrench_observer::{
+    ContactWrenches, DriveFriction, WrenchObserver, WrenchObserverGains,
+};
 
 /// When the observer's estimates are used (`controller.wrench_observer.mode`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
@@ -42,6 +44,13 @@ pub struct WrenchObserverSettings {
     /// weights.
     pub velocity_noise: [f64; 3],
     pub torque_noise: f64,
+    /// K₂ of WO-5 (1/s): a second stage on the residual; 0: none.
+    pub filter_gain: f64,
+    /// WO-6, the drives' friction as identified: Coulomb as a fraction of each joint's effort
+    /// limit, the velocity over which it changes sign (rad/s), viscous (N·m·s/rad).
+    pub friction_coulomb: f64,
+    pub friction_velocity: f64,
+    pub friction_viscous: f64,
 }
 
 impl Default for WrenchObserverSettings {
@@ -58,11 +67,27 @@ impl crate::config::PartSettings for WrenchObserverSettings {
         if !(self.gain.is_finite() && self.gain > 0.0) {
             return Err(("gain", format!("must be finite and > 0, got {}", self.gain)));
         }
-        let sizes = [self.velocity_noise.as_slice(), &[self.torque_noise]].concat();
+        let sizes = [
+            self.velocity_noise.as_slice(),
+            &[self.torque_noise, self.filter_gain],
+            &[self.friction_coulomb, self.friction_viscous],
+        ]
+        .concat();
         if !sizes.iter().all(|x| x.is_finite() && *x >= 0.0) {
             return Err((
                 "velocity_noise",
-                "the noise sizes must be finite and ≥ 0".into(),
+                "the noise sizes, filter gain and friction must be finite and ≥ 0".into(),
+            ));
+        }
+        if self.friction_coulomb > 0.0
+            && self.friction_velocity.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+        {
+            return Err((
+                "friction_velocity",
+                format!(
+                    "must be > 0 with a Coulomb friction, got {}",
+                    self.friction_velocity
+                ),
             ));
         }
         Ok(())
@@ -81,6 +106,12 @@ fn build(
         gain: settings.gain,
         velocity_noise: settings.velocity_noise,
         torque_noise: settings.torque_noise,
+        filter_gain: settings.filter_gain,
+        friction: DriveFriction {
+            coulomb: settings.friction_coulomb,
+            velocity: settings.friction_velocity,
+            viscous: settings.friction_viscous,
+        },
     };
     Ok(Box::new(WrenchEstimation {
         observer: WrenchObserver::new(s.model, s.contact_frames, hand, gains),
@@ -212,6 +243,7 @@ impl ControllerPart for WrenchEstimation {
                 }
                 if e.hand {
                     frame.hand_force = w.hand;
+                    frame.hand_force_lag = self.observer.lag();
                     self.counts.hand_ticks += 1;
                 }
             }
