@@ -118,6 +118,9 @@ const BULK_ENERGY: f64 = 0.25;
 /// FC-5's leads (bins): 10 ms to 320 ms at 5 ms bins, doubling, around the cart-table's time
 /// constant 1/ω ≈ 0.23 s, the lead over which a push decides a fall.
 const LEADS: [usize; 6] = [2, 4, 8, 16, 32, 64];
+/// FC-2b: how much better (−2 log posterior) a shift that lowers κ must fit than the prior's:
+/// between χ²₁'s 0.95 and 0.99 points (3.84, 6.63).
+const SHIFT_SIGNIFICANCE: f64 = 5.0;
 /// Below this weight the forecast is discounted (counted, logged); back above [`TRUSTED`].
 const DISCOUNTED: f64 = 0.5;
 const TRUSTED: f64 = 0.9;
@@ -179,6 +182,8 @@ pub struct ForecastCorrector {
     p1: Vec<V3>,
     /// Scratch: each candidate shift's cost.
     costs: Vec<f64>,
+    /// Each candidate's κ, evidence h and forecast energy (FC-2b).
+    fits: Vec<[f64; 3]>,
     est: CorrectionEstimate,
     /// Prior means (relaxing to 1 and 0 at `forget`).
     prior_factor: f64,
@@ -256,6 +261,7 @@ impl ForecastCorrector {
             p2: vec![0.0; timeline + 1],
             p1: vec![[0.0; 3]; timeline + 1],
             costs: vec![f64::INFINITY; 2 * m + 1],
+            fits: vec![[1.0, 0.0, 0.0]; 2 * m + 1],
             est: CorrectionEstimate::default(),
             prior_factor: 1.0,
             prior_shift: 0.0,
@@ -735,6 +741,23 @@ impl ForecastCorrector {
                 energy_at_best = sxx / n;
             }
             self.costs[mi] = cost;
+            self.fits[mi] = [kappa, h, sxx / n];
+        }
+        // FC-2b: the shift moves off the prior's only where the window says so. The candidate
+        // nearest τ₀ stands unless the best is better by `SHIFT_SIGNIFICANCE` in units of the bin's
+        // variance: at a push's onset, a forecast still too small to be seen lets a shift that
+        // brings its later, larger part into the window "explain" a flat measurement with
+        // κ ≈ 0, a fit the noise picks.
+        // Only a shift that lowers κ is held: one that finds the push where the forecast put
+        // none (an early or a late push) raises it, and is the evidence of its own.
+        let prior_mi = ((t0 / self.bin).round() + m as f64).clamp(0.0, (2 * m) as f64) as usize;
+        if best.2 < self.fits[prior_mi][0]
+            && self.costs[prior_mi] - best.0 < SHIFT_SIGNIFICANCE * var
+        {
+            let [kappa, h, energy] = self.fits[prior_mi];
+            best = (self.costs[prior_mi], prior_mi, kappa);
+            evidence_at_best = h;
+            energy_at_best = energy;
         }
         let (_, mi, kappa) = best;
         ShiftFit {
