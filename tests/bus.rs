@@ -88,17 +88,28 @@ fn a_g1_on_the_bus_stands_and_is_damped_within_10_ms_of_its_controller_s_death()
     p.stop(&s, "sim", libc::SIGTERM);
     let bus = json(&s.path("bus.json"));
     let sim = json(&s.path("sim.json"));
-    // The controller had the robot, then lost it.
+    // The controller had the robot, then lost it. Without real-time scheduling (this test
+    // runs without it) the controller may stall past `command_timeout` (6 ms) before its death
+    // too: the bus then damps and hands the robot back, as designed. Each loss but the last was
+    // followed by a handover, and every one was damped within the bound below.
     assert!(u(&bus, "handovers") >= 1, "{bus}");
     assert!(f(&bus, "control_start") >= 0.0, "{bus}");
-    assert_eq!(u(&bus, "losses"), 1, "{bus}");
+    let losses = u(&bus, "losses");
+    assert!(losses >= 1, "{bus}");
+    assert_eq!(u(&bus, "handovers"), losses, "{bus}");
+    if losses > 1 {
+        eprintln!(
+            "note: {} transient loss(es) of the controller before its death (no real-time scheduling)",
+            losses - 1
+        );
+    }
     assert!(u(&bus, "damping_states") > 100, "{bus}");
     // The bound: the controller's last torques → the damping command, within 10 ms.
     let delay = f(&bus, "loss_to_damping_max");
     assert!(delay > 0.0 && delay <= 0.010, "{bus}");
-    // The robot received damping only from then on, valid and echoed.
+    // The robot received damping from a loss on (once per loss at most), valid and echoed.
     let starts = sim["damping_starts"].as_array().expect("damping_starts");
-    assert_eq!(starts.len(), 1, "{sim}");
+    assert!(!starts.is_empty() && starts.len() as u64 <= losses, "{sim}");
     assert!(u(&sim, "damping_steps") > 200, "{sim}");
     assert_eq!(u(&sim, "bad_crc_commands"), 0, "{sim}");
     assert_eq!(u(&sim, "wrong_mode_machine"), 0, "{sim}");
