@@ -80,7 +80,7 @@ impl crate::config::PartSettings for WrenchObserverSettings {
             ));
         }
         if self.friction_coulomb > 0.0
-            && self.friction_velocity.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+            && (self.friction_velocity.is_nan() || self.friction_velocity <= 0.0)
         {
             return Err((
                 "friction_velocity",

@@ -267,6 +267,17 @@ impl Model {
             .collect()
     }
 
+    /// Each velocity coordinate's effort limit (N·m or N), 0 where there is none (the floating
+    /// base's coordinates, an unbounded joint): the scale of a drive's friction and noise.
+    pub fn effort_limits(&self) -> Vec<f64> {
+        (0..self.nv)
+            .map(|k| {
+                let e = self.joints[self.dof_joint[k]].limits.effort;
+                if e.is_finite() && e > 0.0 { e } else { 0.0 }
+            })
+            .collect()
+    }
+
     /// Sum of the body masses (bodies fixed to the world are not counted: they never move).
     pub fn total_mass(&self) -> f64 {
         self.joints.iter().map(|j| j.inertia.mass).sum()

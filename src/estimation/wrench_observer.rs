@@ -156,12 +156,6 @@ impl WrenchObserver {
         gains: WrenchObserverGains,
     ) -> Self {
         let nv = model.nv;
-        let mut effort = DVector::zeros(nv);
-        for j in &model.joints {
-            for k in j.idx_v..j.idx_v + j.nv() {
-                effort[k] = j.limits.effort;
-            }
-        }
         Self {
             data: Data::new(model),
             model: model.clone(),
@@ -177,7 +171,7 @@ impl WrenchObserver {
             filtered: DVector::zeros(nv),
             filter_gain: gains.filter_gain,
             friction: gains.friction,
-            effort,
+            effort: DVector::from_vec(model.effort_limits()),
             m_prev: DMatrix::zeros(nv, nv),
             started: false,
             tau_full: DVector::zeros(nv),
@@ -429,16 +423,7 @@ mod tests {
         let (mut q, mut v) = (robot.home.clone(), DVector::zeros(model.nv));
         let mut next = q.clone();
         let tau = DVector::zeros(model.nv);
-        let mut effort = vec![0.0; model.nv];
-        for j in &model.joints {
-            for k in j.idx_v..j.idx_v + j.nv() {
-                effort[k] = if j.limits.effort.is_finite() {
-                    j.limits.effort
-                } else {
-                    0.0
-                };
-            }
-        }
+        let effort = model.effort_limits();
         let (dt, substeps) = (1e-3, 10);
         let h = dt / substeps as f64;
         let mut out = Vec::new();

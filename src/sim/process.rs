@@ -548,22 +548,6 @@ fn sensors_of(cfg: &SimConfig, robot: &Robot) -> SensorsConfig {
     s
 }
 
-/// Each velocity coordinate's effort limit (N·m; 0 for the base and unlimited joints).
-fn effort_limits(model: &crate::dynamics::Model) -> Vec<f64> {
-    let mut e = vec![0.0; model.nv];
-    for j in &model.joints {
-        let limit = j.limits.effort;
-        for k in j.idx_v..j.idx_v + j.nv() {
-            e[k] = if limit.is_finite() && limit > 0.0 {
-                limit
-            } else {
-                0.0
-            };
-        }
-    }
-    e
-}
-
 fn log_transition(from: Phase, to: Phase, t: f64, cfg: &SimConfig) {
     match (from, to) {
         (_, Phase::Handover) => tracing::info!(
@@ -684,7 +668,7 @@ impl Looper {
                 robot.description.sensors,
                 cfg.sensors.sensing == Sensing::Realistic,
                 cfg.sensors.motor_torques,
-                effort_limits(world.robot()),
+                world.robot().effort_limits(),
                 cfg.sensors.seed,
             ),
             points: [[0.0; 3]; N_CONTACTS],
