@@ -743,13 +743,12 @@ impl ForecastCorrector {
             self.costs[mi] = cost;
             self.fits[mi] = [kappa, h, sxx / n];
         }
-        // FC-2b: the shift moves off the prior's only where the window says so. The candidate
-        // nearest τ₀ stands unless the best is better by `SHIFT_SIGNIFICANCE` in units of the bin's
-        // variance: at a push's onset, a forecast still too small to be seen lets a shift that
-        // brings its later, larger part into the window "explain" a flat measurement with
-        // κ ≈ 0, a fit the noise picks.
-        // Only a shift that lowers κ is held: one that finds the push where the forecast put
-        // none (an early or a late push) raises it, and is the evidence of its own.
+        // FC-2b: a shift that lowers κ below the prior shift's κ stands only if it fits better
+        // by `SHIFT_SIGNIFICANCE` in units of the bin's variance. At a push's onset, a forecast
+        // still too small to be seen lets a shift that brings its later, larger part into the
+        // window "explain" a flat measurement with κ ≈ 0, a fit the noise picks. A shift that
+        // raises κ (the push found where the forecast put none: an early or a late forecast) is
+        // its own evidence.
         let prior_mi = ((t0 / self.bin).round() + m as f64).clamp(0.0, (2 * m) as f64) as usize;
         if best.2 < self.fits[prior_mi][0]
             && self.costs[prior_mi] - best.0 < SHIFT_SIGNIFICANCE * var
@@ -1356,8 +1355,7 @@ mod tests {
     /// An estimated hand force lagging the push by 20 ms (WO-5 at K = K₂ = 100/s) against an
     /// exact forecast: told the lag, the correction finds the forecast on time (|τ̂| < 5 ms at
     /// 200 ms) and κ̂ settles within 10 % of 1 by 300 ms; not told, it reads the lag as a push
-    /// 10 ms late or more, and would preview every push that much late. (κ̂ may sink at the
-    /// onset, told or not, while the lagging measurement has not risen: seed 17 until 240 ms.)
+    /// 10 ms late or more, and would preview every push that much late.
     #[test]
     fn a_lagging_estimate_is_not_read_as_a_late_push() {
         for seed in [3, 17] {
