@@ -246,7 +246,8 @@ fn static_standing_forces_carry_the_weight() {
         "left foot carries {left} of {mg}"
     );
     assert!(sol.forces.iter().all(|f| f.z > 0.0), "{:?}", sol.forces);
-    assert!(sol.iterations > 0);
+    // Every corner loaded inside its cone: the active-set solve decides, without clarabel.
+    assert_eq!((s.wbc.counters().active_set, sol.iterations), (1, 0));
     assert_cones_and_limits(&s, &sol, config().friction);
     assert!(eom_residual(&s, &sol) < 1e-5, "{}", eom_residual(&s, &sol));
     assert_eq!(s.wbc.counters().solved, 1);
@@ -501,8 +502,13 @@ fn fallback_torque_is_static_gravity_compensation() {
 
 #[test]
 fn reused_solver_matches_a_fresh_solver_each_tick() {
-    let mut warm = setup();
-    let mut cfg = config();
+    // Clarabel on every tick: its solver reuse is what is checked.
+    let clarabel = WbcConfig {
+        active_set: false,
+        ..config()
+    };
+    let mut warm = setup_with(&clarabel);
+    let mut cfg = clarabel.clone();
     cfg.reuse_solver = false;
     let mut cold = setup_with(&cfg);
     let home = warm.q.clone();
@@ -684,4 +690,64 @@ fn condensed_and_full_formulations_give_the_same_optimum() {
             );
         }
     }
+}
+
+/// The active-set solve (docs/whole_body_qp.md) returns clarabel's optimum: against clarabel
+/// on every tick at a tight tolerance, over CoM requests and hand pushes that keep every corner
+/// loaded, unload some corners (the apex of their cones) and put corners at their friction
+/// limit (left to clarabel). Each kind of tick must occur, or the check tests nothing.
+#[test]
+fn the_active_set_solve_is_clarabels_optimum() {
+    let tight = WbcConfig {
+        tolerance: 1e-9,
+        ..config()
+    };
+    let mut fast = setup_with(&tight);
+    let mut reference = setup_with(&WbcConfig {
+        active_set: false,
+        ..tight.clone()
+    });
+    let (mut closed_form, mut unloaded, mut left_to_clarabel) = (0, 0, 0);
+    for ax in [0.0, 0.4, 0.8, 1.2, -1.2] {
+        for fx in [0.0, -20.0, -40.0, -60.0] {
+            let cmd = WbcCommand {
+                com_acc: Vector3::new(ax, 0.1 * ax, 0.0),
+                hand_force: Vector3::new(fx, 0.3 * fx, 0.0),
+                ..hold(&fast)
+            };
+            let before = fast.wbc.counters().active_set;
+            let a = solve(&mut fast, &cmd);
+            let b = solve(&mut reference, &cmd);
+            assert_eq!(a.status, WbcStatus::Solved);
+            assert_eq!(b.status, WbcStatus::Solved);
+            assert_eq!(reference.wbc.counters().active_set, 0);
+            let df = (0..N_CONTACTS)
+                .map(|c| (a.forces[c] - b.forces[c]).amax())
+                .fold(0.0, f64::max);
+            let dt = (a.tau.clone() - &b.tau).amax();
+            let dq = (a.ddq.clone() - &b.ddq).amax();
+            let by_active_set = fast.wbc.counters().active_set > before;
+            let zeros = a.forces.iter().filter(|f| f.norm() == 0.0).count();
+            eprintln!(
+                "a_x {ax}, hand f_x {fx}: active set {by_active_set} ({zeros} corners unloaded, \
+                 {} iterations)  |Δf| {df:.1e} N  |Δτ| {dt:.1e} N·m  |Δq̈| {dq:.1e}",
+                a.iterations
+            );
+            if by_active_set {
+                closed_form += 1;
+                unloaded += usize::from(zeros > 0);
+                assert_eq!(a.iterations, 0);
+                // Exact against a 1e-9 interior-point solve: the reference's own error.
+                assert!(df < 1e-3 && dt < 1e-3 && dq < 1e-5, "{df} {dt} {dq}");
+            } else {
+                left_to_clarabel += 1;
+                assert!(a.iterations > 0);
+                assert!(df < 1e-6 && dt < 1e-6, "the same solve: {df} {dt}");
+            }
+        }
+    }
+    assert!(
+        closed_form > 0 && unloaded > 0 && left_to_clarabel > 0,
+        "closed form {closed_form} (with unloaded corners {unloaded}), clarabel {left_to_clarabel}"
+    );
 }

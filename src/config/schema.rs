@@ -160,6 +160,16 @@ pub struct WbcConfig {
     /// (fast; the full one decides a tick whose condensation fails), or `full`.
     #[serde(default)]
     pub formulation: WbcFormulation,
+    /// Condensed formulation: solve a tick whose optimum has no friction cone active on its
+    /// boundary (every corner inside its cone or unloaded) exactly in closed form, and leave
+    /// clarabel the others (docs/whole_body_qp.md, "The active-set solve"); `false`: clarabel
+    /// every tick (the reference).
+    #[serde(default = "active_set_default")]
+    pub active_set: bool,
+}
+
+fn active_set_default() -> bool {
+    true
 }
 
 /// Form of the whole-body QP handed to clarabel (`src/wbc/`).

@@ -351,7 +351,9 @@ impl ForecastCorrector {
         if x <= 0.0 {
             return self.fc_bin(0);
         }
-        let k = x.floor() as usize;
+        // x > 0 here, so truncation is floor (and no libm call: the build targets baseline
+        // x86-64, which has no rounding instruction).
+        let k = x as usize;
         if k + 1 >= recorded {
             return self.fc_bin(recorded - 1);
         }

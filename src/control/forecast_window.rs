@@ -193,7 +193,9 @@ impl ForecastWindow {
         if x <= 0.0 {
             return self.forces[0];
         }
-        let i = x.floor() as usize;
+        // x > 0 here, so truncation is floor (and no libm call: the build targets baseline
+        // x86-64, which has no rounding instruction).
+        let i = x as usize;
         if i + 1 >= self.len {
             let last = self.forces[self.len - 1];
             let k = (-(t - self.end()).max(0.0) / self.decay).exp();

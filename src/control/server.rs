@@ -739,6 +739,7 @@ impl<'a> ControlLoop<'a> {
         let wc = self.core.wbc_counters();
         s.wbc_torque_limited_ticks = wc.torque_limited;
         s.wbc_condensation_failures = wc.condensation_failures;
+        s.wbc_active_set_ticks = wc.active_set;
         let w = &self.intake.window;
         s.forecasts_accepted = w.accepted;
         s.forecast_never_received = w.accepted == 0;

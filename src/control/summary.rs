@@ -49,6 +49,10 @@ pub struct ServerSummary {
     pub wbc_torque_limited_ticks: u64,
     #[serde(default)]
     pub wbc_condensation_failures: u64,
+    /// Ticks whose whole-body QP was solved by the condensed problem's active-set check, without
+    /// clarabel (docs/whole_body_qp.md).
+    #[serde(default)]
+    pub wbc_active_set_ticks: u64,
     pub preview_fallbacks: u64,
     /// Falls the controller detected (`controller.fall_drop`), and the ticks it then held joint
     /// damping without preview or QP (until the plant restarted).

@@ -101,6 +101,11 @@ impl TickRecord {
             self.wbc_time * 1e6,
         );
         out.flag(col!(plain("wbc_solved")), self.wbc_solved);
+        // 0: the active-set check found the optimum without clarabel.
+        out.put(
+            col!(fixed("wbc_iterations", 0)),
+            f64::from(self.wbc_iterations),
+        );
         out.put(
             col!(fixed("f_meas_x", 3).plot("forecast/measured_x")),
             self.f_meas[0],

@@ -39,7 +39,7 @@
 use std::time::Duration;
 
 use clarabel::solver::{DefaultSettings, SupportedConeT};
-use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Vector6};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Vector3, Vector6};
 
 use super::outcome::{FallbackReason, N_CONTACTS, WbcCounters};
 use super::pattern::Pattern;
@@ -55,6 +55,8 @@ const NY: usize = NF + 6;
 /// Rows of the reduced QP: `Bᵀ f − δ = y*` (6), then the cones (24).
 const ROW_SOC: usize = 6;
 const N_ROWS: usize = ROW_SOC + NF;
+/// Active-set rounds tried before clarabel decides (see `active_set_optimum`).
+const ACTIVE_SET_ROUNDS: usize = 4;
 
 /// The data of one tick, as the controller assembled it (world axes, SI).
 pub(crate) struct Problem<'a> {
@@ -75,6 +77,8 @@ pub(crate) struct Problem<'a> {
     pub friction: f64,
     /// Rotation of each sole (its z axis is the contact normal).
     pub foot_rot: [Matrix3<f64>; 2],
+    /// Try the active-set solve before clarabel (`wbc.active_set`).
+    pub active_set: bool,
 }
 
 /// Why the condensed problem could not be solved (the caller then solves the full problem,
@@ -96,12 +100,17 @@ pub(crate) struct CondensedQp {
     l_h: DMatrix<f64>,
     /// Cᵀ, then W = L⁻¹ Cᵀ (nv × 18).
     w: DMatrix<f64>,
+    /// Reciprocals of L's pivots (nv).
+    inv_diag: Vec<f64>,
     /// S = Wᵀ W, then its Cholesky factor (18 × 18).
     l_s: DMatrix<f64>,
     /// X = S⁻¹[:, 0..6] (18 × 6).
     x6: DMatrix<f64>,
     /// B = J_c,u (24 × 6).
     b: DMatrix<f64>,
+    /// X_u and y* of the reduced QP (`force_qp`), kept for the closed-form check.
+    xu: Matrix6<f64>,
+    y_star: Vector6<f64>,
     /// u = −H⁻¹ g, then q̈.
     u: DVector<f64>,
     /// ρ, then S⁻¹ ρ; and the 18-vector combining it with the forces.
@@ -150,9 +159,12 @@ impl CondensedQp {
             },
             l_h: DMatrix::zeros(nv, nv),
             w: DMatrix::zeros(nv, NC),
+            inv_diag: vec![0.0; nv],
             l_s: DMatrix::zeros(NC, NC),
             x6: DMatrix::zeros(NC, 6),
             b: DMatrix::zeros(NF, 6),
+            xu: Matrix6::zeros(),
+            y_star: Vector6::zeros(),
             u: DVector::zeros(nv),
             rho: DVector::zeros(NC),
             z: DVector::zeros(NC),
@@ -194,6 +206,11 @@ impl CondensedQp {
         solve_time: &mut Duration,
     ) -> Result<bool, CondensedError> {
         self.reduce(pb)?;
+        if let Some(f) = pb.active_set.then(|| self.active_set_optimum(pb)).flatten() {
+            counters.active_set += 1;
+            self.recover(&f);
+            return Ok(false);
+        }
         let run = self.qp.run(
             &self.p_pattern,
             &self.p_val,
@@ -230,21 +247,23 @@ impl CondensedQp {
     /// H (factored in place into L) and `u = −H⁻¹ g`: the optimum of the q̈ cost terms alone.
     fn unconstrained(&mut self, pb: &Problem) -> Result<(), CondensedError> {
         let nv = self.nv;
-        // H = D + Σ w JᵀJ, lower triangle (all the Cholesky reads).
+        // H = D + Σ w JᵀJ, lower triangle (all the Cholesky reads): per task, down contiguous
+        // columns of H (a task's Jacobian is 3 × nv, column-major).
         {
             let h = self.l_h.as_mut_slice();
-            for c in 0..nv {
-                for r in c..nv {
-                    let mut x = 0.0;
-                    for t in pb.tasks {
-                        let j = &t.jac;
-                        x += t.weight
-                            * (j[(0, r)] * j[(0, c)]
-                                + j[(1, r)] * j[(1, c)]
-                                + j[(2, r)] * j[(2, c)]);
+            h.fill(0.0);
+            for t in pb.tasks {
+                let (j, w) = (t.jac.as_slice(), t.weight);
+                for c in 0..nv {
+                    let jc = &j[3 * c..3 * c + 3];
+                    let (a0, a1, a2) = (w * jc[0], w * jc[1], w * jc[2]);
+                    let col = &mut h[c * nv + c..(c + 1) * nv];
+                    for (x, jr) in col.iter_mut().zip(j[3 * c..].chunks_exact(3)) {
+                        *x += a0 * jr[0] + a1 * jr[1] + a2 * jr[2];
                     }
-                    h[r + c * nv] = x;
                 }
+            }
+            for c in 0..nv {
                 h[c + c * nv] += pb.diag[c];
             }
         }
@@ -287,13 +306,13 @@ impl CondensedQp {
         // ρ = d₀ − C u.
         self.rho.gemv_tr(-1.0, &self.w, &self.u, 1.0);
         // W = L⁻¹ Cᵀ, S = Wᵀ W = C H⁻¹ Cᵀ.
-        forward_substitution(&self.l_h, &mut self.w);
+        forward_substitution(&self.l_h, &mut self.inv_diag, &mut self.w);
         // S = Wᵀ W, lower triangle.
         for c in 0..NC {
             let wc = &self.w.as_slice()[c * nv..(c + 1) * nv];
             for r in c..NC {
                 let wr = &self.w.as_slice()[r * nv..(r + 1) * nv];
-                self.l_s[(r, c)] = wr.iter().zip(wc).map(|(a, b)| a * b).sum();
+                self.l_s[(r, c)] = dot(wr, wc);
             }
         }
         if !cholesky_in_place(&mut self.l_s) {
@@ -342,6 +361,8 @@ impl CondensedQp {
             .cholesky()
             .ok_or(CondensedError::Factorisation)?
             .solve(&rho_u);
+        self.xu = xu;
+        self.y_star = y_star;
         for k in 0..NF {
             for c in 0..6 {
                 self.b[(k, c)] = pb.jc[(k, c)];
@@ -374,6 +395,69 @@ impl CondensedQp {
         Ok(())
     }
 
+    /// The reduced QP's exact optimum when no friction cone is active on its boundary: every
+    /// corner either inside its cone or unloaded (f = 0, the cone's apex). For a set U of
+    /// unloaded corners, the optimum of ½ w_f ‖f‖² + ½ δᵀ X_u δ on `Bᵀ f − δ = y*` with those
+    /// forces zero is `f_k = b_k z` for the loaded corners (b_k: B's rows of corner k) with
+    /// `(w_f X_u⁻¹ + Σ_loaded b_kᵀ b_k) z = y*`, and its multipliers are X_u δ = −w_f z, so an
+    /// unloaded corner's is `λ_k = −w_f b_k z`. The KKT conditions of the convex QP, loaded
+    /// forces in their cones and unloaded corners' λ_k in the dual cone (λ_n ≥ μ ‖λ_t‖), make it
+    /// the optimum. U starts empty; corners pulling (f_n < 0) are unloaded and corners whose λ
+    /// leaves the dual cone loaded again, for a few rounds. `None` when a cone is active on its
+    /// boundary (a corner at its friction limit) or the rounds do not settle: clarabel decides.
+    fn active_set_optimum(&self, pb: &Problem) -> Option<[f64; NF]> {
+        if pb.w_force <= 0.0 || pb.w_force.is_nan() {
+            return None;
+        }
+        let base = self.xu.cholesky()?.inverse() * pb.w_force;
+        let mut unloaded = [false; N_CONTACTS];
+        let mut f = [0.0; NF];
+        for _ in 0..ACTIVE_SET_ROUNDS {
+            let mut m = base;
+            for k in (0..NF).filter(|k| !unloaded[k / 3]) {
+                for r in 0..6 {
+                    for c in 0..6 {
+                        m[(r, c)] += self.b[(k, r)] * self.b[(k, c)];
+                    }
+                }
+            }
+            let z = m.cholesky()?.solve(&self.y_star);
+            let (mut changed, mut at_friction_limit) = (false, false);
+            for c in 0..N_CONTACTS {
+                let rot = &pb.foot_rot[c / 4];
+                // b_c z: the corner's force if loaded; −λ_c / w_f if unloaded.
+                let bz =
+                    Vector3::from_fn(|a, _| (0..6).map(|j| self.b[(3 * c + a, j)] * z[j]).sum());
+                let (n, t) = (
+                    rot.column(2).dot(&bz),
+                    rot.column(0).dot(&bz).hypot(rot.column(1).dot(&bz)),
+                );
+                if unloaded[c] {
+                    // λ = −w_f b_c z must satisfy λ_n ≥ μ ‖λ_t‖.
+                    if -n < pb.friction * t {
+                        unloaded[c] = false;
+                        changed = true;
+                    }
+                } else if n < 0.0 {
+                    unloaded[c] = true;
+                    changed = true;
+                } else {
+                    at_friction_limit |= pb.friction * n < t;
+                }
+                for a in 0..3 {
+                    f[3 * c + a] = if unloaded[c] { 0.0 } else { bz[a] };
+                }
+            }
+            // A friction limit is judged once the set of unloaded corners has settled: unloading
+            // a pulling corner moves the others' forces.
+            if !changed {
+                let finite = f.iter().all(|x| x.is_finite());
+                return (finite && !at_friction_limit).then_some(f);
+            }
+        }
+        None
+    }
+
     /// `x = [q̈(f); f]` with `q̈(f) = u + H⁻¹Cᵀ (S⁻¹ρ + X Bᵀ f)`.
     fn recover(&mut self, f: &[f64; NF]) {
         let nv = self.nv;
@@ -395,13 +479,17 @@ impl CondensedQp {
 }
 
 /// `B ← L⁻¹ B` for a lower-triangular L (n × n) and B (n × k), column-major slices: per
-/// column of B, axpys down contiguous columns of L.
-fn forward_substitution(l: &DMatrix<f64>, b: &mut DMatrix<f64>) {
+/// column of B, axpys down contiguous columns of L. The pivots' reciprocals are taken once: a
+/// division in the chain of each element cost more than the rest of the substitution.
+fn forward_substitution(l: &DMatrix<f64>, inv_diag: &mut [f64], b: &mut DMatrix<f64>) {
     let n = l.nrows();
     let l = l.as_slice();
+    for (j, d) in inv_diag.iter_mut().enumerate().take(n) {
+        *d = 1.0 / l[j + j * n];
+    }
     for col in b.as_mut_slice().chunks_exact_mut(n) {
         for j in 0..n {
-            let x = col[j] / l[j + j * n];
+            let x = col[j] * inv_diag[j];
             col[j] = x;
             if x != 0.0 {
                 let lj = &l[j * n + j + 1..(j + 1) * n];
@@ -411,6 +499,24 @@ fn forward_substitution(l: &DMatrix<f64>, b: &mut DMatrix<f64>) {
             }
         }
     }
+}
+
+/// `aᵀ b` with four partial sums (a single running sum is one long chain of dependent adds).
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut s = [0.0; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let tail: f64 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for k in 0..4 {
+            s[k] += x[k] * y[k];
+        }
+    }
+    (s[0] + s[1]) + (s[2] + s[3]) + tail
 }
 
 /// In-place Cholesky `A = L Lᵀ` of a symmetric matrix (lower triangle read, L left there, the

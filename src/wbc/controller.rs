@@ -172,6 +172,7 @@ struct Params {
     fallback_damping: f64,
     reuse_solver: bool,
     formulation: WbcFormulation,
+    active_set: bool,
 }
 
 impl Params {
@@ -187,6 +188,7 @@ impl Params {
             fallback_damping: config.fallback_damping,
             reuse_solver: config.reuse_solver,
             formulation: config.formulation,
+            active_set: config.active_set,
         }
     }
 }
@@ -852,6 +854,8 @@ impl WholeBodyController {
                 w_force: self.p.w_reg_force,
                 friction: self.p.friction,
                 foot_rot: *foot_rot,
+                // A forced path builds clarabel's solver (`prepare`): no shortcut then.
+                active_set: self.p.active_set && forced.is_none(),
             };
             match self.condensed.solve(
                 &pb,

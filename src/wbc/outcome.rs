@@ -51,4 +51,7 @@ pub struct WbcCounters {
     /// Ticks the condensed problem could not be formed (H or S not positive definite), decided
     /// by the full problem instead.
     pub condensation_failures: u64,
+    /// Ticks the condensed problem's optimum was found without clarabel: no friction cone
+    /// active on its boundary (`condensed.rs`, `active_set_optimum`).
+    pub active_set: u64,
 }
