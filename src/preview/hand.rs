@@ -93,6 +93,7 @@ impl HandPreviewer {
 
     /// One step of eq. (24) from `x` with the gains, desired state and external force of the
     /// next step; returns the next state and the CoM disturbance F_dis of eq. (25) at that step.
+    #[inline]
     pub fn step(
         &self,
         x: &HandState,
@@ -149,7 +150,8 @@ impl HandPreviewer {
                 step: 0,
             });
         }
-        let mut x = *x0;
+        // Inputs checked in one pass, step by step (the first bad one reported), so that the
+        // recursion below is a tight loop.
         for i in 0..horizon {
             let (kp, kd) = (gains.kp[i], gains.kd[i]);
             if !(kp.is_finite() && kd.is_finite() && kp > 0.0 && kd >= 0.0) {
@@ -159,8 +161,7 @@ impl HandPreviewer {
                     kd,
                 });
             }
-            let f = Vector3::from(f_ext[i]);
-            if !finite(&f) {
+            if !f_ext[i].iter().all(|c| c.is_finite()) {
                 return Err(PreviewError::NotFinite {
                     what: "hand force",
                     step: i + 1,
@@ -173,7 +174,16 @@ impl HandPreviewer {
                     step: i + 1,
                 });
             }
-            let (next, f_dis) = self.step(&x, d, kp, kd, &f);
+        }
+        let mut x = *x0;
+        for i in 0..horizon {
+            let (next, f_dis) = self.step(
+                &x,
+                &desired[i],
+                gains.kp[i],
+                gains.kd[i],
+                &Vector3::from(f_ext[i]),
+            );
             self.states[i] = next;
             self.f_dis[i] = f_dis.into();
             x = next;

@@ -41,6 +41,7 @@ use std::time::Duration;
 use clarabel::solver::{DefaultSettings, SupportedConeT};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Vector3, Vector6};
 
+use super::dense::{Cholesky, dot};
 use super::outcome::{FallbackReason, N_CONTACTS, WbcCounters};
 use super::pattern::Pattern;
 use super::qp::QpInstance;
@@ -97,13 +98,11 @@ pub(crate) struct CondensedQp {
     /// (p50, perturbed states) instead of 7.
     force_unit: f64,
     /// H, then its Cholesky factor L (lower triangle).
-    l_h: DMatrix<f64>,
+    h: Cholesky,
     /// Cᵀ, then W = L⁻¹ Cᵀ (nv × 18).
     w: DMatrix<f64>,
-    /// Reciprocals of L's pivots (nv).
-    inv_diag: Vec<f64>,
     /// S = Wᵀ W, then its Cholesky factor (18 × 18).
-    l_s: DMatrix<f64>,
+    s: Cholesky,
     /// X = S⁻¹[:, 0..6] (18 × 6).
     x6: DMatrix<f64>,
     /// B = J_c,u (24 × 6).
@@ -157,10 +156,9 @@ impl CondensedQp {
             } else {
                 1.0
             },
-            l_h: DMatrix::zeros(nv, nv),
+            h: Cholesky::new(nv),
             w: DMatrix::zeros(nv, NC),
-            inv_diag: vec![0.0; nv],
-            l_s: DMatrix::zeros(NC, NC),
+            s: Cholesky::new(NC),
             x6: DMatrix::zeros(NC, 6),
             b: DMatrix::zeros(NF, 6),
             xu: Matrix6::zeros(),
@@ -250,7 +248,7 @@ impl CondensedQp {
         // H = D + Σ w JᵀJ, lower triangle (all the Cholesky reads): per task, down contiguous
         // columns of H (a task's Jacobian is 3 × nv, column-major).
         {
-            let h = self.l_h.as_mut_slice();
+            let h = self.h.l.as_mut_slice();
             h.fill(0.0);
             for t in pb.tasks {
                 let (j, w) = (t.jac.as_slice(), t.weight);
@@ -277,12 +275,10 @@ impl CondensedQp {
                 self.u[c] += w * (j[(0, c)] * r[0] + j[(1, c)] * r[1] + j[(2, c)] * r[2]);
             }
         }
-        if !cholesky_in_place(&mut self.l_h) {
+        if !self.h.factor() {
             return Err(CondensedError::Factorisation);
         }
-        self.l_h.solve_lower_triangular_unchecked_mut(&mut self.u);
-        self.l_h
-            .tr_solve_lower_triangular_unchecked_mut(&mut self.u);
+        self.h.solve(self.u.as_mut_slice());
         Ok(())
     }
 
@@ -306,29 +302,25 @@ impl CondensedQp {
         // ρ = d₀ − C u.
         self.rho.gemv_tr(-1.0, &self.w, &self.u, 1.0);
         // W = L⁻¹ Cᵀ, S = Wᵀ W = C H⁻¹ Cᵀ.
-        forward_substitution(&self.l_h, &mut self.inv_diag, &mut self.w);
+        self.h.solve_lower(self.w.as_mut_slice());
         // S = Wᵀ W, lower triangle.
         for c in 0..NC {
             let wc = &self.w.as_slice()[c * nv..(c + 1) * nv];
             for r in c..NC {
                 let wr = &self.w.as_slice()[r * nv..(r + 1) * nv];
-                self.l_s[(r, c)] = dot(wr, wc);
+                self.s.l[(r, c)] = dot(wr, wc);
             }
         }
-        if !cholesky_in_place(&mut self.l_s) {
+        if !self.s.factor() {
             return Err(CondensedError::Factorisation);
         }
         // S⁻¹ ρ and X = S⁻¹[:, 0..6].
-        self.l_s.solve_lower_triangular_unchecked_mut(&mut self.rho);
-        self.l_s
-            .tr_solve_lower_triangular_unchecked_mut(&mut self.rho);
+        self.s.solve(self.rho.as_mut_slice());
         self.x6.fill(0.0);
         for k in 0..6 {
             self.x6[(k, k)] = 1.0;
         }
-        self.l_s.solve_lower_triangular_unchecked_mut(&mut self.x6);
-        self.l_s
-            .tr_solve_lower_triangular_unchecked_mut(&mut self.x6);
+        self.s.solve(self.x6.as_mut_slice());
         Ok(())
     }
 
@@ -469,110 +461,10 @@ impl CondensedQp {
             }
         }
         self.tmp.gemv(1.0, &self.w, &self.z, 0.0);
-        self.l_h
-            .tr_solve_lower_triangular_unchecked_mut(&mut self.tmp);
+        self.h.solve_upper(self.tmp.as_mut_slice());
         for i in 0..nv {
             self.x[i] = self.u[i] + self.tmp[i];
         }
         self.x[nv..].copy_from_slice(f);
-    }
-}
-
-/// `B ← L⁻¹ B` for a lower-triangular L (n × n) and B (n × k), column-major slices: per
-/// column of B, axpys down contiguous columns of L. The pivots' reciprocals are taken once: a
-/// division in the chain of each element cost more than the rest of the substitution.
-fn forward_substitution(l: &DMatrix<f64>, inv_diag: &mut [f64], b: &mut DMatrix<f64>) {
-    let n = l.nrows();
-    let l = l.as_slice();
-    for (j, d) in inv_diag.iter_mut().enumerate().take(n) {
-        *d = 1.0 / l[j + j * n];
-    }
-    for col in b.as_mut_slice().chunks_exact_mut(n) {
-        for j in 0..n {
-            let x = col[j] * inv_diag[j];
-            col[j] = x;
-            if x != 0.0 {
-                let lj = &l[j * n + j + 1..(j + 1) * n];
-                for (y, a) in col[j + 1..].iter_mut().zip(lj) {
-                    *y -= a * x;
-                }
-            }
-        }
-    }
-}
-
-/// `aᵀ b` with four partial sums (a single running sum is one long chain of dependent adds).
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let mut s = [0.0; 4];
-    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
-    let tail: f64 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
-    for (x, y) in ca.zip(cb) {
-        for k in 0..4 {
-            s[k] += x[k] * y[k];
-        }
-    }
-    (s[0] + s[1]) + (s[2] + s[3]) + tail
-}
-
-/// In-place Cholesky `A = L Lᵀ` of a symmetric matrix (lower triangle read, L left there, the
-/// strict upper triangle is zeroed so the triangular solves see L alone). `false` when a pivot
-/// is not positive and finite. Left-looking by columns: contiguous column updates.
-fn cholesky_in_place(a: &mut DMatrix<f64>) -> bool {
-    let n = a.nrows();
-    let s = a.as_mut_slice();
-    for j in 0..n {
-        for k in 0..j {
-            let ljk = s[j + k * n];
-            if ljk != 0.0 {
-                let (left, right) = s.split_at_mut(j * n);
-                let col_k = &left[k * n + j..k * n + n];
-                for (x, y) in right[j..n].iter_mut().zip(col_k) {
-                    *x -= ljk * y;
-                }
-            }
-        }
-        let d = s[j + j * n];
-        if !(d > 0.0 && d.is_finite()) {
-            return false;
-        }
-        let d = d.sqrt();
-        s[j + j * n] = d;
-        let inv = 1.0 / d;
-        for x in &mut s[j * n + j + 1..j * n + n] {
-            *x *= inv;
-        }
-        for x in &mut s[j * n..j * n + j] {
-            *x = 0.0;
-        }
-    }
-    true
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn cholesky_reproduces_a_spd_matrix_and_refuses_an_indefinite_one() {
-        let n = 7;
-        let r = DMatrix::from_fn(n, n, |i, j| ((i * 7 + j * 3) as f64).sin());
-        let a = &r * r.transpose() + DMatrix::identity(n, n) * 0.1;
-        let mut l = a.clone();
-        assert!(cholesky_in_place(&mut l));
-        let back = &l * l.transpose();
-        assert!((back - &a).amax() < 1e-12);
-        for i in 0..n {
-            for j in i + 1..n {
-                assert_eq!(l[(i, j)], 0.0);
-            }
-        }
-        let mut b = a.clone();
-        b[(3, 3)] = -10.0;
-        assert!(!cholesky_in_place(&mut b));
     }
 }

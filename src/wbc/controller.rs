@@ -1086,14 +1086,29 @@ impl WholeBodyController {
     /// rows), from `data.j` and `data.o_m_f`.
     fn build_jacobians(&mut self, model: &Model, data: &Data) {
         let lwa = ReferenceFrame::LocalWorldAligned;
-        for (c, &id) in self.corner_ids.iter().enumerate() {
+        for (k, &id) in self.foot_ids.iter().enumerate() {
             // Frame ids and sizes were checked at construction: this cannot fail.
             let _ = get_frame_jacobian(model, data, id, lwa, &mut self.jtmp);
-            self.jc.rows_mut(3 * c, 3).copy_from(&self.jtmp.rows(0, 3));
-        }
-        for (k, &id) in self.foot_ids.iter().enumerate() {
-            let _ = get_frame_jacobian(model, data, id, lwa, &mut self.jtmp);
             self.jfeet.rows_mut(6 * k, 6).copy_from(&self.jtmp);
+        }
+        for (c, &id) in self.corner_ids.iter().enumerate() {
+            let k = c / 4;
+            if model.frames[id].parent != model.frames[self.foot_ids[k]].parent {
+                let _ = get_frame_jacobian(model, data, id, lwa, &mut self.jtmp);
+                self.jc.rows_mut(3 * c, 3).copy_from(&self.jtmp.rows(0, 3));
+                continue;
+            }
+            // On the sole's body: v_corner = v_sole + ω × r, r from the sole to the corner
+            // (world axes), one cross product per column instead of a walk up the leg.
+            let r = data.o_m_f[id].trans - data.o_m_f[self.foot_ids[k]].trans;
+            for col in 0..self.jc.ncols() {
+                let j = self.jfeet.column(col);
+                let (v, w) = (6 * k, 6 * k + 3);
+                let (wx, wy, wz) = (j[w], j[w + 1], j[w + 2]);
+                self.jc[(3 * c, col)] = j[v] + (wy * r.z - wz * r.y);
+                self.jc[(3 * c + 1, col)] = j[v + 1] + (wz * r.x - wx * r.z);
+                self.jc[(3 * c + 2, col)] = j[v + 2] + (wx * r.y - wy * r.x);
+            }
         }
         for t in &mut self.tasks.points {
             if let Point::Frame(id) = t.point {

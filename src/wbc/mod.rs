@@ -19,6 +19,7 @@
 pub mod com_bias;
 mod condensed;
 pub mod controller;
+mod dense;
 pub mod outcome;
 mod pattern;
 mod qp;
