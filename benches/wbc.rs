@@ -111,7 +111,103 @@ fn tail_report(label: &str, cfg: &WbcConfig, amp: f64, n: usize) {
     );
 }
 
+/// With `UPC_QP_EXPORT=path`: the condensed QP of 400 ticks (standing, pushed at the hand,
+/// perturbed postures) written as JSON lines for `scripts/qp_compare.py`, each with upc's
+/// answer: the active set's where it decides, and clarabel's (iterations, solve time) from a
+/// second controller that runs clarabel on every tick.
+fn export_instances(path: &str) {
+    let cfg = Config::embedded_default().unwrap().wbc;
+    let model = icub_like::load().unwrap();
+    let home = upc::robot::Robot::embedded_default().expect("robot").home;
+    let mut data = Data::new(&model);
+    forward_kinematics(&model, &mut data, &home).unwrap();
+    let hand = data.o_m_f[model.frame_id("r_hand").unwrap()].trans;
+    let mut fast = WholeBodyController::new(&model, &cfg, &frames()).unwrap();
+    let clarabel_cfg = WbcConfig {
+        active_set: false,
+        ..cfg.clone()
+    };
+    let mut slow = WholeBodyController::new(&model, &clarabel_cfg, &frames()).unwrap();
+    for w in [&mut fast, &mut slow] {
+        w.set_posture_reference(&model, &home).unwrap();
+    }
+    let mut out = String::new();
+    for k in 0..400 {
+        let (kind, amp, push) = match k {
+            0..100 => ("standing", 0.0, 0.0),
+            100..250 => ("pushed", 0.0, -10.0 - 60.0 * ((k - 100) as f64 / 150.0)),
+            _ => ("perturbed", 0.05, -40.0 * ((k as f64 * 0.3).sin()).abs()),
+        };
+        let (q, v, com) = state(&model, &home, k, amp);
+        let cmd = WbcCommand {
+            com_acc: com * 0.5,
+            hand_pos_des: hand,
+            kp: 100.0,
+            kd: 20.0,
+            hand_force: Vector3::new(push, 0.3 * push, 0.0),
+            ..WbcCommand::default()
+        };
+        let limited = fast.counters().torque_limited;
+        let t0 = Instant::now();
+        let a = wbc_once(&mut fast, &model, &mut data, &q, &v, &cmd);
+        let mut fast_tick = t0.elapsed().as_secs_f64();
+        for _ in 0..4 {
+            let t0 = Instant::now();
+            wbc_once(&mut fast, &model, &mut data, &q, &v, &cmd);
+            fast_tick = fast_tick.min(t0.elapsed().as_secs_f64());
+        }
+        // A tick at a torque limit is decided by the full problem: its condensed QP (without
+        // the limits) is exported all the same, marked.
+        let limited = fast.counters().torque_limited > limited;
+        let inst = fast.condensed_instance().expect("condensed");
+        // Clarabel's best of 5 solves of the tick (as the script times the wheels).
+        let mut b = wbc_once(&mut slow, &model, &mut data, &q, &v, &cmd);
+        let mut tick = f64::INFINITY;
+        for _ in 0..4 {
+            let t0 = Instant::now();
+            let r = wbc_once(&mut slow, &model, &mut data, &q, &v, &cmd);
+            tick = tick.min(t0.elapsed().as_secs_f64());
+            b.2 = b.2.min(r.2);
+        }
+        let forces: Vec<f64> = a.1.iter().flat_map(|f| f.iter().copied()).collect();
+        let line = serde_json::json!({
+            "kind": kind, "n": inst.n, "m": inst.m, "zero": inst.zero, "soc": inst.soc,
+            "force_unit": inst.force_unit, "P": inst.p, "q": inst.q, "A": inst.a, "b": inst.b,
+            "active_set": a.0 == 0, "torque_limited": limited, "forces": forces,
+            "tick_us": fast_tick * 1e6,
+            "clarabel_iterations": b.0, "clarabel_solve_us": b.2 * 1e6, "clarabel_tick_us": tick * 1e6,
+            "clarabel_forces": b.1.iter().flat_map(|f| f.iter().copied()).collect::<Vec<f64>>(),
+        });
+        out.push_str(&line.to_string());
+        out.push('\n');
+    }
+    std::fs::write(path, out).expect("write the instances");
+    eprintln!("wrote 400 condensed QP instances to {path}");
+}
+
+/// One tick: (iterations, contact forces, clarabel's solve time in s).
+fn wbc_once(
+    w: &mut WholeBodyController,
+    model: &Model,
+    data: &mut Data,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    cmd: &WbcCommand,
+) -> (u32, Vec<Vector3<f64>>, f64) {
+    let out = w.solve(model, data, q, v, cmd);
+    assert_eq!(out.status, WbcStatus::Solved);
+    (
+        out.iterations,
+        out.contact_forces.to_vec(),
+        out.solve_time.as_secs_f64(),
+    )
+}
+
 fn bench(c: &mut Criterion) {
+    if let Ok(path) = std::env::var("UPC_QP_EXPORT") {
+        export_instances(&path);
+        return;
+    }
     let cfg = Config::embedded_default().unwrap().wbc;
     let with = |f: WbcFormulation, tol: f64, reuse: bool| WbcConfig {
         formulation: f,

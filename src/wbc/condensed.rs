@@ -82,6 +82,23 @@ pub(crate) struct Problem<'a> {
     pub active_set: bool,
 }
 
+/// The reduced QP of one tick as clarabel receives it, `min ½ xᵀPx + qᵀx` s.t. `A x + s = b`,
+/// s in `zero` equality rows then `soc` second-order cones of dimension 3, for comparing solvers
+/// offline (`benches/wbc.rs`, `scripts/qp_compare.py`). Dense, row-major; x = [f / force_unit
+/// (24); δ (6)].
+#[derive(Debug, Clone)]
+pub struct CondensedInstance {
+    pub n: usize,
+    pub m: usize,
+    pub p: Vec<f64>,
+    pub q: Vec<f64>,
+    pub a: Vec<f64>,
+    pub b: Vec<f64>,
+    pub zero: usize,
+    pub soc: usize,
+    pub force_unit: f64,
+}
+
 /// Why the condensed problem could not be solved (the caller then solves the full problem,
 /// except for solver failures, which it reports as they are).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -175,6 +192,22 @@ impl CondensedQp {
             p_pattern,
             qp,
             x: vec![0.0; nv + NF],
+        }
+    }
+
+    /// The last reduced QP (allocates: offline use).
+    pub(crate) fn instance(&self) -> CondensedInstance {
+        let row_major = |m: &DMatrix<f64>| m.transpose().as_slice().to_vec();
+        CondensedInstance {
+            n: NY,
+            m: N_ROWS,
+            p: row_major(&self.pd),
+            q: self.qd.clone(),
+            a: row_major(&self.ad),
+            b: self.bd.clone(),
+            zero: ROW_SOC,
+            soc: N_CONTACTS,
+            force_unit: self.force_unit,
         }
     }
 

@@ -65,7 +65,7 @@ use clarabel::solver::{DefaultSettings, SupportedConeT};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Quaternion, UnitQuaternion, Vector3, Vector6};
 
 use super::com_bias::{com_drift_from_pass, drift_pass, frame_drift_from_pass};
-use super::condensed::{CondensedError, CondensedQp, Problem};
+use super::condensed::{CondensedError, CondensedInstance, CondensedQp, Problem};
 pub use super::outcome::{FallbackReason, N_CONTACTS, WbcCounters, WbcStatus};
 use super::pattern::Pattern;
 use super::qp::QpInstance;
@@ -486,6 +486,12 @@ impl WholeBodyController {
         self.settings.presolve_enable = false;
         self.settings.input_sparse_dropzeros = false;
         self.drop_solvers();
+    }
+
+    /// The condensed QP of the last tick that formed one, as clarabel receives it (allocates:
+    /// for comparing solvers offline, never in the loop). `None` with the full formulation.
+    pub fn condensed_instance(&self) -> Option<CondensedInstance> {
+        (self.p.formulation == WbcFormulation::Condensed).then(|| self.condensed.instance())
     }
 
     /// Counters of ticks, solves and fallbacks since construction.

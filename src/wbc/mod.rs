@@ -13,6 +13,7 @@
 //!   counters (the contact frames are the robot's: `crate::robot::BodyFrames`, `CORNERS`).
 //! - `tasks`: the QP's tasks as data and the layout of its variables and rows, decided once
 //!   and read by both formulations.
+//! - `dense`: the condensation's small Cholesky factors and triangular solves.
 //! - `qp`: one clarabel problem with a fixed sparsity pattern, updated in place each tick.
 //! - [`com_bias`]: `J̇ v` drift of the CoM and of several frames from one forward pass.
 
@@ -25,6 +26,7 @@ mod pattern;
 mod qp;
 mod tasks;
 
+pub use condensed::CondensedInstance;
 pub use controller::{
     FallbackReason, N_CONTACTS, WbcCommand, WbcCounters, WbcError, WbcOutput, WbcStatus,
     WholeBodyController,
