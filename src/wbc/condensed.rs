@@ -124,9 +124,8 @@ pub(crate) struct CondensedQp {
     x6: DMatrix<f64>,
     /// B = J_c,u (24 × 6).
     b: DMatrix<f64>,
-    /// X_u and y* of the reduced QP (`force_qp`), kept for the closed-form check.
-    xu: Matrix6<f64>,
-    y_star: Vector6<f64>,
+    /// X_u⁻¹, from `force_qp`'s factor of X_u, for the active-set solve (y* is `bd[..6]`).
+    xu_inv: Matrix6<f64>,
     /// u = −H⁻¹ g, then q̈.
     u: DVector<f64>,
     /// ρ, then S⁻¹ ρ; and the 18-vector combining it with the forces.
@@ -178,8 +177,7 @@ impl CondensedQp {
             s: Cholesky::new(NC),
             x6: DMatrix::zeros(NC, 6),
             b: DMatrix::zeros(NF, 6),
-            xu: Matrix6::zeros(),
-            y_star: Vector6::zeros(),
+            xu_inv: Matrix6::zeros(),
             u: DVector::zeros(nv),
             rho: DVector::zeros(NC),
             z: DVector::zeros(NC),
@@ -382,12 +380,9 @@ impl CondensedQp {
             self.rho[4],
             self.rho[5],
         );
-        let y_star = -xu
-            .cholesky()
-            .ok_or(CondensedError::Factorisation)?
-            .solve(&rho_u);
-        self.xu = xu;
-        self.y_star = y_star;
+        let xu_factor = xu.cholesky().ok_or(CondensedError::Factorisation)?;
+        let y_star = -xu_factor.solve(&rho_u);
+        self.xu_inv = xu_factor.inverse();
         for k in 0..NF {
             for c in 0..6 {
                 self.b[(k, c)] = pb.jc[(k, c)];
@@ -434,7 +429,8 @@ impl CondensedQp {
         if pb.w_force <= 0.0 || pb.w_force.is_nan() {
             return None;
         }
-        let base = self.xu.cholesky()?.inverse() * pb.w_force;
+        let base = self.xu_inv * pb.w_force;
+        let y_star = Vector6::from_column_slice(&self.bd[..ROW_SOC]);
         let mut unloaded = [false; N_CONTACTS];
         let mut f = [0.0; NF];
         for _ in 0..ACTIVE_SET_ROUNDS {
@@ -446,7 +442,7 @@ impl CondensedQp {
                     }
                 }
             }
-            let z = m.cholesky()?.solve(&self.y_star);
+            let z = m.cholesky()?.solve(&y_star);
             let (mut changed, mut at_friction_limit) = (false, false);
             for c in 0..N_CONTACTS {
                 let rot = &pb.foot_rot[c / 4];

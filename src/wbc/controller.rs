@@ -1109,11 +1109,11 @@ impl WholeBodyController {
             let r = data.o_m_f[id].trans - data.o_m_f[self.foot_ids[k]].trans;
             for col in 0..self.jc.ncols() {
                 let j = self.jfeet.column(col);
-                let (v, w) = (6 * k, 6 * k + 3);
-                let (wx, wy, wz) = (j[w], j[w + 1], j[w + 2]);
-                self.jc[(3 * c, col)] = j[v] + (wy * r.z - wz * r.y);
-                self.jc[(3 * c + 1, col)] = j[v + 1] + (wz * r.x - wx * r.z);
-                self.jc[(3 * c + 2, col)] = j[v + 2] + (wx * r.y - wy * r.x);
+                let v = Vector3::new(j[6 * k], j[6 * k + 1], j[6 * k + 2]);
+                let w = Vector3::new(j[6 * k + 3], j[6 * k + 4], j[6 * k + 5]);
+                self.jc
+                    .fixed_view_mut::<3, 1>(3 * c, col)
+                    .copy_from(&(v + w.cross(&r)));
             }
         }
         for t in &mut self.tasks.points {
