@@ -36,6 +36,12 @@ if ! .venv/bin/python -c 'import iceoryx2, mujoco, zenoh, rerun' >/dev/null 2>&1
   .venv/bin/pip install -q --disable-pip-version-check "iceoryx2==0.10.0" "mujoco==4.0.0" \
     "eclipse-zenoh==1.10.2" "rerun-sdk==0.36.3"
 fi
+# Ray, the engine of `upc capability` / `upc robustness --engine ray` (scripts/ray_sweep.py is
+# the driver; a lab's cluster runs the same version on every node: docs/sweeps.md).
+if ! .venv/bin/python -c 'import sys, importlib.metadata
+sys.exit(importlib.metadata.version("ray") != "2.52.1")' >/dev/null 2>&1; then
+  .venv/bin/pip install -q --disable-pip-version-check "ray==2.52.1"
+fi
 # Real robots' URDFs and Pinocchio, for the loader tests and scripts/pin_check.py (about 1 GB,
 # kept outside the clone so that fresh clones on one machine share it). Not needed to run upc:
 # outside CI a failed install only skips those tests, each saying so; under CI (CI=true) it

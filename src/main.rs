@@ -44,6 +44,9 @@ enum Command {
     Robustness(cli::robustness::RobustnessArgs),
     /// Write the MuJoCo scene (MJCF, plant description, plant process) of a robot and scenario.
     Mjcf(cli::sim::MjcfArgs),
+    /// One cell of a sweep, its result as JSON on stdout: the task a sweep engine runs.
+    #[command(hide = true)]
+    SweepCell(cli::cell::SweepCellArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -64,6 +67,7 @@ fn main() -> std::process::ExitCode {
         Command::Forecast(args) => cli::forecast::run_cli(args),
         Command::Bridge(args) => cli::bridge::run_cli(args),
         Command::Controller(args) => cli::controller::run(args),
+        Command::SweepCell(args) => cli::cell::run(args),
     };
     // Queued log lines first, then the error (which goes to stderr directly).
     drop(log);

@@ -21,8 +21,8 @@ pub const IMPACT_START: f64 = 1.0;
 /// Simulated time after the impact's end (s).
 pub const RECOVERY: f64 = 2.0;
 
-/// The controllers compared.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+/// The controllers compared (on the command line by [`Variant::parse`]'s names).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum Variant {
     C0,
@@ -30,12 +30,15 @@ pub enum Variant {
     C2,
     /// C1 with the predicted ZMP kept inside the support by hard constraints
     /// (`preview.zmp_constraints`).
+    #[value(name = "c1zmp")]
     C1Zmp,
     /// C0 with the CoM disturbance observer (`controller.com_observer`): the baseline of a robot
     /// without any forecast.
+    #[value(name = "c0obs")]
     C0Obs,
     /// C1 previewing the forecast as received, without the correction by the measured hand
     /// force (`controller.forecast_correction.enabled = false`).
+    #[value(name = "c1raw")]
     C1Raw,
 }
 
@@ -97,7 +100,7 @@ impl Variant {
 }
 
 /// Direction of the push on the hand.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum Direction {
     /// Toward the robot (−x), as the door pushes in the paper's scenarios.
@@ -186,7 +189,7 @@ impl Default for Criteria {
 }
 
 /// The result of one bisection.
-#[derive(Debug, Clone, Copy, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Capability {
     /// Largest amplitude survived (N); 0 if not even the smallest tried.
     pub survived: f64,

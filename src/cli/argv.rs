@@ -141,6 +141,7 @@ mod tests {
 
     use super::Argv;
     use crate::cli::bridge::BridgeArgs;
+    use crate::cli::cell::CellArgs;
     use crate::cli::common::{ConfigArgs, RobotArg};
     use crate::cli::controller::ControllerArgs;
     use crate::cli::forecast::ForecastArgs;
@@ -291,5 +292,32 @@ mod tests {
             panic!("not run")
         };
         assert_eq!(format!("{back:?}"), format!("{run:?}"));
+
+        // A sweep's cell: what the Ray task runs (`--scratch` is the task's, not the cell's).
+        let cell = CellArgs {
+            variant: upc::capability::Variant::C1Raw,
+            duration: 0.1 + 0.2,
+            direction: upc::capability::Direction::Y,
+            forecast_scale: 1.5,
+            forecast_shift: -0.15,
+            forecast_shape: "stretched:2".parse().expect("shape"),
+            phantom: true,
+            max: 160.0,
+            tol: 2.0,
+            monotone: Some(5.0),
+            edge_time: 0.2,
+            com_drop: 0.005,
+            plant: PlantChoice::Mujoco,
+            sensing: Some(upc::sim::sensors::Sensing::Realistic),
+            sim_sets: vec!["sim.sensors.seed=2".into()],
+            robot: robot(),
+            config: config(),
+        };
+        let mut argv = Argv::of("sweep-cell", &cell);
+        argv.extend(["--scratch".into(), "s".into()]);
+        let Command::SweepCell(back) = parse(argv) else {
+            panic!("not sweep-cell")
+        };
+        assert_eq!(format!("{:?}", back.cell), format!("{cell:?}"));
     }
 }

@@ -1,26 +1,21 @@
 //! `upc capability`: how hard the robot can be pushed. For each controller, impact duration
 //! and direction, the largest single impact survived, by bisection over the amplitude
 //! (`upc::capability`), on the reduced models (in-process) and on the full simulation (each
-//! case an `upc run` of its own, run `--jobs` at a time). Writes `capability.md`, `.csv`,
-//! `.json` and one figure per model and direction.
+//! cell a bisection of `upc run`s, run by the sweep engine: `--jobs` at a time here, or on Ray).
+//! Writes `capability.md`, `.csv`, `.json` and one figure per model and direction.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
-use std::sync::Mutex;
 use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
-use upc::capability::{
-    Capability, Criteria, Direction, Variant, impact_toml, search, survived_full, survives_reduced,
-};
-use upc::config::ControllerKind;
+use upc::capability::{Capability, Criteria, Direction, Variant, search, survives_reduced};
 use upc::report::figures::{Figure, Line, Panel, write_figure};
 use upc::report::series::{Quantity, Series, SeriesSource};
 
 use super::CliResult;
-use super::argv::Argv;
+use super::cell::{CellArgs, Outcome};
 use super::common::{ConfigArgs, RobotArg};
-use super::run::{RunArgs, Which};
+use super::engine::{Engine, EngineArgs, EngineKind, pool};
 use super::sim::PlantChoice;
 
 #[derive(Clone, Copy, PartialEq, Eq, Debug, clap::ValueEnum)]
@@ -63,9 +58,8 @@ pub struct CapabilityArgs {
     /// Largest CoM height drop of a robot still standing (m, full simulation).
     #[arg(long, default_value_t = Criteria::default().max_com_drop)]
     pub com_drop: f64,
-    /// Cases run at once (default: the machine's cores).
-    #[arg(long)]
-    pub jobs: Option<usize>,
+    #[command(flatten)]
+    pub engine: EngineArgs,
     /// Full simulation's plant.
     #[arg(long, value_enum, default_value = "upc")]
     pub plant: PlantChoice,
@@ -138,24 +132,29 @@ pub fn run(args: CapabilityArgs) -> CliResult {
         + args
             .monotone
             .map_or(0, |step| (args.max / step).ceil() as u64);
-    let bar = runs_bar(args.quiet, cases.len() as u64 * per_case);
-    let jobs = args
-        .jobs
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
-        .max(1);
+    // The Ray driver prints its own progress.
+    let bar = runs_bar(
+        args.quiet || args.engine.engine == EngineKind::Ray,
+        cases.len() as u64 * per_case,
+    );
     let exe = std::env::current_exe()?;
     let sweep = Sweep {
         args: &args,
         config: &config,
         reduced,
         criteria: &criteria,
-        exe: &exe,
-        out: &out,
-        per_case,
-        bar: &bar,
+        engine: Engine {
+            args: &args.engine,
+            out: &out,
+            exe: &exe,
+            bar: &bar,
+            per_cell: per_case,
+            quiet: args.quiet,
+        },
     };
     let start = Instant::now();
-    let rows = sweep.run(cases, jobs);
+    let mut failed = Vec::new();
+    let rows = sweep.run(&cases, &mut failed);
     bar.finish_and_clear();
     let mut rows = rows?;
     let wall = start.elapsed().as_secs_f64();
@@ -171,6 +170,7 @@ pub fn run(args: CapabilityArgs) -> CliResult {
             .cmp(&order(b))
             .then(a.duration.total_cmp(&b.duration))
     });
+    let engine = args.engine.describe(&out);
     write_outputs(
         &out,
         &args,
@@ -179,14 +179,15 @@ pub fn run(args: CapabilityArgs) -> CliResult {
         &rows,
         &variants,
         &directions,
+        &failed,
         wall,
-        jobs,
+        &engine,
     )?;
     println!(
-        "wrote {}/capability.md ({wall:.0} s, {jobs} at a time)",
+        "wrote {}/capability.md ({wall:.0} s, {engine})",
         out.display()
     );
-    Ok(())
+    super::engine::failed_cells(&failed)
 }
 
 /// The controllers and directions named on the command line, once the search's values are
@@ -259,99 +260,95 @@ fn sweep_cases(args: &CapabilityArgs, variants: &[Variant], directions: &[Direct
 }
 
 /// What every case of the sweep shares: the reduced models run in-process, the full
-/// simulation as an `upc run` each.
+/// simulation's cells by the engine.
 struct Sweep<'a> {
     args: &'a CapabilityArgs,
     config: &'a upc::config::Config,
     reduced: upc::robot::ReducedModel,
     criteria: &'a Criteria,
-    exe: &'a Path,
-    out: &'a Path,
-    /// Runs the progress bar counts per case (the longest search).
-    per_case: u64,
-    bar: &'a ProgressBar,
+    engine: Engine<'a>,
 }
 
 impl Sweep<'_> {
-    /// Searches every case, `jobs` at a time, taken from the end of `cases`; the first error
-    /// stops the sweep.
-    fn run(&self, cases: Vec<Case>, jobs: usize) -> Result<Vec<Row>, BoxError> {
-        let queue = Mutex::new(cases);
-        let rows = Mutex::new(Vec::<Row>::new());
-        let first_error = Mutex::new(None::<String>);
-        std::thread::scope(|scope| {
-            for _ in 0..jobs {
-                scope.spawn(|| {
-                    loop {
-                        let Some(case) = queue.lock().unwrap_or_else(|p| p.into_inner()).pop()
-                        else {
-                            return;
-                        };
-                        match self.search_case(case) {
-                            Ok(row) => rows.lock().unwrap_or_else(|p| p.into_inner()).push(row),
-                            Err(e) => {
-                                let mut first =
-                                    first_error.lock().unwrap_or_else(|p| p.into_inner());
-                                first.get_or_insert(format!("{case:?}: {e}"));
-                                return;
-                            }
-                        }
-                    }
-                });
+    /// Every case's row; a full-simulation cell that failed is kept aside with its reason.
+    fn run(
+        &self,
+        cases: &[Case],
+        failed: &mut Vec<(String, String)>,
+    ) -> Result<Vec<Row>, BoxError> {
+        let (reduced, full): (Vec<Case>, Vec<Case>) =
+            cases.iter().partition(|c| c.model == Model::Reduced);
+        let mut rows = pool(&reduced, self.engine.args.jobs(), |c| {
+            self.search_reduced(c)
+        })?;
+        let cells: Vec<CellArgs> = full.iter().map(|c| self.cell_args(c)).collect();
+        for ((case, cell), result) in full.iter().zip(&cells).zip(self.engine.run(&cells)?) {
+            match result.outcome {
+                Outcome::Searched { capability, .. } => rows.push(Row {
+                    model: Model::Full,
+                    controller: case.variant.label(),
+                    duration: case.duration,
+                    direction: case.direction.label(),
+                    capability,
+                    wall_time: result.wall_time,
+                }),
+                Outcome::Failed { reason } => failed.push((cell.argv().join(" "), reason)),
             }
-        });
-        if let Some(e) = first_error.into_inner().unwrap_or_else(|p| p.into_inner()) {
-            return Err(e.into());
         }
-        Ok(rows.into_inner().unwrap_or_else(|p| p.into_inner()))
+        Ok(rows)
     }
 
-    /// One case's bisection over [0, `--max`].
-    fn search_case(&self, case: Case) -> Result<Row, BoxError> {
+    /// One case's bisection over [0, `--max`] on the reduced models.
+    fn search_reduced(&self, case: &Case) -> Result<Row, BoxError> {
         let args = self.args;
         let t0 = Instant::now();
-        let mut survives = |a: f64| -> Result<bool, BoxError> {
-            self.bar.inc(1);
-            match case.model {
-                Model::Reduced => Ok(survives_reduced(
-                    self.config,
-                    self.reduced,
-                    case.variant,
-                    a,
-                    case.duration,
-                    case.direction,
-                )?),
-                Model::Full => full_case(
-                    self.exe,
-                    &FullCase {
-                        robot: &args.robot.robot,
-                        plant: args.plant,
-                        variant: case.variant,
-                        duration: case.duration,
-                        direction: case.direction,
-                        forecast: ForecastCase::EXACT,
-                        config: &args.config,
-                        sensing: args.sensing,
-                        sim_sets: &args.sim_sets,
-                    },
-                    self.out,
-                    a,
-                    self.criteria,
-                )
-                .map(|r| r.survived),
-            }
-        };
-        let c = search(args.max, args.tol, args.monotone, &mut survives)?;
+        let bar = self.engine.bar;
+        let c = search(args.max, args.tol, args.monotone, |a: f64| {
+            bar.inc(1);
+            survives_reduced(
+                self.config,
+                self.reduced,
+                case.variant,
+                a,
+                case.duration,
+                case.direction,
+            )
+        })?;
         // The bar counted the longest search: settle the difference.
-        self.bar.inc(self.per_case.saturating_sub(c.runs as u64));
+        bar.inc(self.engine.per_cell.saturating_sub(c.runs as u64));
         Ok(Row {
-            model: case.model,
+            model: Model::Reduced,
             controller: case.variant.label(),
             duration: case.duration,
             direction: case.direction.label(),
             capability: c,
             wall_time: t0.elapsed().as_secs_f64(),
         })
+    }
+
+    /// A full-simulation case's cell.
+    fn cell_args(&self, case: &Case) -> CellArgs {
+        let args = self.args;
+        CellArgs {
+            variant: case.variant,
+            duration: case.duration,
+            direction: case.direction,
+            forecast_scale: 1.0,
+            forecast_shift: 0.0,
+            forecast_shape: upc::forecast::ForecastShape::Exact,
+            phantom: false,
+            max: args.max,
+            tol: args.tol,
+            monotone: args.monotone,
+            edge_time: self.criteria.max_edge_time,
+            com_drop: self.criteria.max_com_drop,
+            plant: args.plant,
+            sensing: args.sensing,
+            sim_sets: args.sim_sets.clone(),
+            robot: args.robot.clone(),
+            config: args.config.clone(),
+        }
+        .absolute()
     }
 }
 
@@ -369,209 +366,6 @@ pub(super) fn runs_bar(quiet: bool, len: u64) -> ProgressBar {
     bar
 }
 
-/// How a full-simulation case's forecast departs from the impact the plant plays.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct ForecastCase {
-    /// The forecast is `scale × F(t − shift)`.
-    pub scale: f64,
-    pub shift: f64,
-    /// The plant does not push at all (`sim.push = "none"`): the forecast is a phantom.
-    pub phantom: bool,
-    /// The forecast's shape (`upc run --forecast-error-shape`; exact on the κ × τ map).
-    pub shape: upc::forecast::ForecastShape,
-}
-
-impl ForecastCase {
-    pub const EXACT: ForecastCase = ForecastCase {
-        scale: 1.0,
-        shift: 0.0,
-        phantom: false,
-        shape: upc::forecast::ForecastShape::Exact,
-    };
-}
-
-/// One full-simulation case.
-pub(super) struct FullCase<'a> {
-    pub robot: &'a str,
-    pub plant: PlantChoice,
-    pub variant: Variant,
-    pub duration: f64,
-    pub direction: Direction,
-    pub forecast: ForecastCase,
-    /// The user's config files and `--set` keys.
-    pub config: &'a ConfigArgs,
-    pub sensing: Option<upc::sim::sensors::Sensing>,
-    /// The user's plant config keys.
-    pub sim_sets: &'a [String],
-}
-
-/// What a full-simulation case gave: survived, and the controller's summary when it wrote one.
-pub(super) struct CaseResult {
-    pub survived: bool,
-    pub summary: Option<serde_json::Value>,
-}
-
-/// One full-simulation case: `upc run` of the impact with the variant's controller.
-pub(super) fn full_case(
-    exe: &Path,
-    case: &FullCase,
-    out: &Path,
-    amplitude: f64,
-    criteria: &Criteria,
-) -> Result<CaseResult, BoxError> {
-    let f = case.forecast;
-    let name = format!(
-        "{}_{}_{:.0}ms_{amplitude:.2}N_k{}_s{:.0}ms{}{}",
-        case.variant.label().replace(['+', ' '], "_"),
-        case.direction.label(),
-        case.duration * 1e3,
-        f.scale,
-        f.shift * 1e3,
-        if f.phantom { "_phantom" } else { "" },
-        match f.shape {
-            upc::forecast::ForecastShape::Exact => String::new(),
-            s => format!("_{}", s.to_string().replace([':', '.', '-'], "_")),
-        }
-    );
-    let dir = out.join("cases");
-    let scenario = dir.join(format!("{name}.toml"));
-    std::fs::write(
-        &scenario,
-        impact_toml(amplitude, case.duration, case.direction),
-    )?;
-    let kind = case.variant.kind();
-    let run = case_run_args(case, &name, &scenario, &dir);
-    let mut cmd = Command::new(exe);
-    cmd.args(Argv::of("run", &run)).env("RUST_LOG", "warn");
-    let status = cmd.output()?;
-    let run_dir = dir.join(&name).join(kind.name());
-    let result = case_result(case, &name, &run_dir, status.status, criteria)?;
-    // Keep the directory only for inspection of the last cases; the sweep makes hundreds.
-    let _ = std::fs::remove_dir_all(dir.join(&name));
-    let _ = std::fs::remove_file(&scenario);
-    Ok(result)
-}
-
-/// The `upc run` of a case named `name`, its scenario written at `scenario`, its run directory
-/// under `dir`.
-fn case_run_args(case: &FullCase, name: &str, scenario: &Path, dir: &Path) -> RunArgs {
-    let f = case.forecast;
-    let mut sim_sets = case.sim_sets.to_vec();
-    if case.direction == Direction::Y {
-        sim_sets.push("sim.push=\"hand\"".to_string());
-    }
-    if f.phantom {
-        sim_sets.push("sim.push=\"none\"".to_string());
-    }
-    RunArgs {
-        scenario: scenario.display().to_string(),
-        controller: match case.variant.kind() {
-            ControllerKind::C0 => Which::C0,
-            ControllerKind::C1 => Which::C1,
-            ControllerKind::C2 => Which::C2,
-        },
-        realtime: false,
-        duration: None,
-        name: Some(name.to_owned()),
-        out: dir.to_path_buf(),
-        forecaster: None,
-        forecaster_over_zenoh: false,
-        no_forecaster: false,
-        viewer: false,
-        connect: None,
-        quiet: true,
-        forecast_error_scale: f.scale,
-        forecast_error_shift: f.shift,
-        forecast_error_shape: f.shape,
-        config: ConfigArgs {
-            configs: case.config.configs.clone(),
-            sets: case
-                .config
-                .sets
-                .iter()
-                .cloned()
-                .chain(case.variant.config_set().map(str::to_owned))
-                .collect(),
-        },
-        sim_sets,
-        plant: case.plant,
-        sensing: case.sensing,
-        robot: RobotArg {
-            robot: case.robot.to_owned(),
-        },
-        bus: None,
-        bus_settings: Default::default(),
-    }
-}
-
-/// What a finished case's run directory `run_dir` says, the process having ended with
-/// `status`; an error when the case never ran or was killed (the sweep cannot go on).
-fn case_result(
-    case: &FullCase,
-    name: &str,
-    run_dir: &Path,
-    status: std::process::ExitStatus,
-    criteria: &Criteria,
-) -> Result<CaseResult, BoxError> {
-    let summary = std::fs::read_to_string(run_dir.join("controller.json"));
-    let parsed: Option<serde_json::Value> = match &summary {
-        Ok(text) => Some(serde_json::from_str(text)?),
-        Err(_) => None,
-    };
-    let num = |v: &serde_json::Value, k: &str| {
-        v.get(k).and_then(serde_json::Value::as_f64).unwrap_or(0.0)
-    };
-    // A case the plant refused never ran: its controller got no state. It wrote a summary of
-    // zeros (which would read as a robot that stood), or none when `upc run` stopped it first
-    // (which would read as a fall). Either way the sweep cannot go on. Whether any tick ran is
-    // read from the summary, else from the controller's CSV (a header only: none did).
-    let ticked = match &parsed {
-        Some(v) => num(v, "ticks") > 0.0,
-        None => std::fs::read_to_string(run_dir.join("controller.csv"))
-            .map(|t| t.lines().nth(1).is_some())
-            .unwrap_or(false),
-    };
-    if !ticked {
-        let last = std::fs::read_to_string(run_dir.join("sim.log"))
-            .ok()
-            .and_then(|t| {
-                t.lines()
-                    .rev()
-                    .find(|l| !l.trim().is_empty())
-                    .map(str::to_owned)
-            })
-            .unwrap_or_default();
-        return Err(format!(
-            "{name}: the case never ran (no state reached the controller); the plant said: {last}"
-        )
-        .into());
-    }
-    let result = match parsed {
-        Some(v) => {
-            // A run that stopped before the scenario's end (a simulation that diverged) did not
-            // survive, however little the robot had moved by then.
-            let end = upc::capability::IMPACT_START + case.duration + upc::capability::RECOVERY;
-            let complete = num(&v, "sim_time") >= end - 0.01;
-            CaseResult {
-                survived: complete && survived_full(&v, criteria),
-                summary: Some(v),
-            }
-        }
-        // A run whose controller ticked but wrote no summary: a failure of the case, not of the
-        // sweep, when the process ran (a simulation that diverged); otherwise the sweep cannot
-        // go on.
-        None if status.code().is_some() => {
-            tracing::debug!("{name}: no controller summary");
-            CaseResult {
-                survived: false,
-                summary: None,
-            }
-        }
-        None => return Err(format!("{name}: the run was killed by a signal").into()),
-    };
-    Ok(result)
-}
-
 #[allow(clippy::too_many_arguments)]
 fn write_outputs(
     out: &Path,
@@ -581,13 +375,15 @@ fn write_outputs(
     rows: &[Row],
     variants: &[Variant],
     directions: &[Direction],
+    failed: &[(String, String)],
     wall: f64,
-    jobs: usize,
+    engine: &str,
 ) -> Result<(), BoxError> {
-    write_data(out, args, criteria, rows, wall, jobs)?;
+    write_data(out, args, criteria, rows, failed, wall, engine)?;
     let fig_dir = out.join("figures");
     std::fs::create_dir_all(&fig_dir)?;
-    let mut md = preamble(args, robot, criteria, wall, jobs);
+    let mut md = preamble(args, robot, criteria, wall, engine);
+    super::engine::failed_section(&mut md, failed);
     for model in [Model::Reduced, Model::Full] {
         let of_model: Vec<&Row> = rows.iter().filter(|r| r.model == model).collect();
         if of_model.is_empty() {
@@ -605,8 +401,9 @@ fn write_data(
     args: &CapabilityArgs,
     criteria: &Criteria,
     rows: &[Row],
+    failed: &[(String, String)],
     wall: f64,
-    jobs: usize,
+    engine: &str,
 ) -> Result<(), BoxError> {
     std::fs::write(
         out.join("capability.json"),
@@ -617,8 +414,9 @@ fn write_data(
             "max": args.max,
             "tol": args.tol,
             "wall_time": wall,
-            "jobs": jobs,
+            "engine": engine,
             "rows": rows,
+            "failed_cells": super::engine::failed_json(failed),
         }))?,
     )?;
     let mut csv =
@@ -651,7 +449,7 @@ fn preamble(
     robot: &upc::robot::Robot,
     criteria: &Criteria,
     wall: f64,
-    jobs: usize,
+    engine: &str,
 ) -> String {
     let mut md = format!(
         "# Balance capability — robot `{}`, full simulation on the `{}` plant\n\n\
@@ -661,7 +459,7 @@ fn preamble(
          the support (the linear model has no tipping to recover from); on the full simulation, standing at the end (CoM drop < {} mm), \
          at most {} s on the support edge, no whole-body QP fallback. \"≥\": the search's upper \
          bound was survived. C1+ZMP: C1 with the predicted ZMP kept inside the support by hard \
-         constraints. Wall time of the sweep: {wall:.0} s, {jobs} cases at a time.\n\n",
+         constraints. Wall time of the sweep: {wall:.0} s, {engine}.\n\n",
         robot.name(),
         args.plant.name(),
         args.max,

@@ -8,16 +8,16 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 use std::time::Instant;
 
-use indicatif::ProgressBar;
-use upc::capability::{Capability, Criteria, Direction, Variant, search};
+use upc::capability::{Capability, Criteria, Direction, Variant};
 use upc::forecast::ForecastShape;
 
 use super::CliResult;
-use super::capability::{BoxError, ForecastCase, FullCase, full_case, runs_bar};
+use super::capability::{BoxError, runs_bar};
+use super::cell::{CellArgs, Outcome};
 use super::common::{ConfigArgs, RobotArg};
+use super::engine::{Engine, EngineArgs, EngineKind};
 use super::sim::PlantChoice;
 
 #[derive(clap::Args, Debug)]
@@ -65,9 +65,8 @@ pub struct RobustnessArgs {
     /// Largest CoM drop (m) of a phantom case still survived.
     #[arg(long, default_value_t = 0.005)]
     pub phantom_com_drop: f64,
-    /// Cases run at once (default: the machine's cores).
-    #[arg(long)]
-    pub jobs: Option<usize>,
+    #[command(flatten)]
+    pub engine: EngineArgs,
     /// The plant.
     #[arg(long, value_enum, default_value = "upc")]
     pub plant: PlantChoice,
@@ -88,6 +87,27 @@ pub struct RobustnessArgs {
     /// Config files and `--set` keys for every case's controller (the variant's own key last).
     #[command(flatten)]
     pub config: ConfigArgs,
+}
+
+/// How a full-simulation case's forecast departs from the impact the plant plays.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ForecastCase {
+    /// The forecast is `scale × F(t − shift)`.
+    scale: f64,
+    shift: f64,
+    /// The plant does not push at all (`sim.push = "none"`): the forecast is a phantom.
+    phantom: bool,
+    /// The forecast's shape (`upc run --forecast-error-shape`; exact on the κ × τ map).
+    shape: upc::forecast::ForecastShape,
+}
+
+impl ForecastCase {
+    const EXACT: ForecastCase = ForecastCase {
+        scale: 1.0,
+        shift: 0.0,
+        phantom: false,
+        shape: upc::forecast::ForecastShape::Exact,
+    };
 }
 
 /// One bisection of the sweep.
@@ -147,10 +167,6 @@ pub fn run(args: RobustnessArgs) -> CliResult {
     });
     std::fs::create_dir_all(out.join("cases"))?;
     let exe = std::env::current_exe()?;
-    let jobs = args
-        .jobs
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
-        .max(1);
     let start = Instant::now();
 
     // Phase 1: the error grid (C0 and C0+obs ignore the forecast: one bisection each).
@@ -170,28 +186,36 @@ pub fn run(args: RobustnessArgs) -> CliResult {
         + args
             .monotone
             .map_or(0, |step| (args.max_bound() / step).ceil() as u64);
-    let bar = runs_bar(args.quiet, (cells.len() + phantoms) as u64 * per_case);
+    // The Ray driver prints its own progress.
+    let bar = runs_bar(
+        args.quiet || args.engine.engine == EngineKind::Ray,
+        (cells.len() + phantoms) as u64 * per_case,
+    );
     let sweep = Sweep {
         args: &args,
-        exe: &exe,
-        out: &out,
-        jobs,
-        per_case,
-        bar: &bar,
+        engine: Engine {
+            args: &args.engine,
+            out: &out,
+            exe: &exe,
+            bar: &bar,
+            per_cell: per_case,
+            quiet: args.quiet,
+        },
     };
+    let mut failed = Vec::new();
     let mut rows = sweep.run_cells(
         cells
             .iter()
-            .rev()
             .map(|c| (*c, max_of(c.duration), criteria))
             .collect(),
+        &mut failed,
     )?;
 
     // Phase 2: phantoms up to twice C1's capability with an exact forecast (the forecast as
     // received, when swept; else the variant's own).
     if !no_phantom {
         let ph = phantom_cells(&args, &variants, &rows, max_of, phantom_criteria);
-        rows.extend(sweep.run_cells(ph)?);
+        rows.extend(sweep.run_cells(ph, &mut failed)?);
     }
     bar.finish_and_clear();
     let wall = start.elapsed().as_secs_f64();
@@ -206,12 +230,13 @@ pub fn run(args: RobustnessArgs) -> CliResult {
         )
     };
     rows.sort_by_key(order);
-    write_outputs(&out, &args, &variants, &rows, wall, jobs)?;
+    let engine = args.engine.describe(&out);
+    write_outputs(&out, &args, &variants, &rows, &failed, wall, &engine)?;
     println!(
-        "wrote {}/robustness.md ({wall:.0} s, {jobs} at a time)",
+        "wrote {}/robustness.md ({wall:.0} s, {engine})",
         out.display()
     );
-    Ok(())
+    super::engine::failed_cells(&failed)
 }
 
 /// The controllers named by `--controllers`, once the grid's values are checked.
@@ -345,99 +370,69 @@ fn phantom_cells(
     ph
 }
 
-/// What every cell of a sweep shares: its cases run `jobs` at a time, each an `upc run`.
+/// What every cell of the sweep shares, and the engine that runs them.
 struct Sweep<'a> {
     args: &'a RobustnessArgs,
-    exe: &'a Path,
-    out: &'a Path,
-    jobs: usize,
-    /// Runs the progress bar counts per cell (the longest search).
-    per_case: u64,
-    bar: &'a ProgressBar,
+    engine: Engine<'a>,
 }
 
 impl Sweep<'_> {
-    /// Searches each cell (cell, upper bound, criteria), taken from the end of `cells`; the
-    /// first error stops the sweep.
-    fn run_cells(&self, cells: Vec<(Cell, f64, Criteria)>) -> Result<Vec<Row>, BoxError> {
-        let queue = Mutex::new(cells);
-        let rows = Mutex::new(Vec::new());
-        let first_error = Mutex::new(None::<String>);
-        std::thread::scope(|scope| {
-            for _ in 0..self.jobs {
-                scope.spawn(|| {
-                    loop {
-                        let Some((cell, max, crit)) =
-                            queue.lock().unwrap_or_else(|p| p.into_inner()).pop()
-                        else {
-                            return;
-                        };
-                        match self.search_cell(cell, max, &crit) {
-                            Ok(row) => rows.lock().unwrap_or_else(|p| p.into_inner()).push(row),
-                            Err(e) => {
-                                first_error
-                                    .lock()
-                                    .unwrap_or_else(|p| p.into_inner())
-                                    .get_or_insert(format!("{cell:?}: {e}"));
-                                return;
-                            }
-                        }
-                    }
-                });
+    /// Searches each cell (cell, upper bound, criteria); a cell that failed is kept aside with
+    /// its reason.
+    fn run_cells(
+        &self,
+        cells: Vec<(Cell, f64, Criteria)>,
+        failed: &mut Vec<(String, String)>,
+    ) -> Result<Vec<Row>, BoxError> {
+        let specs: Vec<CellArgs> = cells
+            .iter()
+            .map(|(cell, max, crit)| self.cell_args(cell, *max, crit))
+            .collect();
+        let results = self.engine.run(&specs)?;
+        let mut rows = Vec::new();
+        for (((cell, max, _), spec), result) in cells.iter().zip(&specs).zip(results) {
+            match result.outcome {
+                Outcome::Searched { capability, at_max } => rows.push(Row {
+                    controller: cell.variant.label(),
+                    duration: cell.duration,
+                    scale: cell.forecast.scale,
+                    shift: cell.forecast.shift,
+                    phantom: cell.forecast.phantom,
+                    shape: cell.forecast.shape,
+                    max: *max,
+                    capability,
+                    at_max,
+                    wall_time: result.wall_time,
+                }),
+                Outcome::Failed { reason } => failed.push((spec.argv().join(" "), reason)),
             }
-        });
-        if let Some(e) = first_error.into_inner().unwrap_or_else(|p| p.into_inner()) {
-            return Err(e.into());
         }
-        Ok(rows.into_inner().unwrap_or_else(|p| p.into_inner()))
+        Ok(rows)
     }
 
-    /// One cell's bisection up to `max`; a phantom's row keeps the summary of its case at
-    /// `max`.
-    fn search_cell(&self, cell: Cell, max: f64, crit: &Criteria) -> Result<Row, BoxError> {
+    /// One cell's definition: its bisection up to `max` against `crit`.
+    fn cell_args(&self, cell: &Cell, max: f64, crit: &Criteria) -> CellArgs {
         let args = self.args;
-        let t0 = Instant::now();
-        let case = FullCase {
-            robot: args.robot.robot.as_str(),
-            plant: args.plant,
+        CellArgs {
             variant: cell.variant,
             duration: cell.duration,
             direction: Direction::X,
-            forecast: cell.forecast,
-            config: &args.config,
-            sensing: args.sensing,
-            sim_sets: &args.sim_sets,
-        };
-        let mut at_max = None;
-        let mut survives = |a: f64| -> Result<bool, BoxError> {
-            self.bar.inc(1);
-            let r = full_case(self.exe, &case, self.out, a, crit)?;
-            if a == max && cell.forecast.phantom {
-                let num = |k: &str| {
-                    r.summary
-                        .as_ref()
-                        .and_then(|s| s.get(k))
-                        .and_then(serde_json::Value::as_f64)
-                        .unwrap_or(f64::NAN)
-                };
-                at_max = Some((num("com_height_drop"), num("min_zmp_margin")));
-            }
-            Ok(r.survived)
-        };
-        let c = search(max, args.tol, args.monotone, &mut survives)?;
-        self.bar.inc(self.per_case.saturating_sub(c.runs as u64));
-        Ok(Row {
-            controller: cell.variant.label(),
-            duration: cell.duration,
-            scale: cell.forecast.scale,
-            shift: cell.forecast.shift,
+            forecast_scale: cell.forecast.scale,
+            forecast_shift: cell.forecast.shift,
+            forecast_shape: cell.forecast.shape,
             phantom: cell.forecast.phantom,
-            shape: cell.forecast.shape,
             max,
-            capability: c,
-            at_max,
-            wall_time: t0.elapsed().as_secs_f64(),
-        })
+            tol: args.tol,
+            monotone: args.monotone,
+            edge_time: crit.max_edge_time,
+            com_drop: crit.max_com_drop,
+            plant: args.plant,
+            sensing: args.sensing,
+            sim_sets: args.sim_sets.clone(),
+            robot: args.robot.clone(),
+            config: args.config.clone(),
+        }
+        .absolute()
     }
 }
 
@@ -455,13 +450,15 @@ fn write_outputs(
     args: &RobustnessArgs,
     variants: &[Variant],
     rows: &[Row],
+    failed: &[(String, String)],
     wall: f64,
-    jobs: usize,
+    engine: &str,
 ) -> Result<(), BoxError> {
-    write_data(out, args, rows, wall, jobs)?;
+    write_data(out, args, rows, failed, wall, engine)?;
     let fig_dir = out.join("figures");
     std::fs::create_dir_all(&fig_dir)?;
-    let mut md = preamble(args, wall, jobs);
+    let mut md = preamble(args, wall, engine);
+    super::engine::failed_section(&mut md, failed);
     for &d in &args.durations {
         let _ = writeln!(md, "## {d} s impact\n");
         for &v in variants {
@@ -489,8 +486,9 @@ fn write_data(
     out: &Path,
     args: &RobustnessArgs,
     rows: &[Row],
+    failed: &[(String, String)],
     wall: f64,
-    jobs: usize,
+    engine: &str,
 ) -> Result<(), BoxError> {
     std::fs::write(
         out.join("robustness.json"),
@@ -499,8 +497,9 @@ fn write_data(
             "plant": args.plant.name(),
             "tol": args.tol,
             "wall_time": wall,
-            "jobs": jobs,
+            "engine": engine,
             "rows": rows,
+            "failed_cells": super::engine::failed_json(failed),
         }))?,
     )?;
     let mut csv = String::from(
@@ -532,7 +531,7 @@ fn write_data(
 }
 
 /// The report's title, what its figures mean, and what the user layered over the defaults.
-fn preamble(args: &RobustnessArgs, wall: f64, jobs: usize) -> String {
+fn preamble(args: &RobustnessArgs, wall: f64, engine: &str) -> String {
     let mut md = format!(
         "# Robustness to forecast errors — robot `{}`, `{}` plant\n\n\
          Largest single impact along x survived (N; full simulation, `upc capability`'s \
@@ -541,8 +540,7 @@ fn preamble(args: &RobustnessArgs, wall: f64, jobs: usize) -> String {
          raw\" previews it as received; C0 and C0+obs ignore the forecast (one search each, \
          the same at every κ, τ). Phantom: the plant does not push, the forecast announces \
          the impact; the largest phantom survived with a CoM drop under {} mm, searched up to \
-         twice C1's exact-forecast capability. Wall time: {wall:.0} s, {jobs} cases at a \
-         time.\n\n",
+         twice C1's exact-forecast capability. Wall time: {wall:.0} s, {engine}.\n\n",
         args.robot.robot,
         args.plant.name(),
         args.tol,

@@ -890,11 +890,13 @@ fn first_forecast(
 }
 
 /// A started child process that is stopped (SIGKILL, reaped) when dropped before it exited: an
-/// error anywhere in `upc run` leaves no participant behind.
+/// error anywhere in `upc run` leaves no participant behind, and neither does `upc run` killed
+/// itself (the child dies with it).
 struct Participant(Child);
 
 impl Participant {
     fn spawn(what: &str, cmd: &mut Command) -> Result<Self, String> {
+        super::child::dies_with_parent(cmd);
         cmd.spawn()
             .map(Participant)
             .map_err(|e| format!("cannot start the {what} ({:?}): {e}", cmd.get_program()))
