@@ -107,6 +107,8 @@ def main():
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
     # Ray's own default today, without its warning about the default changing.
     os.environ.setdefault("RAY_ACCEL_ENV_VAR_OVERRIDE_ON_ZERO", "0")
+    # The driver exports no metrics (a cluster without its dashboard has no agent to take them).
+    os.environ.setdefault("RAY_enable_metrics_collection", "0")
     t_start = time.monotonic()
     if address:
         # This host's address on the cluster: Ray's guess unless UPC_RAY_NODE_IP says.

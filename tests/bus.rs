@@ -149,9 +149,11 @@ fn upc_run_through_the_bus_keeps_c1_standing_on_the_g1() {
     );
     let dir = s.dir.join("run/c1");
     let c = json(&dir.join("controller.json"));
-    assert_eq!(u(&c, "falls"), 0, "{c}");
-    assert_eq!(u(&c, "tick_errors"), 0, "{c}");
     let bus = json(&dir.join("bus.json"));
+    // A fall in real time on a shared machine: the bus's view (a controller silent past
+    // `bus.command_timeout` is damped, a new hand-over) says whether the controller starved.
+    assert_eq!(u(&c, "falls"), 0, "controller: {c}\nbus: {bus}");
+    assert_eq!(u(&c, "tick_errors"), 0, "{c}");
     assert!(u(&bus, "states") > 1500, "{bus}");
     // One hand-over: the controller kept the robot until its run was over.
     assert_eq!(u(&bus, "handovers"), 1, "{bus}");

@@ -365,7 +365,7 @@ fn the_robustness_sweep_writes_its_map() {
     let _one = serial();
     let s = Scratch::new("fc_sweep");
     let out = s.dir.join("sweep");
-    upc_ok([
+    let args = [
         "robustness",
         "--controllers",
         "c0,c1",
@@ -386,8 +386,8 @@ fn the_robustness_sweep_writes_its_map() {
         "10",
         "--quiet",
         "--out",
-        out.to_str().expect("utf-8"),
-    ]);
+    ];
+    upc_ok(args.iter().copied().chain([out.to_str().expect("utf-8")]));
     let j = json(&out.join("robustness.json"));
     let rows = j["rows"].as_array().expect("rows");
     let survived = |c: &str| {
@@ -427,13 +427,28 @@ fn the_robustness_sweep_writes_its_map() {
     assert!(md.contains("| κ \\ τ (ms) |"), "{md}");
     assert!(md.contains("| `rotated:30` |"), "{md}");
     assert!(out.join("figures/robustness_c1_1000ms.svg").exists());
+    // Each cell was saved as it ended: the same sweep again runs none and writes the same map.
+    let again = std::process::Command::new(env!("CARGO_BIN_EXE_upc"))
+        .args(args)
+        .arg(&out)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("upc starts");
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert!(again.status.success(), "{err}");
+    assert!(err.contains("3 of 3 cells already done"), "{err}");
+    assert_eq!(
+        std::fs::read_to_string(out.join("robustness.csv")).expect("csv"),
+        csv
+    );
 }
 
 /// A case the plant refuses to play (MuJoCo cannot play a phantom: it pushes through the door)
-/// never runs; its controller's summary of zeros must not read as a robot that stood. The
-/// sweep stops and names the plant's reason; `--plant mujoco` alone skips the phantoms.
+/// never runs; its controller's summary of zeros must not read as a robot that stood. Its cell
+/// fails with the plant's reason and the sweep ends in an error; `--plant mujoco` alone skips
+/// the phantoms.
 #[test]
-fn a_case_the_plant_refuses_stops_the_sweep_instead_of_counting_as_survived() {
+fn a_case_the_plant_refuses_fails_its_cell_instead_of_counting_as_survived() {
     let _one = serial();
     let s = Scratch::new("fc_refused");
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_upc"))

@@ -55,17 +55,16 @@ impl EngineArgs {
     /// saw it).
     pub fn describe(&self, out: &Path) -> String {
         match self.engine {
-            EngineKind::Local => format!("{} cells at a time", self.jobs()),
+            EngineKind::Local => format!("{} at a time", count(self.jobs() as u64, "cell")),
             EngineKind::Ray => match ray_cluster(out) {
-                Some(c) => format!(
-                    "on Ray ({} nodes, {} CPUs), one task per cell",
-                    c.get("nodes")
-                        .and_then(serde_json::Value::as_u64)
-                        .unwrap_or(0),
-                    c.get("cpus")
-                        .and_then(serde_json::Value::as_u64)
-                        .unwrap_or(0)
-                ),
+                Some(c) => {
+                    let n = |k: &str| c.get(k).and_then(serde_json::Value::as_u64).unwrap_or(0);
+                    format!(
+                        "on Ray ({}, {}), one task per cell",
+                        count(n("nodes"), "node"),
+                        count(n("cpus"), "CPU")
+                    )
+                }
                 None => "on Ray, one task per cell".to_string(),
             },
         }
@@ -192,6 +191,15 @@ impl Engine<'_> {
             .into());
         }
         Ok(())
+    }
+}
+
+/// "1 cell", "2 cells".
+fn count(n: u64, what: &str) -> String {
+    if n == 1 {
+        format!("1 {what}")
+    } else {
+        format!("{n} {what}s")
     }
 }
 
