@@ -115,8 +115,9 @@ def main():
         ray.init(address=address, logging_level="WARNING", log_to_driver=False,
                  _node_ip_address=os.environ.get("UPC_RAY_NODE_IP"))
     else:
-        ray.init(num_cpus=a.num_cpus, include_dashboard=False, logging_level="WARNING",
-                 log_to_driver=False,
+        # "local": a new cluster even where `ray start` left one (or its stale address file).
+        ray.init(address="local", num_cpus=a.num_cpus, include_dashboard=False,
+                 logging_level="WARNING", log_to_driver=False,
                  _node_ip_address=os.environ.get("UPC_RAY_NODE_IP", "127.0.0.2"))
     t_ready = time.monotonic()
     # Stopped (upc, its parent, gone: PR_SET_PDEATHSIG): exit through Ray's own shutdown, which

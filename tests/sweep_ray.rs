@@ -477,3 +477,49 @@ fn a_worker_with_another_upc_build_refuses_its_tasks() {
     assert!(!o.status.success(), "{err}");
     assert!(err.contains("runs another upc build"), "{err}");
 }
+
+/// A cell whose `upc sweep-cell` crashes (killed here) fails once with the signal as its reason:
+/// not run again (it returned), not on the map; the other cells are searched.
+#[test]
+fn a_crashed_cell_is_reported_once_and_not_run_again() {
+    let _one = serial();
+    if ray_bin().is_none() {
+        return;
+    }
+    let s = Scratch::new("sweep_ray_crash");
+    let out = s.path("sweep");
+    let sweep = Command::new(env!("CARGO_BIN_EXE_upc"))
+        .args([&MAP[..], &["--engine", "ray", "--jobs", "1"]].concat())
+        .arg("--out")
+        .arg(&out)
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("upc starts");
+    let until = Instant::now() + Duration::from_secs(60);
+    let cell = loop {
+        let found = descendants(sweep.id() as i32).into_iter().find(|p| {
+            p.comm == "upc"
+                && std::fs::read(format!("/proc/{}/cmdline", p.pid))
+                    .is_ok_and(|c| c.windows(10).any(|w| w == b"sweep-cell"))
+        });
+        if let Some(p) = found {
+            break p;
+        }
+        assert!(Instant::now() < until, "no cell started");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    // SAFETY: signalling a process of the sweep this test started.
+    unsafe { libc::kill(cell.pid, libc::SIGKILL) };
+    let o = sweep.wait_with_output().expect("upc");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(err.contains("1 cell failed"), "{err}");
+    assert_eq!(err.matches("ray_sweep: cell failed").count(), 1, "{err}");
+    assert!(err.contains("killed by signal 9"), "{err}");
+    let j = json(&out.join("robustness.json"));
+    assert_eq!(j["failed_cells"].as_array().map(Vec::len), Some(1), "{j}");
+    // The other two cells were searched.
+    assert_eq!(j["rows"].as_array().map(Vec::len), Some(2), "{j}");
+}

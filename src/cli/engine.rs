@@ -294,8 +294,8 @@ pub fn failed_cells(failed: &[(String, String)]) -> super::CliResult {
         .map(|(cell, why)| format!("  {cell}\n    {why}"))
         .collect();
     Err(format!(
-        "{} cells failed (not on the map, never counted as survived):\n{}",
-        failed.len(),
+        "{} failed (not on the map, never counted as survived):\n{}",
+        count(failed.len() as u64, "cell"),
         list.join("\n")
     )
     .into())
