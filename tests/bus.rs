@@ -126,30 +126,7 @@ fn upc_run_through_the_bus_keeps_c1_standing_on_the_g1() {
         return;
     }
     let s = Scratch::new("bus_run");
-    let out = Command::new(env!("CARGO_BIN_EXE_upc"))
-        .args([
-            "run",
-            "--robot",
-            "g1",
-            "--bus",
-            "unitree",
-            "--controller",
-            "c1",
-        ])
-        .args(["--duration", "4", "--bus-set", &domain(22)])
-        .args(["--quiet", "--name", "run", "--out"])
-        .arg(&s.dir)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("upc run");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let dir = s.dir.join("run/c1");
-    let c = json(&dir.join("controller.json"));
-    let bus = json(&dir.join("bus.json"));
+    let (dir, c, bus) = c1_on_the_bus(&s, 22, &[]);
     // A fall in real time on a shared machine: the bus's view (a controller silent past
     // `bus.command_timeout` is damped, a new hand-over) says whether the controller starved.
     assert_eq!(u(&c, "falls"), 0, "controller: {c}\nbus: {bus}");
@@ -170,6 +147,71 @@ fn upc_run_through_the_bus_keeps_c1_standing_on_the_g1() {
         let len = std::fs::metadata(dir.join(rrd)).map_or(0, |m| m.len());
         assert!(len > 10_000, "{rrd}: {len} bytes");
     }
+}
+
+/// The G1 on the bus with only what it measures: `--sensing realistic` makes the plant publish
+/// encoders, the IMU and the drives' torque estimates (MT-1) in `tau_est`, and the lab topic
+/// carries no base or forces. The controller estimates the base and the contact and hand
+/// wrenches from them (docs/estimation.md) and C1 stands.
+#[test]
+fn upc_run_through_the_bus_on_what_a_g1_measures_keeps_c1_standing() {
+    let _one = serial();
+    if installed("g1").is_none() {
+        return;
+    }
+    let s = Scratch::new("bus_run_g1_sensing");
+    let (_, c, bus) = c1_on_the_bus(&s, 25, &["--sensing", "realistic"]);
+    assert_eq!(u(&c, "falls"), 0, "controller: {c}\nbus: {bus}");
+    assert_eq!(u(&c, "tick_errors"), 0, "{c}");
+    // The base from the IMU and the encoders, the feet and the hand from the torques: on
+    // (nearly) every tick, the stance found.
+    let ticks = u(&c["estimator"], "ticks");
+    assert!(ticks > 1500, "{c}");
+    assert!(u(&c["estimator"], "no_stance") < ticks / 100, "{c}");
+    let wo = &c["wrench_observer"];
+    for k in ["feet_ticks", "cop_ticks", "hand_ticks"] {
+        assert!(u(wo, k) + 10 >= ticks, "{k}: {c}");
+    }
+    assert_eq!(
+        u(wo, "commanded_torque_ticks"),
+        0,
+        "the drives' estimates arrived: {c}"
+    );
+}
+
+/// `upc run --robot g1 --bus unitree --controller c1` for 4 s on DDS domain `d` with `extra`
+/// arguments, into `s`: C1's directory, its `controller.json` and `bus.json`.
+fn c1_on_the_bus(
+    s: &Scratch,
+    d: u16,
+    extra: &[&str],
+) -> (PathBuf, serde_json::Value, serde_json::Value) {
+    let out = Command::new(env!("CARGO_BIN_EXE_upc"))
+        .args([
+            "run",
+            "--robot",
+            "g1",
+            "--bus",
+            "unitree",
+            "--controller",
+            "c1",
+        ])
+        .args(extra)
+        .args(["--duration", "4", "--bus-set", &domain(d)])
+        .args(["--quiet", "--name", "run", "--out"])
+        .arg(&s.dir)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("upc run");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let dir = s.dir.join("run/c1");
+    let c = json(&dir.join("controller.json"));
+    let bus = json(&dir.join("bus.json"));
+    (dir, c, bus)
 }
 
 /// The robot venv's Python when it has CycloneDDS 0.10.2, else `None` (a failure under CI).

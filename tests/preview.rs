@@ -860,3 +860,17 @@ fn next_zmp_is_the_first_sample_of_the_plan() {
         );
     }
 }
+
+#[test]
+fn a_plan_before_any_solve_is_none_not_a_panic() {
+    // A controller whose first states were bad logs a plan before its first solve.
+    let c = config_with(&[]);
+    let n = 200;
+    let (state, refs) = busy_problem(n);
+    let mut p = preview(&c, n, LqSolverKind::Riccati);
+    let mut plan = PreviewPlan::with_capacity(n);
+    assert!(!p.plan(&state, &mut plan), "a plan without gains");
+    p.solve_c0(&state, &refs).unwrap();
+    assert!(p.plan(&state, &mut plan));
+    assert!(plan.zmp[0].iter().all(|z| z.is_finite()));
+}

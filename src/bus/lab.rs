@@ -43,6 +43,27 @@ pub struct LabState {
     pub scenario_start: f64,
 }
 
+impl LabState {
+    /// A lab without motion capture or force plates: the base and the forces unmeasured (NaN),
+    /// the scenario's clock, the door and the simulator's own figures kept.
+    pub fn unmeasured(&mut self) {
+        self.base_pose = [f64::NAN; 7];
+        self.base_velocity = [f64::NAN; 6];
+        self.contact_forces = [[f64::NAN; 3]; N_CONTACTS];
+        self.hand_force = [f64::NAN; 3];
+        self.zmp = [f64::NAN; 2];
+        self.loaded = false;
+    }
+
+    /// Whether the lab measures the floating base.
+    pub fn has_base(&self) -> bool {
+        self.base_pose
+            .iter()
+            .chain(&self.base_velocity)
+            .all(|x| x.is_finite())
+    }
+}
+
 super::dds::serde_bus_message!(LabState, "upc::msg::dds_::LabState_");
 
 #[cfg(test)]

@@ -758,6 +758,10 @@ fn fill(
             m.hand_force = l.hand_force;
             m.door_angle = l.door_angle;
             m.door_velocity = l.door_velocity;
+            // A lab without motion capture: the estimator's base.
+            if !l.has_base() {
+                flags |= STATE_FLAG_BASE_UNMEASURED;
+            }
         }
         None => {
             m.q[..7].fill(f64::NAN);
@@ -808,7 +812,11 @@ fn publish_ros(
         js.effort.push(f64::from(s.tau_est));
     }
     joints.write(js)?;
-    if let Some(l) = &robot.lab {
+    if let Some(l) = robot
+        .lab
+        .as_ref()
+        .filter(|l| l.hand_force.iter().all(|x| x.is_finite()))
+    {
         let [x, y, z] = l.hand_force;
         wrenches.write(WrenchStamped {
             header: Header {

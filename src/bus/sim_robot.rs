@@ -5,6 +5,11 @@
 //! every physics step with the latest command. What a G1 does not measure (base, sole and hand
 //! forces) goes out on upc's own lab topic only ([`super::lab`]).
 //!
+//! On `--sensing realistic` the robot measures what its description's `[sensors]` says, through
+//! the sensor models (encoders, IMU, the drives' torque estimates of MT-1 in `tau_est`), and the
+//! lab has no motion capture or force plates: its sample carries the scenario's clock and the
+//! door only, so the controller runs on what the G1 measures (docs/bus.md, "Sensing").
+//!
 //! Until the first valid command the robot hangs in its harness (the plant's hold at the start
 //! posture, as `[sim.hold]`); the scenario's push starts `bus.sim.scenario_delay` after it. A
 //! command with a bad CRC is ignored (as the robot does) and counted; no valid command for
@@ -26,8 +31,10 @@ use crate::sim::hold::Supervisor;
 use crate::sim::physics::{Engine, Physics};
 use crate::sim::process::{
     Plant, PlantInfo, PlantUser, ProcessError, apply_scenario, build_plant, fill_state, push_frame,
+    sensors_of,
 };
-use crate::sim::sensors::{ImuMount, Sensing, Sensors, SensorsConfig};
+use crate::sim::robot_sensing::RobotSensing;
+use crate::sim::sensors::{ImuMount, Sensing, Sensors};
 
 /// What the simulated robot runs.
 #[derive(Debug, Clone)]
@@ -165,6 +172,10 @@ struct BusRobot<'a, P> {
     /// The plant's hold until the first command (the robot's harness).
     harness: Supervisor,
     sensors: Sensors,
+    /// What the robot measures and its drives' torque estimates (on `realistic`).
+    robot_sensing: RobotSensing,
+    /// Whether the lab measures the base and the forces (not on `realistic`).
+    lab_measures: bool,
     info: PlantInfo,
     push_frame: Option<usize>,
     /// Publish a state every this many physics steps.
@@ -206,12 +217,16 @@ impl<'a, P: Physics> BusRobot<'a, P> {
             cfg.process.safe_damping,
             cfg.dt,
         )?;
-        let truth = SensorsConfig {
-            sensing: Sensing::Truth,
-            ..cfg.sensors
-        };
+        let realistic = cfg.sensors.sensing == Sensing::Realistic;
+        let robot_sensing = RobotSensing::new(
+            opts.robot.description.sensors,
+            realistic,
+            cfg.sensors.motor_torques,
+            world.robot().effort_limits(),
+            cfg.sensors.seed,
+        );
         let sensors = Sensors::new(
-            &truth,
+            &sensors_of(cfg, &opts.robot),
             -world.robot().gravity.z,
             opts.robot
                 .imu_frame
@@ -256,6 +271,8 @@ impl<'a, P: Physics> BusRobot<'a, P> {
             map,
             harness,
             sensors,
+            robot_sensing,
+            lab_measures: !realistic,
             push_frame,
             every,
             tau: DVector::zeros(n),
@@ -283,13 +300,27 @@ impl<'a, P: Physics> BusRobot<'a, P> {
         for (p, c) in self.points.iter_mut().zip(self.world.contact_points()) {
             *p = [c.x, c.y, c.z];
         }
-        let dt = self.opts.sim.dt * self.every as f64;
-        self.sensors.apply(&mut self.msg, dt, &self.points);
+        // The lab's sample from the truth, before the robot's sensors.
         if bus.sim.lab {
-            let lab = lab_state(&self.msg, rep, &self.world, &self.summary);
+            let mut lab = lab_state(&self.msg, rep, &self.world, &self.summary);
+            if !self.lab_measures {
+                lab.unmeasured();
+            }
             self.labs.write(lab).map_err(dds)?;
         }
-        let state = low_state(&self.msg, &self.map, &self.applied, bus.sim.mode_machine, t);
+        // The models' step is the plant's (their latencies and the accelerometer's difference
+        // count plant steps); they are sampled every `every` of them.
+        let dt = self.opts.sim.dt;
+        self.robot_sensing.take_truth(&self.msg);
+        self.sensors.apply(&mut self.msg, dt, &self.points);
+        // The torques applied over the last step: what the drives' estimates read (MT-1 on
+        // `realistic`, its latency counted in published states).
+        let m = &mut self.msg;
+        m.joint_torques.fill(0.0);
+        let base = m.nv as usize - self.applied.len();
+        m.joint_torques[base..base + self.applied.len()].copy_from_slice(&self.applied);
+        self.robot_sensing.apply(m);
+        let state = low_state(&self.msg, &self.map, bus.sim.mode_machine, t);
         self.states.write(state).map_err(dds)?;
         self.summary.states += 1;
         Ok(())
@@ -391,9 +422,9 @@ fn drives(
     damping
 }
 
-/// The G1's state from the plant's: joints of the motor slots, the applied torques as the
-/// drives' estimates, the IMU; sealed.
-fn low_state(m: &StateMsg, map: &MotorMap, applied: &[f64], mode_machine: u8, t: f64) -> LowState {
+/// The G1's state from the plant's as measured: joints of the motor slots, the drives' torque
+/// estimates, the IMU; sealed.
+fn low_state(m: &StateMsg, map: &MotorMap, mode_machine: u8, t: f64) -> LowState {
     let mut s = LowState {
         mode_machine,
         tick: (t * 1e3).round() as u32,
@@ -402,11 +433,11 @@ fn low_state(m: &StateMsg, map: &MotorMap, applied: &[f64], mode_machine: u8, t:
     for (k, slot) in map.slots.iter().enumerate() {
         let ms = &mut s.motor_state[k];
         match *slot {
-            Slot::Joint { q, v, actuated, .. } => {
+            Slot::Joint { q, v, .. } => {
                 ms.mode = 1;
                 ms.q = m.q[q] as f32;
                 ms.dq = m.v[v] as f32;
-                ms.tau_est = applied[actuated] as f32;
+                ms.tau_est = m.joint_torques[v] as f32;
             }
             Slot::Locked { q } => {
                 ms.mode = 1;

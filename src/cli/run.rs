@@ -175,6 +175,10 @@ struct Entry {
     /// The base estimate against the plant's truth (lockstep runs whose base was estimated).
     #[serde(skip_serializing_if = "Option::is_none")]
     base_estimate_error: Option<upc::estimation::BaseAccuracy>,
+    /// The hand force, foot loads and CoP the controller had against the plant's truth
+    /// (lockstep runs).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    wrench_estimate_error: Option<upc::estimation::WrenchAccuracy>,
 }
 
 pub fn run(mut args: RunArgs) -> CliResult {
@@ -435,6 +439,10 @@ fn run_one(
         failure: None,
         bridge_summary: read("bridge.json").and_then(|t| serde_json::from_str(&t).ok()),
         base_estimate_error: upc::estimation::base_accuracy(
+            &dir.join("controller.csv"),
+            &dir.join("sim.csv"),
+        ),
+        wrench_estimate_error: upc::estimation::wrench_accuracy(
             &dir.join("controller.csv"),
             &dir.join("sim.csv"),
         ),
@@ -1072,6 +1080,29 @@ fn print_table(entries: &[Entry]) {
                 a.orientation_rms_deg,
                 a.tilt_rms_deg,
                 a.orientation_max_deg
+            );
+        }
+        // The wrenches, where the controller did not have them exactly (an observer, or
+        // force sensors with their errors).
+        if let Some(w) = e.wrench_estimate_error.as_ref().filter(|w| {
+            w.hand_source == "observer" || w.hand_x_push.rms > 1e-3 || w.cop_x_standing.rms > 1e-5
+        }) {
+            let feet = w.foot_load.map_or(String::new(), |f| {
+                format!(", foot load RMS {:.1} N (p99 {:.1})", f.rms, f.p99)
+            });
+            println!(
+                "{}: {} hand force vs truth: x RMS {:.1} N during pushes (p99 {:.1}), {:.1} standing, \
+                 lag {:.0} ms; CoP RMS x/y {:.1}/{:.1} mm standing, {:.1}/{:.1} mm during pushes{feet}",
+                e.controller,
+                w.hand_source,
+                w.hand_x_push.rms,
+                w.hand_x_push.p99,
+                w.hand_x_standing.rms,
+                w.hand_lag * 1e3,
+                w.cop_x_standing.rms * 1e3,
+                w.cop_y_standing.rms * 1e3,
+                w.cop_x_push.rms * 1e3,
+                w.cop_y_push.rms * 1e3,
             );
         }
     }

@@ -294,8 +294,14 @@ impl ControllerCore {
 
     /// Roll out the last tick's predicted horizon and copy it into a log record.
     pub fn fill_plan(&mut self, out: &mut super::logger::PlanLog) {
-        self.zmp.plan(&self.last_x, &mut self.plan);
+        let planned = self.zmp.plan(&self.last_x, &mut self.plan);
         out.time = self.last.time;
+        if !planned {
+            // No solve yet: an empty plan, not the buffer's last one.
+            out.zmp.fill([f32::NAN; 2]);
+            out.com.fill([f32::NAN; 2]);
+            return;
+        }
         out.com_height = self.latched.map_or(0.0, |l| l.com_height);
         for i in 0..self.horizon.min(out.zmp.len()) {
             out.zmp[i] = [self.plan.zmp[0][i] as f32, self.plan.zmp[1][i] as f32];

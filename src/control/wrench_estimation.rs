@@ -118,6 +118,7 @@ fn build(
         mode: settings.mode,
         counts: WrenchCounts::default(),
         last_time: None,
+        observed: false,
     }))
 }
 
@@ -148,6 +149,8 @@ pub struct WrenchEstimation {
     mode: WrenchMode,
     pub counts: WrenchCounts,
     last_time: Option<f64>,
+    /// Whether the observer ran this tick (its columns are empty where it did not).
+    observed: bool,
 }
 
 impl WrenchEstimation {
@@ -202,6 +205,7 @@ impl ControllerPart for WrenchEstimation {
     fn reset(&mut self) {
         self.observer.reset();
         self.last_time = None;
+        self.observed = false;
     }
 
     fn update(
@@ -228,7 +232,8 @@ impl ControllerPart for WrenchEstimation {
                     cop: self.replaces(s.cop.iter().all(|x| x.is_finite())),
                     hand: self.replaces(s.hand_force.iter().all(|x| x.is_finite())),
                 };
-                if !(e.feet || e.cop || e.hand) {
+                self.observed = e.feet || e.cop || e.hand;
+                if !self.observed {
                     return Ok(()); // the robot measures them all: nothing to stand in for
                 }
                 self.observe(inputs, frame);
@@ -252,7 +257,17 @@ impl ControllerPart for WrenchEstimation {
     }
 
     fn record(&self, out: &mut Record) {
-        let w = &self.observer.last;
+        let none = ContactWrenches {
+            feet: [[f64::NAN; 6]; 2],
+            hand: [f64::NAN; 3],
+            cop: None,
+            normal_force: f64::NAN,
+        };
+        let w = if self.observed {
+            &self.observer.last
+        } else {
+            &none
+        };
         let cop = w.cop.unwrap_or([f64::NAN; 2]);
         out.put(col!(fixed("wo_hand_x", 3).plot("wrench/hand_x")), w.hand[0]);
         out.put(col!(fixed("wo_hand_y", 3).plot("wrench/hand_y")), w.hand[1]);

@@ -28,7 +28,7 @@ pub struct BaseAccuracy {
 }
 
 /// Columns by name of a CSV text (numbers only; an unparsable cell is NaN).
-fn columns(text: &str) -> HashMap<&str, Vec<f64>> {
+pub(super) fn columns(text: &str) -> HashMap<&str, Vec<f64>> {
     let mut lines = text.lines();
     let names: Vec<&str> = lines.next().unwrap_or("").split(',').collect();
     let mut cols: HashMap<&str, Vec<f64>> = names.iter().map(|n| (*n, Vec::new())).collect();

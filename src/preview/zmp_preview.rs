@@ -183,8 +183,12 @@ impl ZmpPreview {
     }
 
     /// The predicted horizon of the last solve from `state` (CoM states, jerks and the ZMP that the
-    /// disturbed model predicts, eq. (11)).
-    pub fn plan(&mut self, state: &[AxisState; 2], out: &mut PreviewPlan) {
+    /// disturbed model predicts, eq. (11)); `false`, `out` untouched, before any solve (a
+    /// controller whose first states were bad has no gains yet).
+    pub fn plan(&mut self, state: &[AxisState; 2], out: &mut PreviewPlan) -> bool {
+        if self.riccati.is_empty() {
+            return false;
+        }
         let n = self.horizon;
         for axis in 0..2 {
             let ff = &mut self.ff[axis][..n];
@@ -210,6 +214,7 @@ impl ZmpPreview {
                 );
             }
         }
+        true
     }
 
     /// The ZMP the model predicts one preview step ahead after applying `u` from `state`

@@ -503,7 +503,7 @@ struct Run<'a> {
 }
 
 /// Columns of the lockstep ground-truth CSV (`--truth-csv`).
-pub const TRUTH_CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_x,zmp_y,hand_fx,hand_fy,hand_fz,door_angle,door_torque,loop_error,max_penetration,max_slip_speed,solver_iterations,base_x,base_y,base_z,base_vx,base_vy,base_vz,base_roll,base_pitch,base_yaw,lfoot_x,lfoot_y,rfoot_x,rfoot_y";
+pub const TRUTH_CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_x,zmp_y,hand_fx,hand_fy,hand_fz,door_angle,door_torque,loop_error,max_penetration,max_slip_speed,solver_iterations,base_x,base_y,base_z,base_vx,base_vy,base_vz,base_roll,base_pitch,base_yaw,lfoot_x,lfoot_y,rfoot_x,rfoot_y,lfoot_fz,rfoot_fz";
 
 struct Looper {
     tau: DVector<f64>,
@@ -537,7 +537,7 @@ struct Looper {
 }
 
 /// The sensor models' settings, the feet as the robot's description says when it says.
-fn sensors_of(cfg: &SimConfig, robot: &Robot) -> SensorsConfig {
+pub(crate) fn sensors_of(cfg: &SimConfig, robot: &Robot) -> SensorsConfig {
     let mut s = cfg.sensors;
     match robot.description.sensors.feet {
         Some(FootSensors::Corners) => s.feet = FootSensing::Corners,
@@ -589,10 +589,15 @@ fn write_truth(
         let f = &mut feet[k / 4];
         (f[0], f[1]) = (f[0] + p.x / 4.0, f[1] + p.y / 4.0);
     }
+    // Each foot's load (N): its corners' normal forces, for the wrench observer's error.
+    let mut load = [0.0; 2];
+    for (k, f) in world.contact_forces().iter().take(N_CONTACTS).enumerate() {
+        load[k / 4] += f.z;
+    }
     writeln!(
         w,
         "{:.4},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{:.4},{:.4},{:.6},{:.4},{:.3e},{:.3e},{:.3e},{},\
-         {:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}",
+         {:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.3},{:.3}",
         world.time(),
         rep.com[0],
         rep.com[1],
@@ -621,6 +626,8 @@ fn write_truth(
         feet[0][1],
         feet[1][0],
         feet[1][1],
+        load[0],
+        load[1],
     )
 }
 

@@ -18,6 +18,7 @@ use serde::Deserialize;
 
 use crate::channels::{MAX_DOF, N_CONTACTS, StateMsg};
 use crate::robot::{FootSensors, SensorSpec};
+use crate::sim::sensors::Transport;
 
 /// `[sim.sensors.motor_torques]`: MT-1's sizes.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
@@ -80,10 +81,8 @@ pub struct RobotSensing {
     rng: ChaCha8Rng,
     /// The true joint velocities of the step (before the encoders' noise).
     velocity: [f64; MAX_DOF],
-    /// The last `latency + 1` estimates, newest at `head`.
-    delay: [[f64; MAX_DOF]; MAX_DELAY + 1],
-    head: usize,
-    filled: usize,
+    /// The estimates' latency (plant steps, whatever the publishing rate).
+    delay: Transport<MAX_DOF>,
 }
 
 impl RobotSensing {
@@ -106,9 +105,7 @@ impl RobotSensing {
             effort,
             rng,
             velocity: [0.0; MAX_DOF],
-            delay: [[0.0; MAX_DOF]; MAX_DELAY + 1],
-            head: 0,
-            filled: 0,
+            delay: Transport::new(cfg.latency.min(MAX_DELAY)),
         }
     }
 
@@ -119,7 +116,7 @@ impl RobotSensing {
 
     /// A new plant session: nothing delayed yet.
     pub fn reset(&mut self) {
-        self.filled = 0;
+        self.delay.reset();
     }
 
     /// On `realistic`: the torque estimates by MT-1 (or NaN without them) and NaN for every
@@ -165,13 +162,9 @@ impl RobotSensing {
                 raw
             };
         }
-        self.head = (self.head + 1) % (MAX_DELAY + 1);
-        self.delay[self.head] = now;
-        self.filled = (self.filled + 1).min(MAX_DELAY + 1);
         // Until `latency` steps have passed, the oldest estimate there is.
-        let back = c.latency.min(self.filled - 1);
-        let i = (self.head + MAX_DELAY + 1 - back) % (MAX_DELAY + 1);
-        m.joint_torques = self.delay[i];
+        self.delay.pass(m.step, &mut now, 1.0, 0.0);
+        m.joint_torques = now;
     }
 }
 
@@ -198,6 +191,32 @@ mod tests {
         }
     }
 
+    /// On a plant publishing every second step (a bus at 500 Hz on a 1 kHz plant) the latency
+    /// is still in plant steps: three steps late reads the sample four steps old.
+    #[test]
+    fn the_latency_counts_plant_steps_at_any_publishing_rate() {
+        let c = MotorTorqueConfig {
+            friction: 0.0,
+            viscous: 0.0,
+            latency: 3,
+            ..cfg()
+        };
+        let mut s = RobotSensing::new(spec(), true, c, vec![0.0, 50.0], 1);
+        let mut out = Vec::new();
+        for step in (0..12).step_by(2) {
+            let mut m = StateMsg {
+                nv: 2,
+                step,
+                ..Default::default()
+            };
+            m.joint_torques[1] = step as f64;
+            s.take_truth(&m);
+            s.apply(&mut m);
+            out.push(m.joint_torques[1]);
+        }
+        assert_eq!(out, [0.0, 0.0, 0.0, 2.0, 4.0, 6.0]);
+    }
+
     /// The estimate is the torque plus the friction the velocity signs, two steps late; the
     /// feet and the hand a G1 does not measure are NaN.
     #[test]
@@ -207,6 +226,7 @@ mod tests {
         for step in 0..5 {
             let mut m = StateMsg {
                 nv: 2,
+                step,
                 ..Default::default()
             };
             m.v[1] = 1.0;

@@ -25,43 +25,61 @@ pub struct ForceSensorConfig {
     pub dropout: f64,
 }
 
-/// A delay line of `latency + 1` samples of N values, and the sample last published: what a
-/// fieldbus does to a sensor's samples (late, sometimes lost).
+/// A delay line of the last `latency + 1` samples of N values, each with its plant step, and
+/// the sample last published: what a fieldbus does to a sensor's samples (late, sometimes lost).
+/// The latency counts plant steps whatever the rate the samples are taken at (a plant
+/// publishing every second step reads the newest sample at least `latency` steps old).
 #[derive(Debug, Clone)]
-pub(super) struct Transport<const N: usize> {
-    line: Vec<[f64; N]>,
+pub(crate) struct Transport<const N: usize> {
+    line: Vec<(u64, [f64; N])>,
+    /// Where the newest sample is, and how many the line holds.
+    head: usize,
+    filled: usize,
+    latency: u64,
     last: [f64; N],
     primed: bool,
 }
 
 impl<const N: usize> Transport<N> {
-    pub(super) fn new(latency: usize) -> Self {
+    pub(crate) fn new(latency: usize) -> Self {
         Self {
-            line: vec![[0.0; N]; latency + 1],
+            line: vec![(0, [0.0; N]); latency + 1],
+            head: latency,
+            filled: 0,
+            latency: latency as u64,
             last: [0.0; N],
             primed: false,
         }
     }
 
     /// Empty, as before the first sample (in place: no allocation).
-    pub(super) fn reset(&mut self) {
-        self.line.fill([0.0; N]);
+    pub(crate) fn reset(&mut self) {
+        self.head = self.line.len() - 1;
+        self.filled = 0;
         self.last = [0.0; N];
         self.primed = false;
     }
 
     /// Writes step `step`'s sample `x`, replaces it with the one published at that step, and
     /// returns whether the sample was lost (`u`: a uniform draw, lost when below `dropout`).
-    pub(super) fn pass(&mut self, step: u64, x: &mut [f64; N], u: f64, dropout: f64) -> bool {
-        // Write this step's sample, read the one `latency` steps old (the oldest written so far
-        // while the line fills).
-        let len = self.line.len() as u64;
-        self.line[(step % len) as usize] = *x;
-        let old = (step + 1).saturating_sub(len);
-        let delayed = self.line[(old % len) as usize];
+    pub(crate) fn pass(&mut self, step: u64, x: &mut [f64; N], u: f64, dropout: f64) -> bool {
+        let len = self.line.len();
+        self.head = (self.head + 1) % len;
+        self.line[self.head] = (step, *x);
+        self.filled = (self.filled + 1).min(len);
+        // The newest sample `latency` steps old or older; the oldest written while the line
+        // fills.
+        let mut delayed = (self.head + len - (self.filled - 1)) % len;
+        for back in 0..self.filled {
+            let i = (self.head + len - back) % len;
+            if self.line[i].0 + self.latency <= step {
+                delayed = i;
+                break;
+            }
+        }
         let lost = self.primed && u < dropout;
         if !lost {
-            self.last = delayed;
+            self.last = self.line[delayed].1;
         }
         self.primed = true;
         *x = self.last;

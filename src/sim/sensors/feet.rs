@@ -36,8 +36,12 @@ pub(super) fn fill_foot_wrenches(m: &mut StateMsg, points: &[[f64; 3]]) {
             y.dot(&moment),
             z.dot(&moment),
         ];
-        // A degenerate sole (points not given) publishes zeros rather than NaN.
-        m.foot_wrenches[foot] = if w.iter().all(|c| c.is_finite()) {
+        // Forces not measured (NaN): the wrench is not either. A degenerate sole (points not
+        // given) publishes zeros rather than NaN.
+        let measured = (0..4).all(|i| f(i).iter().all(|c| c.is_finite()));
+        m.foot_wrenches[foot] = if !measured {
+            [f64::NAN; 6]
+        } else if w.iter().all(|c| c.is_finite()) {
             w
         } else {
             [0.0; 6]

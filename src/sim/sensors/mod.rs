@@ -44,6 +44,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::Deserialize;
 
 pub use channel::ForceSensorConfig;
+pub(crate) use channel::Transport;
 pub use encoders::EncoderConfig;
 pub use foot_ft::WrenchSensorConfig;
 pub use imu::{ImuConfig, ImuMount};

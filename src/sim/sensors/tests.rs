@@ -298,6 +298,15 @@ fn a_foot_wrench_is_its_corners_in_the_sole_frame() {
         m.foot_wrenches[1], [0.0; 6],
         "a degenerate sole reads nothing"
     );
+    // Sole forces not measured (a robot without foot sensors, no force plates): the foot's
+    // wrench is not measured either, never a measured zero (an unloaded foot).
+    m.contact_forces[2] = [f64::NAN; 3];
+    s.apply(&mut m, 1e-3, &points);
+    assert!(
+        m.foot_wrenches[0].iter().all(|x| x.is_nan()),
+        "{:?}",
+        m.foot_wrenches[0]
+    );
 }
 
 /// Two feet 0.2 × 0.1 m, toes along +x, 0.1 m either side of y = 0, and their corner
