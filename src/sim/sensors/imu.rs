@@ -54,6 +54,8 @@ pub(super) struct Imu {
     /// Orientation xyzw, angular velocity, specific force.
     transport: Transport<10>,
     stamp: f64,
+    /// The plant step of the last sample: the biases walk over the time since.
+    last_step: Option<u64>,
 }
 
 impl SensorModel for Imu {
@@ -68,6 +70,7 @@ impl SensorModel for Imu {
             yaw: 0.0,
             transport: Transport::new(settings.latency),
             stamp: 0.0,
+            last_step: None,
         }
     }
 
@@ -80,6 +83,7 @@ impl SensorModel for Imu {
         self.yaw = 0.0;
         self.transport.reset();
         self.stamp = 0.0;
+        self.last_step = None;
     }
 
     fn apply(
@@ -110,9 +114,12 @@ impl Imu {
             c.gyro_noise_density / dt.sqrt(),
             c.accel_noise_density / dt.sqrt(),
         );
+        // A plant publishing every few steps: the walks cover the steps between samples.
+        let span = dt * self.last_step.map_or(1, |l| step.saturating_sub(l).max(1)) as f64;
+        self.last_step = Some(step);
         let (wg, wa) = (
-            c.gyro_bias_drift * dt.sqrt(),
-            c.accel_bias_drift * dt.sqrt(),
+            c.gyro_bias_drift * span.sqrt(),
+            c.accel_bias_drift * span.sqrt(),
         );
         for k in 0..3 {
             self.gyro_bias[k] += wg * n();
@@ -122,7 +129,7 @@ impl Imu {
         }
         // The attitude filter's error, a small rotation about the world's axes applied to the
         // true orientation.
-        self.yaw += c.yaw_drift * dt.sqrt() * n();
+        self.yaw += c.yaw_drift * span.sqrt() * n();
         let e = Vector3::new(
             self.tilt[0] + c.orientation_noise * n(),
             self.tilt[1] + c.orientation_noise * n(),

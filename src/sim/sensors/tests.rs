@@ -453,3 +453,36 @@ fn without_mocap_the_base_is_not_published() {
     assert!((m.stamps[SENSOR_HAND] - 0.009).abs() < 1e-12);
     assert_eq!(m.stamps[SENSOR_JOINTS], 0.01);
 }
+
+/// The gyro's bias walks drift·√t whatever the rate the IMU is sampled at: every plant step or
+/// every second one (a G1 on its bus), over the same 1 s the spread across seeds is the same.
+#[test]
+fn the_gyro_bias_walks_over_time_not_samples() {
+    let spread = |every: u64| {
+        let mut c = cfg();
+        c.imu.gyro_noise_density = 0.0;
+        c.imu.gyro_bias = 0.0;
+        c.imu.gyro_bias_drift = 0.01;
+        let (mut sum2, seeds) = (0.0, 400);
+        for seed in 0..seeds {
+            c.seed = seed;
+            let mut s = Sensors::new(&c, 9.81, None);
+            let mut w = 0.0;
+            for k in (0..=1000).step_by(every as usize) {
+                let mut m = state(k, [0.0; 3]);
+                s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+                w = m.imu_angular_velocity[0];
+            }
+            sum2 += w * w;
+        }
+        (sum2 / seeds as f64).sqrt()
+    };
+    let (one, two) = (spread(1), spread(2));
+    // 0.01 rad/s/√s over 1 s; 400 seeds: the spread's own error is about 4 %.
+    for s in [one, two] {
+        assert!(
+            (s - 0.01).abs() < 0.0015,
+            "every step {one}, every second {two}"
+        );
+    }
+}
