@@ -31,7 +31,7 @@ use crate::sim::hold::Supervisor;
 use crate::sim::physics::{Engine, Physics};
 use crate::sim::process::{
     Plant, PlantInfo, PlantUser, ProcessError, apply_scenario, build_plant, fill_state, push_frame,
-    sensors_of,
+    put_applied_torques, sensors_of,
 };
 use crate::sim::robot_sensing::RobotSensing;
 use crate::sim::sensors::{ImuMount, Sensing, Sensors};
@@ -174,8 +174,6 @@ struct BusRobot<'a, P> {
     sensors: Sensors,
     /// What the robot measures and its drives' torque estimates (on `realistic`).
     robot_sensing: RobotSensing,
-    /// Whether the lab measures the base and the forces (not on `realistic`).
-    lab_measures: bool,
     info: PlantInfo,
     push_frame: Option<usize>,
     /// Publish a state every this many physics steps.
@@ -272,7 +270,6 @@ impl<'a, P: Physics> BusRobot<'a, P> {
             harness,
             sensors,
             robot_sensing,
-            lab_measures: !realistic,
             push_frame,
             every,
             tau: DVector::zeros(n),
@@ -303,7 +300,8 @@ impl<'a, P: Physics> BusRobot<'a, P> {
         // The lab's sample from the truth, before the robot's sensors.
         if bus.sim.lab {
             let mut lab = lab_state(&self.msg, rep, &self.world, &self.summary);
-            if !self.lab_measures {
+            // On `realistic` the lab has no motion capture or force plates.
+            if self.sensors.realistic() {
                 lab.unmeasured();
             }
             self.labs.write(lab).map_err(dds)?;
@@ -314,12 +312,9 @@ impl<'a, P: Physics> BusRobot<'a, P> {
         self.robot_sensing.take_truth(&self.msg);
         self.sensors.apply(&mut self.msg, dt, &self.points);
         // The torques applied over the last step: what the drives' estimates read (MT-1 on
-        // `realistic`, its latency counted in published states).
-        let m = &mut self.msg;
-        m.joint_torques.fill(0.0);
-        let base = m.nv as usize - self.applied.len();
-        m.joint_torques[base..base + self.applied.len()].copy_from_slice(&self.applied);
-        self.robot_sensing.apply(m);
+        // `realistic`).
+        put_applied_torques(&mut self.msg, &self.applied);
+        self.robot_sensing.apply(&mut self.msg);
         let state = low_state(&self.msg, &self.map, bus.sim.mode_machine, t);
         self.states.write(state).map_err(dds)?;
         self.summary.states += 1;

@@ -1085,7 +1085,9 @@ fn print_table(entries: &[Entry]) {
         // The wrenches, where the controller did not have them exactly (an observer, or
         // force sensors with their errors).
         if let Some(w) = e.wrench_estimate_error.as_ref().filter(|w| {
-            w.hand_source == "observer" || w.hand_x_push.rms > 1e-3 || w.cop_x_standing.rms > 1e-5
+            w.hand_source == upc::estimation::HandSource::Observer
+                || w.hand_x_push.rms > 1e-3
+                || w.cop_x_standing.rms > 1e-5
         }) {
             let feet = w.foot_load.map_or(String::new(), |f| {
                 format!(", foot load RMS {:.1} N (p99 {:.1})", f.rms, f.p99)

@@ -257,7 +257,7 @@ impl ControllerPart for WrenchEstimation {
     }
 
     fn record(&self, out: &mut Record) {
-        let none = ContactWrenches {
+        const UNOBSERVED: ContactWrenches = ContactWrenches {
             feet: [[f64::NAN; 6]; 2],
             hand: [f64::NAN; 3],
             cop: None,
@@ -266,7 +266,7 @@ impl ControllerPart for WrenchEstimation {
         let w = if self.observed {
             &self.observer.last
         } else {
-            &none
+            &UNOBSERVED
         };
         let cop = w.cop.unwrap_or([f64::NAN; 2]);
         out.put(col!(fixed("wo_hand_x", 3).plot("wrench/hand_x")), w.hand[0]);

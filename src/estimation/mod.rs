@@ -22,7 +22,7 @@ pub mod wrench_observer;
 
 pub use accuracy::{BaseAccuracy, base_accuracy};
 pub use settings::{EstimatorMode, EstimatorSettings};
-pub use wrench_accuracy::{ErrorStats, WrenchAccuracy, wrench_accuracy};
+pub use wrench_accuracy::{ErrorStats, HandSource, WrenchAccuracy, wrench_accuracy};
 
 use nalgebra::{DVector, Matrix3, Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
 

@@ -48,11 +48,31 @@ impl ErrorStats {
     }
 }
 
+/// Which hand force the controller had.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum HandSource {
+    /// The wrench observer's (`wo_hand_*`).
+    #[default]
+    Observer,
+    /// A wrist sensor's (`f_meas_*`).
+    Measured,
+}
+
+impl std::fmt::Display for HandSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Observer => "observer",
+            Self::Measured => "measured",
+        })
+    }
+}
+
 /// The wrenches' error over a run (N, m, s).
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct WrenchAccuracy {
-    /// Which hand force was compared: "observer" or "measured".
-    pub hand_source: String,
+    /// Which hand force was compared.
+    pub hand_source: HandSource,
     /// The hand force's x and y errors, during pushes and standing.
     pub hand_x_push: ErrorStats,
     pub hand_y_push: ErrorStats,
@@ -96,8 +116,12 @@ fn accuracy_of(
     truth: &HashMap<&str, Vec<f64>>,
 ) -> Option<WrenchAccuracy> {
     let (hand_source, hx, hy) = match (col(est, "wo_hand_x"), col(est, "wo_hand_y")) {
-        (Some(x), Some(y)) => ("observer", x, y),
-        _ => ("measured", col(est, "f_meas_x")?, col(est, "f_meas_y")?),
+        (Some(x), Some(y)) => (HandSource::Observer, x, y),
+        _ => (
+            HandSource::Measured,
+            col(est, "f_meas_x")?,
+            col(est, "f_meas_y")?,
+        ),
     };
     let (tx, ty) = (truth.get("hand_fx")?, truth.get("hand_fy")?);
     let (cx, cy) = (est.get("zmp_meas_x")?, est.get("zmp_meas_y")?);
@@ -140,7 +164,7 @@ fn accuracy_of(
         _ => None,
     };
     Some(WrenchAccuracy {
-        hand_source: hand_source.into(),
+        hand_source,
         hand_x_push: errors(hx, tx, true),
         hand_y_push: errors(hy, ty, true),
         hand_x_standing: errors(hx, tx, false),
@@ -233,7 +257,7 @@ mod tests {
             truth += &format!("{t:.4},{},0,0,0,150,150\n", force(t));
         }
         let a = accuracy_of(&columns(&est), &columns(&truth)).unwrap();
-        assert_eq!(a.hand_source, "observer");
+        assert_eq!(a.hand_source, HandSource::Observer);
         assert!((a.hand_lag - 0.02).abs() < 0.004, "lag {}", a.hand_lag);
         // Standing: the offset (the push's lagging tails below 5 N add to the RMS only).
         assert!(
@@ -262,8 +286,8 @@ mod tests {
         let truth = "t,hand_fx,hand_fy,zmp_x,zmp_y\n0.0100,5,0,0,0\n0.0200,5,0,0,0\n";
         let a = accuracy_of(&columns(est), &columns(truth)).unwrap();
         assert_eq!(
-            (a.hand_source.as_str(), a.hand_x_push.samples),
-            ("measured", 2)
+            (a.hand_source, a.hand_x_push.samples),
+            (HandSource::Measured, 2)
         );
         assert!((a.hand_x_push.rms - 1.0).abs() < 1e-12 && a.foot_load.is_none());
     }

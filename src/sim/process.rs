@@ -536,6 +536,14 @@ struct Looper {
     last_state: Box<StateMsg>,
 }
 
+/// The torques `tau` applied over the step (actuated joints) into the state's `joint_torques`,
+/// the base's NaN: what the drives' torque sensing reads, before [`RobotSensing::apply`].
+pub(crate) fn put_applied_torques(m: &mut StateMsg, tau: &[f64]) {
+    m.joint_torques.fill(f64::NAN);
+    let base = m.nv as usize - tau.len();
+    m.joint_torques[base..base + tau.len()].copy_from_slice(tau);
+}
+
 /// The sensor models' settings, the feet as the robot's description says when it says.
 pub(crate) fn sensors_of(cfg: &SimConfig, robot: &Robot) -> SensorsConfig {
     let mut s = cfg.sensors;
@@ -814,10 +822,7 @@ impl Looper {
             fill_state(m, world, info, zmp, hand);
             robot_sensing.take_truth(m);
             sensors.apply(m, dt, points);
-            // The torques applied over the step: what the drives' torque sensing reads.
-            m.joint_torques.fill(f64::NAN);
-            let base = m.nv as usize - tau.len();
-            m.joint_torques[base..base + tau.len()].copy_from_slice(tau.as_slice());
+            put_applied_torques(m, tau.as_slice());
             robot_sensing.apply(m);
             **last = *m;
         })?;
