@@ -125,7 +125,9 @@ fn lockstep_over_iceoryx2_rejects_bad_commands_and_reruns_identically() {
     assert_eq!(a.commands.wrong_length, 1, "{a:?}");
     assert_eq!(a.commands.non_finite, 1, "{a:?}");
     assert_eq!(a.commands.out_of_order, 1, "{a:?}");
+    // Accepted means applied: the second answer to step 9 is stale, whenever it arrives.
     assert_eq!(a.commands.accepted, 300, "{a:?}");
+    assert_eq!(a.commands.stale, 1, "{a:?}");
     assert!(a.max_loop_error < 1e-3 && a.max_penetration < 1e-3, "{a:?}");
     let (b, sb) = lockstep_run("b", 300, false);
     assert_eq!(b.commands.rejected(), 0);

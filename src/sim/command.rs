@@ -21,6 +21,7 @@ pub enum Rejection {
 /// Counters of the command stream.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct CommandStats {
+    /// Valid commands applied (in lockstep, only answers to the state the plant waits on).
     pub accepted: u64,
     pub wrong_length: u64,
     pub non_finite: u64,
@@ -88,6 +89,15 @@ impl CommandGate {
             session,
             ..Self::default()
         }
+    }
+
+    /// A valid command that answers another state than the one a lockstep plant waits on (a
+    /// controller's re-answer after the plant was stopped): stale, not applied. How many arrive
+    /// depends on wall-clock timing, so it must not count among the accepted ones, which are a
+    /// function of the run's inputs.
+    pub fn not_applied(&mut self) {
+        self.stats.accepted = self.stats.accepted.saturating_sub(1);
+        self.stats.stale += 1;
     }
 
     /// Validates and counts; on success the command's seq becomes the last accepted one.

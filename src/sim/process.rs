@@ -877,7 +877,7 @@ impl Looper {
                         break 'wait;
                     }
                     // A valid answer to another state: not applied.
-                    self.gate.stats.stale += 1;
+                    self.gate.not_applied();
                 }
                 let now = Instant::now();
                 if now >= deadline {

@@ -9,7 +9,8 @@ use upc::sim::PosturePd;
 
 /// Drives the plant on `prefix` until its state `steps` (or until `done()`); returns the last
 /// state received. `inject_bad`: at step 5 a command of the wrong length and one with a NaN, at
-/// step 7 one whose seq does not increase (each to be rejected, one of each).
+/// step 7 one whose seq does not increase (each to be rejected, one of each), and the answer to
+/// step 9 sent twice (the second valid but stale, never applied).
 pub fn drive(
     prefix: &str,
     tag: &str,
@@ -69,6 +70,12 @@ pub fn drive(
             }
             seq += 1;
             send(seq, &s, n as u32, tau.as_slice());
+            if inject_bad && s.step == 9 {
+                // Answered again, as a controller re-answers a state after a stopped plant:
+                // valid, but stale when it arrives (the plant has stepped on).
+                seq += 1;
+                send(seq, &s, n as u32, tau.as_slice());
+            }
         }
         if done() {
             break;
