@@ -51,6 +51,9 @@ pub struct PreviewConfig {
     pub solver: LqSolverKind,
     /// Keep the predicted ZMP inside the support bounds as hard constraints (QP, clarabel).
     pub zmp_constraints: bool,
+    /// The last predicted state pays the infinite horizon's tail (PC-T,
+    /// docs/preview_control.md); false: the paper's finite horizon.
+    pub terminal_cost: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]

@@ -158,6 +158,9 @@ impl ControllerCore {
         let op = OpSpaceWorkspace::new(&model, &frames.hand_chain_root, &frames.hand)?;
         let wbc = WholeBodyController::new(&model, &config.wbc, &frames)?;
         let hand_frame = model.frame_id(&frames.hand)?;
+        let mut zmp = ZmpPreview::new(cart, p.q_e, p.r, n, crate::config::LqSolverKind::Riccati)
+            .with_terminal_cost(p.terminal_cost);
+        zmp.check_holds_the_com()?;
         let nominal = GainSchedule::constant(n, config.hand.kp, config.nominal_kd(config.hand.kp));
         let parts = parts::build_all(&PartSetup {
             robot,
@@ -176,7 +179,7 @@ impl ControllerCore {
             parts,
             op,
             wbc,
-            zmp: ZmpPreview::new(cart, p.q_e, p.r, n, crate::config::LqSolverKind::Riccati),
+            zmp,
             previewer: HandPreviewer::new(p.period, Matrix3::identity(), n)?,
             kind,
             hand_frame,

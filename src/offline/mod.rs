@@ -67,10 +67,13 @@ impl<'a> ReducedLoop<'a> {
         let r = &self.robot;
         let model = r.cart_table(t, c.robot.gravity);
         let m_e = r.effective_mass;
-        let mut zmp = ZmpPreview::new(model, p.q_e, p.r, n, p.solver);
-        let mut constrained = p
-            .zmp_constraints
-            .then(|| ConstrainedPreview::new(model, p.q_e, p.r, n, r.support));
+        let mut zmp =
+            ZmpPreview::new(model, p.q_e, p.r, n, p.solver).with_terminal_cost(p.terminal_cost);
+        zmp.check_holds_the_com()?;
+        let mut constrained = p.zmp_constraints.then(|| {
+            ConstrainedPreview::new(model, p.q_e, p.r, n, r.support)
+                .with_terminal_cost(p.terminal_cost)
+        });
         let mut previewer = HandPreviewer::new(t, m_e, n)?;
         let plant_hand = HandPreviewer::new(t, m_e, 1)?;
         let mut search = match self.controller {

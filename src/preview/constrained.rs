@@ -8,6 +8,9 @@
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 
+use nalgebra::Matrix3;
+
+use super::dense::tail_cost;
 use super::{AxisState, CartTable, Disturbance, PreviewError};
 
 pub struct ConstrainedPreview {
@@ -18,6 +21,8 @@ pub struct ConstrainedPreview {
     bounds: [[f64; 2]; 2],
     disturbance: Disturbance,
     solver: Option<DefaultSolver<f64>>,
+    /// PC-T's P_tail on the last state, if on.
+    tail: Option<Matrix3<f64>>,
 }
 
 struct Qp {
@@ -38,7 +43,16 @@ impl ConstrainedPreview {
             bounds,
             disturbance: Disturbance::with_capacity(horizon),
             solver: None,
+            tail: None,
         }
+    }
+
+    /// With `on`, the last state pays the infinite horizon's tail (PC-T), as
+    /// [`super::ZmpPreview::with_terminal_cost`].
+    pub fn with_terminal_cost(mut self, on: bool) -> Self {
+        self.tail = on.then(|| tail_cost(&self.model, self.q_e, self.r));
+        self.solver = None;
+        self
     }
 
     /// Like [`super::ZmpPreview::solve_c1`], with the ZMP bounds enforced. An infeasible bound
@@ -119,13 +133,25 @@ impl ConstrainedPreview {
                 pi.push(u(i));
                 pj.push(u(i));
                 pv.push(self.r);
-                for (s1, s2, v) in [(0, 0, 1.0), (0, 2, c2), (2, 2, c2 * c2)] {
-                    pi.push(x(i + 1, s1));
-                    pj.push(x(i + 1, s2));
-                    pv.push(self.q_e * v);
+                // PC-T on the last state: ½ (x_N − x̄)ᵀ P_tail (x_N − x̄), x̄ = [t_N, 0, 0].
+                let tail = self
+                    .tail
+                    .filter(|_| i + 1 == n)
+                    .unwrap_or_else(Matrix3::zeros);
+                let stage = [[1.0, 0.0, c2], [0.0, 0.0, 0.0], [c2, 0.0, c2 * c2]];
+                for s1 in 0..3 {
+                    for s2 in s1..3 {
+                        let v = self.q_e * stage[s1][s2] + tail[(s1, s2)];
+                        if v != 0.0 || (s1 != 1 && s2 != 1) {
+                            pi.push(x(i + 1, s1));
+                            pj.push(x(i + 1, s2));
+                            pv.push(v);
+                        }
+                    }
                 }
-                q[x(i + 1, 0)] = -self.q_e * t;
-                q[x(i + 1, 2)] = -self.q_e * t * c2;
+                for (s, c) in [(0, 1.0), (1, 0.0), (2, c2)] {
+                    q[x(i + 1, s)] = -self.q_e * t * c - tail[(s, 0)] * t;
+                }
                 // Dynamics x_{i+1} − A x_i − B u_i = 0 (x_0 known: moves to the right side).
                 for s in 0..3 {
                     let row = axis * 3 * n + 3 * i + s;

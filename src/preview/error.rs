@@ -26,4 +26,18 @@ pub enum PreviewError {
     BadGain { step: usize, kp: f64, kd: f64 },
     #[error("ZMP-constrained QP failed: {0}")]
     Qp(String),
+    #[error(
+        "the {horizon}-step ({seconds:.2} s) preview without a terminal cost does not hold this \
+         robot's CoM ({com_height:.2} m high): its receding-horizon loop has spectral radius \
+         {radius:.5} ≥ 1, and an offset CoM drifts away until the robot falls. Set \
+         preview.terminal_cost = true (the default){}",
+        .stable_from.map_or(String::new(), |n| format!(", or preview.horizon ≥ {n}"))
+    )]
+    UnstableHorizon {
+        horizon: usize,
+        seconds: f64,
+        com_height: f64,
+        radius: f64,
+        stable_from: Option<usize>,
+    },
 }

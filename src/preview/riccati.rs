@@ -9,13 +9,26 @@
 //!
 //! The recursions are written out for the cart-table's A (upper triangular, ones on the
 //! diagonal) and a symmetric P kept as its six distinct entries: this is the per-tick hot path.
+//!
+//! **The tail past the horizon** (docs/preview_control.md, PC-T). The finite sum leaves the
+//! cart-table's unstable mode free after step N: on a tall robot (its time constant √(z_c/g)
+//! a fifth of the horizon) the optimum puts the ZMP on the reference and lets the CoM diverge
+//! slowly beyond the horizon, and the robot falls. With [`Riccati::set_tail`] the last state
+//! also pays the infinite-horizon cost of holding the last reference for ever,
+//!
+//!   ½ (x_N − x̄_N)ᵀ P_tail (x_N − x̄_N),  x̄_N = [t_N, 0, 0],  P_tail = P∞ − Q_e cᵀc   (PC-T)
+//!
+//! with P∞ the stabilising solution of the cart-table's discrete algebraic Riccati equation for
+//! the undisturbed output row c = [1, 0, −z_c/g]: x̄_N is the rest state whose ZMP is t_N, and
+//! from it every later stage costs nothing, so the finite problem is Kajita's infinite-horizon
+//! preview control with the reference held after N.
 
 use nalgebra::{RowVector3, Vector3};
 
 use super::CartTable;
 
 /// Symmetric 3×3 cost-to-go matrix, upper triangle.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
 struct Sym3 {
     p00: f64,
     p01: f64,
@@ -34,6 +47,10 @@ pub struct Riccati {
     /// `preview_gain` belongs to the current factorisation (a fused pass leaves it stale).
     preview_valid: bool,
     len: usize,
+    /// PC-T's P_tail in the backward pass's coordinates (zero: no tail), and P_tail e₀ in the
+    /// state's own (the tail's linear term per unit of t_N).
+    tail: Sym3,
+    tail_e0: Vector3<f64>,
 }
 
 impl Riccati {
@@ -44,7 +61,95 @@ impl Riccati {
             preview_gain: vec![0.0; capacity],
             preview_valid: false,
             len: 0,
+            tail: Sym3::default(),
+            tail_e0: Vector3::zeros(),
         }
+    }
+
+    /// PC-T: the last state pays the infinite horizon's tail for `model`'s undisturbed output
+    /// row (`false`: none, the paper's finite horizon). Once, at set-up (a fixed-point iteration
+    /// of the recursion below, a few hundred steps). The next factorisation uses it.
+    pub fn set_tail(&mut self, model: &CartTable, q_e: f64, r: f64, on: bool) {
+        self.preview_valid = false;
+        self.len = 0;
+        if !on {
+            self.tail = Sym3::default();
+            self.tail_e0 = Vector3::zeros();
+            return;
+        }
+        let dt = model.period;
+        let r_s = r / dt.powi(6);
+        let gm = 1.0 / 6.0 + model.output_acc_coeff(model.nominal_alpha0()) / (dt * dt);
+        let q = Sym3 {
+            p00: q_e,
+            p02: q_e * gm,
+            p22: q_e * gm * gm,
+            ..Sym3::default()
+        };
+        // P ← Q' + A'ᵀ P A' − Gᵀ G / H' from P = Q' (the terms of `backward_kernel`) until it
+        // stops moving: it converges at the square of the closed loop's slowest pole.
+        let mut p = q;
+        for _ in 0..1_000_000 {
+            let h = p.p22 + r_s;
+            let g0 = p.p02;
+            let g1 = p.p02 + p.p12;
+            let g2 = g1 + p.p22;
+            let a01 = p.p00 + p.p01;
+            let a02 = a01 + p.p02;
+            let t11 = p.p01 + p.p11;
+            let a11 = a01 + t11;
+            let a12 = a02 + (t11 + p.p12);
+            let a22 = a12 + g2;
+            let next = Sym3 {
+                p00: q.p00 + p.p00 - g0 * g0 / h,
+                p01: a01 - g0 * g1 / h,
+                p02: q.p02 + a02 - g0 * g2 / h,
+                p11: a11 - g1 * g1 / h,
+                p12: a12 - g1 * g2 / h,
+                p22: q.p22 + a22 - g2 * g2 / h,
+            };
+            let moved = [
+                next.p00 - p.p00,
+                next.p01 - p.p01,
+                next.p02 - p.p02,
+                next.p11 - p.p11,
+                next.p12 - p.p12,
+                next.p22 - p.p22,
+            ]
+            .iter()
+            .map(|d| d.abs())
+            .fold(0.0, f64::max);
+            p = next;
+            if moved <= 1e-14 * p.p00.abs().max(p.p22.abs()) {
+                break;
+            }
+        }
+        self.tail = Sym3 {
+            p00: p.p00 - q.p00,
+            p01: p.p01,
+            p02: p.p02 - q.p02,
+            p11: p.p11,
+            p12: p.p12,
+            p22: p.p22 - q.p22,
+        };
+        // In the state's coordinates (x' = T⁻¹ S x): P_tail e₀ = S T⁻ᵀ P'_tail e₀, as
+        // T⁻¹ S e₀ = e₀.
+        let v = (self.tail.p00, self.tail.p01, self.tail.p02);
+        self.tail_e0 = Vector3::new(
+            v.0,
+            dt * v.1,
+            dt * dt / 2.0 * (-v.0 / 3.0 - v.1 + 2.0 * v.2),
+        );
+    }
+
+    /// K_0 of the last factorisation: the receding-horizon feedback u = K_0 x (+ the preview).
+    pub fn first_gain(&self) -> RowVector3<f64> {
+        self.gain[0]
+    }
+
+    /// PC-T's P_tail e₀ in the state's coordinates (zero without a tail).
+    pub fn tail_e0(&self) -> Vector3<f64> {
+        self.tail_e0
     }
 
     pub fn capacity(&self) -> usize {
@@ -82,6 +187,10 @@ impl Riccati {
         let scale = self.inv_h[0] * q_e;
         for j in 1..=n {
             self.preview_gain[j - 1] = scale * (v[0] + c2[j - 1] * v[2]);
+            if j == n {
+                // PC-T: t_N also enters through the tail's −P_tail x̄_N.
+                self.preview_gain[j - 1] += self.inv_h[0] * self.tail_e0.dot(&v);
+            }
             if j < n {
                 v = a * v + b * (self.gain[j] * v)[0];
             }
@@ -204,22 +313,28 @@ impl Riccati {
         const SIXTH: f64 = 1.0 / 6.0;
         // K = K' T⁻¹ S / T³ (T⁻¹ = [[1, 0, −1/3], [0, 1, −1], [0, 0, 2]]).
         let (ks0, ks1, ks2) = (inv_dt3, dt * inv_dt3, dt * dt / 2.0 * inv_dt3);
-        // P'_N = Q_e c'_Nᵀ c'_N, c' = [1, 0, γ].
+        // P'_N = Q_e c'_Nᵀ c'_N + P'_tail (PC-T), c' = [1, 0, γ].
         let gn = madd(c2[n - 1], gamma_scale, SIXTH);
+        let tail = self.tail;
         let mut p = Sym3 {
-            p00: q_e,
-            p01: 0.0,
-            p02: q_e * gn,
-            p11: 0.0,
-            p12: 0.0,
-            p22: q_e * gn * gn,
+            p00: q_e + tail.p00,
+            p01: tail.p01,
+            p02: madd(q_e, gn, tail.p02),
+            p11: tail.p11,
+            p12: tail.p12,
+            p22: madd(q_e * gn, gn, tail.p22),
         };
         // H' = R̃ + p'22, carried on its own: the next one is a single multiply–add after the
         // division (see `h` below).
         let mut h = p.p22 + r_s;
-        // s'_N = −Q_e c'_Nᵀ t_N, one lane per axis.
-        let w = [0, 1].map(|a| if LINEAR { -q_e * t[a][n - 1] } else { 0.0 });
-        let (mut s0, mut s1, mut s2) = (w, [0.0; 2], w.map(|w| w * gn));
+        // s'_N = −Q_e c'_Nᵀ t_N − P'_tail x̄'_N (PC-T; x̄'_N = t_N e₀), one lane per axis.
+        let tn = [0, 1].map(|a| if LINEAR { t[a][n - 1] } else { 0.0 });
+        let w = tn.map(|t| -q_e * t);
+        let (mut s0, mut s1, mut s2) = (
+            [0, 1].map(|a| madd(-tail.p00, tn[a], w[a])),
+            tn.map(|t| -tail.p01 * t),
+            [0, 1].map(|a| madd(-tail.p02, tn[a], w[a] * gn)),
+        );
         let mut ff0 = [0.0; 2];
         for i in (0..n).rev() {
             let inv_h = 1.0 / h;
@@ -306,9 +421,10 @@ impl Riccati {
         let dt = model.period;
         let dt2 = dt * dt / 2.0;
         let [b0, b1, b2] = [dt * dt * dt / 6.0, dt2, dt];
-        // s_N = −Q_e c_N t_N.
+        // s_N = −Q_e c_N t_N − P_tail x̄_N (PC-T).
         let w = -q_e * t[n - 1];
-        let (mut s0, mut s1, mut s2) = (w, 0.0, w * c2[n - 1]);
+        let tail = self.tail_e0 * t[n - 1];
+        let (mut s0, mut s1, mut s2) = (w - tail[0], -tail[1], w * c2[n - 1] - tail[2]);
         for i in (0..n).rev() {
             let h = b0 * s0 + b1 * s1 + b2 * s2;
             ff[i] = -h * self.inv_h[i];

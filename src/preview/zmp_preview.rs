@@ -1,9 +1,9 @@
 //! C0 and C1: ZMP preview control of the CoM along x and y (docs/preview_control.md,
 //! docs/disturbance.md, eq. (1)–(16)).
 
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
 
-use super::dense::CondensedHorizon;
+use super::dense::{CondensedHorizon, tail_cost};
 use super::{CartTable, Disturbance, PreviewError, Riccati};
 use crate::config::LqSolverKind;
 
@@ -28,6 +28,8 @@ pub struct ZmpPreview {
     factored_c2: Vec<f64>,
     factored: bool,
     ff: [Vec<f64>; 2],
+    /// PC-T's P_tail for the dense reference (the Riccati solver keeps its own).
+    tail: Option<Matrix3<f64>>,
 }
 
 /// The predicted horizon of the last solve: jerks u_0…u_{N−1}, CoM states and ZMP at k+1…k+N.
@@ -63,11 +65,69 @@ impl ZmpPreview {
             factored_c2: vec![0.0; horizon],
             factored: false,
             ff: [vec![0.0; horizon], vec![0.0; horizon]],
+            tail: None,
         }
+    }
+
+    /// With `on`, the last predicted state pays the infinite horizon's tail (PC-T,
+    /// `preview.terminal_cost`; docs/preview_control.md); without, the paper's finite horizon.
+    pub fn with_terminal_cost(mut self, on: bool) -> Self {
+        self.riccati.set_tail(&self.model, self.q_e, self.r, on);
+        self.tail = on.then(|| tail_cost(&self.model, self.q_e, self.r));
+        self.factored = false;
+        self
     }
 
     pub fn horizon(&self) -> usize {
         self.horizon
+    }
+
+    /// The spectral radius of C0's receding-horizon loop x ← (A + B K_0) x on the undisturbed
+    /// cart-table: below 1, an offset CoM returns to a held reference. Factorises (set-up only).
+    pub fn closed_loop_radius(&mut self) -> f64 {
+        let n = self.horizon;
+        let c2 = self.model.output_acc_coeff(self.model.nominal_alpha0());
+        self.c2[..n].fill(c2);
+        self.factored = false;
+        self.riccati
+            .factor(&self.model, self.q_e, self.r, &self.c2[..n]);
+        let k = self.riccati.first_gain();
+        (self.model.a() + self.model.b() * k)
+            .complex_eigenvalues()
+            .iter()
+            .map(|l| l.norm())
+            .fold(0.0, f64::max)
+    }
+
+    /// A start-up check (PC-T): with the tail the loop is the infinite horizon's, stable for
+    /// any robot; without it, a horizon too short for the robot's pendulum (a tall robot at the
+    /// paper's 1.5 s) is refused, naming the horizon that would do.
+    pub fn check_holds_the_com(&mut self) -> Result<(), PreviewError> {
+        if self.tail.is_some() {
+            return Ok(());
+        }
+        let radius = self.closed_loop_radius();
+        if radius < 1.0 {
+            return Ok(());
+        }
+        let mut longer = self.horizon;
+        let stable_from = loop {
+            longer += longer.div_ceil(8);
+            if longer > 20_000 {
+                break None;
+            }
+            let mut p = ZmpPreview::new(self.model, self.q_e, self.r, longer, self.solver);
+            if p.closed_loop_radius() < 1.0 {
+                break Some(longer);
+            }
+        };
+        Err(PreviewError::UnstableHorizon {
+            horizon: self.horizon,
+            seconds: self.horizon as f64 * self.model.period,
+            com_height: self.model.com_height,
+            radius,
+            stable_from,
+        })
     }
 
     /// C0 (Kajita–Wieber): track `zmp_ref` (samples at k+1…k+N, [x, y]) ignoring any disturbance.
@@ -166,7 +226,8 @@ impl ZmpPreview {
                     self.riccati
                         .factor(&self.model, self.q_e, self.r, &self.c2[..n]);
                 }
-                let horizon = CondensedHorizon::build(&self.model, &self.c2[..n]);
+                let horizon =
+                    CondensedHorizon::build(&self.model, &self.c2[..n], self.tail.as_ref());
                 let u = horizon
                     .solve(
                         self.q_e,

@@ -80,7 +80,8 @@ impl GainSearch {
             p.r,
             p.horizon,
             crate::config::LqSolverKind::Riccati,
-        );
+        )
+        .with_terminal_cost(p.terminal_cost);
         let hand = HandPreviewer::new(p.period, robot.effective_mass, p.horizon)?;
         let n_knots = match solver {
             GainSolverKind::GaussNewton => g.knots,
