@@ -121,9 +121,18 @@ fn foot_urdf(collision: &str) -> String {
 }
 
 fn contact_points(urdf: &str, spec: &FootSpec) -> Result<Vec<Vector3<f64>>, RobotError> {
+    contact_points_in(urdf, None, spec)
+}
+
+/// [`contact_points`] with the URDF in `dir` (a collision mesh's relative path starts there).
+fn contact_points_in(
+    urdf: &str,
+    dir: Option<&std::path::Path>,
+    spec: &FootSpec,
+) -> Result<Vec<Vector3<f64>>, RobotError> {
     let mut model = Model::from_urdf_str(urdf, BaseJoint::Floating).expect("model");
     let parsed = upc::dynamics::parse_urdf(urdf).expect("parse");
-    let names = feet::attach(&mut model, &parsed, spec)?;
+    let names = feet::attach(&mut model, &parsed, dir, spec)?;
     let mut data = Data::new(&model);
     forward_kinematics(&model, &mut data, &model.neutral()).expect("fk");
     Ok(names
@@ -133,7 +142,7 @@ fn contact_points(urdf: &str, spec: &FootSpec) -> Result<Vec<Vector3<f64>>, Robo
 }
 
 #[test]
-fn contact_points_come_from_a_box_or_spheres_and_a_mesh_is_refused() {
+fn contact_points_come_from_a_box_or_spheres_and_a_missing_mesh_is_refused() {
     let spec = |contacts: ContactSpec| FootSpec {
         frame: "sole".into(),
         link: Some("foot".into()),
@@ -211,14 +220,17 @@ fn contact_points_come_from_a_box_or_spheres_and_a_mesh_is_refused() {
         (p[3] - Vector3::new(-0.1, -0.04, -0.5)).norm() < 1e-12,
         "{p:?}"
     );
-    // A mesh cannot give points: the error says what to do.
+    // A mesh that is not there: the error says where upc looked and what else to do.
     let mesh = foot_urdf(
         r#"<collision><geometry><mesh filename="package://x/foot.stl"/></geometry></collision>"#,
     );
     let e = contact_points(&mesh, &spec(ContactSpec::Keyword("collision".into())))
         .expect_err("mesh")
         .to_string();
-    assert!(e.contains("mesh") && e.contains("contacts = [["), "{e}");
+    assert!(
+        e.contains("package://x/foot.stl") && e.contains("looked") && e.contains("contacts = [["),
+        "{e}"
+    );
     // Three points are not a sole.
     let e = contact_points(&boxed, &spec(ContactSpec::Points(vec![[0.0; 3]; 3])))
         .expect_err("three")
@@ -623,5 +635,138 @@ fn a_made_sole_frame_on_a_tilted_link_is_turned_by_its_origin() {
     }
     // acos near 1 turns rounding into ~1e-8 rad.
     assert!(d.sole_tilt < 1e-6, "{}", d.sole_tilt);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A sole of pads as a collision mesh (the heel's and the ball's flat at the bottom, a toe
+/// 3.6 mm higher), as a binary STL next to the URDF and as an OBJ, placed by the collision's
+/// origin and scale: the contacts are the pads' outer corners on the ground, the toe is off it.
+#[test]
+fn contact_points_come_from_a_collision_mesh() {
+    let dir = std::env::temp_dir().join(format!("upc_sole_mesh_{}", std::process::id()));
+    std::fs::create_dir_all(dir.join("meshes")).expect("dir");
+    // Boxes in millimetres (the URDF scales by 1e-3): [x0, x1, y half-width, z0, z1].
+    let pads = [
+        [-80.0, -20.0, 30.0, 0.0, 20.0],
+        [0.0, 90.0, 40.0, 0.0, 20.0],
+        [100.0, 130.0, 35.0, 3.6, 20.0],
+    ];
+    let mut triangles = Vec::new();
+    let mut obj = String::new();
+    let mut n = 0;
+    for [x0, x1, w, z0, z1] in pads {
+        let v = |i: usize| {
+            let pick = |b: usize, lo: f64, hi: f64| if i & b == 0 { lo } else { hi };
+            [pick(1, x0, x1), pick(2, -w, w), pick(4, z0, z1)]
+        };
+        // Each face as two triangles (winding does not matter here).
+        for (a, b, c, d) in [
+            (0, 1, 3, 2),
+            (4, 5, 7, 6),
+            (0, 1, 5, 4),
+            (2, 3, 7, 6),
+            (0, 2, 6, 4),
+            (1, 3, 7, 5),
+        ] {
+            for tri in [[a, b, c], [a, c, d]] {
+                let vs = tri.map(|i| {
+                    let p = v(i);
+                    stl_io::Vector::new([p[0] as f32, p[1] as f32, p[2] as f32])
+                });
+                triangles.push(stl_io::Triangle {
+                    normal: stl_io::Vector::new([0.0, 0.0, 1.0]),
+                    vertices: vs,
+                });
+            }
+        }
+        for i in 0..8 {
+            let p = v(i);
+            obj.push_str(&format!("v {} {} {}\n", p[0], p[1], p[2]));
+        }
+        for (a, b, c, d) in [(0, 1, 3, 2), (4, 5, 7, 6)] {
+            obj.push_str(&format!(
+                "f {} {} {} {}\n",
+                n + a + 1,
+                n + b + 1,
+                n + c + 1,
+                n + d + 1
+            ));
+        }
+        n += 8;
+    }
+    let mut file = std::fs::File::create(dir.join("meshes/sole.stl")).expect("stl");
+    stl_io::write_stl(&mut file, triangles.iter()).expect("write stl");
+    std::fs::write(dir.join("meshes/sole.obj"), obj).expect("obj");
+    let spec = FootSpec {
+        frame: "sole".into(),
+        link: Some("foot".into()),
+        origin: None,
+        contacts: ContactSpec::Keyword("collision".into()),
+    };
+    // The pads' bottom 4 cm below the ankle's link frame: the contacts at z = −0.5 − 0.04.
+    let want = [[0.09, 0.04], [0.09, -0.04], [-0.08, 0.03], [-0.08, -0.03]];
+    for file in ["meshes/sole.stl", "meshes/sole.obj"] {
+        let urdf = foot_urdf(&format!(
+            r#"<collision><origin xyz="0 0 -0.04" rpy="0 0 0"/><geometry><mesh filename="{file}" scale="0.001 0.001 0.001"/></geometry></collision>"#
+        ));
+        let p = contact_points_in(&urdf, Some(&dir), &spec).expect(file);
+        for (q, w) in p.iter().zip(want) {
+            assert!(
+                (q - Vector3::new(w[0], w[1], -0.54)).norm() < 1e-6,
+                "{file}: {q:?} vs {w:?}"
+            );
+        }
+    }
+    // A format upc does not read: named, with the way out.
+    std::fs::write(dir.join("meshes/sole.dae"), "<COLLADA/>").expect("dae");
+    let urdf = foot_urdf(
+        r#"<collision><geometry><mesh filename="meshes/sole.dae"/></geometry></collision>"#,
+    );
+    let e = contact_points_in(&urdf, Some(&dir), &spec)
+        .expect_err("dae")
+        .to_string();
+    assert!(
+        e.contains("STL and OBJ") && e.contains("contacts = [["),
+        "{e}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// TALOS's feet collide through STL meshes: the support upc derives from them agrees with the
+/// contact points its description lists (measured by hand from the same meshes) within 6 mm on
+/// every side (the listed ones sit a few mm inside the sole's edge).
+#[test]
+fn talos_contacts_from_its_foot_meshes_match_the_listed_ones() {
+    let dir = std::env::temp_dir().join(format!("upc_talos_mesh_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let path = dir.join("talos_mesh.toml");
+    let foot = |side: &str| {
+        format!(
+            "[feet.{side}]\nframe = \"{side}_sole_link\"\nlink = \"leg_{side}_6_link\"\n\
+             contacts = \"collision\"\n"
+        )
+    };
+    std::fs::write(
+        &path,
+        format!(
+            "extends = \"talos\"\nname = \"talos_mesh\"\n{}{}",
+            foot("left"),
+            foot("right")
+        ),
+    )
+    .expect("description");
+    let (Some(listed), Some(meshed)) = (installed("talos"), installed(&path.display().to_string()))
+    else {
+        return;
+    };
+    let (a, b) = (listed.derived.support, meshed.derived.support);
+    for axis in 0..2 {
+        for side in 0..2 {
+            assert!(
+                (a[axis][side] - b[axis][side]).abs() < 6e-3,
+                "support listed {a:?}, from the meshes {b:?}"
+            );
+        }
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -1,7 +1,9 @@
 //! The four contact points under each sole, as frames of the model named `<sole>_fl`, `_fr`,
 //! `_rl`, `_rr` (front/rear, left/right in the sole frame: [`CORNERS`], which the whole-body
 //! controller and the simulator look up). Given as frames of the URDF, as points, or derived
-//! from the foot's collision geometry.
+//! from the foot's collision geometry (boxes, spheres, or a mesh: [`super::sole_mesh`]).
+
+use std::path::Path;
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -23,18 +25,27 @@ fn on_body(model: &Model, name: &str) -> Option<(Option<usize>, SE3)> {
     Some((f.parent, f.placement))
 }
 
-/// Candidate points (link frame) from a link's collision geometry: a box's eight corners or
-/// spheres' centres with their radii.
+/// Candidate points (link frame) from a link's collision geometry: a box's eight corners,
+/// spheres' centres with their radii, a mesh's vertices.
+struct Collision {
+    points: Vec<Vector3<f64>>,
+    radii: Vec<f64>,
+    /// A mesh among them: the contacts are its lowest face's corners, not the four lowest
+    /// points.
+    mesh: bool,
+}
+
 fn collision_points(
     urdf: &urdf_rs::Robot,
+    urdf_dir: Option<&Path>,
     link: &str,
-) -> Result<(Vec<Vector3<f64>>, Vec<f64>), RobotError> {
+) -> Result<Collision, RobotError> {
     let l = urdf
         .links
         .iter()
         .find(|l| l.name == link)
         .ok_or_else(|| RobotError::Feet(format!("no link `{link}` in the URDF")))?;
-    let (mut pts, mut radii) = (Vec::new(), Vec::new());
+    let (mut pts, mut radii, mut mesh) = (Vec::new(), Vec::new(), false);
     for c in &l.collision {
         let o = SE3::from_xyz_rpy(c.origin.xyz.0, c.origin.rpy.0);
         match &c.geometry {
@@ -50,12 +61,35 @@ fn collision_points(
                 pts.push(o.trans);
                 radii.push(*radius);
             }
+            urdf_rs::Geometry::Mesh { filename, scale } => {
+                let list = "or list the contact points (contacts = [[x, y, z], …] in the sole \
+                            frame)";
+                let path = super::packages::resolve_mesh(filename, urdf_dir).ok_or_else(|| {
+                    RobotError::Feet(format!(
+                        "link `{link}`: collision mesh `{filename}` not found (looked next to \
+                         the URDF{} and in {}): install its package, {list}",
+                        urdf_dir.map_or(String::new(), |d| format!(", {}", d.display())),
+                        super::packages::package_search_dirs()
+                            .iter()
+                            .map(|d| d.display().to_string())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ))
+                })?;
+                let vertices = super::sole_mesh::vertices(&path)
+                    .map_err(|e| RobotError::Feet(format!("link `{link}`: {e}; {list}")))?;
+                let k = scale.map_or(Vector3::repeat(1.0), |s| Vector3::from(s.0));
+                for v in vertices {
+                    pts.push(o.act_point(&v.component_mul(&k)));
+                    radii.push(0.0);
+                }
+                mesh = true;
+            }
             other => {
                 return Err(RobotError::Feet(format!(
                     "link `{link}`: a collision {} cannot give contact points: list them \
                      (contacts = [[x, y, z], …] in the sole frame)",
                     match other {
-                        urdf_rs::Geometry::Mesh { .. } => "mesh",
                         urdf_rs::Geometry::Cylinder { .. } => "cylinder",
                         _ => "capsule",
                     }
@@ -68,22 +102,33 @@ fn collision_points(
             "link `{link}` has no collision geometry: list the contact points"
         )));
     }
-    Ok((pts, radii))
+    Ok(Collision {
+        points: pts,
+        radii,
+        mesh,
+    })
 }
 
-/// The four lowest points along `-z` of `frame` (placement `to_frame` from the link), each
-/// sphere lowered by its radius: the face that rests on the ground.
-fn lowest_four(
-    pts: &[Vector3<f64>],
-    radii: &[f64],
-    to_frame: &SE3,
-    link: &str,
-) -> Result<Vec<Vector3<f64>>, RobotError> {
-    let mut p: Vec<Vector3<f64>> = pts
+/// The four contact points in `frame` (placement `to_frame` from the link): a mesh's lowest
+/// face's corners, else the four lowest points along `-z`, each sphere lowered by its radius:
+/// the face that rests on the ground.
+fn lowest_four(c: &Collision, to_frame: &SE3, link: &str) -> Result<Vec<Vector3<f64>>, RobotError> {
+    let mut p: Vec<Vector3<f64>> = c
+        .points
         .iter()
-        .zip(radii)
+        .zip(&c.radii)
         .map(|(x, r)| to_frame.act_point(x) - Vector3::z() * *r)
         .collect();
+    if c.mesh {
+        return super::sole_mesh::lowest_face_corners(&p)
+            .map(Vec::from)
+            .map_err(|e| {
+                RobotError::Feet(format!(
+                    "link `{link}`: collision mesh: {e}; turn the sole frame (`origin` rpy) or \
+                     list the contact points"
+                ))
+            });
+    }
     p.sort_by(|a, b| a.z.total_cmp(&b.z));
     if p.len() < 4 {
         return Err(RobotError::Feet(format!(
@@ -114,9 +159,12 @@ fn ordered(mut p: Vec<Vector3<f64>>) -> [Vector3<f64>; 4] {
 
 /// Adds the foot's sole frame (if new) and contact frames to `model`; returns the contact
 /// frames' names in [`CORNERS`] order.
+///
+/// `urdf_dir`: the URDF's directory, where a collision mesh's relative path starts.
 pub fn attach(
     model: &mut Model,
     urdf: &urdf_rs::Robot,
+    urdf_dir: Option<&Path>,
     spec: &FootSpec,
 ) -> Result<[String; 4], RobotError> {
     let names = CORNERS.map(|c| format!("{}_{c}", spec.frame));
@@ -158,7 +206,7 @@ pub fn attach(
             let link = spec.link.as_deref().unwrap_or(&spec.frame);
             let (body_joint, link_in_body) = on_body(model, link)
                 .ok_or_else(|| RobotError::Feet(format!("no link `{link}` in the model")))?;
-            let (pts, radii) = collision_points(urdf, link)?;
+            let collision = collision_points(urdf, urdf_dir, link)?;
             match sole {
                 Some((joint, sole_in_body)) => {
                     if joint != body_joint {
@@ -168,7 +216,7 @@ pub fn attach(
                         )));
                     }
                     let to_sole = sole_in_body.inverse().compose(&link_in_body);
-                    lowest_four(&pts, &radii, &to_sole, link)?
+                    lowest_four(&collision, &to_sole, link)?
                 }
                 None => {
                     // A new sole frame at the contact points' centroid, axes of the link turned
@@ -180,7 +228,7 @@ pub fn attach(
                             spec.frame
                         )));
                     }
-                    let p = lowest_four(&pts, &radii, &made.inverse(), link)?;
+                    let p = lowest_four(&collision, &made.inverse(), link)?;
                     let c = p.iter().sum::<Vector3<f64>>() / 4.0;
                     let sole_in_body = link_in_body
                         .compose(&made)

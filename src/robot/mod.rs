@@ -10,6 +10,7 @@ pub mod feet;
 pub mod packages;
 pub mod physical;
 mod reduced_model;
+pub mod sole_mesh;
 mod state;
 
 use std::collections::HashMap;
@@ -230,8 +231,9 @@ impl Robot {
             tracing::warn!("robot `{}`: {w}", description.name);
         }
         let f = &description.feet;
-        let left = feet::attach(&mut model, &parsed, &f.left)?;
-        let right = feet::attach(&mut model, &parsed, &f.right)?;
+        let urdf_dir = urdf_path.as_deref().and_then(std::path::Path::parent);
+        let left = feet::attach(&mut model, &parsed, urdf_dir, &f.left)?;
+        let right = feet::attach(&mut model, &parsed, urdf_dir, &f.right)?;
         let contacts: [String; 8] = std::array::from_fn(|k| {
             if k < 4 {
                 left[k].clone()
