@@ -8,7 +8,10 @@ mod support;
 use nalgebra::Vector3;
 use support::robots::installed;
 use upc::config::Config;
-use upc::dynamics::{BaseJoint, Data, Model, OpSpaceWorkspace, center_of_mass, forward_kinematics};
+use upc::dynamics::{
+    BaseJoint, Data, Model, OpSpaceWorkspace, center_of_mass, forward_kinematics,
+    update_frame_placements,
+};
 use upc::robot::description::{ContactSpec, FootSpec};
 use upc::robot::{Robot, RobotError, feet};
 use upc::scenario::Scenario;
@@ -768,5 +771,119 @@ fn talos_contacts_from_its_foot_meshes_match_the_listed_ones() {
             );
         }
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `[stance]` solves the standing posture on a robot whose hip pitch axes are diagonal (30°
+/// toward the vertical: no "hip + knee + ankle pitch = 0" rule holds), from straight legs (a
+/// singular guess): the soles flat on the ground facing x, the CoM over the feet's centre, the
+/// base `crouch` lower and upright, every joint within its limits, the hand near its target.
+#[test]
+fn a_stance_is_solved_for_diagonal_hip_axes_from_straight_legs() {
+    let dir = std::env::temp_dir().join(format!("upc-stance-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let urdf = upc::dynamics::icub_like::URDF;
+    let diagonal = urdf
+        .replacen(
+            "<child link=\"l_hip_1\"/>\n    <axis xyz=\"0 -1 0\"/>",
+            "<child link=\"l_hip_1\"/>\n    <axis xyz=\"0 -0.8660254 0.5\"/>",
+            1,
+        )
+        .replacen(
+            "<child link=\"r_hip_1\"/>\n    <axis xyz=\"0 -1 0\"/>",
+            "<child link=\"r_hip_1\"/>\n    <axis xyz=\"0 -0.8660254 -0.5\"/>",
+            1,
+        );
+    assert_eq!(diagonal.matches("0.8660254").count(), 2, "the hips' axes");
+    std::fs::write(dir.join("diagonal.urdf"), diagonal).expect("urdf");
+    // The iCub-like's description without its legs' posture, the arms' kept as the guess.
+    let text = include_str!("../config/robots/icub_like.toml");
+    let mut description: String = text
+        .lines()
+        .filter(|l| {
+            !["hip", "knee", "ankle"]
+                .iter()
+                .any(|j| l.contains(j) && l.contains('='))
+        })
+        .map(|l| {
+            if l.starts_with("path = ") {
+                "path = \"diagonal.urdf\"".to_string()
+            } else if l.starts_with("name = ") {
+                "name = \"diagonal_hips\"".to_string()
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let (crouch, hand) = (0.03, [0.2, -0.1, 0.55]);
+    description.push_str(&format!(
+        "\n[stance]\ncrouch = {crouch}\nhand = [{}, {}, {}]\n",
+        hand[0], hand[1], hand[2]
+    ));
+    let path = dir.join("diagonal.toml");
+    std::fs::write(&path, description).expect("description");
+    let r = Robot::load(path.to_str().expect("utf-8")).expect("a solved stance");
+    let d = &r.derived;
+    assert!(d.sole_tilt < 0.01f64.to_radians(), "tilt {}", d.sole_tilt);
+    assert!(
+        d.com_offset[0].abs() < 1e-4 && d.com_offset[1].abs() < 1e-4,
+        "CoM off the feet's centre by {:?}",
+        d.com_offset
+    );
+    for j in r.model.joints.iter().filter(|j| j.nq() == 1) {
+        let x = r.home[j.idx_q];
+        assert!(
+            x >= j.limits.lower - 1e-12 && x <= j.limits.upper + 1e-12,
+            "{} = {x} outside [{}, {}]",
+            j.name,
+            j.limits.lower,
+            j.limits.upper
+        );
+    }
+    // The knees bent (the base sank by bending them, the legs did not splay).
+    let knee = |n: &str| r.home[r.model.joints[r.model.joint_id(n).expect("knee")].idx_q];
+    assert!(
+        knee("l_knee") > 0.3 && knee("r_knee") > 0.3,
+        "knees {} {}",
+        knee("l_knee"),
+        knee("r_knee")
+    );
+    // The base `crouch` below its zero-posture height above the soles, and upright.
+    let root = r
+        .model
+        .joints
+        .iter()
+        .position(|j| j.nv() == 6)
+        .expect("a floating base");
+    let mut data = Data::new(&r.model);
+    forward_kinematics(&r.model, &mut data, &r.model.neutral()).expect("fk");
+    update_frame_placements(&r.model, &mut data);
+    let (zero_base, zero_sole) = (
+        data.o_m_i[root].trans.z,
+        data.o_m_f[r.model.frame_id("l_sole").expect("sole")]
+            .trans
+            .z,
+    );
+    forward_kinematics(&r.model, &mut data, &r.home).expect("fk");
+    update_frame_placements(&r.model, &mut data);
+    let (base, sole) = (
+        data.o_m_i[root].trans.z,
+        data.o_m_f[r.model.frame_id("l_sole").expect("sole")]
+            .trans
+            .z,
+    );
+    assert!(
+        ((zero_base - zero_sole) - (base - sole) - crouch).abs() < 1e-5,
+        "the base sank {} m",
+        (zero_base - zero_sole) - (base - sole)
+    );
+    let tilt = (data.o_m_i[root].rot * Vector3::z()).z.acos();
+    assert!(tilt < 1e-4, "base tilt {tilt}");
+    // The hand near its target (relative to the feet's centre on the ground).
+    let soles = ["l_sole", "r_sole"].map(|s| data.o_m_f[r.model.frame_id(s).expect("sole")].trans);
+    let centre = (soles[0] + soles[1]) / 2.0;
+    let h = data.o_m_f[r.model.frame_id("r_hand").expect("hand")].trans - centre;
+    assert!((h - Vector3::from(hand)).norm() < 0.01, "hand at {h:?}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -170,6 +170,17 @@ fn print_robot(r: &upc::robot::Robot) -> CliResult {
             p.x, p.y, p.z
         );
     }
+    if r.description.stance.is_some() {
+        // The solved posture as a [home] table: pasted in place of [stance], the same robot
+        // without the solve.
+        println!("\n# the posture [stance] solved, as a [home] table (rad):\n[home]");
+        for j in r.model.joints.iter().filter(|j| j.nq() == 1) {
+            let x = r.home[j.idx_q];
+            if x.abs() >= 5e-5 {
+                println!("{} = {x:.4}", j.name);
+            }
+        }
+    }
     println!();
     Ok(())
 }

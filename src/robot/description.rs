@@ -51,9 +51,13 @@ pub struct RobotDescription {
     /// mounting").
     #[serde(default)]
     pub imu: Option<ImuSpec>,
-    /// Joint angles of the standing posture (rad); unlisted joints are at 0.
+    /// Joint angles of the standing posture (rad); unlisted joints are at 0. With `[stance]`,
+    /// the guess the solved posture starts from and stays near.
     #[serde(default)]
     pub home: BTreeMap<String, f64>,
+    /// The standing posture solved by inverse kinematics (`super::stance`) instead of typed.
+    #[serde(default)]
+    pub stance: Option<super::stance::StanceSpec>,
     /// Joints fixed at their home value: neither simulated nor controlled (fingers, eyes…).
     #[serde(default)]
     pub locked: Locked,

@@ -11,6 +11,7 @@ pub mod packages;
 pub mod physical;
 mod reduced_model;
 pub mod sole_mesh;
+pub mod stance;
 mod state;
 
 use std::collections::HashMap;
@@ -463,6 +464,24 @@ fn home_configuration(
         .map(|(k, v)| (k.as_str(), *v))
         .collect();
     let mut q = model.configuration(&values)?;
+    if let Some(spec) = &d.stance {
+        let err = |reason: String| RobotError::Home {
+            robot: d.name.clone(),
+            reason,
+        };
+        let ids = [model.frame_id(&soles[0])?, model.frame_id(&soles[1])?];
+        let hand = model.frame_id(&d.hand.frame)?;
+        let solved = stance::solve(model, &q, ids, hand, spec).map_err(err)?;
+        if solved.hand_error > 0.01 {
+            tracing::warn!(
+                "robot `{}`: [stance] hand target missed by {:.0} mm (out of the arm's reach, \
+                 or it would move the CoM or the soles)",
+                d.name,
+                solved.hand_error * 1e3
+            );
+        }
+        q = solved.q;
+    }
     let mut data = Data::new(model);
     forward_kinematics(model, &mut data, &q)?;
     let mut toes = Vector3::zeros();
