@@ -53,11 +53,16 @@ fn lq(c: &mut Criterion) {
                 .map(|i| [-40.0, 5.0, 30.0 * ((i as f64 + s) * 0.03).sin()])
                 .collect()
         });
-        for (name, solver) in [
-            ("riccati", LqSolverKind::Riccati),
-            ("dense", LqSolverKind::Dense),
+        // As the controller runs them (PC-T's tail as configured), and the paper's finite
+        // horizon beside: the tail changes only the recursion's first step.
+        let tail = cfg.preview.terminal_cost;
+        for (name, solver, tail) in [
+            ("riccati", LqSolverKind::Riccati, tail),
+            ("riccati_finite", LqSolverKind::Riccati, false),
+            ("dense", LqSolverKind::Dense, tail),
         ] {
-            let mut p = ZmpPreview::new(model(&cfg), cfg.preview.q_e, cfg.preview.r, n, solver);
+            let mut p = ZmpPreview::new(model(&cfg), cfg.preview.q_e, cfg.preview.r, n, solver)
+                .with_terminal_cost(tail);
             c.bench_with_input(BenchmarkId::new(format!("c0_{name}"), n), &n, |b, _| {
                 b.iter(|| black_box(p.solve_c0(black_box(&state), &refs)))
             });
