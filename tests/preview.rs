@@ -5,7 +5,7 @@
 use nalgebra::{Matrix3, Vector3};
 use upc::config::{Config, ControllerKind, GainSolverKind, LqSolverKind};
 use upc::offline::ReducedLoop;
-use upc::preview::dense::{CondensedHorizon, tail_cost};
+use upc::preview::dense::CondensedHorizon;
 use upc::preview::gain_search::{GainSearch, GainSearchInputs};
 use upc::preview::{
     AxisState, CartTable, GainSchedule, HandPreviewer, HandState, PreviewError, PreviewPlan,
@@ -136,7 +136,7 @@ fn riccati_rollout_matches_the_whole_dense_input_horizon() {
     let dense = CondensedHorizon::build(
         &m,
         &c2,
-        Some(&tail_cost(&m, c.preview.q_e, c.preview.r)).filter(|_| c.preview.terminal_cost),
+        Some(&m.infinite_tail(c.preview.q_e, c.preview.r)).filter(|_| c.preview.terminal_cost),
     );
     let u = dense
         .solve(
@@ -915,9 +915,9 @@ fn closed_loop_radius(m: &CartTable, k: &Vector3<f64>) -> f64 {
 }
 
 /// PC-T is the infinite horizon: with the tail the backward recursion starts at its fixed
-/// point, so the first gain does not depend on the horizon (N = 40 and N = 300 agree), and the
-/// tail the Riccati solver built in its own coordinates is the one a plain iteration of the
-/// algebraic Riccati equation gives in the state's.
+/// point, so the first gain does not depend on the horizon (N = 40 and N = 300 agree) and is
+/// the infinite-horizon LQR gain from the algebraic Riccati equation solved in the state's
+/// coordinates (the solver's recursion runs in another basis).
 #[test]
 fn the_tail_makes_the_horizon_infinite() {
     let c = config_with(&[]);
@@ -938,14 +938,16 @@ fn the_tail_makes_the_horizon_infinite() {
     // Without the tail a 40-step (0.2 s) horizon is another controller.
     let finite = first_gain(&mut ZmpPreview::new(m, q_e, r, 40, LqSolverKind::Riccati));
     assert!(rel(finite[0], long[0]) > 0.1, "{finite} {long}");
-    let mut ric = Riccati::with_capacity(10);
-    ric.set_tail(&m, q_e, r, true);
-    let plain = tail_cost(&m, q_e, r).column(0).into_owned();
-    let ours = ric.tail_e0();
+    // And it is the infinite horizon's LQR gain K∞ = −(R + Bᵀ P∞ B)⁻¹ Bᵀ P∞ A, P∞ of the
+    // algebraic Riccati equation in the state's coordinates (the solver carried it into its own).
+    let cbar = Vector3::new(1.0, 0.0, m.output_acc_coeff(m.nominal_alpha0()));
+    let p_inf = m.infinite_tail(q_e, r) + cbar * cbar.transpose() * q_e;
+    let (a, b) = (m.a(), m.b());
+    let k_inf = -(b.transpose() * p_inf * a) / (r + b.dot(&(p_inf * b)));
     for j in 0..3 {
         assert!(
-            rel(ours[j], plain[j]) < 1e-8,
-            "P_tail e0 {ours} against {plain}"
+            rel(long[j], k_inf[j]) < 1e-8,
+            "K_0 {long} against K∞ {k_inf}"
         );
     }
 }

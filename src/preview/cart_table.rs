@@ -47,6 +47,29 @@ impl CartTable {
         -self.mass * self.com_height * alpha0
     }
 
+    /// PC-T's P_tail = P∞ − Q_e cᵀc (docs/preview_control.md): P∞ the stabilising solution of
+    /// the discrete algebraic Riccati equation for the undisturbed output row c, by its plain
+    /// fixed-point iteration (once, at set-up; it converges at the square of the closed loop's
+    /// slowest pole).
+    pub fn infinite_tail(&self, q_e: f64, r: f64) -> Matrix3<f64> {
+        let (a, b) = (self.a(), self.b());
+        let c = Vector3::new(1.0, 0.0, self.output_acc_coeff(self.nominal_alpha0()));
+        let q = c * c.transpose() * q_e;
+        let mut p = q;
+        for _ in 0..1_000_000 {
+            let pb = p * b;
+            let g = a.transpose() * pb;
+            let next = q + a.transpose() * p * a - g * g.transpose() / (r + b.dot(&pb));
+            let next = (next + next.transpose()) / 2.0;
+            let moved = (next - p).abs().max();
+            p = next;
+            if moved <= 1e-14 * p.abs().max() {
+                break;
+            }
+        }
+        p - q
+    }
+
     /// ZMP of a state under a disturbance (eq. 10): p = x − M z_c α0 ẍ + z_c α.
     pub fn zmp(&self, x: &Vector3<f64>, alpha0: f64, alpha: f64) -> f64 {
         x[0] + self.output_acc_coeff(alpha0) * x[2] + self.com_height * alpha

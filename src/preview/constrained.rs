@@ -10,7 +10,6 @@ use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, S
 
 use nalgebra::Matrix3;
 
-use super::dense::tail_cost;
 use super::{AxisState, CartTable, Disturbance, PreviewError};
 
 pub struct ConstrainedPreview {
@@ -50,7 +49,7 @@ impl ConstrainedPreview {
     /// With `on`, the last state pays the infinite horizon's tail (PC-T), as
     /// [`super::ZmpPreview::with_terminal_cost`].
     pub fn with_terminal_cost(mut self, on: bool) -> Self {
-        self.tail = on.then(|| tail_cost(&self.model, self.q_e, self.r));
+        self.tail = on.then(|| self.model.infinite_tail(self.q_e, self.r));
         self.solver = None;
         self
     }

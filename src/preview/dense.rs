@@ -16,34 +16,11 @@ pub struct CondensedHorizon {
     tail: Option<(Matrix3<f64>, Matrix3<f64>, Mat<f64>)>,
 }
 
-/// PC-T's P_tail = P∞ − Q_e cᵀc for the undisturbed output row, by the plain fixed-point
-/// iteration of the discrete algebraic Riccati equation in the state's own coordinates (the
-/// reference against which `Riccati::set_tail`'s transformed recursion is tested).
-pub fn tail_cost(model: &CartTable, q_e: f64, r: f64) -> Matrix3<f64> {
-    let (a, b) = (model.a(), model.b());
-    let c = Vector3::new(1.0, 0.0, model.output_acc_coeff(model.nominal_alpha0()));
-    let q = c * c.transpose() * q_e;
-    let mut p = q;
-    for _ in 0..1_000_000 {
-        let pb = p * b;
-        let h = r + b.dot(&pb);
-        let pa = a.transpose() * p * a;
-        let g = a.transpose() * pb;
-        let next = q + pa - g * g.transpose() / h;
-        let next = (next + next.transpose()) / 2.0;
-        let moved = (next - p).abs().max();
-        p = next;
-        if moved <= 1e-14 * p.abs().max() {
-            break;
-        }
-    }
-    p - q
-}
-
 impl CondensedHorizon {
     /// eq. (5) / (12): P_x[i] = c_i Aⁱ = [1, iT, i²T²/2 + c2_i];
     /// P_u[i][j] = c_i A^{i−j} B = (1 + 3(i−j) + 3(i−j)²) T³/6 + c2_i T for j ≤ i (1-based).
-    /// `tail`: PC-T's P_tail ([`tail_cost`]), or none (the paper's finite horizon).
+    /// `tail`: PC-T's P_tail ([`CartTable::infinite_tail`]), or none (the paper's finite
+    /// horizon).
     pub fn build(model: &CartTable, c2: &[f64], tail: Option<&Matrix3<f64>>) -> Self {
         let n = c2.len();
         let t = model.period;

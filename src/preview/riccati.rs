@@ -21,9 +21,10 @@
 //! with P∞ the stabilising solution of the cart-table's discrete algebraic Riccati equation for
 //! the undisturbed output row c = [1, 0, −z_c/g]: x̄_N is the rest state whose ZMP is t_N, and
 //! from it every later stage costs nothing, so the finite problem is Kajita's infinite-horizon
-//! preview control with the reference held after N.
+//! preview control with the reference held after N. P_tail is the cart-table's
+//! ([`CartTable::infinite_tail`]), one for this solver, the dense one and the constrained one.
 
-use nalgebra::{RowVector3, Vector3};
+use nalgebra::{Matrix3, RowVector3, Vector3};
 
 use super::CartTable;
 
@@ -67,8 +68,9 @@ impl Riccati {
     }
 
     /// PC-T: the last state pays the infinite horizon's tail for `model`'s undisturbed output
-    /// row (`false`: none, the paper's finite horizon). Once, at set-up (a fixed-point iteration
-    /// of the recursion below, a few hundred steps). The next factorisation uses it.
+    /// row (`false`: none, the paper's finite horizon), [`CartTable::infinite_tail`] carried into
+    /// the backward pass's coordinates: P' = Nᵀ P N with x = N x', N = S⁻¹ T. Once, at set-up;
+    /// the next factorisation uses it.
     pub fn set_tail(&mut self, model: &CartTable, q_e: f64, r: f64, on: bool) {
         self.preview_valid = false;
         self.len = 0;
@@ -77,79 +79,34 @@ impl Riccati {
             self.tail_e0 = Vector3::zeros();
             return;
         }
+        let p = model.infinite_tail(q_e, r);
         let dt = model.period;
-        let r_s = r / dt.powi(6);
-        let gm = 1.0 / 6.0 + model.output_acc_coeff(model.nominal_alpha0()) / (dt * dt);
-        let q = Sym3 {
-            p00: q_e,
-            p02: q_e * gm,
-            p22: q_e * gm * gm,
-            ..Sym3::default()
-        };
-        // P ← Q' + A'ᵀ P A' − Gᵀ G / H' from P = Q' (the terms of `backward_kernel`) until it
-        // stops moving: it converges at the square of the closed loop's slowest pole.
-        let mut p = q;
-        for _ in 0..1_000_000 {
-            let h = p.p22 + r_s;
-            let g0 = p.p02;
-            let g1 = p.p02 + p.p12;
-            let g2 = g1 + p.p22;
-            let a01 = p.p00 + p.p01;
-            let a02 = a01 + p.p02;
-            let t11 = p.p01 + p.p11;
-            let a11 = a01 + t11;
-            let a12 = a02 + (t11 + p.p12);
-            let a22 = a12 + g2;
-            let next = Sym3 {
-                p00: q.p00 + p.p00 - g0 * g0 / h,
-                p01: a01 - g0 * g1 / h,
-                p02: q.p02 + a02 - g0 * g2 / h,
-                p11: a11 - g1 * g1 / h,
-                p12: a12 - g1 * g2 / h,
-                p22: q.p22 + a22 - g2 * g2 / h,
-            };
-            let moved = [
-                next.p00 - p.p00,
-                next.p01 - p.p01,
-                next.p02 - p.p02,
-                next.p11 - p.p11,
-                next.p12 - p.p12,
-                next.p22 - p.p22,
-            ]
-            .iter()
-            .map(|d| d.abs())
-            .fold(0.0, f64::max);
-            p = next;
-            if moved <= 1e-14 * p.p00.abs().max(p.p22.abs()) {
-                break;
-            }
-        }
-        self.tail = Sym3 {
-            p00: p.p00 - q.p00,
-            p01: p.p01,
-            p02: p.p02 - q.p02,
-            p11: p.p11,
-            p12: p.p12,
-            p22: p.p22 - q.p22,
-        };
-        // In the state's coordinates (x' = T⁻¹ S x): P_tail e₀ = S T⁻ᵀ P'_tail e₀, as
-        // T⁻¹ S e₀ = e₀.
-        let v = (self.tail.p00, self.tail.p01, self.tail.p02);
-        self.tail_e0 = Vector3::new(
-            v.0,
-            dt * v.1,
-            dt * dt / 2.0 * (-v.0 / 3.0 - v.1 + 2.0 * v.2),
+        let n = Matrix3::new(
+            1.0,
+            0.0,
+            1.0 / 6.0,
+            0.0,
+            1.0 / dt,
+            1.0 / (2.0 * dt),
+            0.0,
+            0.0,
+            1.0 / (dt * dt),
         );
+        let t = n.transpose() * p * n;
+        self.tail = Sym3 {
+            p00: t[(0, 0)],
+            p01: t[(0, 1)],
+            p02: t[(0, 2)],
+            p11: t[(1, 1)],
+            p12: t[(1, 2)],
+            p22: t[(2, 2)],
+        };
+        self.tail_e0 = p.column(0).into_owned();
     }
 
     /// K_0 of the last factorisation: the receding-horizon feedback u = K_0 x (+ the preview).
     pub fn first_gain(&self) -> RowVector3<f64> {
         self.gain[0]
-    }
-
-    /// PC-T's P_tail e₀ in the state's coordinates (zero without a tail).
-    pub fn tail_e0(&self) -> Vector3<f64> {
-        self.tail_e0
     }
 
     pub fn capacity(&self) -> usize {

@@ -3,7 +3,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::dense::{CondensedHorizon, tail_cost};
+use super::dense::CondensedHorizon;
 use super::{CartTable, Disturbance, PreviewError, Riccati};
 use crate::config::LqSolverKind;
 
@@ -73,7 +73,7 @@ impl ZmpPreview {
     /// `preview.terminal_cost`; docs/preview_control.md); without, the paper's finite horizon.
     pub fn with_terminal_cost(mut self, on: bool) -> Self {
         self.riccati.set_tail(&self.model, self.q_e, self.r, on);
-        self.tail = on.then(|| tail_cost(&self.model, self.q_e, self.r));
+        self.tail = on.then(|| self.model.infinite_tail(self.q_e, self.r));
         self.factored = false;
         self
     }

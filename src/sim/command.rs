@@ -91,15 +91,6 @@ impl CommandGate {
         }
     }
 
-    /// A valid command that answers another state than the one a lockstep plant waits on (a
-    /// controller's re-answer after the plant was stopped): stale, not applied. How many arrive
-    /// depends on wall-clock timing, so it must not count among the accepted ones, which are a
-    /// function of the run's inputs.
-    pub fn not_applied(&mut self) {
-        self.stats.accepted = self.stats.accepted.saturating_sub(1);
-        self.stats.stale += 1;
-    }
-
     /// Validates and counts; on success the command's seq becomes the last accepted one.
     pub fn check(
         &mut self,
@@ -108,6 +99,22 @@ impl CommandGate {
         n: u32,
         tau: &[f64],
         expected: usize,
+    ) -> Result<(), Rejection> {
+        self.check_answer(origin, seq, n, tau, expected, true)
+    }
+
+    /// [`CommandGate::check`] for a command that `applies` or not: a valid one answering
+    /// another state than the one a lockstep plant waits on (a controller's re-answer after
+    /// the plant was stopped) is counted stale, not accepted. How many of those arrive depends
+    /// on wall-clock timing; the accepted count is a function of the run's inputs.
+    pub fn check_answer(
+        &mut self,
+        origin: CommandOrigin,
+        seq: u64,
+        n: u32,
+        tau: &[f64],
+        expected: usize,
+        applies: bool,
     ) -> Result<(), Rejection> {
         if self.session != 0 && origin.session != self.session {
             self.stats.foreign += 1;
@@ -129,7 +136,11 @@ impl CommandGate {
                     self.controller = origin.controller;
                 }
                 self.last_seq = Some(seq);
-                self.stats.accepted += 1;
+                if applies {
+                    self.stats.accepted += 1;
+                } else {
+                    self.stats.stale += 1;
+                }
                 Ok(())
             }
             Err(e) => {

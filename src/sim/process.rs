@@ -737,14 +737,20 @@ impl Looper {
     }
 
     /// Validates a command; on acceptance copies its torques into `self.tau`.
-    fn accept(&mut self, msg: &TorqueMsg, n: usize) -> bool {
+    /// Gates `msg`; a valid one that `applies` becomes the torques to apply.
+    fn accept(&mut self, msg: &TorqueMsg, n: usize, applies: bool) -> bool {
         let origin = CommandOrigin {
             session: msg.session,
             controller: msg.controller,
         };
-        match self.gate.check(origin, msg.seq, msg.n, &msg.tau, n) {
+        match self
+            .gate
+            .check_answer(origin, msg.seq, msg.n, &msg.tau, n, applies)
+        {
             Ok(()) => {
-                self.tau.as_mut_slice().copy_from_slice(&msg.tau[..n]);
+                if applies {
+                    self.tau.as_mut_slice().copy_from_slice(&msg.tau[..n]);
+                }
                 true
             }
             Err(e) => {
@@ -863,10 +869,9 @@ impl Looper {
             let mut waiting_for_live_controller = false;
             'wait: loop {
                 while let Some(msg) = ep.torques.receive()? {
-                    if !self.accept(&msg, n) {
-                        continue;
-                    }
-                    if msg.state_step == want {
+                    // A valid answer to another state is counted stale and not applied.
+                    let answers = msg.state_step == want;
+                    if self.accept(&msg, n, answers) && answers {
                         let round_trip = self.published_at.elapsed();
                         // State 0 waits for the controller to start: not an IPC figure.
                         if want > 0 {
@@ -876,8 +881,6 @@ impl Looper {
                         }
                         break 'wait;
                     }
-                    // A valid answer to another state: not applied.
-                    self.gate.not_applied();
                 }
                 let now = Instant::now();
                 if now >= deadline {
@@ -943,7 +946,7 @@ impl Looper {
                 if holding && msg.flags & TORQUE_FLAG_FALLBACK != 0 {
                     continue;
                 }
-                if self.accept(&msg, n) {
+                if self.accept(&msg, n, true) {
                     fresh = true;
                     commanded.copy_from(&self.tau);
                 }
