@@ -32,6 +32,8 @@ enum Command {
     Forecast(cli::forecast::ForecastArgs),
     /// Inspect a URDF: joints, DoF, mass, CoM; dump M(q), h(q, v), CoM and a frame Jacobian as JSON.
     Model(cli::model::ModelArgs),
+    /// Bring a robot: `upc robot init [PACKAGE] URDF --out FILE` drafts its description from the URDF.
+    Robot(cli::robot::RobotArgs),
     /// Forward the channels between this host's iceoryx2 and Zenoh (forecasters and viewers elsewhere).
     Bridge(cli::bridge::BridgeArgs),
     /// Run the simulator: the humanoid on the ground and the door, over iceoryx2 (see --help).
@@ -59,6 +61,7 @@ fn main() -> std::process::ExitCode {
         Command::Preview(args) => cli::preview::run(args),
         Command::Compare(args) => cli::compare::run(args),
         Command::Model(args) => cli::model::run(args),
+        Command::Robot(args) => cli::robot::run(args),
         Command::Sim(args) => cli::sim::run_cli(args),
         Command::Bus(args) => cli::bus::run_cli(args),
         Command::Mjcf(args) => cli::sim::mjcf_cli(args),

@@ -5,6 +5,8 @@
 
 mod support;
 
+use std::path::{Path, PathBuf};
+
 use nalgebra::Vector3;
 use support::robots::installed;
 use upc::config::Config;
@@ -424,26 +426,46 @@ fn a_description_whose_joints_move_no_mass_names_them_and_both_fixes() {
     Robot::parse(&text, "romeo", Some(&dir)).expect("romeo with [armature]");
 }
 
+/// The embedded iCub-like with its root link's `<inertia>` replaced by `inertia`: a URDF and
+/// a description named `name` in `dir` (the description's path and text).
+fn with_root_inertia(dir: &Path, inertia: &str, name: &str) -> (PathBuf, String) {
+    std::fs::create_dir_all(dir).expect("dir");
+    let urdf = upc::dynamics::icub_like::URDF;
+    let good =
+        r#"<inertia ixx="0.0145833" ixy="0" ixz="0" iyy="0.00478333" iyz="0" izz="0.0135333"/>"#;
+    assert_eq!(urdf.matches(good).count(), 1, "the root link's inertia");
+    std::fs::write(
+        dir.join(format!("{name}.urdf")),
+        urdf.replace(good, inertia),
+    )
+    .expect("urdf");
+    let text =
+        format!("extends = \"icub_like\"\nname = \"{name}\"\n\n[urdf]\npath = \"{name}.urdf\"\n");
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(&path, &text).expect("description");
+    (path, text)
+}
+
+/// The plants to run: upc's, and MuJoCo's when it is built in (a visible skip otherwise).
+fn plants() -> Vec<&'static str> {
+    let mut plants = vec!["upc"];
+    if upc::sim::mujoco::AVAILABLE {
+        plants.push("mujoco");
+    } else {
+        support::prereq::missing(upc::sim::mujoco::UNAVAILABLE, support::prereq::SETUP);
+    }
+    plants
+}
+
 /// A body whose principal moments break the triangle inequality (a URDF's inertia typed by
 /// hand) is refused at load, naming the link, on both plants with the same message: before,
 /// upc's plant ran it and MuJoCo refused it from the depth of its log.
 #[test]
 fn a_non_physical_inertia_is_refused_with_the_same_message_on_both_plants() {
     let dir = std::env::temp_dir().join(format!("upc-bad-inertia-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("dir");
-    let urdf = upc::dynamics::icub_like::URDF;
-    let good =
-        r#"<inertia ixx="0.0145833" ixy="0" ixz="0" iyy="0.00478333" iyz="0" izz="0.0135333"/>"#;
-    assert_eq!(urdf.matches(good).count(), 1, "the root link's inertia");
     // 0.001 + 0.002 < 0.0135: no body has these moments.
     let bad = r#"<inertia ixx="0.001" ixy="0" ixz="0" iyy="0.002" iyz="0" izz="0.0135333"/>"#;
-    std::fs::write(dir.join("bad.urdf"), urdf.replace(good, bad)).expect("bad urdf");
-    let description = dir.join("bad.toml");
-    std::fs::write(
-        &description,
-        "extends = \"icub_like\"\nname = \"bad_inertia\"\n\n[urdf]\npath = \"bad.urdf\"\n",
-    )
-    .expect("description");
+    let (description, _) = with_root_inertia(&dir, bad, "bad_inertia");
     let err = match Robot::load(description.to_str().expect("utf-8")) {
         Err(e @ RobotError::Inertia { .. }) => e.to_string(),
         Err(e) => panic!("another error: {e}"),
@@ -452,12 +474,7 @@ fn a_non_physical_inertia_is_refused_with_the_same_message_on_both_plants() {
     for part in ["link 'root_link'", "A + B ≥ C", "1.000e-3, 2.000e-3"] {
         assert!(err.contains(part), "{part}: {err}");
     }
-    let mut plants = vec!["upc"];
-    if upc::sim::mujoco::AVAILABLE {
-        plants.push("mujoco");
-    } else {
-        support::prereq::missing(upc::sim::mujoco::UNAVAILABLE, support::prereq::SETUP);
-    }
+    let plants = plants();
     for plant in plants {
         let out = std::process::Command::new(env!("CARGO_BIN_EXE_upc"))
             .args([
@@ -477,6 +494,77 @@ fn a_non_physical_inertia_is_refused_with_the_same_message_on_both_plants() {
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{plant}: {stderr}");
         assert!(stderr.contains(&err), "{plant}: {stderr}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A link with mass and no rotational inertia (a point mass, as example-robot-data's iCub has
+/// seven) is refused by both plants with the same message, which names `inertia_floor`; with it,
+/// both plants run the robot and the bodies that had inertia keep theirs.
+#[test]
+fn a_point_mass_is_refused_on_both_plants_and_runs_with_an_inertia_floor() {
+    let dir = std::env::temp_dir().join(format!("upc-point-mass-{}", std::process::id()));
+    let point = r#"<inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/>"#;
+    let (refused, text) = with_root_inertia(&dir, point, "point_mass");
+    let err = match Robot::load(refused.to_str().expect("utf-8")) {
+        Err(e @ RobotError::PointMass { .. }) => e.to_string(),
+        Err(e) => panic!("another error: {e}"),
+        Ok(_) => panic!("a point mass was accepted"),
+    };
+    for part in ["link 'root_link'", "point mass", "inertia_floor = 1e-6"] {
+        assert!(err.contains(part), "{part}: {err}");
+    }
+    let floored = dir.join("floored.toml");
+    std::fs::write(
+        &floored,
+        text.replace("name = ", "inertia_floor = 1e-6\nname = "),
+    )
+    .expect("toml");
+    let r = Robot::load(floored.to_str().expect("utf-8")).expect("floored");
+    let reference = Robot::load("icub_like").expect("icub_like");
+    for (a, b) in r.model.joints.iter().zip(&reference.model.joints) {
+        let (ia, ib) = (a.inertia.inertia_com(), b.inertia.inertia_com());
+        if a.body == "root_link" {
+            let m = nalgebra::SymmetricEigen::new(ia).eigenvalues;
+            assert!(m.iter().all(|x| (x - 1e-6).abs() < 1e-12), "{m:?}");
+        } else {
+            assert!((ia - ib).norm() < 1e-15, "{}: {ia} vs {ib}", a.body);
+        }
+    }
+    let plants = plants();
+    for plant in plants {
+        for (description, runs) in [(&refused, false), (&floored, true)] {
+            // Real time for 50 steps: without a controller the plant holds the robot, and
+            // has built and stepped the model.
+            let prefix = format!("pointmass{}", std::process::id());
+            let out = std::process::Command::new(env!("CARGO_BIN_EXE_upc"))
+                .args([
+                    "sim",
+                    "--plant",
+                    plant,
+                    "--mode",
+                    "realtime",
+                    "--duration",
+                    "0.05",
+                ])
+                .args(["--prefix", &prefix, "--robot"])
+                .arg(description)
+                .env("RUST_LOG", "warn")
+                .output()
+                .expect("upc sim");
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            if runs {
+                assert!(out.status.success(), "{plant}: {stderr}");
+                let stdout = String::from_utf8_lossy(&out.stdout);
+                assert!(
+                    stdout.contains("sim: 50 steps"),
+                    "{plant}: {stdout}{stderr}"
+                );
+            } else {
+                assert!(!out.status.success(), "{plant}: {stderr}");
+                assert!(stderr.contains(&err), "{plant}: {stderr}");
+            }
+        }
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -642,8 +730,8 @@ fn a_made_sole_frame_on_a_tilted_link_is_turned_by_its_origin() {
 }
 
 /// A sole of pads as a collision mesh (the heel's and the ball's flat at the bottom, a toe
-/// 3.6 mm higher), as a binary STL next to the URDF and as an OBJ, placed by the collision's
-/// origin and scale: the contacts are the pads' outer corners on the ground, the toe is off it.
+/// 3.6 mm higher), as a binary STL next to the URDF, as an OBJ and as COLLADA (its units, its
+/// up axis and its nodes' transforms applied), placed by the collision's origin and scale: the contacts are the pads' outer corners on the ground, the toe is off it.
 #[test]
 fn contact_points_come_from_a_collision_mesh() {
     let dir = std::env::temp_dir().join(format!("upc_sole_mesh_{}", std::process::id()));
@@ -700,6 +788,39 @@ fn contact_points_come_from_a_collision_mesh() {
     let mut file = std::fs::File::create(dir.join("meshes/sole.stl")).expect("stl");
     stl_io::write_stl(&mut file, triangles.iter()).expect("write stl");
     std::fs::write(dir.join("meshes/sole.obj"), obj).expect("obj");
+    // The same vertices as COLLADA, written as exporters do: in millimetres (`<unit>`), y up,
+    // under a node moved 10 mm along x holding a node scaled by ½ (so each coordinate stored
+    // is the inverse of those: x' = 2 (x − 10), and (x, y, z) z-up is (x, z, −y) y-up).
+    let mut positions = Vec::new();
+    for [x0, x1, w, z0, z1] in pads {
+        for i in 0..8 {
+            let pick = |b: usize, lo: f64, hi: f64| if i & b == 0 { lo } else { hi };
+            let (x, y, z) = (pick(1, x0, x1), pick(2, -w, w), pick(4, z0, z1));
+            positions.extend([2.0 * (x - 10.0), 2.0 * z, -2.0 * y]);
+        }
+    }
+    let floats: Vec<String> = positions.iter().map(|x| x.to_string()).collect();
+    let dae = format!(
+        r##"<?xml version="1.0"?>
+<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
+  <asset><unit meter="0.001" name="millimeter"/><up_axis>Y_UP</up_axis></asset>
+  <library_geometries><geometry id="sole-mesh"><mesh>
+    <source id="sole-positions"><float_array id="sole-positions-array" count="{}">{}</float_array>
+      <technique_common><accessor source="#sole-positions-array" count="{}" stride="3"/></technique_common></source>
+    <vertices id="sole-vertices"><input semantic="POSITION" source="#sole-positions"/></vertices>
+  </mesh></geometry></library_geometries>
+  <library_visual_scenes><visual_scene id="scene">
+    <node id="moved"><translate>10 0 0</translate>
+      <node id="halved"><scale>0.5 0.5 0.5</scale><instance_geometry url="#sole-mesh"/></node>
+    </node>
+  </visual_scene></library_visual_scenes>
+  <scene><instance_visual_scene url="#scene"/></scene>
+</COLLADA>"##,
+        positions.len(),
+        floats.join(" "),
+        positions.len() / 3
+    );
+    std::fs::write(dir.join("meshes/sole.dae"), dae).expect("dae");
     let spec = FootSpec {
         frame: "sole".into(),
         link: Some("foot".into()),
@@ -708,9 +829,13 @@ fn contact_points_come_from_a_collision_mesh() {
     };
     // The pads' bottom 4 cm below the ankle's link frame: the contacts at z = −0.5 − 0.04.
     let want = [[0.09, 0.04], [0.09, -0.04], [-0.08, 0.03], [-0.08, -0.03]];
-    for file in ["meshes/sole.stl", "meshes/sole.obj"] {
+    for (file, scale) in [
+        ("meshes/sole.stl", "0.001"),
+        ("meshes/sole.obj", "0.001"),
+        ("meshes/sole.dae", "1"),
+    ] {
         let urdf = foot_urdf(&format!(
-            r#"<collision><origin xyz="0 0 -0.04" rpy="0 0 0"/><geometry><mesh filename="{file}" scale="0.001 0.001 0.001"/></geometry></collision>"#
+            r#"<collision><origin xyz="0 0 -0.04" rpy="0 0 0"/><geometry><mesh filename="{file}" scale="{scale} {scale} {scale}"/></geometry></collision>"#
         ));
         let p = contact_points_in(&urdf, Some(&dir), &spec).expect(file);
         for (q, w) in p.iter().zip(want) {
@@ -721,15 +846,15 @@ fn contact_points_come_from_a_collision_mesh() {
         }
     }
     // A format upc does not read: named, with the way out.
-    std::fs::write(dir.join("meshes/sole.dae"), "<COLLADA/>").expect("dae");
+    std::fs::write(dir.join("meshes/sole.ply"), "ply\n").expect("ply");
     let urdf = foot_urdf(
-        r#"<collision><geometry><mesh filename="meshes/sole.dae"/></geometry></collision>"#,
+        r#"<collision><geometry><mesh filename="meshes/sole.ply"/></geometry></collision>"#,
     );
     let e = contact_points_in(&urdf, Some(&dir), &spec)
-        .expect_err("dae")
+        .expect_err("ply")
         .to_string();
     assert!(
-        e.contains("STL and OBJ") && e.contains("contacts = [["),
+        e.contains("STL, OBJ and COLLADA") && e.contains("contacts = [["),
         "{e}"
     );
     let _ = std::fs::remove_dir_all(&dir);

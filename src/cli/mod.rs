@@ -13,6 +13,7 @@ pub mod engine;
 pub mod forecast;
 pub mod model;
 pub mod preview;
+pub mod robot;
 pub mod robustness;
 pub mod run;
 pub mod sim;

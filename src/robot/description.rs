@@ -24,6 +24,7 @@
 //! joints = ["*_hand_*", "head_*"]          # model): names or glob patterns
 //! [armature]                               # reflected rotor inertia (kg·m²), by name or
 //! "*_wrist_*" = 0.001                      # pattern; the URDF has none (0 elsewhere)
+//! inertia_floor = 1e-6                     # (top level) a point-mass link's moments (kg·m²)
 //! [config]                                 # robot-dependent values of config/default.toml
 //! hand.kp = 400.0
 //! ```
@@ -66,6 +67,11 @@ pub struct RobotDescription {
     /// URDF's fingers) needs it to have a non-singular M.
     #[serde(default)]
     pub armature: BTreeMap<String, f64>,
+    /// The smallest principal moment of inertia (kg·m²) a body with mass gets about its CoM:
+    /// for a URDF whose links are point masses (zero inertia), which no physical body is and
+    /// MuJoCo refuses. Absent: such a body is refused with its name.
+    #[serde(default)]
+    pub inertia_floor: Option<f64>,
     /// Config keys layered over `config/default.toml` for this robot (gains, torque scale).
     #[serde(default)]
     pub config: Option<toml::Table>,

@@ -27,18 +27,29 @@ fn on_body(model: &Model, name: &str) -> Option<(Option<usize>, SE3)> {
 
 /// Candidate points (link frame) from a link's collision geometry: a box's eight corners,
 /// spheres' centres with their radii, a mesh's vertices.
-struct Collision {
-    points: Vec<Vector3<f64>>,
-    radii: Vec<f64>,
+pub(super) struct Collision {
+    pub(super) points: Vec<Vector3<f64>>,
+    pub(super) radii: Vec<f64>,
     /// A mesh among them: the contacts are its lowest face's corners, not the four lowest
     /// points.
     mesh: bool,
 }
 
-fn collision_points(
+pub(super) fn collision_points(
     urdf: &urdf_rs::Robot,
     urdf_dir: Option<&Path>,
     link: &str,
+) -> Result<Collision, RobotError> {
+    geometry_points(urdf, urdf_dir, link, false)
+}
+
+/// As [`collision_points`], from the link's visual geometry (`visual`) or its collision
+/// geometry.
+pub(super) fn geometry_points(
+    urdf: &urdf_rs::Robot,
+    urdf_dir: Option<&Path>,
+    link: &str,
+    visual: bool,
 ) -> Result<Collision, RobotError> {
     let l = urdf
         .links
@@ -46,9 +57,17 @@ fn collision_points(
         .find(|l| l.name == link)
         .ok_or_else(|| RobotError::Feet(format!("no link `{link}` in the URDF")))?;
     let (mut pts, mut radii, mut mesh) = (Vec::new(), Vec::new(), false);
-    for c in &l.collision {
-        let o = SE3::from_xyz_rpy(c.origin.xyz.0, c.origin.rpy.0);
-        match &c.geometry {
+    let shapes: Vec<(&urdf_rs::Pose, &urdf_rs::Geometry)> = if visual {
+        l.visual.iter().map(|v| (&v.origin, &v.geometry)).collect()
+    } else {
+        l.collision
+            .iter()
+            .map(|c| (&c.origin, &c.geometry))
+            .collect()
+    };
+    for (origin, geometry) in shapes {
+        let o = SE3::from_xyz_rpy(origin.xyz.0, origin.rpy.0);
+        match geometry {
             urdf_rs::Geometry::Box { size } => {
                 let h = Vector3::from(size.0) * 0.5;
                 for k in 0..8 {
@@ -112,7 +131,11 @@ fn collision_points(
 /// The four contact points in `frame` (placement `to_frame` from the link): a mesh's lowest
 /// face's corners, else the four lowest points along `-z`, each sphere lowered by its radius:
 /// the face that rests on the ground.
-fn lowest_four(c: &Collision, to_frame: &SE3, link: &str) -> Result<Vec<Vector3<f64>>, RobotError> {
+pub(super) fn lowest_four(
+    c: &Collision,
+    to_frame: &SE3,
+    link: &str,
+) -> Result<Vec<Vector3<f64>>, RobotError> {
     let mut p: Vec<Vector3<f64>> = c
         .points
         .iter()

@@ -4,9 +4,11 @@
 //! config keys.
 //! The iCub-like humanoid is the embedded default; the others name a registry package.
 
+mod collada;
 mod config_layers;
 pub mod description;
 pub mod feet;
+pub mod init;
 pub mod packages;
 pub mod physical;
 mod reduced_model;
@@ -92,6 +94,15 @@ pub enum RobotError {
     Inertia {
         robot: String,
         link: String,
+        moments: String,
+    },
+    #[error(
+        "robot `{robot}`: link '{link}' has a mass of {mass} kg but principal moments of inertia {moments} kg·m² about its CoM: a point mass, which MuJoCo refuses (inertia must have positive eigenvalues): give it an <inertia> in the URDF, or set inertia_floor = 1e-6 (kg·m², top level of the description) to give such bodies that moment"
+    )]
+    PointMass {
+        robot: String,
+        link: String,
+        mass: f64,
         moments: String,
     },
 }
@@ -226,6 +237,15 @@ impl Robot {
         let locked = locked_joints(&description, &parsed)?;
         let mut model = Model::from_urdf_str_locked(&urdf, BaseJoint::Floating, &locked)?;
         set_armatures(&mut model, &description, &locked)?;
+        if let Some(floor) = description.inertia_floor {
+            if !(floor.is_finite() && floor > 0.0) {
+                return Err(RobotError::Home {
+                    robot: name.clone(),
+                    reason: format!("inertia_floor must be a positive kg·m², got {floor}"),
+                });
+            }
+            physical::apply_inertia_floor(&mut model, floor);
+        }
         physical::check_inertias(&model, &description.name)?;
         physical::check_inert_joints(&model, &description.name)?;
         for w in physical::placeholder_warnings(&model) {
@@ -470,8 +490,15 @@ fn home_configuration(
             reason,
         };
         let ids = [model.frame_id(&soles[0])?, model.frame_id(&soles[1])?];
-        let hand = model.frame_id(&d.hand.frame)?;
-        let solved = stance::solve(model, &q, ids, hand, spec).map_err(err)?;
+        let hand = [
+            model.frame_id(&d.hand.frame)?,
+            model.frame_id(&d.hand.chain_root)?,
+        ];
+        let support: Vec<usize> = contacts
+            .iter()
+            .map(|c| model.frame_id(c))
+            .collect::<Result<_, _>>()?;
+        let solved = stance::solve(model, &q, ids, &support, hand, spec).map_err(err)?;
         if solved.hand_error > 0.01 {
             tracing::warn!(
                 "robot `{}`: [stance] hand target missed by {:.0} mm (out of the arm's reach, \

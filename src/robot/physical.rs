@@ -6,6 +6,10 @@
 //!   here makes a description upc accepts run on both plants. Bodies are upc's (a joint's child
 //!   link with the links fixed to it merged), as upc writes them into MuJoCo's scene.
 //!
+//! - a moving body with mass and a zero principal moment (a point mass): MuJoCo refuses it
+//!   ("inertia must have positive eigenvalues"); a description's `inertia_floor` gives such
+//!   bodies a small moment instead of an edit to the URDF.
+//!
 //! Values a description left at a placeholder are warnings: nothing refuses them, but the arm's
 //! capacity, the force scaling and the torque limits are computed from them.
 
@@ -21,8 +25,32 @@ fn slack(largest: f64) -> f64 {
     1e-15_f64.max(1e-9 * largest)
 }
 
-/// The first moving body whose principal moments break the triangle inequality, as an error
-/// naming its link, its moments and what to change.
+/// MuJoCo's smallest positive value (`mjMINVAL`): a principal moment at or below it is none.
+const MIN_MOMENT: f64 = 1e-15;
+
+/// Raises each principal moment (about its CoM) of every body with mass to at least `floor`
+/// (`inertia_floor` of a description), keeping its principal axes: the bodies that have more
+/// are untouched.
+pub fn apply_inertia_floor(model: &mut Model, floor: f64) {
+    for j in model.joints.iter_mut() {
+        if j.inertia.mass <= 0.0 {
+            continue;
+        }
+        let eig = SymmetricEigen::new(j.inertia.inertia_com());
+        if eig.eigenvalues.iter().all(|&m| m >= floor) {
+            continue;
+        }
+        let raised = eig.eigenvalues.map(|m| m.max(floor));
+        let i = eig.eigenvectors
+            * nalgebra::Matrix3::from_diagonal(&raised)
+            * eig.eigenvectors.transpose();
+        j.inertia = crate::dynamics::Inertia::from_com(j.inertia.mass, j.inertia.com(), i);
+    }
+}
+
+/// The first moving body with mass whose principal moments are not all positive (a point
+/// mass) or break the triangle inequality, as an error naming its link, its moments and what to
+/// change.
 pub fn check_inertias(model: &Model, robot: &str) -> Result<(), RobotError> {
     for j in model.joints.iter() {
         if j.inertia.mass <= 0.0 {
@@ -32,6 +60,15 @@ pub fn check_inertias(model: &Model, robot: &str) -> Result<(), RobotError> {
             .eigenvalues
             .into();
         m.sort_by(f64::total_cmp);
+        // MuJoCo's rule for a body with mass: every principal moment positive.
+        if m[0] <= MIN_MOMENT {
+            return Err(RobotError::PointMass {
+                robot: robot.to_owned(),
+                link: j.body.clone(),
+                mass: j.inertia.mass,
+                moments: format!("{:.3e}, {:.3e}, {:.3e}", m[0], m[1], m[2]),
+            });
+        }
         if m[0] + m[1] < m[2] - slack(m[2]) {
             return Err(RobotError::Inertia {
                 robot: robot.to_owned(),

@@ -1,5 +1,5 @@
-//! Contact points from a foot's collision mesh (STL, binary or ASCII, or Wavefront OBJ, as
-//! URDFs ship them): the lowest face's support polygon, and its four corners.
+//! Contact points from a foot's collision mesh (STL, binary or ASCII, Wavefront OBJ or COLLADA
+//! (`super::collada`), as URDFs ship them): the lowest face's support polygon, and its four corners.
 //!
 //! The lowest face is every vertex within [`FACE_TOLERANCE`] of the lowest along the sole's
 //! normal: a sole of several pads rests on the lowest ones, and a toe a few millimetres higher
@@ -48,8 +48,12 @@ pub fn vertices(path: &Path) -> Result<Vec<Vector3<f64>>, String> {
                 .map(|p| Vector3::new(p[0].into(), p[1].into(), p[2].into()))
                 .collect())
         }
+        "dae" => {
+            let text = std::fs::read_to_string(path).map_err(|e| format!("{shown}: {e}"))?;
+            super::collada::vertices(&text).map_err(|e| format!("{shown}: {e}"))
+        }
         _ => Err(format!(
-            "{shown}: upc reads contact points from STL and OBJ meshes, not `.{ext}`"
+            "{shown}: upc reads contact points from STL, OBJ and COLLADA meshes, not `.{ext}`"
         )),
     }
 }

@@ -9,10 +9,11 @@
 //!
 //!   min Σ_t w_t ‖J_t δq − e_t‖² + w_g ‖δq_j − (q_g − q)_j‖² + μ ‖δq‖²,   q ← clamp(q ⊕ δq)   (ST-1)
 //!
-//! Tasks e_t: each sole's position (its zero-posture x and y, the ground's z) and rotation
-//! (identity: flat, toes along x); the base's rotation (upright, facing x) and height (its
-//! height at the zero posture, less `crouch`); the CoM's x, y (the feet's centre); the hand's
-//! position (feet centre + `hand`), if given. With the soles and the base's height and rotation
+//! Tasks e_t: each sole's position (its zero-posture offset across the feet, the ground's z)
+//! and rotation (flat, toes along the heading the soles have at the zero posture); the base's
+//! rotation (as at the zero posture: upright) and height (its height at the zero posture, less
+//! `crouch`); the CoM's x, y (the feet's centre); the hand's position (feet centre + `hand`,
+//! x along the soles' heading), if given. With the soles and the base's height and rotation
 //! fixed, each leg's posture follows (the knees bend, the legs do not splay), and the base's
 //! x, y carry the CoM over the feet.
 
@@ -61,8 +62,10 @@ pub struct Stance {
 }
 
 /// Solves ST-1 on `model` (a floating base) from the guess `guess` (its base at the identity,
-/// its joints the description's `[home]`) for the sole frames `soles` and the hand frame
-/// `hand`. A guess with straight knees is singular (bending a straight knee does not move the
+/// its joints the description's `[home]`) for the sole frames `soles` (the CoM over the centre
+/// of their contact frames `contacts`) and the hand frame
+/// `hand[0]`, reached by its arm's joints alone (those below the frame `hand[1]`, the arm's
+/// chain root: a torso bent to reach would be a posture no one asked for). A guess with straight knees is singular (bending a straight knee does not move the
 /// hip at first order, and Gauss–Newton never bends it): if the guess does not converge, it
 /// starts again with every joint moved a tenth of the way to the middle of its range, which
 /// bends a knee the way its limits allow.
@@ -70,10 +73,11 @@ pub fn solve(
     model: &Model,
     guess: &DVector<f64>,
     soles: [usize; 2],
-    hand: usize,
+    contacts: &[usize],
+    hand: [usize; 2],
     spec: &StanceSpec,
 ) -> Result<Stance, String> {
-    solve_from(model, guess, guess, soles, hand, spec).or_else(|first| {
+    solve_from(model, guess, guess, soles, contacts, hand, spec).or_else(|first| {
         let mut start = guess.clone();
         for j in model.joints.iter().filter(|j| j.nv() == 1 && j.nq() == 1) {
             let (lo, hi) = (j.limits.lower, j.limits.upper);
@@ -81,7 +85,7 @@ pub fn solve(
                 start[j.idx_q] += 0.1 * ((lo + hi) / 2.0 - start[j.idx_q]);
             }
         }
-        solve_from(model, &start, guess, soles, hand, spec).map_err(|_| first)
+        solve_from(model, &start, guess, soles, contacts, hand, spec).map_err(|_| first)
     })
 }
 
@@ -91,7 +95,8 @@ fn solve_from(
     start: &DVector<f64>,
     guess: &DVector<f64>,
     soles: [usize; 2],
-    hand: usize,
+    contacts: &[usize],
+    hand: [usize; 2],
     spec: &StanceSpec,
 ) -> Result<Stance, String> {
     if !(spec.crouch.is_finite() && spec.crouch >= 0.0) {
@@ -118,9 +123,41 @@ fn solve_from(
         (feet[0].y + feet[1].y) / 2.0,
         ground,
     );
-    let sole_targets = feet.map(|p| Vector3::new(centre.x, p.y, ground));
+    // The soles face where they face at the zero posture (the base's −x on a robot whose root
+    // link faces backward): their targets and the hand's are turned by that heading, the base
+    // keeps its zero-posture orientation.
+    let toes: Vector3<f64> = soles
+        .iter()
+        .map(|&s| data.o_m_f[s].rot * Vector3::x())
+        .sum();
+    let heading = nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), toes.y.atan2(toes.x));
+    let sole_rot = *heading.matrix();
+    let across = heading * Vector3::y();
+    let sole_targets = feet.map(|p| centre + across * across.dot(&(p - centre)));
     let base_height = data.o_m_i[root].trans.z - spec.crouch;
-    let hand_target = spec.hand.map(|h| centre + Vector3::from(h));
+    // The support's centre: the contact points' centroid, offset from the soles' midpoint
+    // when a sole frame is not at its contacts' centre (under the ankle, say); the soles keep
+    // that offset as they turn flat.
+    let mut support = Vector3::zeros();
+    for &c in contacts {
+        support += data.o_m_f[c].trans / contacts.len().max(1) as f64;
+    }
+    let offset = heading.transpose() * (support - centre);
+    let support = centre + heading * Vector3::new(offset.x, offset.y, 0.0);
+    let hand_target = spec.hand.map(|h| support + heading * Vector3::from(h));
+    // The arm's dofs: below the chain root, above the hand.
+    let (hand_joint, arm_root) = (model.frames[hand[0]].parent, model.frames[hand[1]].parent);
+    let off_arm: Vec<usize> = model
+        .joints
+        .iter()
+        .enumerate()
+        .filter(|(i, j)| {
+            let below_root = arm_root.is_none_or(|r| r != *i && model.is_ancestor(r, *i));
+            let above_hand = hand_joint.is_some_and(|h| model.is_ancestor(*i, h));
+            j.nv() == 1 && !(below_root && above_hand)
+        })
+        .map(|(_, j)| j.idx_v)
+        .collect();
 
     let limits: Vec<(usize, f64, f64)> = model
         .joints
@@ -151,12 +188,12 @@ fn solve_from(
             get_frame_jacobian(model, &data, *s, lwa, &mut jac).map_err(|e| e.to_string())?;
             let m = &data.o_m_f[*s];
             let dp = target - m.trans;
-            let dr = log3(&m.rot.transpose()); // toward the identity, in world axes
+            let dr = log3(&(sole_rot * m.rot.transpose())); // toward the heading, world axes
             let e = [dp.x, dp.y, dp.z, dr.x, dr.y, dr.z];
             worst = worst.max(e.iter().fold(0.0, |a, x| a.max(x.abs())));
             add(&jac, &e, W_SOLE);
         }
-        let dc = [centre.x - data.com.x, centre.y - data.com.y];
+        let dc = [support.x - data.com.x, support.y - data.com.y];
         worst = worst.max(dc[0].abs()).max(dc[1].abs());
         add(&jcom.rows(0, 2).into_owned(), &dc, W_COM);
         // The base upright at its height: its velocity in world axes is R v[0..3], its angular
@@ -170,8 +207,14 @@ fn solve_from(
         worst = worst.max(eb.iter().fold(0.0, |a, x| a.max(x.abs())));
         add(&jb, &eb, W_BASE);
         if let Some(t) = hand_target {
-            get_frame_jacobian(model, &data, hand, lwa, &mut jac).map_err(|e| e.to_string())?;
-            let dh = t - data.o_m_f[hand].trans;
+            get_frame_jacobian(model, &data, hand[0], lwa, &mut jac).map_err(|e| e.to_string())?;
+            for &k in &off_arm {
+                jac.column_mut(k).fill(0.0);
+            }
+            for k in 0..6 {
+                jac.column_mut(k).fill(0.0); // the base: carried by the legs' tasks
+            }
+            let dh = t - data.o_m_f[hand[0]].trans;
             hand_error = dh.norm();
             add(&jac.rows(0, 3).into_owned(), dh.as_slice(), W_HAND);
         }

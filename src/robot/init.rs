@@ -1,0 +1,948 @@
+//! `upc robot init`: a robot description drafted from a URDF alone (README, "Bring your
+//! robot"). Everything is read from the kinematic tree and the geometry at the zero posture,
+//! where a URDF stands straight with its arms down:
+//! - the feet: the link whose collision geometry reaches lowest (the shallowest of those that
+//!   reach it, so a foot before its toes), and the lowest on another leg (no moving joint in
+//!   common); the visual geometry when the legs have no collision geometry;
+//! - the robot's front: where its knees' flexion (their larger range) swings the ankles from,
+//!   which also tells its left from its right;
+//! - each sole frame: the URDF's own (a frame named `*sole*` on the foot, level, facing the
+//!   toes; its corner frames as contacts when it has them) or one upc makes on the foot link,
+//!   turned so that z is up and x points forward, its contacts the geometry's lowest face;
+//! - the hands: on each side of the upper body, the arm whose chain goes deepest; the hand is
+//!   where that chain branches into fingers or moves a gripper (or its last link), named by a
+//!   fixed frame of it that says `hand`, `palm` or `gripper` when there is one; the arms' chain
+//!   root is the link the two arms share (the torso after any waist joints);
+//! - the joints below the hands (fingers) and those that move no mass are locked; links with
+//!   mass and no rotational inertia get `inertia_floor`;
+//! - the IMU: a frame named `*imu*`, on the base if one is;
+//! - the posture: `[stance]`, knees bent by 5 % of the base's height, the hand held forward and
+//!   down of its shoulder, solved by [`super::stance`] and written out as `[home]`.
+//!
+//! The draft is loaded as any description is (every check of [`super::Robot::parse`]) before
+//! it is written: what it writes, upc runs.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Matrix3, Rotation3, Vector3};
+
+use super::{Robot, RobotError, feet, packages};
+use crate::dynamics::{BaseJoint, Data, Model, SE3, forward_kinematics};
+
+/// The knees' bend of the drafted stance: the base this fraction of its height lower.
+const CROUCH: f64 = 0.05;
+/// The hand's target from its shoulder, in arm lengths (shoulder to hand frame): forward, out
+/// to its side and down: 0.78 arm lengths away, the elbow bent. The hand-written descriptions
+/// hold it 0.6–1.1 forward, 0.4–0.9 down; nearer full reach C1 fell on example-robot-data's
+/// iCub, nearer the body on the iCub-like (docs/results/robots.md, "Drafted descriptions").
+const HAND_FORWARD: f64 = 0.5;
+const HAND_OUT: f64 = 0.05;
+const HAND_DOWN: f64 = 0.6;
+/// A link reaching within this of the lowest point on its side is on the ground (m).
+const ON_GROUND: f64 = 5e-3;
+/// A principal moment at or below this is none (MuJoCo's `mjMINVAL`), and the floor a draft
+/// gives it (kg·m²: a radius of gyration of 1 mm for a 1 kg link).
+const POINT_MASS: f64 = 1e-15;
+const INERTIA_FLOOR: f64 = 1e-6;
+/// Names of the links a hand's fingers or gripper move.
+const FINGER_NAMES: [&str; 3] = ["finger", "thumb", "gripper"];
+/// Names of a hand's frame, best first.
+const HAND_NAMES: [&str; 4] = ["hand", "palm", "gripper", "tool"];
+
+/// What `upc robot init` found in a URDF, each choice with why (written as comments).
+#[derive(Debug, Clone)]
+pub struct Draft {
+    pub name: String,
+    pub package: Option<String>,
+    pub path: PathBuf,
+    /// Left, right.
+    pub feet: [DraftFoot; 2],
+    pub hand: String,
+    pub chain_root: String,
+    pub imu: Option<String>,
+    /// Joints locked (fingers, joints that move no mass), with their value when not 0.
+    pub locked: Vec<(String, f64)>,
+    pub crouch: f64,
+    /// The hand's target from the feet's centre on the ground (m; x forward, y left, z up).
+    pub hand_target: [f64; 3],
+    /// `inertia_floor`, when the URDF has point masses.
+    pub inertia_floor: Option<f64>,
+    /// What the reader should know about the choices.
+    pub notes: Vec<String>,
+}
+
+/// One drafted foot.
+#[derive(Debug, Clone)]
+pub struct DraftFoot {
+    pub link: String,
+    pub frame: String,
+    /// The made sole frame's rotation in the link (`None`: the URDF's frame, or the link's axes).
+    pub rpy: Option<[f64; 3]>,
+    /// The made sole frame's position in the link, when its contacts are listed.
+    pub xyz: Option<[f64; 3]>,
+    /// Contacts listed in the sole frame (from visual geometry); `None`: "collision".
+    pub contacts: Option<Vec<[f64; 3]>>,
+    /// The URDF has the sole's corner frames (`<sole>_fl`, …): contacts = "frames".
+    pub corner_frames: bool,
+    /// The URDF names the sole frame.
+    pub urdf_frame: bool,
+}
+
+/// The URDF's link tree (from its joints).
+struct Tree {
+    root: String,
+    /// Link → (parent link, joint is moving).
+    parent: HashMap<String, (String, bool)>,
+    /// Link → (child link, joint is moving).
+    children: HashMap<String, Vec<(String, bool)>>,
+}
+
+impl Tree {
+    fn new(urdf: &urdf_rs::Robot) -> Result<Self, String> {
+        use urdf_rs::JointType as T;
+        let mut parent = HashMap::new();
+        let mut children: HashMap<String, Vec<(String, bool)>> = HashMap::new();
+        for j in &urdf.joints {
+            let moving = !matches!(j.joint_type, T::Fixed);
+            parent.insert(j.child.link.clone(), (j.parent.link.clone(), moving));
+            children
+                .entry(j.parent.link.clone())
+                .or_default()
+                .push((j.child.link.clone(), moving));
+        }
+        let root = urdf
+            .links
+            .iter()
+            .find(|l| !parent.contains_key(&l.name))
+            .map(|l| l.name.clone())
+            .ok_or("the URDF's links form no tree (no root link)")?;
+        Ok(Self {
+            root,
+            parent,
+            children,
+        })
+    }
+
+    /// `link`, its parent, … the root.
+    fn ancestors<'a>(&'a self, link: &'a str) -> Vec<&'a str> {
+        let mut out = vec![link];
+        let mut cur = link;
+        while let Some((p, _)) = self.parent.get(cur) {
+            out.push(p);
+            cur = p;
+        }
+        out
+    }
+
+    /// Moving joints between the root and `link`.
+    fn depth(&self, link: &str) -> usize {
+        let mut n = 0;
+        let mut cur = link;
+        while let Some((p, moving)) = self.parent.get(cur) {
+            n += usize::from(*moving);
+            cur = p;
+        }
+        n
+    }
+
+    /// The deepest link both `a` and `b` descend from.
+    fn common<'a>(&'a self, a: &'a str, b: &'a str) -> &'a str {
+        let up = self.ancestors(b);
+        self.ancestors(a)
+            .into_iter()
+            .find(|l| up.contains(l))
+            .unwrap_or(&self.root)
+    }
+
+    /// `link` and every link below it.
+    fn subtree(&self, link: &str) -> Vec<String> {
+        let mut out = vec![link.to_owned()];
+        let mut k = 0;
+        while k < out.len() {
+            if let Some(c) = self.children.get(&out[k]) {
+                out.extend(c.iter().map(|(l, _)| l.clone()));
+            }
+            k += 1;
+        }
+        out
+    }
+
+    /// `a` and `b` share no moving joint on their paths from the root (two legs).
+    fn apart(&self, a: &str, b: &str) -> bool {
+        let moved = |l: &str| -> Vec<String> {
+            self.ancestors(l)
+                .into_iter()
+                .filter(|x| self.parent.get(*x).is_some_and(|p| p.1))
+                .map(str::to_owned)
+                .collect()
+        };
+        let (ma, mb) = (moved(a), moved(b));
+        !ma.is_empty() && !mb.is_empty() && ma.iter().all(|x| !mb.contains(x))
+    }
+
+    /// A moving joint below `link`, or into it when `moving`.
+    fn moves_below(&self, link: &str) -> bool {
+        self.children
+            .get(link)
+            .is_some_and(|c| c.iter().any(|(l, m)| *m || self.moves_below(l)))
+    }
+
+    /// Branches below `link` that move (fingers).
+    fn moving_branches(&self, link: &str) -> usize {
+        self.children.get(link).map_or(0, |c| {
+            c.iter().filter(|(l, m)| *m || self.moves_below(l)).count()
+        })
+    }
+
+    /// A moving joint into a child of `link` that a gripper's or a hand's name says it is
+    /// (a one-joint gripper: no branching tells it from the arm).
+    fn grips(&self, link: &str) -> bool {
+        self.children.get(link).is_some_and(|c| {
+            c.iter().any(|(l, m)| {
+                let n = l.to_ascii_lowercase();
+                *m && FINGER_NAMES.iter().any(|f| n.contains(f))
+            })
+        })
+    }
+
+    /// The link's body: itself, or the first ancestor a moving joint carries.
+    fn body<'a>(&'a self, link: &'a str) -> &'a str {
+        let mut cur = link;
+        while let Some((p, moving)) = self.parent.get(cur) {
+            if *moving {
+                break;
+            }
+            cur = p;
+        }
+        cur
+    }
+}
+
+/// The zero posture's kinematics.
+struct Pose<'a> {
+    model: &'a Model,
+    data: Data,
+}
+
+impl Pose<'_> {
+    fn link(&self, name: &str) -> Result<SE3, RobotError> {
+        Ok(self.data.o_m_f[self.model.frame_id(name)?])
+    }
+}
+
+/// A foot found on one side of the base (before knowing which is the robot's left).
+struct FootFound {
+    link: String,
+    /// The ankle (the foot's last moving joint) and the support's centroid, base frame.
+    ankle: Vector3<f64>,
+    centroid: Vector3<f64>,
+    lowest: f64,
+    /// The visual geometry the contacts come from, when the URDF has no collision geometry.
+    geometry: Option<feet::Collision>,
+}
+
+/// Drafts a description of the URDF at `path` (inside `package` when given) named `name`.
+pub fn draft(package: Option<&str>, path: &Path, name: &str) -> Result<Draft, RobotError> {
+    let urdf_err = |reason: String| RobotError::Urdf {
+        robot: name.to_owned(),
+        reason,
+    };
+    let file = match package {
+        Some(p) => packages::package_root(p).map_err(urdf_err)?.join(path),
+        None => path.to_path_buf(),
+    };
+    let text =
+        std::fs::read_to_string(&file).map_err(|e| urdf_err(format!("{}: {e}", file.display())))?;
+    let urdf = crate::dynamics::parse_urdf(&text)?;
+    let tree = Tree::new(&urdf).map_err(urdf_err)?;
+    let model = Model::from_urdf_str(&text, BaseJoint::Floating)?;
+    let mut data = Data::new(&model);
+    forward_kinematics(&model, &mut data, &model.neutral())?;
+    let pose = Pose {
+        model: &model,
+        data,
+    };
+    let urdf_dir = file.parent();
+    let mut notes = Vec::new();
+
+    let (feet_found, forward) = find_feet(&urdf, urdf_dir, &tree, &pose, &mut notes)?;
+    // The robot's frame in the base's: x its front (the toes), y its left.
+    let axes = robot_axes(&forward);
+    let to_robot = axes.transpose();
+    let [a, b] = feet_found;
+    let (left, right) = if (to_robot * a.centroid).y > 0.0 {
+        (a, b)
+    } else {
+        (b, a)
+    };
+    let feet = [
+        sole_for(&left, "left", &tree, &pose, &axes, &mut notes)?,
+        sole_for(&right, "right", &tree, &pose, &axes, &mut notes)?,
+    ];
+
+    // The arms: the upper body is what the legs are not.
+    let pelvis = tree.common(&left.link, &right.link).to_owned();
+    let mut legs = Vec::new();
+    for f in [&left, &right] {
+        let up = tree.ancestors(&f.link);
+        if let Some(k) = up.iter().position(|l| *l == pelvis)
+            && k > 0
+        {
+            legs.extend(tree.subtree(up[k - 1]));
+        }
+    }
+    let root_at = pose.link(&tree.root)?.trans;
+    let arm_tip = |side: f64| -> Result<Option<String>, RobotError> {
+        let mut best: Option<(usize, f64, String)> = None;
+        for l in &urdf.links {
+            if legs.contains(&l.name) {
+                continue;
+            }
+            let y = (to_robot * (pose.link(&l.name)?.trans - root_at)).y * side;
+            if y < 0.02 {
+                continue;
+            }
+            let d = tree.depth(&l.name);
+            if best
+                .as_ref()
+                .is_none_or(|(bd, by, _)| d > *bd || (d == *bd && y > *by))
+            {
+                best = Some((d, y, l.name.clone()));
+            }
+        }
+        Ok(best.map(|b| b.2))
+    };
+    let right_tip = arm_tip(-1.0)?.ok_or_else(|| {
+        RobotError::Feet(
+            "no right arm found (no link right of the base above the legs): write [hand] \
+             by hand"
+                .into(),
+        )
+    })?;
+    let chain_root = match arm_tip(1.0)? {
+        Some(l) => tree.common(&right_tip, &l).to_owned(),
+        None => {
+            notes.push("no left arm found: the arm's chain starts at the pelvis".into());
+            pelvis.clone()
+        }
+    };
+    let right_palm = palm(&tree, &chain_root, &right_tip);
+    let hand = hand_frame(&tree, &right_palm);
+    let mut locked: Vec<(String, f64)> = Vec::new();
+    let mut palms = vec![right_palm.clone()];
+    if let Some(l) = arm_tip(1.0)? {
+        palms.push(palm(&tree, &chain_root, &l));
+    }
+    let mut fingers = 0;
+    for p in &palms {
+        for l in tree.subtree(p).iter().skip(1) {
+            if let Some((_, true)) = tree.parent.get(l)
+                && let Some(j) = urdf.joints.iter().find(|j| &j.child.link == l)
+            {
+                locked.push((j.name.clone(), lock_value(&model, &j.name)));
+                fingers += 1;
+            }
+        }
+    }
+    if fingers > 0 {
+        notes.push(format!(
+            "{fingers} joints below the hands (fingers) are locked: the door is held by the hand"
+        ));
+    }
+    // Joints that still move no mass (M singular): locked too.
+    let names: HashMap<String, f64> = locked.iter().cloned().collect();
+    let reduced = Model::from_urdf_str_locked(&text, BaseJoint::Floating, &names)?;
+    let inert: Vec<String> = reduced
+        .inert_joints()
+        .into_iter()
+        .map(|i| reduced.joints[i].name.clone())
+        .collect();
+    if !inert.is_empty() {
+        notes.push(format!(
+            "{} joints move no mass (massless links in the URDF) and are locked: {}",
+            inert.len(),
+            inert.join(", ")
+        ));
+        for n in inert {
+            let v = lock_value(&model, &n);
+            locked.push((n, v));
+        }
+    }
+
+    // Point masses (MuJoCo refuses them): a floor on their moments.
+    let points: Vec<String> = reduced
+        .joints
+        .iter()
+        .filter(|j| {
+            j.inertia.mass > 0.0
+                && nalgebra::SymmetricEigen::new(j.inertia.inertia_com())
+                    .eigenvalues
+                    .min()
+                    <= POINT_MASS
+        })
+        .map(|j| j.body.clone())
+        .collect();
+    let inertia_floor = (!points.is_empty()).then(|| {
+        notes.push(format!(
+            "{} links are point masses (no rotational inertia: {}): inertia_floor gives them \
+             {INERTIA_FLOOR:e} kg·m² about each axis",
+            points.len(),
+            points.join(", ")
+        ));
+        INERTIA_FLOOR
+    });
+
+    let imu = model
+        .frames
+        .iter()
+        .filter(|f| f.name.to_ascii_lowercase().contains("imu"))
+        .min_by_key(|f| f.parent.map_or(0, |j| tree.depth(&model.joints[j].body)))
+        .map(|f| f.name.clone());
+
+    // The stance: the base lower by CROUCH of its height, the hand forward of its shoulder.
+    let ground = left.lowest.min(right.lowest);
+    let base_height = root_at.z - ground;
+    let centre = (left.centroid + right.centroid) / 2.0;
+    let shoulder = first_moving(&tree, &chain_root, &right_palm)
+        .map(|l| pose.link(l).map(|p| p.trans))
+        .transpose()?
+        .unwrap_or(root_at);
+    let arm = (pose.link(&hand)?.trans - shoulder).norm();
+    let s = to_robot * (shoulder - centre);
+    let crouch = round3(CROUCH * base_height);
+    let hand_target = [
+        round3(s.x + HAND_FORWARD * arm),
+        round3(s.y - HAND_OUT * arm),
+        round3(shoulder.z - ground - crouch - HAND_DOWN * arm),
+    ];
+
+    let draft = Draft {
+        name: name.to_owned(),
+        package: package.map(str::to_owned),
+        path: if package.is_some() {
+            path.to_path_buf()
+        } else {
+            std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf())
+        },
+        feet,
+        hand,
+        chain_root,
+        imu,
+        locked,
+        crouch,
+        hand_target,
+        inertia_floor,
+        notes,
+    };
+    Ok(draft)
+}
+
+/// Loads a draft as `upc run` would (solving its stance): its text with the solved posture as
+/// `[home]`, and the robot.
+pub fn solve(draft: &mut Draft) -> Result<(String, Robot), RobotError> {
+    let first = draft.to_toml(&BTreeMap::new());
+    let robot = Robot::parse(&first, "<drafted description>", None)?;
+    // A target out of the arm's reach: the draft holds the hand where the arm reached.
+    let reached = robot.derived.hand_position;
+    let miss = (reached - Vector3::from(draft.hand_target)).norm();
+    if miss > 5e-3 {
+        draft.notes.push(format!(
+            "the hand's first target was {:.0} mm out of the arm's reach: [stance] hand is \
+             where it reached",
+            miss * 1e3
+        ));
+        draft.hand_target = [reached.x, reached.y, reached.z].map(round3);
+    }
+    // A foot wider than long is a foot turned: most often a mesh whose COLLADA up axis the
+    // URDF's author read otherwise (upc reads it as Assimp does, as Pinocchio and ROS do).
+    let mut data = crate::dynamics::Data::new(&robot.model);
+    forward_kinematics(&robot.model, &mut data, &robot.home)?;
+    for (k, side) in ["left", "right"].iter().enumerate() {
+        let mut lo = Vector3::repeat(f64::INFINITY);
+        let mut hi = Vector3::repeat(f64::NEG_INFINITY);
+        for c in &robot.contacts[4 * k..4 * k + 4] {
+            let p = data.o_m_f[robot.model.frame_id(c)?].trans;
+            lo = lo.inf(&p);
+            hi = hi.sup(&p);
+        }
+        let (long, wide) = (hi.x - lo.x, hi.y - lo.y);
+        if wide > long {
+            draft.notes.push(format!(
+                "the {side} foot's support is wider ({:.0} mm) than long ({:.0} mm): its \
+                 geometry may be turned (a COLLADA mesh's up axis read otherwise by the URDF's \
+                 author?); check it with upc model, or list the contacts",
+                wide * 1e3,
+                long * 1e3
+            ));
+        }
+    }
+    let mut home = BTreeMap::new();
+    for j in robot.model.joints.iter().filter(|j| j.nq() == 1) {
+        let v = robot.home[j.idx_q];
+        if v.abs() > 5e-5 {
+            home.insert(j.name.clone(), v);
+        }
+    }
+    let text = draft.to_toml(&home);
+    let robot = Robot::parse(&text, "<drafted description>", None)?;
+    Ok((text, robot))
+}
+
+/// The two feet (either side of the base) and the way the robot faces (a horizontal unit
+/// vector in the base's frame).
+fn find_feet(
+    urdf: &urdf_rs::Robot,
+    urdf_dir: Option<&Path>,
+    tree: &Tree,
+    pose: &Pose,
+    notes: &mut Vec<String>,
+) -> Result<([FootFound; 2], Vector3<f64>), RobotError> {
+    let root = pose.link(&tree.root)?;
+    let base_rot = root.rot;
+    // Links below the base with geometry upc reads: (link, lowest z).
+    let candidates = |visual: bool| -> Result<Vec<(String, f64)>, RobotError> {
+        let mut found = Vec::new();
+        for l in &urdf.links {
+            let at = pose.link(&l.name)?;
+            if at.trans.z >= root.trans.z {
+                continue;
+            }
+            // A link whose geometry cannot be read is not a foot upc can stand on.
+            let Ok(c) = feet::geometry_points(urdf, urdf_dir, &l.name, visual) else {
+                continue;
+            };
+            let lowest = c
+                .points
+                .iter()
+                .zip(&c.radii)
+                .map(|(p, r)| at.act_point(p).z - r)
+                .fold(f64::INFINITY, f64::min);
+            found.push((l.name.clone(), lowest));
+        }
+        Ok(found)
+    };
+    let mut visual = false;
+    let mut found = candidates(false)?;
+    let two_legs = |found: &[(String, f64)]| {
+        found
+            .iter()
+            .any(|a| found.iter().any(|b| tree.apart(&a.0, &b.0)))
+    };
+    if !two_legs(&found) {
+        // No collision geometry on the legs (a URDF made for drawing): the visual's.
+        visual = true;
+        found = candidates(true)?;
+        notes.push(
+            "the legs have no collision geometry: the feet and their contacts come from the \
+             visual meshes (listed as points below)"
+                .into(),
+        );
+    }
+    let pick = |other: Option<&str>| -> Result<FootFound, RobotError> {
+        // The other foot is on another leg: no moving joint in common.
+        let side: Vec<&(String, f64)> = found
+            .iter()
+            .filter(|f| other.is_none_or(|o| tree.apart(&f.0, o)))
+            .collect();
+        let low = side.iter().map(|f| f.1).fold(f64::INFINITY, f64::min);
+        let link = side
+            .iter()
+            .filter(|f| f.1 < low + ON_GROUND)
+            .min_by(|a, b| {
+                tree.depth(&a.0)
+                    .cmp(&tree.depth(&b.0))
+                    .then(a.1.total_cmp(&b.1))
+            })
+            .map(|f| f.0.clone())
+            .ok_or_else(|| {
+                RobotError::Feet(format!(
+                    "no {} foot found (no link below the base with collision or visual geometry \
+                     upc reads{}): write [feet] by hand",
+                    if other.is_some() { "second" } else { "" },
+                    other.map_or(String::new(), |o| format!(" on another leg than `{o}`"))
+                ))
+            })?;
+        let at = pose.link(&link)?;
+        let c = feet::geometry_points(urdf, urdf_dir, &link, visual)?;
+        // The support in the base's axes about the link's origin.
+        let to_base = SE3::new(base_rot.transpose() * at.rot, Vector3::zeros());
+        let support = feet::lowest_four(&c, &to_base, &link)?;
+        let centroid_rel = support.iter().sum::<Vector3<f64>>() / 4.0;
+        let body = tree.body(&link);
+        let ankle = base_rot.transpose() * (pose.link(body)?.trans - root.trans);
+        let origin = base_rot.transpose() * (at.trans - root.trans);
+        Ok(FootFound {
+            ankle,
+            centroid: origin + centroid_rel,
+            lowest: low,
+            geometry: visual.then_some(c),
+            link,
+        })
+    };
+    let a = pick(None)?;
+    let b = pick(Some(&a.link))?;
+    if (a.lowest - b.lowest).abs() > 0.02 {
+        return Err(RobotError::Feet(format!(
+            "the feet found ({}, {}) are {:.0} mm apart in height at the zero posture: not a \
+             robot standing straight there; write [feet] by hand",
+            a.link,
+            b.link,
+            (a.lowest - b.lowest).abs() * 1e3
+        )));
+    }
+    // The knees bend backward; failing a knee, the toes: the support reaches further ahead of
+    // the ankle than behind it.
+    let knees = [knee_forward(pose, &a.link)?, knee_forward(pose, &b.link)?];
+    let ahead = (a.centroid.x - a.ankle.x) + (b.centroid.x - b.ankle.x);
+    let forward = match knees {
+        [Some(x), Some(y)] if x.dot(&y) > 0.9 => (x + y).normalize(),
+        _ => {
+            let sign = if ahead < 0.0 { -1.0 } else { 1.0 };
+            notes.push(format!(
+                "no knee bends both legs the same way: the robot is taken to face the base's \
+                 {}x, where the soles reach {:.0} mm beyond the ankles; check the feet's x axes \
+                 with upc model",
+                if sign > 0.0 { "+" } else { "−" },
+                ahead.abs() / 2.0 * 1e3,
+            ));
+            Vector3::x() * sign
+        }
+    };
+    Ok(([a, b], forward))
+}
+
+/// The way a leg faces (a horizontal unit vector in the base's frame), from its knee: the leg's
+/// revolute joint with a horizontal axis nearest midway between hip and ankle, whose larger
+/// range (flexion) swings the ankle backward. `None` without such a joint.
+fn knee_forward(pose: &Pose, foot: &str) -> Result<Option<Vector3<f64>>, RobotError> {
+    let model = pose.model;
+    let mut chain = Vec::new();
+    let mut cur = model.frames[model.frame_id(foot)?].parent;
+    while let Some(j) = cur {
+        if let crate::dynamics::JointKind::Revolute { axis } = model.joints[j].kind {
+            chain.push((j, axis));
+        }
+        cur = model.joints[j].parent;
+    }
+    let (Some(ankle), Some(hip)) = (chain.first(), chain.last()) else {
+        return Ok(None);
+    };
+    let at = |j: usize| pose.data.o_m_i[j].trans;
+    let (za, zh) = (at(ankle.0).z, at(hip.0).z);
+    let knee = chain
+        .iter()
+        .map(|&(j, axis)| (j, pose.data.o_m_i[j].rot * axis))
+        .filter(|(j, w)| w.z.abs() < 0.3 && at(*j).z > za + 0.02 && at(*j).z < zh - 0.02)
+        .min_by(|a, b| {
+            let mid = (za + zh) / 2.0;
+            (at(a.0).z - mid).abs().total_cmp(&(at(b.0).z - mid).abs())
+        });
+    let Some((k, w)) = knee else {
+        return Ok(None);
+    };
+    let l = &model.joints[k].limits;
+    let flexion = if l.upper.abs() >= l.lower.abs() {
+        1.0
+    } else {
+        -1.0
+    };
+    let swing = flexion * w.cross(&(at(ankle.0) - at(k)));
+    let back = pose.data.o_m_i[0].rot.transpose() * swing;
+    let back = Vector3::new(back.x, back.y, 0.0);
+    Ok((back.norm() > 1e-6).then(|| -back.normalize()))
+}
+
+/// The robot's axes in the base's frame (columns): x forward, y its left, z up.
+fn robot_axes(forward: &Vector3<f64>) -> Matrix3<f64> {
+    let z = Vector3::z();
+    Matrix3::from_columns(&[*forward, z.cross(forward), z])
+}
+
+/// The sole frame of a found foot: the URDF's, when a level frame named `*sole*` on the foot
+/// faces the toes; else made on the link, turned to face them with z up.
+fn sole_for(
+    f: &FootFound,
+    side: &str,
+    tree: &Tree,
+    pose: &Pose,
+    axes: &Matrix3<f64>,
+    notes: &mut Vec<String>,
+) -> Result<DraftFoot, RobotError> {
+    let model = pose.model;
+    let base = pose.link(&tree.root)?.rot;
+    let body = model.frames[model.frame_id(&f.link)?].parent;
+    let want = base * axes;
+    for (k, fr) in model.frames.iter().enumerate() {
+        if f.geometry.is_some()
+            || fr.parent != body
+            || !fr.name.to_ascii_lowercase().contains("sole")
+        {
+            continue;
+        }
+        let r = pose.data.o_m_f[k].rot;
+        let off = Rotation3::from_matrix_unchecked(want.transpose() * r).angle();
+        if off < 1f64.to_radians() {
+            // The URDF's own corner frames, when it has them, are the contacts.
+            let corners = super::CORNERS
+                .iter()
+                .all(|c| model.frame_id(&format!("{}_{c}", fr.name)).is_ok());
+            return Ok(DraftFoot {
+                link: f.link.clone(),
+                frame: fr.name.clone(),
+                rpy: None,
+                xyz: None,
+                contacts: None,
+                corner_frames: corners,
+                urdf_frame: true,
+            });
+        }
+    }
+    let link_rot = pose.link(&f.link)?.rot;
+    let turn = Rotation3::from_matrix_unchecked(link_rot.transpose() * want);
+    let rpy = (turn.angle() > 1e-9).then(|| {
+        let (r, p, y) = turn.euler_angles();
+        [r, p, y].map(|x| (x * 1e6).round() / 1e6)
+    });
+    if rpy.is_some() {
+        notes.push(format!(
+            "the {side} foot link `{}` is not level with its toes along x at the zero posture: \
+             its sole frame is turned by `origin.rpy`",
+            f.link
+        ));
+    }
+    let mut frame = format!("{side}_sole");
+    if model.frame_id(&frame).is_ok() {
+        frame = format!("upc_{side}_sole");
+    }
+    // From visual geometry, the points are listed: the frame at their centroid.
+    let (mut xyz, mut contacts) = (None, None);
+    if let Some(g) = &f.geometry {
+        let p = feet::lowest_four(
+            g,
+            &SE3::new(turn.matrix().transpose(), Vector3::zeros()),
+            &f.link,
+        )?;
+        let c = p.iter().sum::<Vector3<f64>>() / 4.0;
+        let at = turn * c;
+        xyz = Some([at.x, at.y, at.z].map(|x| (x * 1e4).round() / 1e4));
+        contacts = Some(
+            p.iter()
+                .map(|x| {
+                    let d = x - c;
+                    [d.x, d.y, d.z].map(|v| (v * 1e4).round() / 1e4)
+                })
+                .collect(),
+        );
+    }
+    Ok(DraftFoot {
+        link: f.link.clone(),
+        frame,
+        rpy: rpy.or(xyz.map(|_| [0.0; 3])),
+        xyz,
+        contacts,
+        corner_frames: false,
+        urdf_frame: false,
+    })
+}
+
+/// Where an arm's chain from `root` to `tip` branches into fingers (three moving joints or
+/// more below `root`), or the tip's body when it never does.
+fn palm(tree: &Tree, root: &str, tip: &str) -> String {
+    let mut path: Vec<&str> = tree.ancestors(tip);
+    let k = path.iter().position(|l| *l == root).unwrap_or(path.len());
+    path.truncate(k);
+    path.reverse();
+    let mut joints = 0;
+    for l in &path {
+        if tree.parent.get(*l).is_some_and(|p| p.1) {
+            joints += 1;
+        }
+        if joints >= 3 && (tree.moving_branches(l) >= 2 || tree.grips(l)) {
+            return (*l).to_owned();
+        }
+    }
+    tree.body(tip).to_owned()
+}
+
+/// The hand's frame: the palm, or a link fixed to it whose name says hand, palm, gripper.
+fn hand_frame(tree: &Tree, palm: &str) -> String {
+    let mut fixed = vec![palm.to_owned()];
+    let mut k = 0;
+    while k < fixed.len() {
+        if let Some(c) = tree.children.get(&fixed[k]) {
+            fixed.extend(c.iter().filter(|(_, m)| !m).map(|(l, _)| l.clone()));
+        }
+        k += 1;
+    }
+    let score = |n: &str| {
+        let n = n.to_ascii_lowercase();
+        HAND_NAMES
+            .iter()
+            .position(|h| n.contains(h))
+            .map_or(0, |p| HAND_NAMES.len() - p)
+    };
+    // A name that ends with the word (`r_hand`) names the hand itself, not a part of it
+    // (`r_hand_link`, `gripper_right_fingertip_1_link`).
+    let ends = |n: &str| {
+        let n = n.to_ascii_lowercase();
+        HAND_NAMES.iter().any(|h| n.ends_with(h))
+    };
+    fixed
+        .iter()
+        .max_by_key(|n| (score(n), ends(n), n.as_str() == palm))
+        .cloned()
+        .unwrap_or_else(|| palm.to_owned())
+}
+
+/// The first link a moving joint carries on the way from `root` to `to` (the shoulder).
+fn first_moving<'a>(tree: &'a Tree, root: &str, to: &'a str) -> Option<&'a str> {
+    let path = tree.ancestors(to);
+    let k = path.iter().position(|l| *l == root)?;
+    path[..k]
+        .iter()
+        .rev()
+        .find(|l| tree.parent.get(**l).is_some_and(|p| p.1))
+        .copied()
+}
+
+/// A locked joint's value: 0, or its nearer limit when 0 is outside them.
+fn lock_value(model: &Model, joint: &str) -> f64 {
+    model
+        .joint_id(joint)
+        .ok()
+        .map(|i| &model.joints[i].limits)
+        .map_or(0.0, |l| {
+            if l.lower > 0.0 {
+                l.lower
+            } else if l.upper < 0.0 {
+                l.upper
+            } else {
+                0.0
+            }
+        })
+}
+
+fn round3(x: f64) -> f64 {
+    (x * 1e3).round() / 1e3
+}
+
+impl Draft {
+    /// The description as TOML, commented, with `home` as its `[home]` table.
+    pub fn to_toml(&self, home: &BTreeMap<String, f64>) -> String {
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "# Drafted by `upc robot init` from the URDF alone (README, \"Bring your robot\").\n\
+             # Check it with `upc model --robot <this file>`; every choice below may be edited."
+        );
+        for n in &self.notes {
+            let _ = writeln!(s, "# - {n}");
+        }
+        let _ = writeln!(s, "name = {:?}", self.name);
+        let _ = writeln!(
+            s,
+            "description = {:?}",
+            format!("{} (drafted from {})", self.name, self.path.display())
+        );
+        if let Some(f) = self.inertia_floor {
+            let _ = writeln!(s, "inertia_floor = {f:e}");
+        }
+        let _ = writeln!(s, "\n[urdf]");
+        if let Some(p) = &self.package {
+            let _ = writeln!(s, "package = {p:?}");
+        }
+        let _ = writeln!(s, "path = {:?}", self.path.display().to_string());
+        for (side, f) in ["left", "right"].iter().zip(&self.feet) {
+            let contacts = if f.corner_frames {
+                "the URDF's corner frames"
+            } else if f.contacts.is_some() {
+                "its visual mesh's lowest face's corners"
+            } else {
+                "its collision geometry's lowest face's corners"
+            };
+            let _ = writeln!(
+                s,
+                "\n# The link reaching lowest on this leg; contacts: {contacts}.\n[feet.{side}]"
+            );
+            let _ = writeln!(s, "frame = {:?}", f.frame);
+            let _ = writeln!(s, "link = {:?}", f.link);
+            match (f.xyz, f.rpy) {
+                (Some([x, y, z]), Some([r, p, w])) => {
+                    let _ = writeln!(
+                        s,
+                        "origin = {{ xyz = [{x}, {y}, {z}], rpy = [{r}, {p}, {w}] }}"
+                    );
+                }
+                (None, Some([r, p, y])) => {
+                    let _ = writeln!(s, "origin = {{ rpy = [{r}, {p}, {y}] }}");
+                }
+                _ => {}
+            }
+            match &f.contacts {
+                Some(c) => {
+                    let list: Vec<String> = c
+                        .iter()
+                        .map(|[x, y, z]| format!("[{x}, {y}, {z}]"))
+                        .collect();
+                    let _ = writeln!(s, "contacts = [{}]", list.join(", "));
+                }
+                None if f.corner_frames => {
+                    let _ = writeln!(s, "contacts = \"frames\"");
+                }
+                None => {
+                    let _ = writeln!(s, "contacts = \"collision\"");
+                }
+            }
+        }
+        let _ = writeln!(
+            s,
+            "\n# The right arm's end (where it branches into fingers); its chain from the link \
+             both arms share.\n[hand]\nframe = {:?}\nchain_root = {:?}",
+            self.hand, self.chain_root
+        );
+        match &self.imu {
+            Some(i) => {
+                let _ = writeln!(s, "\n[imu]\nframe = {i:?}");
+            }
+            None => {
+                let _ = writeln!(
+                    s,
+                    "\n# No frame named *imu*: the IMU is taken on the base, aligned with it."
+                );
+            }
+        }
+        if !self.locked.is_empty() {
+            let names: Vec<String> = self.locked.iter().map(|(n, _)| format!("{n:?}")).collect();
+            let _ = writeln!(
+                s,
+                "\n# Fingers and joints that move no mass.\n[locked]\njoints = [{}]",
+                names.join(", ")
+            );
+        }
+        let [x, y, z] = self.hand_target;
+        let _ = writeln!(
+            s,
+            "\n# The standing posture, solved at every load from [home] (soles flat, CoM over \
+             the feet, base upright\n# and `crouch` lower, the hand at `hand` from the feet's \
+             centre on the ground).\n[stance]\ncrouch = {}\nhand = [{x}, {y}, {z}]",
+            self.crouch
+        );
+        let mut table: BTreeMap<&str, f64> = home.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+        for (n, v) in &self.locked {
+            if *v != 0.0 {
+                table.insert(n, *v);
+            }
+        }
+        let _ = writeln!(
+            s,
+            "\n# The solved posture (rad), the stance's starting guess; locked joints at their \
+             value.\n[home]"
+        );
+        for (k, v) in table {
+            let _ = writeln!(s, "{k} = {:.6}", v);
+        }
+        s
+    }
+}
