@@ -94,6 +94,21 @@ fn robot_facts_are_values_not_config_layers() {
 fn forces_scale_with_the_robot_mass() {
     let r = Robot::embedded_default().expect("robot");
     assert_eq!(r.force_scale().expect("scale"), 1.0);
+    // Another posture under the default's name is another arm: its own scale (a description
+    // drafted from the default's URDF is named so).
+    let bent = Robot::parse(
+        "extends = \"icub_like\"\nname = \"icub_like\"\n[home]\nr_elbow = 0.3\n",
+        "<test>",
+        None,
+    )
+    .expect("a variant");
+    let (mass, capacity) = upc::robot::reference().expect("reference");
+    let want = (bent.derived.mass / mass).min(bent.derived.hand_force_capacity / capacity);
+    assert!(
+        (want - 1.0).abs() > 0.01,
+        "the variant's arm holds as much: {want}"
+    );
+    assert_eq!(bent.force_scale().expect("scale"), want);
     let s = Scenario::load("multiple_impacts").expect("scenario");
     let same = s.clone().with_force_scale(1.0);
     assert_eq!(same.content_hash(), s.content_hash());

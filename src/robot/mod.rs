@@ -351,11 +351,9 @@ impl Robot {
     /// embedded default): its mass over the default's, so that a push moves the CoM about as
     /// much on every robot, but no more than its arm's force capacity over the default's
     /// ([`Derived::hand_force_capacity`]), so that the arm holds the door as the default's does.
-    /// 1 on the default robot.
+    /// 1 on the default robot (each ratio is a value over itself), and computed for any other,
+    /// whatever its name.
     pub fn force_scale(&self) -> Result<f64, RobotError> {
-        if self.name() == DEFAULT {
-            return Ok(1.0);
-        }
         let (mass, capacity) = reference()?;
         Ok((self.derived.mass / mass).min(self.derived.hand_force_capacity / capacity))
     }
