@@ -461,6 +461,17 @@ fn with_root_inertia(dir: &Path, inertia: &str, name: &str) -> (PathBuf, String)
     (path, text)
 }
 
+/// `upc sim` on `plant` with the robot `description` and `args`, to its end.
+fn sim(plant: &str, description: &Path, args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_upc"))
+        .args(["sim", "--plant", plant, "--robot"])
+        .arg(description)
+        .args(args)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("upc sim")
+}
+
 /// The plants to run: upc's, and MuJoCo's when it is built in (a visible skip otherwise).
 fn plants() -> Vec<&'static str> {
     let mut plants = vec!["upc"];
@@ -489,23 +500,12 @@ fn a_non_physical_inertia_is_refused_with_the_same_message_on_both_plants() {
     for part in ["link 'root_link'", "A + B ≥ C", "1.000e-3, 2.000e-3"] {
         assert!(err.contains(part), "{part}: {err}");
     }
-    let plants = plants();
-    for plant in plants {
-        let out = std::process::Command::new(env!("CARGO_BIN_EXE_upc"))
-            .args([
-                "sim",
-                "--plant",
-                plant,
-                "--mode",
-                "lockstep",
-                "--duration",
-                "0.01",
-            ])
-            .arg("--robot")
-            .arg(&description)
-            .env("RUST_LOG", "warn")
-            .output()
-            .expect("upc sim");
+    for plant in plants() {
+        let out = sim(
+            plant,
+            &description,
+            &["--mode", "lockstep", "--duration", "0.01"],
+        );
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{plant}: {stderr}");
         assert!(stderr.contains(&err), "{plant}: {stderr}");
@@ -546,27 +546,23 @@ fn a_point_mass_is_refused_on_both_plants_and_runs_with_an_inertia_floor() {
             assert!((ia - ib).norm() < 1e-15, "{}: {ia} vs {ib}", a.body);
         }
     }
-    let plants = plants();
-    for plant in plants {
+    for plant in plants() {
         for (description, runs) in [(&refused, false), (&floored, true)] {
             // Real time for 50 steps: without a controller the plant holds the robot, and
             // has built and stepped the model.
             let prefix = format!("pointmass{}", std::process::id());
-            let out = std::process::Command::new(env!("CARGO_BIN_EXE_upc"))
-                .args([
-                    "sim",
-                    "--plant",
-                    plant,
+            let out = sim(
+                plant,
+                description,
+                &[
                     "--mode",
                     "realtime",
                     "--duration",
                     "0.05",
-                ])
-                .args(["--prefix", &prefix, "--robot"])
-                .arg(description)
-                .env("RUST_LOG", "warn")
-                .output()
-                .expect("upc sim");
+                    "--prefix",
+                    &prefix,
+                ],
+            );
             let stderr = String::from_utf8_lossy(&out.stderr);
             if runs {
                 assert!(out.status.success(), "{plant}: {stderr}");

@@ -321,8 +321,9 @@ pub fn draft(package: Option<&str>, path: &Path, name: &str) -> Result<Draft, Ro
                 .into(),
         )
     })?;
-    let chain_root = match arm_tip(1.0)? {
-        Some(l) => tree.common(&right_tip, &l).to_owned(),
+    let left_tip = arm_tip(1.0)?;
+    let chain_root = match &left_tip {
+        Some(l) => tree.common(&right_tip, l).to_owned(),
         None => {
             notes.push("no left arm found: the arm's chain starts at the pelvis".into());
             pelvis.clone()
@@ -332,8 +333,8 @@ pub fn draft(package: Option<&str>, path: &Path, name: &str) -> Result<Draft, Ro
     let hand = hand_frame(&tree, &right_palm);
     let mut locked: Vec<(String, f64)> = Vec::new();
     let mut palms = vec![right_palm.clone()];
-    if let Some(l) = arm_tip(1.0)? {
-        palms.push(palm(&tree, &chain_root, &l));
+    if let Some(l) = &left_tip {
+        palms.push(palm(&tree, &chain_root, l));
     }
     let mut fingers = 0;
     for p in &palms {
@@ -703,7 +704,7 @@ fn sole_for(
     let turn = Rotation3::from_matrix_unchecked(link_rot.transpose() * want);
     let rpy = (turn.angle() > 1e-9).then(|| {
         let (r, p, y) = turn.euler_angles();
-        [r, p, y].map(|x| (x * 1e6).round() / 1e6)
+        [r, p, y].map(|x| round_to(x, 1e-6))
     });
     if rpy.is_some() {
         notes.push(format!(
@@ -726,12 +727,12 @@ fn sole_for(
         )?;
         let c = p.iter().sum::<Vector3<f64>>() / 4.0;
         let at = turn * c;
-        xyz = Some([at.x, at.y, at.z].map(|x| (x * 1e4).round() / 1e4));
+        xyz = Some([at.x, at.y, at.z].map(|x| round_to(x, 1e-4)));
         contacts = Some(
             p.iter()
                 .map(|x| {
                     let d = x - c;
-                    [d.x, d.y, d.z].map(|v| (v * 1e4).round() / 1e4)
+                    [d.x, d.y, d.z].map(|v| round_to(v, 1e-4))
                 })
                 .collect(),
         );
@@ -824,8 +825,13 @@ fn lock_value(model: &Model, joint: &str) -> f64 {
         })
 }
 
+/// `x` to the nearest multiple of `step` (what the description shows: mm, 0.1 mm, µrad).
+fn round_to(x: f64, step: f64) -> f64 {
+    (x / step).round() * step
+}
+
 fn round3(x: f64) -> f64 {
-    (x * 1e3).round() / 1e3
+    round_to(x, 1e-3)
 }
 
 impl Draft {
