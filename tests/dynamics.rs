@@ -1157,3 +1157,71 @@ fn joints_that_move_no_mass_are_found_and_make_m_singular() {
     assert!(names(&model).is_empty());
     assert!(factors(&model), "M factors with both rotor inertias");
 }
+
+/// `[urdf] root_rpy`: the root link hung turned from an upright base is the same robot. At a
+/// base orientation turned back by the same rotation, every frame, the CoM and the joints'
+/// mass matrix are the original model's.
+#[test]
+fn a_turned_root_is_the_same_robot_on_an_upright_base() {
+    let original = humanoid();
+    let rpy = [std::f64::consts::FRAC_PI_2, 0.0, 0.3];
+    let mut urdf = parse_urdf(icub_like::URDF).expect("the humanoid's URDF parses");
+    let root = urdf
+        .links
+        .iter()
+        .find(|l| urdf.joints.iter().all(|j| j.child.link != l.name))
+        .expect("a root link")
+        .name
+        .clone();
+    turn_root(&mut urdf, rpy).expect("the root turns");
+    let turned = Model::from_urdf_robot_locked(&urdf, BaseJoint::Floating, &Default::default())
+        .expect("the turned model builds");
+    assert_eq!(turned.nv, original.nv);
+    assert!((turned.total_mass() - original.total_mass()).abs() < 1e-12);
+    let r0 = SE3::from_xyz_rpy([0.0; 3], rpy);
+    // At the neutral posture the root link's frame is the turn itself.
+    let mut d = Data::new(&turned);
+    forward_kinematics(&turned, &mut d, &turned.neutral()).unwrap();
+    update_frame_placements(&turned, &mut d);
+    let at = d.o_m_f[turned.frame_id(&root).unwrap()];
+    assert!((at.rot - r0.rot).abs().max() < 1e-12, "{at:?}");
+
+    let mut rng = Rng(0x5eed_7a11);
+    for _ in 0..5 {
+        let q = rng.configuration(&original);
+        // The same joints; the base turned back: R_turned = R_original R0ᵀ.
+        let mut qt = q.clone();
+        let quat = |q: &DVector<f64>| {
+            nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                q[6], q[3], q[4], q[5],
+            ))
+        };
+        let rot = quat(&q).to_rotation_matrix().into_inner() * r0.rot.transpose();
+        let c = nalgebra::UnitQuaternion::from_matrix(&rot)
+            .quaternion()
+            .coords;
+        for k in 0..4 {
+            qt[3 + k] = c[k];
+        }
+        let (mut a, mut b) = (Data::new(&original), Data::new(&turned));
+        forward_kinematics(&original, &mut a, &q).unwrap();
+        forward_kinematics(&turned, &mut b, &qt).unwrap();
+        update_frame_placements(&original, &mut a);
+        update_frame_placements(&turned, &mut b);
+        for (k, f) in original.frames.iter().enumerate() {
+            let g = b.o_m_f[turned.frame_id(&f.name).unwrap()];
+            let e = (a.o_m_f[k].trans - g.trans).norm() + (a.o_m_f[k].rot - g.rot).abs().max();
+            assert!(e < 1e-12, "frame {}: {e:e}", f.name);
+        }
+        let ca = center_of_mass(&original, &mut a, &q).unwrap();
+        let cb = center_of_mass(&turned, &mut b, &qt).unwrap();
+        assert!((ca - cb).norm() < 1e-12);
+        let ma = crba(&original, &mut a, &q).unwrap().clone();
+        let mb = crba(&turned, &mut b, &qt).unwrap().clone();
+        let n = original.nv - 6;
+        let joints = (ma.view((6, 6), (n, n)) - mb.view((6, 6), (n, n)))
+            .abs()
+            .max();
+        assert!(joints < 1e-10, "joints' mass matrix differs by {joints:e}");
+    }
+}

@@ -46,4 +46,4 @@ pub use model::{Frame, Joint, JointLimits, Model};
 pub use op_space::OpSpaceWorkspace;
 pub use rnea::{gravity_torques, nonlinear_effects, rnea};
 pub use spatial::{Force, Inertia, Motion, SE3};
-pub use urdf::{BaseJoint, ROOT_JOINT_NAME, parse_urdf};
+pub use urdf::{BaseJoint, ROOT_JOINT_NAME, UPRIGHT_BASE, parse_urdf, turn_root};

@@ -69,7 +69,17 @@ impl Model {
         base: BaseJoint,
         locked: &HashMap<String, f64>,
     ) -> Result<Model, DynamicsError> {
-        let model = build(&parse_urdf(text)?, base, locked)?;
+        Self::from_urdf_robot_locked(&parse_urdf(text)?, base, locked)
+    }
+
+    /// [`Model::from_urdf_str_locked`] on a URDF already parsed (and perhaps turned upright by
+    /// [`turn_root`]).
+    pub fn from_urdf_robot_locked(
+        robot: &urdf_rs::Robot,
+        base: BaseJoint,
+        locked: &HashMap<String, f64>,
+    ) -> Result<Model, DynamicsError> {
+        let model = build(robot, base, locked)?;
         for w in &model.load_warnings {
             tracing::warn!("URDF `{}`: {w}", model.name);
         }
@@ -82,6 +92,72 @@ impl Model {
 pub fn parse_urdf(text: &str) -> Result<urdf_rs::Robot, DynamicsError> {
     let text = without_empty_textures(text);
     urdf_rs::read_from_string(&text).map_err(|e| diagnose(&text, &e.to_string()))
+}
+
+/// The link [`turn_root`] adds above a URDF's root link: the floating base upc stands upright.
+pub const UPRIGHT_BASE: &str = "upright_base";
+
+/// Hangs the URDF's root link, turned by `rpy` (URDF's roll-pitch-yaw, rad), from a new massless
+/// root link [`UPRIGHT_BASE`] by a fixed joint: for a URDF whose root link's z axis is not up
+/// at the zero posture (a human model in the ISB convention has y up), the floating base is
+/// then upright at the identity and the root link keeps its frame, its inertia merged.
+pub fn turn_root(robot: &mut urdf_rs::Robot, rpy: [f64; 3]) -> Result<(), DynamicsError> {
+    let children: std::collections::HashSet<&str> =
+        robot.joints.iter().map(|j| j.child.link.as_str()).collect();
+    let roots: Vec<String> = robot
+        .links
+        .iter()
+        .filter(|l| !children.contains(l.name.as_str()))
+        .map(|l| l.name.clone())
+        .collect();
+    let root = match roots.as_slice() {
+        [] => return Err(DynamicsError::NoRoot),
+        [r] if r == "world" => {
+            return Err(DynamicsError::InvalidJoint {
+                joint: UPRIGHT_BASE.into(),
+                reason: "a URDF rooted at `world` cannot be turned: turn its child's joint".into(),
+            });
+        }
+        [r] => r.clone(),
+        many => return Err(DynamicsError::MultipleRoots(many.join(", "))),
+    };
+    if robot.links.iter().any(|l| l.name == UPRIGHT_BASE) {
+        return Err(DynamicsError::DuplicateName {
+            what: "link",
+            name: UPRIGHT_BASE.into(),
+        });
+    }
+    robot.links.insert(
+        0,
+        urdf_rs::Link {
+            name: UPRIGHT_BASE.into(),
+            inertial: Default::default(),
+            visual: Vec::new(),
+            collision: Vec::new(),
+        },
+    );
+    robot.joints.insert(
+        0,
+        urdf_rs::Joint {
+            name: format!("{UPRIGHT_BASE}_to_{root}"),
+            joint_type: urdf_rs::JointType::Fixed,
+            origin: urdf_rs::Pose {
+                xyz: urdf_rs::Vec3([0.0; 3]),
+                rpy: urdf_rs::Vec3(rpy),
+            },
+            parent: urdf_rs::LinkName {
+                link: UPRIGHT_BASE.into(),
+            },
+            child: urdf_rs::LinkName { link: root },
+            axis: Default::default(),
+            limit: Default::default(),
+            calibration: None,
+            dynamics: None,
+            mimic: None,
+            safety_controller: None,
+        },
+    );
+    Ok(())
 }
 
 /// Largest principal moment below zero (kg·m²) that a repair may remove: a gram at a

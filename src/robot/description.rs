@@ -9,6 +9,7 @@
 //! [urdf]
 //! package = "example-robot-data"           # a registry package (scripts/setup.sh), or none:
 //! path = "robots/g1_description/urdf/g1_29dof_rev_1_0.urdf"   # relative to the package / this file
+//! root_rpy = [1.5708, 0.0, 0.0]            # optional: the root link turned, for a URDF not z-up
 //! [feet.left]
 //! frame = "left_sole"                      # the sole frame (z: the ground's normal)
 //! link = "left_ankle_roll_link"            # created on this link when the URDF has no such frame
@@ -105,6 +106,10 @@ pub struct UrdfSource {
     /// Path of the URDF: inside the package, or relative to the description file (then to the
     /// repository root, where the embedded robot's assets are).
     pub path: PathBuf,
+    /// The URDF's root link turned by this roll-pitch-yaw (rad) in the robot's base, for a
+    /// URDF whose z axis is not up at the zero posture (y up: `[1.5708, 0, 0]`).
+    #[serde(default)]
+    pub root_rpy: Option<[f64; 3]>,
 }
 
 #[derive(Debug, Clone, Deserialize)]

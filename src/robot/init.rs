@@ -1,6 +1,9 @@
 //! `upc robot init`: a robot description drafted from a URDF alone (README, "Bring your
 //! robot"). Everything is read from the kinematic tree and the geometry at the zero posture,
 //! where a URDF stands straight with its arms down:
+//! - which way is up: the root link's z, or, when no two feet stand level below the base along
+//!   −z (a human model's URDF has y up), the root link's axis whose turn down puts two feet
+//!   deepest below it, written as `[urdf] root_rpy`;
 //! - the feet: the link whose collision geometry reaches lowest (the shallowest of those that
 //!   reach it, so a foot before its toes), and the lowest on another leg (no moving joint in
 //!   common); the visual geometry when the legs have no collision geometry;
@@ -14,7 +17,9 @@
 //!   fixed frame of it that says `hand`, `palm` or `gripper` when there is one; the arms' chain
 //!   root is the link the two arms share (the torso after any waist joints);
 //! - the joints below the hands (fingers) and those that move no mass are locked; links with
-//!   mass and no rotational inertia get `inertia_floor`;
+//!   mass and no rotational inertia get `inertia_floor`; joints whose body has no mass (ball
+//!   joints split into one-axis joints) get `[armature]`, so that M stays invertible where
+//!   their axes align;
 //! - the IMU: a frame named `*imu*`, on the base if one is;
 //! - the posture: `[stance]`, knees bent by 5 % of the base's height, the hand held forward and
 //!   down of its shoulder, solved by [`super::stance`] and written out as `[home]`.
@@ -23,13 +28,14 @@
 //! it is written: what it writes, upc runs.
 
 use std::collections::{BTreeMap, HashMap};
+use std::f64::consts::{FRAC_PI_2, PI};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
 use super::{Robot, RobotError, feet, packages};
-use crate::dynamics::{BaseJoint, Data, Model, SE3, forward_kinematics};
+use crate::dynamics::{BaseJoint, Data, Model, SE3, forward_kinematics, turn_root};
 
 /// The knees' bend of the drafted stance: the base this fraction of its height lower.
 const CROUCH: f64 = 0.05;
@@ -46,6 +52,9 @@ const ON_GROUND: f64 = 5e-3;
 /// gives it (kg·m²: a radius of gyration of 1 mm for a 1 kg link).
 const POINT_MASS: f64 = 1e-15;
 const INERTIA_FLOOR: f64 = 1e-6;
+/// The armature a draft gives a joint whose body has no mass (kg·m²): the order of a
+/// humanoid joint's reflected rotor inertia (a 10 g·m² rotor-and-gear).
+const ARMATURE: f64 = 0.01;
 /// Names of the links a hand's fingers or gripper move.
 const FINGER_NAMES: [&str; 3] = ["finger", "thumb", "gripper"];
 /// Names of a hand's frame, best first.
@@ -69,6 +78,10 @@ pub struct Draft {
     pub hand_target: [f64; 3],
     /// `inertia_floor`, when the URDF has point masses.
     pub inertia_floor: Option<f64>,
+    /// `[urdf] root_rpy`, when the URDF's z is not up at the zero posture.
+    pub root_rpy: Option<[f64; 3]>,
+    /// Joints given [`ARMATURE`]: those whose body has no mass.
+    pub armature: Vec<String>,
     /// What the reader should know about the choices.
     pub notes: Vec<String>,
 }
@@ -226,7 +239,14 @@ struct Pose<'a> {
     data: Data,
 }
 
-impl Pose<'_> {
+impl<'a> Pose<'a> {
+    /// The zero posture, the base at the identity.
+    fn zero(model: &'a Model) -> Result<Self, RobotError> {
+        let mut data = Data::new(model);
+        forward_kinematics(model, &mut data, &model.neutral())?;
+        Ok(Pose { model, data })
+    }
+
     fn link(&self, name: &str) -> Result<SE3, RobotError> {
         Ok(self.data.o_m_f[self.model.frame_id(name)?])
     }
@@ -255,17 +275,21 @@ pub fn draft(package: Option<&str>, path: &Path, name: &str) -> Result<Draft, Ro
     };
     let text =
         std::fs::read_to_string(&file).map_err(|e| urdf_err(format!("{}: {e}", file.display())))?;
-    let urdf = crate::dynamics::parse_urdf(&text)?;
-    let tree = Tree::new(&urdf).map_err(urdf_err)?;
-    let model = Model::from_urdf_str(&text, BaseJoint::Floating)?;
-    let mut data = Data::new(&model);
-    forward_kinematics(&model, &mut data, &model.neutral())?;
-    let pose = Pose {
-        model: &model,
-        data,
-    };
+    let mut urdf = crate::dynamics::parse_urdf(&text)?;
     let urdf_dir = file.parent();
     let mut notes = Vec::new();
+    let root_rpy = upright_turn(&urdf, urdf_dir)?;
+    if let Some(rpy) = root_rpy {
+        turn_root(&mut urdf, rpy)?;
+        notes.push(format!(
+            "the URDF's z axis is not up at the zero posture: its root link is turned by \
+             [urdf] root_rpy = {}, which stands its feet under it",
+            list3(rpy)
+        ));
+    }
+    let tree = Tree::new(&urdf).map_err(urdf_err)?;
+    let model = Model::from_urdf_robot_locked(&urdf, BaseJoint::Floating, &HashMap::new())?;
+    let pose = Pose::zero(&model)?;
 
     let (feet_found, forward) = find_feet(&urdf, urdf_dir, &tree, &pose, &mut notes)?;
     // The robot's frame in the base's: x its front (the toes), y its left.
@@ -354,7 +378,7 @@ pub fn draft(package: Option<&str>, path: &Path, name: &str) -> Result<Draft, Ro
     }
     // Joints that still move no mass (M singular): locked too.
     let names: HashMap<String, f64> = locked.iter().cloned().collect();
-    let reduced = Model::from_urdf_str_locked(&text, BaseJoint::Floating, &names)?;
+    let reduced = Model::from_urdf_robot_locked(&urdf, BaseJoint::Floating, &names)?;
     let inert: Vec<String> = reduced
         .inert_joints()
         .into_iter()
@@ -370,6 +394,25 @@ pub fn draft(package: Option<&str>, path: &Path, name: &str) -> Result<Draft, Ro
             let v = lock_value(&model, &n);
             locked.push((n, v));
         }
+    }
+
+    // Joints whose body has no mass (a ball joint split into one-axis joints through massless
+    // links): a rotor's inertia keeps M invertible where two of their axes align (gimbal lock,
+    // which a falling robot reaches).
+    let armature: Vec<String> = reduced
+        .joints
+        .iter()
+        .filter(|j| j.nv() == 1 && j.inertia.mass <= 0.0)
+        .filter(|j| !locked.iter().any(|(n, _)| *n == j.name))
+        .map(|j| j.name.clone())
+        .collect();
+    if !armature.is_empty() {
+        notes.push(format!(
+            "{} joints carry a link without mass (ball joints split into one-axis joints): \
+             [armature] gives each {ARMATURE} kg·m², so that M stays invertible where their \
+             axes align",
+            armature.len()
+        ));
     }
 
     // Point masses (MuJoCo refuses them): a floor on their moments.
@@ -435,6 +478,8 @@ pub fn draft(package: Option<&str>, path: &Path, name: &str) -> Result<Draft, Ro
         crouch,
         hand_target,
         inertia_floor,
+        root_rpy,
+        armature,
         notes,
     };
     Ok(draft)
@@ -612,6 +657,46 @@ fn find_feet(
         }
     };
     Ok(([a, b], forward))
+}
+
+/// The turns [`upright_turn`] tries: the root link's x, −x, y, −y or z pointing down.
+const TURNS: [[f64; 3]; 5] = [
+    [0.0, FRAC_PI_2, 0.0],
+    [0.0, -FRAC_PI_2, 0.0],
+    [-FRAC_PI_2, 0.0, 0.0],
+    [FRAC_PI_2, 0.0, 0.0],
+    [PI, 0.0, 0.0],
+];
+
+/// The root link's turn that stands a URDF upright (`[urdf] root_rpy`): none when two feet are
+/// found below the base along −z (as URDFs mostly have it); otherwise, of the turns that put
+/// one of the root link's other axes down, the one whose two feet reach deepest below the base
+/// (the wrong turns find no two feet level, or a shallower pair such as the toes).
+fn upright_turn(
+    urdf: &urdf_rs::Robot,
+    urdf_dir: Option<&Path>,
+) -> Result<Option<[f64; 3]>, RobotError> {
+    let depth = |rpy: Option<[f64; 3]>| -> Result<f64, RobotError> {
+        let mut turned = urdf.clone();
+        if let Some(r) = rpy {
+            turn_root(&mut turned, r)?;
+        }
+        let tree = Tree::new(&turned).map_err(RobotError::Feet)?;
+        let model = Model::from_urdf_robot_locked(&turned, BaseJoint::Floating, &HashMap::new())?;
+        let pose = Pose::zero(&model)?;
+        let ([a, b], _) = find_feet(&turned, urdf_dir, &tree, &pose, &mut Vec::new())?;
+        Ok(pose.link(&tree.root)?.trans.z - a.lowest.min(b.lowest))
+    };
+    let upright = match depth(None) {
+        Ok(_) => return Ok(None),
+        Err(e) => e,
+    };
+    TURNS
+        .iter()
+        .filter_map(|&r| depth(Some(r)).ok().map(|d| (d, r)))
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, r)| Some(r))
+        .ok_or(upright)
 }
 
 /// The way a leg faces (a horizontal unit vector in the base's frame), from its knee: the leg's
@@ -834,6 +919,19 @@ fn round3(x: f64) -> f64 {
     round_to(x, 1e-3)
 }
 
+/// A rounded value as the description shows it: at most six decimals, no trailing zeros, no
+/// `-0`.
+fn num(x: f64) -> String {
+    let s = format!("{x:.6}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" { "0".into() } else { s.into() }
+}
+
+/// `[a, b, c]` with [`num`].
+fn list3(v: [f64; 3]) -> String {
+    format!("[{}, {}, {}]", num(v[0]), num(v[1]), num(v[2]))
+}
+
 impl Draft {
     /// The description as TOML, commented, with `home` as its `[home]` table.
     pub fn to_toml(&self, home: &BTreeMap<String, f64>) -> String {
@@ -860,6 +958,13 @@ impl Draft {
             let _ = writeln!(s, "package = {p:?}");
         }
         let _ = writeln!(s, "path = {:?}", self.path.display().to_string());
+        if let Some(rpy) = self.root_rpy {
+            let _ = writeln!(
+                s,
+                "# The URDF's z axis is not up at its zero posture: its root link turned upright."
+            );
+            let _ = writeln!(s, "root_rpy = {}", list3(rpy));
+        }
         for (side, f) in ["left", "right"].iter().zip(&self.feet) {
             let contacts = if f.corner_frames {
                 "the URDF's corner frames"
@@ -875,23 +980,22 @@ impl Draft {
             let _ = writeln!(s, "frame = {:?}", f.frame);
             let _ = writeln!(s, "link = {:?}", f.link);
             match (f.xyz, f.rpy) {
-                (Some([x, y, z]), Some([r, p, w])) => {
+                (Some(xyz), Some(rpy)) => {
                     let _ = writeln!(
                         s,
-                        "origin = {{ xyz = [{x}, {y}, {z}], rpy = [{r}, {p}, {w}] }}"
+                        "origin = {{ xyz = {}, rpy = {} }}",
+                        list3(xyz),
+                        list3(rpy)
                     );
                 }
-                (None, Some([r, p, y])) => {
-                    let _ = writeln!(s, "origin = {{ rpy = [{r}, {p}, {y}] }}");
+                (None, Some(rpy)) => {
+                    let _ = writeln!(s, "origin = {{ rpy = {} }}", list3(rpy));
                 }
                 _ => {}
             }
             match &f.contacts {
                 Some(c) => {
-                    let list: Vec<String> = c
-                        .iter()
-                        .map(|[x, y, z]| format!("[{x}, {y}, {z}]"))
-                        .collect();
+                    let list: Vec<String> = c.iter().map(|p| list3(*p)).collect();
                     let _ = writeln!(s, "contacts = [{}]", list.join(", "));
                 }
                 None if f.corner_frames => {
@@ -927,13 +1031,24 @@ impl Draft {
                 names.join(", ")
             );
         }
-        let [x, y, z] = self.hand_target;
+        if !self.armature.is_empty() {
+            let _ = writeln!(
+                s,
+                "\n# Joints whose link has no mass (a ball joint split into one-axis joints): a \
+                 rotor's inertia (kg·m²)\n# keeps the mass matrix invertible where their axes \
+                 align.\n[armature]"
+            );
+            for j in &self.armature {
+                let _ = writeln!(s, "{j:?} = {ARMATURE}");
+            }
+        }
         let _ = writeln!(
             s,
             "\n# The standing posture, solved at every load from [home] (soles flat, CoM over \
              the feet, base upright\n# and `crouch` lower, the hand at `hand` from the feet's \
-             centre on the ground).\n[stance]\ncrouch = {}\nhand = [{x}, {y}, {z}]",
-            self.crouch
+             centre on the ground).\n[stance]\ncrouch = {}\nhand = {}",
+            num(self.crouch),
+            list3(self.hand_target)
         );
         let mut table: BTreeMap<&str, f64> = home.iter().map(|(k, v)| (k.as_str(), *v)).collect();
         for (n, v) in &self.locked {

@@ -233,9 +233,12 @@ impl Robot {
             reason,
         };
         let (urdf, urdf_path) = read_urdf(&description, dir).map_err(urdf_err)?;
-        let parsed = crate::dynamics::parse_urdf(&urdf)?;
+        let mut parsed = crate::dynamics::parse_urdf(&urdf)?;
+        if let Some(rpy) = description.urdf.root_rpy {
+            crate::dynamics::turn_root(&mut parsed, rpy)?;
+        }
         let locked = locked_joints(&description, &parsed)?;
-        let mut model = Model::from_urdf_str_locked(&urdf, BaseJoint::Floating, &locked)?;
+        let mut model = Model::from_urdf_robot_locked(&parsed, BaseJoint::Floating, &locked)?;
         set_armatures(&mut model, &description, &locked)?;
         if let Some(floor) = description.inertia_floor {
             if !(floor.is_finite() && floor > 0.0) {
