@@ -5,7 +5,9 @@
 //! Run: `cargo bench --bench wbc`. Besides criterion's mean / median, the setup runs 1000 ticks
 //! of each formulation (full, condensed) and tolerance and prints p50 / p99 / max of the tick
 //! time, the interior-point iterations and the torques' distance to a tight reference solve
-//! (criterion reports neither tail nor accuracy).
+//! (criterion reports neither tail nor accuracy). `wbc/replay_exported` solves, in turn, the
+//! 400 ticks whose QPs `UPC_QP_EXPORT=path` writes for the solver comparison
+//! (`scripts/qp_compare.py`).
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -111,17 +113,50 @@ fn tail_report(label: &str, cfg: &WbcConfig, amp: f64, n: usize) {
     );
 }
 
-/// With `UPC_QP_EXPORT=path`: the condensed QP of 400 ticks (standing, pushed at the hand,
-/// perturbed postures) written as JSON lines for `scripts/qp_compare.py`, each with upc's
-/// answer: the active set's where it decides, and clarabel's (iterations, solve time) from a
-/// second controller that runs clarabel on every tick.
+/// One exported tick: its kind, state and request.
+struct Tick {
+    kind: &'static str,
+    q: DVector<f64>,
+    v: DVector<f64>,
+    cmd: WbcCommand<'static>,
+}
+
+/// The 400 ticks whose QPs `UPC_QP_EXPORT` writes and the `replay_exported` bench solves: 100
+/// standing, 150 pushed at the hand (10–70 N), 150 at perturbed postures with pushes.
+fn exported_ticks(model: &Model, home: &DVector<f64>) -> Vec<Tick> {
+    let mut data = Data::new(model);
+    forward_kinematics(model, &mut data, home).unwrap();
+    let hand = data.o_m_f[model.frame_id("r_hand").unwrap()].trans;
+    (0..400)
+        .map(|k| {
+            let (kind, amp, push) = match k {
+                0..100 => ("standing", 0.0, 0.0),
+                100..250 => ("pushed", 0.0, -10.0 - 60.0 * ((k - 100) as f64 / 150.0)),
+                _ => ("perturbed", 0.05, -40.0 * ((k as f64 * 0.3).sin()).abs()),
+            };
+            let (q, v, com) = state(model, home, k, amp);
+            let cmd = WbcCommand {
+                com_acc: com * 0.5,
+                hand_pos_des: hand,
+                kp: 100.0,
+                kd: 20.0,
+                hand_force: Vector3::new(push, 0.3 * push, 0.0),
+                ..WbcCommand::default()
+            };
+            Tick { kind, q, v, cmd }
+        })
+        .collect()
+}
+
+/// With `UPC_QP_EXPORT=path`: the condensed QP of the [`exported_ticks`] written as JSON lines
+/// for `scripts/qp_compare.py`, each with upc's answer: the active set's where it decides, and
+/// clarabel's (iterations, solve time) from a second controller that runs clarabel on every
+/// tick.
 fn export_instances(path: &str) {
     let cfg = Config::embedded_default().unwrap().wbc;
     let model = icub_like::load().unwrap();
     let home = upc::robot::Robot::embedded_default().expect("robot").home;
     let mut data = Data::new(&model);
-    forward_kinematics(&model, &mut data, &home).unwrap();
-    let hand = data.o_m_f[model.frame_id("r_hand").unwrap()].trans;
     let mut fast = WholeBodyController::new(&model, &cfg, &frames()).unwrap();
     let clarabel_cfg = WbcConfig {
         active_set: false,
@@ -132,29 +167,16 @@ fn export_instances(path: &str) {
         w.set_posture_reference(&model, &home).unwrap();
     }
     let mut out = String::new();
-    for k in 0..400 {
-        let (kind, amp, push) = match k {
-            0..100 => ("standing", 0.0, 0.0),
-            100..250 => ("pushed", 0.0, -10.0 - 60.0 * ((k - 100) as f64 / 150.0)),
-            _ => ("perturbed", 0.05, -40.0 * ((k as f64 * 0.3).sin()).abs()),
-        };
-        let (q, v, com) = state(&model, &home, k, amp);
-        let cmd = WbcCommand {
-            com_acc: com * 0.5,
-            hand_pos_des: hand,
-            kp: 100.0,
-            kd: 20.0,
-            hand_force: Vector3::new(push, 0.3 * push, 0.0),
-            ..WbcCommand::default()
-        };
+    for Tick { kind, q, v, cmd } in exported_ticks(&model, &home) {
+        let (q, v, cmd) = (&q, &v, &cmd);
         let limited = fast.counters().torque_limited;
-        let a = best_of_5(&mut fast, &model, &mut data, &q, &v, &cmd);
+        let a = best_of_5(&mut fast, &model, &mut data, q, v, cmd);
         // A tick at a torque limit is decided by the full problem: its condensed QP (without
         // the limits) is exported all the same, marked.
         let limited = fast.counters().torque_limited > limited;
         let inst = fast.condensed_instance().expect("condensed");
         // Timed as the script times the wheels: the best of 5 solves of the tick.
-        let b = best_of_5(&mut slow, &model, &mut data, &q, &v, &cmd);
+        let b = best_of_5(&mut slow, &model, &mut data, q, v, cmd);
         let forces: Vec<f64> = a.1.iter().flat_map(|f| f.iter().copied()).collect();
         let line = serde_json::json!({
             "kind": kind, "n": inst.n, "m": inst.m, "zero": inst.zero, "soc": inst.soc,
@@ -278,6 +300,21 @@ fn bench(c: &mut Criterion) {
     g.bench_function("tick_home_new_solver", |b| {
         b.iter(|| {
             let out = cold.solve(&model, &mut data, &home, &zero, &cmd);
+            black_box(out.tau[0]);
+        })
+    });
+    // The ticks of the solver comparison (docs/results/benchmarks.md), in turn, through upc's
+    // path (the active set where it decides, clarabel updated in place elsewhere): one
+    // iteration is one tick, the mean over the 400.
+    let ticks = exported_ticks(&model, &home);
+    let mut wbc = WholeBodyController::new(&model, &cfg, &frames()).unwrap();
+    wbc.set_posture_reference(&model, &home).unwrap();
+    let mut k = 0;
+    g.bench_function("replay_exported", |b| {
+        b.iter(|| {
+            let t = &ticks[k % ticks.len()];
+            k += 1;
+            let out = wbc.solve(&model, &mut data, &t.q, &t.v, &t.cmd);
             black_box(out.tau[0]);
         })
     });
