@@ -631,7 +631,8 @@ fn package_urls_resolve_in_ros_paths_ament_prefixes_and_the_robot_environment() 
 }
 
 /// Placeholders a description may carry are flagged: the same effort limit on every joint (the
-/// arm then "holds" whatever it says), a link of 1 kg·m² about each axis. upc's robots have none.
+/// arm then "holds" whatever it says), an effort limit no motor of the robot's size gives, a
+/// link of 1 kg·m² about each axis. The iCub-like has none.
 #[test]
 fn placeholder_limits_and_inertias_are_flagged() {
     use upc::robot::physical::placeholder_warnings;
@@ -664,6 +665,20 @@ fn placeholder_limits_and_inertias_are_flagged() {
     assert!(w[1].contains("link 'l1' has a unit inertia"), "{w:?}");
     let r = Robot::embedded_default().expect("icub_like");
     assert!(placeholder_warnings(&r.model).is_empty());
+    // One joint's effort far beyond any motor of a 4 kg robot (icub-models has 50000 N·m on
+    // twenty joints of a 33 kg one): flagged by name, the others not.
+    let huge = urdf.replacen(
+        "<limit lower=\"-1\" upper=\"1\" effort=\"240\"",
+        "<limit lower=\"-1\" upper=\"1\" effort=\"50000\"",
+        1,
+    );
+    let model = Model::from_urdf_str(&huge, BaseJoint::Floating).expect("model");
+    let w = placeholder_warnings(&model);
+    assert_eq!(w.len(), 2, "{w:?}");
+    assert!(
+        w[0].contains("weight at a metre") && w[0].contains("j1 (50000)"),
+        "{w:?}"
+    );
 }
 
 /// A sole made on a link whose z axis points forward (as some ankle links' do): the error

@@ -25,6 +25,10 @@ fn slack(largest: f64) -> f64 {
     1e-15_f64.max(1e-9 * largest)
 }
 
+/// An effort limit above this many times the torque of the robot's weight at a metre is a
+/// placeholder: a humanoid's strongest joints (knees, hips) give a few times that torque at most.
+const PLACEHOLDER_WEIGHTS: f64 = 100.0;
+
 /// MuJoCo's smallest positive value (`mjMINVAL`): a principal moment at or below it is none.
 const MIN_MOMENT: f64 = 1e-15;
 
@@ -114,6 +118,23 @@ pub fn placeholder_warnings(model: &Model) -> Vec<String> {
              torque limits, the arm's capacity and the force scaling come from it",
             efforts.len(),
             efforts[0]
+        ));
+    }
+    // An effort no motor of this robot's size gives: more than `PLACEHOLDER_WEIGHTS` times the
+    // torque of its whole weight at a metre (icub-models' 50000 N·m on a 33 kg robot).
+    let bound = PLACEHOLDER_WEIGHTS * model.total_mass() * 9.81;
+    let huge: Vec<String> = model
+        .joints
+        .iter()
+        .filter(|j| j.nv() == 1 && j.limits.effort.is_finite() && j.limits.effort > bound)
+        .map(|j| format!("{} ({})", j.name, j.limits.effort))
+        .collect();
+    if !huge.is_empty() {
+        out.push(format!(
+            "effort limits above {PLACEHOLDER_WEIGHTS} times the torque of the robot's weight \
+             at a metre ({bound:.0} N·m): {} — placeholders? the torque limits, the arm's \
+             capacity and the force scaling come from them",
+            huge.join(", ")
         ));
     }
     for j in &model.joints {
