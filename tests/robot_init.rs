@@ -175,19 +175,18 @@ fn drafted_robot_runs(name: &str, path: &str, note: &str, parts: &[&str]) {
         assert!(text.contains(part), "{part}:\n{text}");
     }
     for (controller, stands) in [("c0", false), ("c1", true)] {
-        let out = Command::new(env!("CARGO_BIN_EXE_upc"))
-            .args(["run", "--controller", controller, "--quiet", "--robot"])
-            .arg(&file)
-            .args(["--name", controller, "--out"])
-            .arg(&s.dir)
-            .env("RUST_LOG", "warn")
-            .output()
-            .expect("upc run");
-        assert!(
-            out.status.success(),
-            "{name} {controller}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        upc_ok([
+            "run".as_ref(),
+            "--controller".as_ref(),
+            controller.as_ref(),
+            "--quiet".as_ref(),
+            "--robot".as_ref(),
+            file.as_os_str(),
+            "--name".as_ref(),
+            controller.as_ref(),
+            "--out".as_ref(),
+            s.dir.as_os_str(),
+        ]);
         let c = json(
             &s.dir
                 .join(controller)
