@@ -36,6 +36,7 @@ pub struct BusConfig {
     pub discovery: f64,
     pub first_state_timeout: f64,
     pub state_timeout: f64,
+    pub robot_lost: f64,
     pub command_timeout: f64,
     pub damping: f64,
     pub bad_crc: BadCrc,
@@ -66,6 +67,9 @@ pub struct BusSim {
     pub lab: bool,
     pub mode_machine: u8,
     pub command_loss: f64,
+    /// [start, length] (s of robot time): no state goes out meanwhile, as states lost on the
+    /// wire (a test of `upc bus`'s safety); length 0: never.
+    pub silence: [f64; 2],
 }
 
 impl BusConfig {
@@ -99,12 +103,15 @@ impl BusConfig {
             ("bus.hold.arm_kd", self.hold.arm_kd),
             ("bus.hold.handover", self.hold.handover),
             ("bus.sim.scenario_delay", self.sim.scenario_delay),
+            ("bus.sim.silence", self.sim.silence[0]),
+            ("bus.sim.silence", self.sim.silence[1]),
         ] {
             check(key, v, v >= 0.0, "≥ 0")?;
         }
         for (key, v) in [
             ("bus.first_state_timeout", self.first_state_timeout),
             ("bus.state_timeout", self.state_timeout),
+            ("bus.robot_lost", self.robot_lost),
             ("bus.command_timeout", self.command_timeout),
             ("bus.damping", self.damping),
             ("bus.late", self.late),
@@ -112,6 +119,15 @@ impl BusConfig {
             ("bus.sim.command_loss", self.sim.command_loss),
         ] {
             check(key, v, v > 0.0, "> 0")?;
+        }
+        if self.robot_lost < self.state_timeout {
+            return Err(l.range_error(
+                "bus.robot_lost",
+                format!(
+                    "must be at least bus.state_timeout ({} s), got {}",
+                    self.state_timeout, self.robot_lost
+                ),
+            ));
         }
         if self.domain > 232 {
             return Err(l.range_error(

@@ -13,8 +13,9 @@
 //!   drives (kp = 0, kd = `bus.damping`, tau = 0), until it answers again (a new hand-over);
 //! - every torque clamped to its joint's effort limit; mode_machine echoed from the state;
 //! - a state with a bad CRC (`bus.bad_crc`), a tick that does not advance or a non-finite value
-//!   is refused and counted; no valid state for `bus.state_timeout` ends the run (the robot is
-//!   gone: there is nothing to command).
+//!   is refused and counted; no valid state for `bus.state_timeout` → damping, repeated until the
+//!   robot speaks again (then a new hand-over); none for `bus.robot_lost` ends the run (the
+//!   robot is gone: there is nothing to command).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -56,7 +57,7 @@ pub enum BusError {
     OtherController(usize),
     #[error("no valid rt/lowstate within {0} s: is the robot (or its simulator) on this domain?")]
     NoRobot(f64),
-    #[error("the robot went silent: no valid rt/lowstate for {0} s")]
+    #[error("the robot is gone: no valid rt/lowstate for {0} s")]
     RobotLost(f64),
 }
 
@@ -120,7 +121,12 @@ pub struct BusSummary {
     pub clamped_commands: u64,
     pub controller_commands: CommandStats,
     pub handovers: u64,
+    /// Times the robot was taken from the controller: its silence, or the robot's.
     pub losses: u64,
+    /// Times the robot fell silent for `bus.state_timeout` (damped, then handed back when it
+    /// spoke again), and the longest silence (s).
+    pub robot_silences: u64,
+    pub robot_silence_max: f64,
     pub hold_states: u64,
     pub damping_states: u64,
     /// The longest publication of a state on the contract and to ROS 2 (s).
@@ -164,6 +170,10 @@ struct Robot {
 
 /// The poll period of the wait for the controller's answer: what it adds to an answer at most.
 const ANSWER_POLL: Duration = Duration::from_micros(50);
+
+/// How often damping is written while the robot is silent: a G1's state period, so that a
+/// robot whose states are lost on the way but which still listens keeps receiving it.
+const SILENT_REPEAT: Duration = Duration::from_millis(2);
 
 /// How long a state waits for the lab's sample of its tick (s).
 const LAB_WAIT: f64 = 3e-4;
@@ -516,35 +526,69 @@ impl Session<'_> {
             (Drive::Handover | Drive::Control, false) => Drive::Damping,
             (d, _) => d,
         };
-        if next != self.drive {
-            if next == Drive::Damping
-                && let Some(c) = self.last_command
-            {
-                let delay = c.elapsed().as_secs_f64();
-                self.summary.loss_to_damping_max = self.summary.loss_to_damping_max.max(delay);
-            }
-            transition(self.drive, next, t, &mut self.summary);
-            self.since = t;
-            self.drive = next;
-        }
+        self.switch(next, t);
         self.summary.hold_states += u64::from(matches!(self.drive, Drive::Hold | Drive::Handover));
         self.summary.damping_states += u64::from(self.drive == Drive::Damping);
     }
 
+    fn switch(&mut self, next: Drive, t: f64) {
+        if next == self.drive {
+            return;
+        }
+        if next == Drive::Damping
+            && let Some(c) = self.last_command
+        {
+            let delay = c.elapsed().as_secs_f64();
+            self.summary.loss_to_damping_max = self.summary.loss_to_damping_max.max(delay);
+        }
+        transition(self.drive, next, t, &mut self.summary);
+        self.since = t;
+        self.drive = next;
+    }
+
     /// Waits for the next valid state. A controller falling silent meanwhile is damped at once,
     /// without waiting for the robot: the bound is `bus.command_timeout`, not a robot period.
+    /// A robot silent for `bus.state_timeout` is damped too, every [`SILENT_REPEAT`], and handed
+    /// back to the controller through the hold when it speaks again; silent for
+    /// `bus.robot_lost`, it is gone.
     fn next_state(&mut self, ep: &mut Endpoints) -> Result<(), BusError> {
-        let lost = Instant::now() + Duration::from_secs_f64(self.cfg.state_timeout);
+        let waiting = Instant::now();
+        let silent = waiting + Duration::from_secs_f64(self.cfg.state_timeout);
+        let lost = waiting + Duration::from_secs_f64(self.cfg.robot_lost);
+        let mut counted = false;
         loop {
+            let now = Instant::now();
             let driven = matches!(self.drive, Drive::Handover | Drive::Control);
-            let silence = self
+            let controller = self
                 .last_command
                 .filter(|_| driven)
                 .map(|c| c + Duration::from_secs_f64(self.cfg.command_timeout));
-            let until = silence.map_or(lost, |s| s.min(lost));
+            let robot = if now < silent {
+                silent
+            } else {
+                (now + SILENT_REPEAT).min(lost)
+            };
+            let until = controller.map_or(robot, |c| c.min(robot));
             match ep.states.wait_newest(until)? {
-                None if Instant::now() < lost => {
-                    // The silence deadline: torques that came meanwhile keep the controller.
+                None if Instant::now() >= lost => {
+                    return Err(BusError::RobotLost(self.cfg.robot_lost));
+                }
+                None if Instant::now() >= silent => {
+                    if !counted {
+                        counted = true;
+                        self.summary.robot_silences += 1;
+                        tracing::warn!(
+                            "the robot is silent (no valid rt/lowstate for {} s): damping",
+                            self.cfg.state_timeout
+                        );
+                    }
+                    let t = self.time();
+                    self.switch(Drive::Damping, t);
+                    ep.commands.write(self.command(Drive::Damping, 0.0))?;
+                    self.summary.commands += 1;
+                }
+                None => {
+                    // The controller's deadline: torques that came meanwhile keep it.
                     let _ = self.take_torques(ep)?;
                     if !self.current() {
                         let t = self.time();
@@ -553,7 +597,6 @@ impl Session<'_> {
                         self.summary.commands += 1;
                     }
                 }
-                None => return Err(BusError::RobotLost(self.cfg.state_timeout)),
                 Some(s)
                     if s.tick == self.robot.state.tick
                         || tick_behind(s.tick, self.robot.state.tick) =>
@@ -561,6 +604,11 @@ impl Session<'_> {
                     self.summary.refused_stale_tick += 1;
                 }
                 Some(s) if valid(&s, self.cfg.bad_crc, &mut self.summary) => {
+                    if counted {
+                        let gap = waiting.elapsed().as_secs_f64();
+                        self.summary.robot_silence_max = self.summary.robot_silence_max.max(gap);
+                        tracing::info!("the robot speaks again after {gap:.3} s");
+                    }
                     self.robot.state = s;
                     self.received = Instant::now();
                     self.step += 1;

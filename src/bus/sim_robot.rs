@@ -14,6 +14,7 @@
 //! posture, as `[sim.hold]`); the scenario's push starts `bus.sim.scenario_delay` after it. A
 //! command with a bad CRC is ignored (as the robot does) and counted; no valid command for
 //! `bus.sim.command_loss` lets the drives go limp (the robot's own watchdog).
+//! `bus.sim.silence` withholds the states for a while, as a wire that loses them.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -57,6 +58,8 @@ pub struct SimRobotSummary {
     pub steps: u64,
     pub sim_time: f64,
     pub states: u64,
+    /// States withheld by `bus.sim.silence`.
+    pub silenced_states: u64,
     pub commands: u64,
     pub bad_crc_commands: u64,
     /// Commands whose mode_machine differs from the robot's.
@@ -286,6 +289,11 @@ impl<'a, P: Physics> BusRobot<'a, P> {
     /// with the state of its tick).
     fn publish(&mut self) -> Result<(), ProcessError> {
         let (bus, t) = (&self.opts.bus, self.world.time());
+        let [from, length] = bus.sim.silence;
+        if (from..from + length).contains(&t) {
+            self.summary.silenced_states += 1;
+            return Ok(());
+        }
         let rep = &self.rep;
         fill_state(
             &mut self.msg,
