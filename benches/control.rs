@@ -118,6 +118,11 @@ fn bench(c: &mut Criterion) {
                 black_box((out.is_ok(), r.tau[0]));
             })
         });
+        let c = r.core.wbc_counters();
+        eprintln!(
+            "{name}: {} ticks, cone solve {} ({} Newton steps), left to clarabel {}, torque-limited {}",
+            c.ticks, c.active_set, c.cone_steps, c.cone_unsettled, c.torque_limited
+        );
     }
     offers(&mut g);
     handoff(&mut g, &config);

@@ -163,10 +163,10 @@ pub struct WbcConfig {
     /// (fast; the full one decides a tick whose condensation fails), or `full`.
     #[serde(default)]
     pub formulation: WbcFormulation,
-    /// Condensed formulation: solve a tick whose optimum has no friction cone active on its
-    /// boundary (every corner inside its cone or unloaded) exactly in closed form, and leave
-    /// clarabel the others (docs/whole_body_qp.md, "The active-set solve"); `false`: clarabel
-    /// every tick (the reference).
+    /// Condensed formulation: solve the condensed problem by the cone solve, a semismooth
+    /// Newton method on its 6-dimensional dual, to machine precision, and leave clarabel only
+    /// the ticks it does not settle (docs/whole_body_qp.md, "The cone solve"); `false`:
+    /// clarabel every tick (the reference).
     #[serde(default = "active_set_default")]
     pub active_set: bool,
 }

@@ -740,6 +740,8 @@ impl<'a> ControlLoop<'a> {
         s.wbc_torque_limited_ticks = wc.torque_limited;
         s.wbc_condensation_failures = wc.condensation_failures;
         s.wbc_active_set_ticks = wc.active_set;
+        s.wbc_cone_steps = wc.cone_steps;
+        s.wbc_cone_unsettled = wc.cone_unsettled;
         let w = &self.intake.window;
         s.forecasts_accepted = w.accepted;
         s.forecast_never_received = w.accepted == 0;

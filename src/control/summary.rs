@@ -53,6 +53,11 @@ pub struct ServerSummary {
     /// clarabel (docs/whole_body_qp.md).
     #[serde(default)]
     pub wbc_active_set_ticks: u64,
+    /// The cone solve's Newton steps over its ticks, and the ticks it left to clarabel.
+    #[serde(default)]
+    pub wbc_cone_steps: u64,
+    #[serde(default)]
+    pub wbc_cone_unsettled: u64,
     pub preview_fallbacks: u64,
     /// Falls the controller detected (`controller.fall_drop`), and the ticks it then held joint
     /// damping without preview or QP (until the plant restarted).

@@ -93,7 +93,9 @@ impl HandPreviewer {
 
     /// One step of eq. (24) from `x` with the gains, desired state and external force of the
     /// next step; returns the next state and the CoM disturbance F_dis of eq. (25) at that step.
-    #[inline]
+    /// Always inlined: left out of line (as the codegen units' partition may decide) it doubled
+    /// the previewer's cost in the C1 tick (perf, `control/c1_tick_phantom`).
+    #[inline(always)]
     pub fn step(
         &self,
         x: &HandState,

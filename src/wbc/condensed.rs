@@ -39,7 +39,7 @@
 use std::time::Duration;
 
 use clarabel::solver::{DefaultSettings, SupportedConeT};
-use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Vector3, Vector6};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x6, Matrix6, Vector3, Vector6};
 
 use super::dense::{Cholesky, dot};
 use super::outcome::{FallbackReason, N_CONTACTS, WbcCounters};
@@ -56,8 +56,13 @@ const NY: usize = NF + 6;
 /// Rows of the reduced QP: `Bᵀ f − δ = y*` (6), then the cones (24).
 const ROW_SOC: usize = 6;
 const N_ROWS: usize = ROW_SOC + NF;
-/// Active-set rounds tried before clarabel decides (see `active_set_optimum`).
-const ACTIVE_SET_ROUNDS: usize = 4;
+/// Newton steps of the cone solve before clarabel decides (see `cone_optimum`); it takes 1–6.
+const NEWTON_STEPS: usize = 30;
+/// The cone solve's stop: the equality's residual (N, N·m) relative to 1 + |y*|∞.
+const NEWTON_TOLERANCE: f64 = 1e-10;
+/// Armijo's sufficient decrease, and the shortest step before giving up.
+const ARMIJO: f64 = 1e-4;
+const MIN_STEP: f64 = 1e-10;
 
 /// The data of one tick, as the controller assembled it (world axes, SI).
 pub(crate) struct Problem<'a> {
@@ -78,7 +83,7 @@ pub(crate) struct Problem<'a> {
     pub friction: f64,
     /// Rotation of each sole (its z axis is the contact normal).
     pub foot_rot: [Matrix3<f64>; 2],
-    /// Try the active-set solve before clarabel (`wbc.active_set`).
+    /// Try the cone solve before clarabel (`wbc.active_set`).
     pub active_set: bool,
 }
 
@@ -124,7 +129,7 @@ pub(crate) struct CondensedQp {
     x6: DMatrix<f64>,
     /// B = J_c,u (24 × 6).
     b: DMatrix<f64>,
-    /// X_u⁻¹, from `force_qp`'s factor of X_u, for the active-set solve (y* is `bd[..6]`).
+    /// X_u⁻¹, from `force_qp`'s factor of X_u, for the cone solve (y* is `bd[..6]`).
     xu_inv: Matrix6<f64>,
     /// u = −H⁻¹ g, then q̈.
     u: DVector<f64>,
@@ -235,8 +240,11 @@ impl CondensedQp {
         solve_time: &mut Duration,
     ) -> Result<bool, CondensedError> {
         self.reduce(pb)?;
-        if let Some(f) = pb.active_set.then(|| self.active_set_optimum(pb)).flatten() {
+        let cone = pb.active_set.then(|| self.cone_optimum(pb));
+        counters.cone_unsettled += u64::from(matches!(cone, Some(None)));
+        if let Some(Some((f, steps))) = cone {
             counters.active_set += 1;
+            counters.cone_steps += steps as u64;
             self.recover(&f);
             return Ok(false);
         }
@@ -415,68 +423,49 @@ impl CondensedQp {
         Ok(())
     }
 
-    /// The reduced QP's exact optimum when no friction cone is active on its boundary: every
-    /// corner either inside its cone or unloaded (f = 0, the cone's apex). For a set U of
-    /// unloaded corners, the optimum of ½ w_f ‖f‖² + ½ δᵀ X_u δ on `Bᵀ f − δ = y*` with those
-    /// forces zero is `f_k = b_k z` for the loaded corners (b_k: B's rows of corner k) with
-    /// `(w_f X_u⁻¹ + Σ_loaded b_kᵀ b_k) z = y*`, and its multipliers are X_u δ = −w_f z, so an
-    /// unloaded corner's is `λ_k = −w_f b_k z`. The KKT conditions of the convex QP, loaded
-    /// forces in their cones and unloaded corners' λ_k in the dual cone (λ_n ≥ μ ‖λ_t‖), make it
-    /// the optimum. U starts empty; corners pulling (f_n < 0) are unloaded and corners whose λ
-    /// leaves the dual cone loaded again, for a few rounds. `None` when a cone is active on its
-    /// boundary (a corner at its friction limit) or the rounds do not settle: clarabel decides.
-    fn active_set_optimum(&self, pb: &Problem) -> Option<[f64; NF]> {
-        if pb.w_force <= 0.0 || pb.w_force.is_nan() {
+    /// The reduced QP's exact optimum by a semismooth Newton method on its dual
+    /// (docs/whole_body_qp.md, "The cone solve"). With ν = w_f z the multiplier of
+    /// `Bᵀ f − δ = y*`, the forces minimising the Lagrangian are f_k = Π_k(b_k z) (b_k: B's rows
+    /// of corner k, Π_k the projection onto its friction cone) and δ = −w_f X_u⁻¹ z, so the dual
+    /// is the minimisation of the convex, C¹
+    ///
+    /// ```text
+    /// ψ(z) = ½ w_f zᵀ X_u⁻¹ z − zᵀ y* + ½ Σ_k ‖Π_k(b_k z)‖²,
+    /// ∇ψ(z) = w_f X_u⁻¹ z − y* + Σ_k b_kᵀ Π_k(b_k z) = −(Bᵀ f − δ − y*),
+    /// ```
+    ///
+    /// whose zero is the optimum: f in its cones by construction, complementarity by the
+    /// projection (Moreau), and ∇ψ the residual of the one equality. Newton steps with the
+    /// generalised Hessian `w_f X_u⁻¹ + Σ_k b_kᵀ J_k b_k` (J_k: Π_k's Jacobian, I inside the
+    /// cone, 0 for an unloaded corner, a rank-2 matrix for a corner sliding on the boundary)
+    /// and an Armijo backtracking on ψ. From z = 0 the first step is the all-loaded solution of
+    /// the former active-set solve. `None` when the steps do not settle within
+    /// [`NEWTON_STEPS`] (clarabel decides).
+    fn cone_optimum(&self, pb: &Problem) -> Option<([f64; NF], usize)> {
+        // Both positive (NaN is not).
+        let positive = |x: f64| x > 0.0;
+        if !positive(pb.w_force) || !positive(pb.friction) {
             return None;
         }
-        let base = self.xu_inv * pb.w_force;
-        let y_star = Vector6::from_column_slice(&self.bd[..ROW_SOC]);
-        let mut unloaded = [false; N_CONTACTS];
-        let mut f = [0.0; NF];
-        for _ in 0..ACTIVE_SET_ROUNDS {
-            let mut m = base;
-            for k in (0..NF).filter(|k| !unloaded[k / 3]) {
-                for r in 0..6 {
-                    for c in 0..6 {
-                        m[(r, c)] += self.b[(k, r)] * self.b[(k, c)];
-                    }
+        let mut bk = [Matrix3x6::zeros(); N_CONTACTS];
+        for (c, b) in bk.iter_mut().enumerate() {
+            for a in 0..3 {
+                for j in 0..6 {
+                    b[(a, j)] = self.b[(3 * c + a, j)];
                 }
-            }
-            let z = m.cholesky()?.solve(&y_star);
-            let (mut changed, mut at_friction_limit) = (false, false);
-            for c in 0..N_CONTACTS {
-                let rot = &pb.foot_rot[c / 4];
-                // b_c z: the corner's force if loaded; −λ_c / w_f if unloaded.
-                let bz =
-                    Vector3::from_fn(|a, _| (0..6).map(|j| self.b[(3 * c + a, j)] * z[j]).sum());
-                let (n, t) = (
-                    rot.column(2).dot(&bz),
-                    rot.column(0).dot(&bz).hypot(rot.column(1).dot(&bz)),
-                );
-                if unloaded[c] {
-                    // λ = −w_f b_c z must satisfy λ_n ≥ μ ‖λ_t‖.
-                    if -n < pb.friction * t {
-                        unloaded[c] = false;
-                        changed = true;
-                    }
-                } else if n < 0.0 {
-                    unloaded[c] = true;
-                    changed = true;
-                } else {
-                    at_friction_limit |= pb.friction * n < t;
-                }
-                for a in 0..3 {
-                    f[3 * c + a] = if unloaded[c] { 0.0 } else { bz[a] };
-                }
-            }
-            // A friction limit is judged once the set of unloaded corners has settled: unloading
-            // a pulling corner moves the others' forces.
-            if !changed {
-                let finite = f.iter().all(|x| x.is_finite());
-                return (finite && !at_friction_limit).then_some(f);
             }
         }
-        None
+        let cones: [Cone; N_CONTACTS] = std::array::from_fn(|c| Cone {
+            rot: &pb.foot_rot[c / 4],
+            mu: pb.friction,
+        });
+        let y_star = Vector6::from_column_slice(&self.bd[..ROW_SOC]);
+        let (f, _, steps) = cone_newton(&bk, &(self.xu_inv * pb.w_force), &y_star, &cones)?;
+        let mut out = [0.0; NF];
+        for (c, fc) in f.iter().enumerate() {
+            out[3 * c..3 * c + 3].copy_from_slice(fc.as_slice());
+        }
+        Some((out, steps))
     }
 
     /// `x = [q̈(f); f]` with `q̈(f) = u + H⁻¹Cᵀ (S⁻¹ρ + X Bᵀ f)`.
@@ -495,5 +484,278 @@ impl CondensedQp {
             self.x[i] = self.u[i] + self.tmp[i];
         }
         self.x[nv..].copy_from_slice(f);
+    }
+}
+
+/// The semismooth Newton iteration of [`CondensedQp::cone_optimum`]: minimises ψ for
+/// `base` = w_f X_u⁻¹; the forces, the dual z and the steps taken.
+fn cone_newton(
+    bk: &[Matrix3x6<f64>; N_CONTACTS],
+    base: &Matrix6<f64>,
+    y_star: &Vector6<f64>,
+    cones: &[Cone; N_CONTACTS],
+) -> Option<([Vector3<f64>; N_CONTACTS], Vector6<f64>, usize)> {
+    let tol = NEWTON_TOLERANCE * (1.0 + y_star.amax());
+    // ψ and the forces at z.
+    let psi = |z: &Vector6<f64>, f: &mut [Vector3<f64>; N_CONTACTS]| {
+        let mut v = 0.5 * z.dot(&(base * z)) - z.dot(y_star);
+        for (c, fc) in f.iter_mut().enumerate() {
+            *fc = cones[c].project(&(bk[c] * z));
+            v += 0.5 * fc.norm_squared();
+        }
+        v
+    };
+    let mut z = Vector6::zeros();
+    let mut f = [Vector3::zeros(); N_CONTACTS];
+    let mut value = psi(&z, &mut f);
+    for step in 0..NEWTON_STEPS {
+        let mut grad = base * z - y_star;
+        for (b, fc) in bk.iter().zip(&f) {
+            grad += b.transpose() * fc;
+        }
+        if !grad.iter().all(|g| g.is_finite()) {
+            return None;
+        }
+        if grad.amax() <= tol {
+            return Some((f, z, step));
+        }
+        let mut hess = *base;
+        for (b, cone) in bk.iter().zip(cones) {
+            // At z = 0 every corner counts as loaded (J = I): the first step is the all-loaded
+            // solution.
+            let jac = if step == 0 {
+                Some(Matrix3::identity())
+            } else {
+                cone.jacobian(&(b * z))
+            };
+            if let Some(j) = jac {
+                hess += b.transpose() * (j * b);
+            }
+        }
+        let dz = -hess.cholesky()?.solve(&grad);
+        let slope = grad.dot(&dz);
+        let mut t = 1.0;
+        let mut trial_f = [Vector3::zeros(); N_CONTACTS];
+        loop {
+            let trial = z + dz * t;
+            let v = psi(&trial, &mut trial_f);
+            // Near the optimum ψ's decrease falls below its rounding (|ψ| ≈ 10⁴ here, the
+            // decrease 10⁻¹²) while the gradient still shrinks quadratically: a step that changes
+            // ψ by no more than its rounding is taken, and the gradient decides.
+            let rounding = 1e-13 * value.abs().max(1.0);
+            if v <= value + ARMIJO * t * slope || (t == 1.0 && (v - value).abs() <= rounding) {
+                z = trial;
+                value = v;
+                f = trial_f;
+                break;
+            }
+            t *= 0.5;
+            if t < MIN_STEP {
+                return None;
+            }
+        }
+    }
+    None
+}
+
+/// A corner's friction cone `‖f_t‖ ≤ μ f_n`, the sole's z axis its normal.
+struct Cone<'a> {
+    rot: &'a Matrix3<f64>,
+    mu: f64,
+}
+
+/// Where a vector lies against a cone: inside, in the polar cone (projected to the apex), or
+/// between (projected onto the boundary ray in its plane with the normal).
+enum Piece {
+    Inside,
+    Apex,
+    /// Tangential direction (unit, sole axes), its length, and the projection's normal force.
+    Boundary {
+        dir: [f64; 2],
+        r: f64,
+        a: f64,
+    },
+}
+
+impl Cone<'_> {
+    fn piece(&self, v: &Vector3<f64>) -> Piece {
+        let l = self.rot.transpose() * v;
+        let (r, n) = (l.x.hypot(l.y), l.z);
+        if r <= self.mu * n {
+            Piece::Inside
+        } else if self.mu * r <= -n {
+            Piece::Apex
+        } else {
+            // The boundary ray (μ x̂, 1): the projection is its direction times
+            // (μ r + n) / (1 + μ²).
+            Piece::Boundary {
+                dir: [l.x / r, l.y / r],
+                r,
+                a: (self.mu * r + n) / (1.0 + self.mu * self.mu),
+            }
+        }
+    }
+
+    /// The Euclidean projection of `v` (world axes) onto the cone.
+    fn project(&self, v: &Vector3<f64>) -> Vector3<f64> {
+        match self.piece(v) {
+            Piece::Inside => *v,
+            Piece::Apex => Vector3::zeros(),
+            Piece::Boundary { dir, a, .. } => {
+                self.rot * Vector3::new(a * self.mu * dir[0], a * self.mu * dir[1], a)
+            }
+        }
+    }
+
+    /// The projection's Jacobian at `v` (world axes); `None` where it is zero (the apex).
+    /// On the boundary piece, in sole axes: `w wᵀ / (1 + μ²) + (a μ / r) (I₂ − x̂ x̂ᵀ)` with
+    /// `w = (μ x̂, 1)`.
+    fn jacobian(&self, v: &Vector3<f64>) -> Option<Matrix3<f64>> {
+        match self.piece(v) {
+            Piece::Inside => Some(Matrix3::identity()),
+            Piece::Apex => None,
+            Piece::Boundary { dir, r, a } => {
+                let mu = self.mu;
+                let w = Vector3::new(mu * dir[0], mu * dir[1], 1.0);
+                let mut j = w * w.transpose() / (1.0 + mu * mu);
+                let k = a * mu / r;
+                for p in 0..2 {
+                    for q in 0..2 {
+                        let delta = if p == q { 1.0 } else { 0.0 };
+                        j[(p, q)] += k * (delta - dir[p] * dir[q]);
+                    }
+                }
+                Some(self.rot * j * self.rot.transpose())
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tilted() -> Matrix3<f64> {
+        *nalgebra::Rotation3::from_euler_angles(0.2, -0.1, 0.7).matrix()
+    }
+
+    /// The projection is the nearest point of the cone: its residual lies in the polar cone and
+    /// is orthogonal to it (Moreau), on each piece.
+    #[test]
+    fn the_cone_projection_is_moreaus() {
+        let rot = tilted();
+        let cone = Cone { rot: &rot, mu: 0.6 };
+        let mut pieces = [0; 3];
+        for i in 0..200 {
+            let x = i as f64;
+            let v = Vector3::new((1.3 * x).sin(), (0.7 * x).cos(), 3.0 * (0.37 * x).sin()) * 10.0;
+            pieces[match cone.piece(&v) {
+                Piece::Inside => 0,
+                Piece::Apex => 1,
+                Piece::Boundary { .. } => 2,
+            }] += 1;
+            let p = cone.project(&v);
+            let l = rot.transpose() * p;
+            assert!(l.x.hypot(l.y) <= 0.6 * l.z + 1e-12);
+            let res = v - p;
+            assert!(res.dot(&p).abs() < 1e-10, "{v:?}");
+            // The polar cone: −res in the cone of aperture 1/μ.
+            let lr = rot.transpose() * -res;
+            assert!(lr.x.hypot(lr.y) <= lr.z / 0.6 + 1e-10 || res.norm() < 1e-12);
+        }
+        assert!(pieces.iter().all(|&n| n > 10), "{pieces:?}");
+    }
+
+    /// The Newton solve's optimum is certified by a zero duality gap: its forces lie in their
+    /// cones, and the primal cost ½ w_f ‖f‖² + ½ δᵀ X_u δ (δ = Bᵀ f − y*) equals the dual's
+    /// −w_f ψ(z), which bounds every feasible cost from below. Over problems that load every
+    /// corner, unload some and slide some on their cones' boundaries.
+    #[test]
+    fn the_cone_solve_closes_the_duality_gap() {
+        let rot = [tilted(), Matrix3::identity()];
+        let mu = 0.5;
+        let cones: [Cone; N_CONTACTS] = std::array::from_fn(|c| Cone {
+            rot: &rot[c / 4],
+            mu,
+        });
+        let w_f = 1e-3;
+        let mut seen = [0; 3];
+        for trial in 0..60 {
+            let x = trial as f64;
+            let wave = |k: f64| (x * 0.77 + k * 1.31).sin();
+            // Corners on a 0.2 × 0.1 m rectangle per foot, feet 0.2 m apart: b_k maps the dual
+            // wrench z (force, moment) to the corner, as B = J_c,u does.
+            let mut bk = [Matrix3x6::zeros(); N_CONTACTS];
+            for (c, b) in bk.iter_mut().enumerate() {
+                let p = Vector3::new(
+                    if c % 2 == 0 { 0.1 } else { -0.1 },
+                    if c % 4 < 2 { 0.05 } else { -0.05 } + if c < 4 { 0.1 } else { -0.1 },
+                    -0.8,
+                );
+                b.fixed_view_mut::<3, 3>(0, 0)
+                    .copy_from(&Matrix3::identity());
+                b.fixed_view_mut::<3, 3>(0, 3).copy_from(&-p.cross_matrix());
+            }
+            let a = Matrix6::from_fn(|r, c| wave((r * 6 + c) as f64));
+            let xu = a * a.transpose() * 0.01 + Matrix6::identity() * 1e-3;
+            let y_star = Vector6::new(
+                60.0 * wave(40.0),
+                60.0 * wave(41.0),
+                300.0 + 100.0 * wave(42.0),
+                20.0 * wave(43.0),
+                20.0 * wave(44.0),
+                5.0 * wave(45.0),
+            );
+            let base = xu.try_inverse().unwrap() * w_f;
+            let (f, z, _) = cone_newton(&bk, &base, &y_star, &cones).expect("converges");
+            let mut btf = Vector6::zeros();
+            let mut primal = 0.0;
+            for (c, fc) in f.iter().enumerate() {
+                let l = rot[c / 4].transpose() * fc;
+                assert!(l.x.hypot(l.y) <= mu * l.z * (1.0 + 1e-12) + 1e-12);
+                seen[match cones[c].piece(&(bk[c] * z)) {
+                    Piece::Inside => 0,
+                    Piece::Apex => 1,
+                    Piece::Boundary { .. } => 2,
+                }] += 1;
+                btf += bk[c].transpose() * fc;
+                primal += 0.5 * w_f * fc.norm_squared();
+            }
+            let delta = btf - y_star;
+            primal += 0.5 * delta.dot(&(xu * delta));
+            let mut psi = 0.5 * z.dot(&(base * z)) - z.dot(&y_star);
+            for c in 0..N_CONTACTS {
+                psi += 0.5 * cones[c].project(&(bk[c] * z)).norm_squared();
+            }
+            let dual = -w_f * psi;
+            assert!(
+                (primal - dual).abs() <= 1e-9 * primal.abs().max(1.0),
+                "trial {trial}: primal {primal}, dual {dual}"
+            );
+        }
+        assert!(seen.iter().all(|&n| n > 20), "{seen:?}");
+    }
+
+    /// The Jacobian against central differences of the projection, off the pieces' seams.
+    #[test]
+    fn the_cone_projections_jacobian_is_its_derivative() {
+        let rot = tilted();
+        let cone = Cone { rot: &rot, mu: 0.6 };
+        let h = 1e-6;
+        for i in 0..200 {
+            let x = i as f64;
+            let v = Vector3::new((1.1 * x).cos(), (0.9 * x).sin(), (0.53 * x).cos()) * 5.0;
+            let j = cone.jacobian(&v).unwrap_or_else(Matrix3::zeros);
+            for k in 0..3 {
+                let mut e = Vector3::zeros();
+                e[k] = h;
+                let fd = (cone.project(&(v + e)) - cone.project(&(v - e))) / (2.0 * h);
+                assert!(
+                    (fd - j.column(k)).amax() < 1e-6,
+                    "{v:?}: {fd:?} vs {:?}",
+                    j.column(k)
+                );
+            }
+        }
     }
 }

@@ -823,8 +823,9 @@ impl WholeBodyController {
     }
 
     /// Solves the tick's problem into `self.x`: the condensed problem (no torque rows), unless
-    /// the last tick had a torque limit active — a robot at its limits (pushed hard, falling)
-    /// stays there for a while, and the screening solve would be wasted. Its optimum is the
+    /// the last tick had a torque limit active and clarabel would solve it — a robot at its
+    /// limits (pushed hard, falling) stays there for a while, and that screening solve would be
+    /// wasted. Its optimum is the
     /// tick's when it respects every limit; otherwise the full problem with its torque rows
     /// decides.
     fn solve_path(
@@ -838,7 +839,12 @@ impl WholeBodyController {
         let finite = |s: &[f64]| s.iter().all(|x| x.is_finite());
         let use_condensed = match forced {
             Some(path) => path == Path::Condensed,
-            None => self.p.formulation == WbcFormulation::Condensed && !self.limits_active,
+            // With the cone solve the screening costs the condensation and a few Newton steps
+            // (tens of µs) against about 1 ms for the full problem: always worth trying.
+            None => {
+                self.p.formulation == WbcFormulation::Condensed
+                    && (self.p.active_set || !self.limits_active)
+            }
         };
         // Screen with the full problem without its torque rows first: after a condensed
         // problem that could not be formed, or as the formulation or `forced` says.

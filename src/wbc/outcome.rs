@@ -51,7 +51,12 @@ pub struct WbcCounters {
     /// Ticks the condensed problem could not be formed (H or S not positive definite), decided
     /// by the full problem instead.
     pub condensation_failures: u64,
-    /// Ticks the condensed problem's optimum was found without clarabel: no friction cone
-    /// active on its boundary (`condensed.rs`, `active_set_optimum`).
+    /// Ticks the condensed problem's optimum was found without clarabel, by the cone solve
+    /// (`condensed.rs`, `cone_optimum`); a torque limit may still send the tick to the full
+    /// problem.
     pub active_set: u64,
+    /// Newton steps the cone solve took over those ticks, and the ticks it did not settle
+    /// (left to clarabel).
+    pub cone_steps: u64,
+    pub cone_unsettled: u64,
 }
