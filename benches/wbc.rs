@@ -182,7 +182,7 @@ fn export_instances(path: &str) {
             "kind": kind, "n": inst.n, "m": inst.m, "zero": inst.zero, "soc": inst.soc,
             "force_unit": inst.force_unit, "P": inst.p, "q": inst.q, "A": inst.a, "b": inst.b,
             "active_set": a.0 == 0, "torque_limited": limited, "forces": forces,
-            "tick_us": a.3 * 1e6,
+            "tick_us": a.3 * 1e6, "solve_us": a.2 * 1e6,
             "clarabel_iterations": b.0, "clarabel_solve_us": b.2 * 1e6, "clarabel_tick_us": b.3 * 1e6,
             "clarabel_forces": b.1.iter().flat_map(|f| f.iter().copied()).collect::<Vec<f64>>(),
         });

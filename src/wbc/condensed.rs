@@ -240,7 +240,9 @@ impl CondensedQp {
         solve_time: &mut Duration,
     ) -> Result<bool, CondensedError> {
         self.reduce(pb)?;
+        let started = std::time::Instant::now();
         let cone = pb.active_set.then(|| self.cone_optimum(pb));
+        *solve_time += started.elapsed();
         counters.cone_unsettled += u64::from(matches!(cone, Some(None)));
         if let Some(Some((f, steps))) = cone {
             counters.active_set += 1;

@@ -153,7 +153,8 @@ pub struct WbcOutput<'a> {
     pub status: WbcStatus,
     /// Build + solve wall time of the tick.
     pub tick_time: Duration,
-    /// Clarabel's own solve time (zero on a fallback before solving).
+    /// The QP solver's wall time: the cone solve's, clarabel's, or both's (zero on a fallback
+    /// before solving).
     pub solve_time: Duration,
     /// Interior-point iterations (0 when not solved).
     pub iterations: u32,
