@@ -1,6 +1,7 @@
 //! upc on a robot's own bus (docs/bus.md): the G1's low-level DDS topics, end to end.
 //!
-//! - upc's plant speaking as a G1 (`upc sim --bus unitree`), `upc bus` and a real-time
+//! - upc's plant speaking as a G1 (`upc sim --bus unitree`), `upc bus` (its systemd unit's
+//!   command line) and a real-time
 //!   controller: the robot held, handed over, standing, silent for a while (damped, handed
 //!   back), then its controller killed and the
 //!   drives damped within the stated bound; no feed-forward torque above an effort limit.
@@ -37,7 +38,6 @@ fn a_g1_on_the_bus_stands_and_is_damped_within_10_ms_of_its_controller_s_death()
     let mut p = Procs::default();
     let d = domain(21);
     let sim_summary = s.path("sim.json").display().to_string();
-    let bus_summary = s.path("bus.json").display().to_string();
     let scenario = s.scenario();
     p.start(
         &s,
@@ -62,25 +62,28 @@ fn a_g1_on_the_bus_stands_and_is_damped_within_10_ms_of_its_controller_s_death()
             "bus.sim.silence=[4.0, 0.08]",
         ],
     );
-    p.start(
-        &s,
-        "bus",
-        &[
-            "bus",
-            "--robot",
-            "g1",
+    // `upc bus` as its systemd unit starts it (services/upc-bus.service: the G1's domain and
+    // network, SCHED_FIFO, its summary in the log directory, here the scratch one), moved to
+    // the test's domain, the loopback and the default scheduler by later `--bus-set`s.
+    let mut bus = unit_args("upc-bus", &s);
+    assert!(bus.iter().any(|a| a.ends_with("bus.json")), "{bus:?}");
+    bus.extend(
+        [
             "--scenario",
             &scenario,
-            "--duration",
-            "0",
-            "--prefix",
-            &s.prefix,
-            "--summary",
-            &bus_summary,
             "--bus-set",
             &d,
-        ],
+            "--bus-set",
+            "bus.interface=127.0.0.1",
+            "--bus-set",
+            "bus.realtime.fifo_priority=0",
+            "--bus-set",
+            "bus.realtime.lock_memory=false",
+        ]
+        .map(String::from),
     );
+    let bus: Vec<&str> = bus.iter().map(String::as_str).collect();
+    p.start(&s, "bus", &bus);
     start_controller(
         &mut p,
         &s,

@@ -13,28 +13,6 @@ use serde_json::Value;
 use support::procs::*;
 use upc::channels::STATE_FLAG_HOLD;
 
-/// The unit's `ExecStart=` command line, continuation lines joined, as arguments after the
-/// binary; `--prefix` set to the test's and `/var/log/upc/` moved into its scratch directory.
-fn unit_args(unit: &str, s: &Scratch) -> Vec<String> {
-    let path = format!("{}/services/{unit}.service", env!("CARGO_MANIFEST_DIR"));
-    let text = std::fs::read_to_string(&path).expect("unit file");
-    let joined = text.replace("\\\n", " ");
-    let line = joined
-        .lines()
-        .find_map(|l| l.strip_prefix("ExecStart="))
-        .unwrap_or_else(|| panic!("{path} has no ExecStart"));
-    let mut words = line.split_whitespace();
-    assert_eq!(words.next(), Some("/usr/local/bin/upc"), "{path}");
-    let logs = format!("{}/", s.dir.display());
-    let mut args: Vec<String> = words.map(|w| w.replace("/var/log/upc/", &logs)).collect();
-    let p = args
-        .iter()
-        .position(|a| a == "--prefix")
-        .unwrap_or_else(|| panic!("{path}: no --prefix"));
-    args[p + 1] = s.prefix.clone();
-    args
-}
-
 /// Start the unit `unit` as process `name`, with `extra` arguments appended.
 fn start_unit(p: &mut Procs, s: &Scratch, unit: &str, name: &str, extra: &[&str]) {
     let mut args = unit_args(unit, s);
