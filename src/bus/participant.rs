@@ -584,8 +584,7 @@ impl Session<'_> {
                     }
                     let t = self.time();
                     self.switch(Drive::Damping, t);
-                    ep.commands.write(self.command(Drive::Damping, 0.0))?;
-                    self.summary.commands += 1;
+                    self.write_damping(ep)?;
                 }
                 None => {
                     // The controller's deadline: torques that came meanwhile keep it.
@@ -593,8 +592,7 @@ impl Session<'_> {
                     if !self.current() {
                         let t = self.time();
                         self.decide(t);
-                        ep.commands.write(self.command(Drive::Damping, 0.0))?;
-                        self.summary.commands += 1;
+                        self.write_damping(ep)?;
                     }
                 }
                 Some(s)
@@ -617,6 +615,13 @@ impl Session<'_> {
                 Some(_) => {}
             }
         }
+    }
+
+    /// A damping command between states (the controller or the robot silent), counted.
+    fn write_damping(&mut self, ep: &mut Endpoints) -> Result<(), BusError> {
+        ep.commands.write(self.command(Drive::Damping, 0.0))?;
+        self.summary.commands += 1;
+        Ok(())
     }
 
     /// The command for this state: the drives' hold, the controller's torques, a blend of both,
