@@ -120,8 +120,14 @@ fn bench(c: &mut Criterion) {
         });
         let c = r.core.wbc_counters();
         eprintln!(
-            "{name}: {} ticks, cone solve {} ({} Newton steps), left to clarabel {}, torque-limited {}",
-            c.ticks, c.active_set, c.cone_steps, c.cone_unsettled, c.torque_limited
+            "{name}: {} ticks, cone solve {} ({} Newton steps), left to clarabel {}, torque-limited {} \
+             ({} held by the cone solve)",
+            c.ticks,
+            c.active_set,
+            c.cone_steps,
+            c.cone_unsettled,
+            c.torque_limited,
+            c.limits_condensed
         );
     }
     offers(&mut g);

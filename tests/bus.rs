@@ -89,7 +89,13 @@ fn a_g1_on_the_bus_stands_and_is_damped_within_10_ms_of_its_controller_s_death()
         &s,
         &["--robot", "g1", "--set", "controller.rate_hz=500.0"],
     );
-    std::thread::sleep(Duration::from_secs(8));
+    std::thread::sleep(Duration::from_secs(6));
+    // A 15 ms stall of the controller (stopped and continued): damped, then its torques again at
+    // once (`bus.hold.resume`), without the hold.
+    p.signal("controller", libc::SIGSTOP);
+    std::thread::sleep(Duration::from_millis(15));
+    p.signal("controller", libc::SIGCONT);
+    std::thread::sleep(Duration::from_secs(2));
     p.signal("controller", libc::SIGKILL);
     std::thread::sleep(Duration::from_secs(1));
     p.stop(&s, "bus", libc::SIGTERM);
@@ -106,17 +112,23 @@ fn a_g1_on_the_bus_stands_and_is_damped_within_10_ms_of_its_controller_s_death()
     let silence = f(&bus, "robot_silence_max");
     assert!((0.06..1.0).contains(&silence), "{bus}");
     assert!(u(&sim, "silenced_states") >= 30, "{sim}");
+    let resumes = u(&bus, "resumes");
     eprintln!(
-        "the robot silent for {silence:.3} s: damped, then handed back; {} hand-overs, {} losses",
+        "the robot silent for {silence:.3} s: damped, then handed back; {} hand-overs, {} losses, \
+         {resumes} resumed at once",
         u(&bus, "handovers"),
         u(&bus, "losses")
     );
     assert!(u(&bus, "handovers") >= 2, "{bus}");
+    assert!(
+        resumes >= 1,
+        "the stalled controller was not resumed: {bus}"
+    );
     assert!(f(&bus, "control_start") >= 0.0, "{bus}");
     let losses = u(&bus, "losses");
     assert!(losses >= 1, "{bus}");
-    assert_eq!(u(&bus, "handovers"), losses, "{bus}");
-    let transient = losses.saturating_sub(1 + u(&bus, "robot_silences"));
+    assert_eq!(u(&bus, "handovers") + resumes, losses, "{bus}");
+    let transient = losses.saturating_sub(2 + u(&bus, "robot_silences"));
     if transient > 0 {
         eprintln!(
             "note: {transient} transient loss(es) of the controller before its death (no real-time scheduling)"
@@ -152,12 +164,12 @@ fn upc_run_through_the_bus_keeps_c1_standing_on_the_g1() {
     assert_eq!(u(&c, "tick_errors"), 0, "{c}");
     assert!(u(&bus, "states") > 1500, "{bus}");
     // The controller kept the robot until its run was over: each loss but its exit was followed
-    // by a hand-over back. Without real-time scheduling a 2-core machine stalls it past the
+    // by a hand-over back, or by its torques at once after a stall of a few ms. Without real-time scheduling a 2-core machine stalls it past the
     // bus's 6 ms now and then (damped, then handed back: the designed behaviour); a few at
     // most, each counted.
     let (handovers, losses) = (u(&bus, "handovers"), u(&bus, "losses"));
     assert!(
-        handovers >= 1 && handovers == losses && losses <= 3,
+        handovers >= 1 && handovers + u(&bus, "resumes") == losses && losses <= 3,
         "{bus}"
     );
     if losses > 1 {

@@ -688,6 +688,10 @@ fn condensed_and_full_formulations_give_the_same_optimum() {
                 at_limit > 0,
                 "no torque limit was active: the case tests nothing"
             );
+            // The condensed side held them itself (the cone solve with the limits' rows), not
+            // through the full problem.
+            let c = cond.wbc.counters();
+            assert!(c.limits_condensed > 0, "{c:?}");
         }
     }
 }
@@ -695,8 +699,9 @@ fn condensed_and_full_formulations_give_the_same_optimum() {
 /// The cone solve (docs/whole_body_qp.md) returns clarabel's optimum: against clarabel on
 /// every tick at a tight tolerance, over CoM requests and hand pushes that keep every corner
 /// loaded, unload some corners (the apex of their cones) and put corners at their friction
-/// limit (sliding on the cone's boundary). Each kind of tick must occur, or the check tests
-/// nothing. A tick at a torque limit goes to the full problem (clarabel) on both sides.
+/// limit (sliding on the cone's boundary), and hold torque limits at their bounds (the
+/// reference's full problem with its torque rows). Each kind of tick must occur, or the check
+/// tests nothing.
 #[test]
 fn the_cone_solve_is_clarabels_optimum() {
     let tight = WbcConfig {
@@ -757,9 +762,10 @@ fn the_cone_solve_is_clarabels_optimum() {
             }
         }
     }
+    let held = fast.wbc.counters().limits_condensed;
     assert!(
-        by_newton > 0 && unloaded > 0 && sliding > 0,
-        "cone solve {by_newton} (with unloaded corners {unloaded}, sliding {sliding}), \
-         clarabel {full}"
+        by_newton > 0 && unloaded > 0 && sliding > 0 && held > 0,
+        "cone solve {by_newton} (with unloaded corners {unloaded}, sliding {sliding}, torque \
+         limits held {held}), clarabel {full}"
     );
 }

@@ -47,7 +47,7 @@ pub struct BusConfig {
     pub realtime: crate::config::RealtimeSettings,
 }
 
-/// The drives' hold before the controller has the robot.
+/// The drives' hold before the controller has the robot, and the hand-over to it.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BusHold {
@@ -56,6 +56,9 @@ pub struct BusHold {
     pub arm_kp: f64,
     pub arm_kd: f64,
     pub handover: f64,
+    /// A controller silent under control for less than this (s) drives again at once when it
+    /// answers; longer, through the hold and a new hand-over.
+    pub resume: f64,
 }
 
 /// The simulated robot on the bus.
@@ -102,6 +105,7 @@ impl BusConfig {
             ("bus.hold.arm_kp", self.hold.arm_kp),
             ("bus.hold.arm_kd", self.hold.arm_kd),
             ("bus.hold.handover", self.hold.handover),
+            ("bus.hold.resume", self.hold.resume),
             ("bus.sim.scenario_delay", self.sim.scenario_delay),
             ("bus.sim.silence", self.sim.silence[0]),
             ("bus.sim.silence", self.sim.silence[1]),

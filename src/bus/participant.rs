@@ -10,7 +10,8 @@
 //! - until the controller's first valid torques the drives hold the start posture (kp, kd,
 //!   tau = 0), then the torques are blended in over `bus.hold.handover`;
 //! - the controller silent for `bus.command_timeout` (of this loop's live time) → damping on the
-//!   drives (kp = 0, kd = `bus.damping`, tau = 0), until it answers again (a new hand-over);
+//!   drives (kp = 0, kd = `bus.damping`, tau = 0), until it answers again: its torques at once
+//!   within `bus.hold.resume` of the damping, else a new hand-over;
 //! - every torque clamped to its joint's effort limit; mode_machine echoed from the state;
 //! - a state with a bad CRC (`bus.bad_crc`), a tick that does not advance or a non-finite value
 //!   is refused and counted; no valid state for `bus.state_timeout` → damping, repeated until the
@@ -123,6 +124,9 @@ pub struct BusSummary {
     pub handovers: u64,
     /// Times the robot was taken from the controller: its silence, or the robot's.
     pub losses: u64,
+    /// Of the controller's silences, those it ended within `bus.hold.resume`: its torques went
+    /// out again at once, without the hold.
+    pub resumes: u64,
     /// Times the robot fell silent for `bus.state_timeout` (damped, then handed back when it
     /// spoke again), and the longest silence (s).
     pub robot_silences: u64,
@@ -205,6 +209,10 @@ struct Session<'a> {
     drive: Drive,
     /// Robot time the drive began.
     since: f64,
+    /// The damping is the controller's brief silence under control (not the robot's, nor a
+    /// silence during the hand-over): its answer within `bus.hold.resume` gives it the robot
+    /// back at once.
+    resumable: bool,
     msg: Box<StateMsg>,
     points: [[f64; 3]; N_CONTACTS],
     tick0: u32,
@@ -301,6 +309,7 @@ pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError>
         last_command: None,
         drive: Drive::Hold,
         since: 0.0,
+        resumable: false,
         msg: Box::default(),
         points: [[0.0; 3]; N_CONTACTS],
         tick0: 0,
@@ -521,6 +530,17 @@ impl Session<'_> {
     /// Who drives the robot now.
     fn decide(&mut self, t: f64) {
         let next = match (self.drive, self.current()) {
+            // A few ms of damping leave the robot where the controller had it: the hold would
+            // pull it toward the start posture for the hand-over's length, mid-task (a 6 ms
+            // stall of the controller under a push then ended in a fall, measured).
+            (Drive::Damping, true) if self.resumable && t - self.since < self.cfg.hold.resume => {
+                self.summary.resumes += 1;
+                tracing::info!(
+                    "t = {t:.3} s: the controller answers again after {:.3} s: its torques at once",
+                    t - self.since
+                );
+                Drive::Control
+            }
             (Drive::Hold | Drive::Damping, true) => Drive::Handover,
             (Drive::Handover, true) if t - self.since >= self.cfg.hold.handover => Drive::Control,
             (Drive::Handover | Drive::Control, false) => Drive::Damping,
@@ -541,7 +561,12 @@ impl Session<'_> {
             let delay = c.elapsed().as_secs_f64();
             self.summary.loss_to_damping_max = self.summary.loss_to_damping_max.max(delay);
         }
-        transition(self.drive, next, t, &mut self.summary);
+        if self.drive == Drive::Damping && next == Drive::Control {
+            // A resume (see `decide`): no new control start.
+        } else {
+            transition(self.drive, next, t, &mut self.summary);
+        }
+        self.resumable = self.drive == Drive::Control && next == Drive::Damping;
         self.since = t;
         self.drive = next;
     }
@@ -584,6 +609,8 @@ impl Session<'_> {
                     }
                     let t = self.time();
                     self.switch(Drive::Damping, t);
+                    // The robot's silence: when it speaks again, the hold and a hand-over.
+                    self.resumable = false;
                     self.write_damping(ep)?;
                 }
                 None => {

@@ -95,7 +95,7 @@ pub fn run_cli(args: BusArgs) -> CliResult {
     }
     println!(
         "bus: {} states at {:.0} Hz, {} commands; refused: bad CRC {}, stale tick {}, non-finite {}; \
-         late answers {}, clamped commands {}; hand-overs {}, losses {}, damping states {}; \
+         late answers {}, clamped commands {}; hand-overs {}, losses {} (resumed {}), damping states {}; \
          state → command p50 {:.0} µs, p99 {:.0} µs (the bus's own share p50 {:.0} µs, p99 {:.0} µs); \
          CPU {:.1} % of a core{}",
         s.states,
@@ -108,6 +108,7 @@ pub fn run_cli(args: BusArgs) -> CliResult {
         s.clamped_commands,
         s.handovers,
         s.losses,
+        s.resumes,
         s.damping_states,
         s.state_to_command_p50 * 1e6,
         s.state_to_command_p99 * 1e6,

@@ -738,6 +738,7 @@ impl<'a> ControlLoop<'a> {
         self.core.summarize(&mut s.parts);
         let wc = self.core.wbc_counters();
         s.wbc_torque_limited_ticks = wc.torque_limited;
+        s.wbc_limits_condensed_ticks = wc.limits_condensed;
         s.wbc_condensation_failures = wc.condensation_failures;
         s.wbc_active_set_ticks = wc.active_set;
         s.wbc_cone_steps = wc.cone_steps;

@@ -47,10 +47,14 @@ pub struct ServerSummary {
     /// not be formed (decided by the full one).
     #[serde(default)]
     pub wbc_torque_limited_ticks: u64,
+    /// Of the torque-limited ticks, those the condensed QP settled by holding the active
+    /// limits (the others went to the full problem).
+    #[serde(default)]
+    pub wbc_limits_condensed_ticks: u64,
     #[serde(default)]
     pub wbc_condensation_failures: u64,
-    /// Ticks whose whole-body QP was solved by the condensed problem's active-set check, without
-    /// clarabel (docs/whole_body_qp.md).
+    /// Ticks whose whole-body QP was solved by the cone solve, without clarabel
+    /// (docs/whole_body_qp.md).
     #[serde(default)]
     pub wbc_active_set_ticks: u64,
     /// The cone solve's Newton steps over its ticks, and the ticks it left to clarabel.

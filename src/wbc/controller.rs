@@ -39,9 +39,11 @@
 //! - Formulation handed to clarabel (`wbc.formulation`): by default the problem **condensed**
 //!   onto the 24 contact forces (`condensed.rs`: q̈ and the task residuals eliminated in
 //!   closed form through the equality rows; 30 variables and 30 rows, one 38 × 38 and one
-//!   18 × 18 Cholesky per tick), which has the same optimum and takes about half the time; the
-//!   **full** problem below stays as the reference (tests compare the two) and decides any tick
-//!   whose condensation fails (H or S not positive definite).
+//!   18 × 18 Cholesky per tick), which has the same optimum. Its exact optimum comes from the
+//!   cone solve (`cone.rs`), the active torque limits held as equalities, and clarabel decides
+//!   only the rare tick it does not settle; the **full** problem below stays as the reference
+//!   (tests compare the two) and decides any tick whose condensation fails (H or S not positive
+//!   definite) or whose limits the condensed problem does not settle.
 //! - Reuse between ticks: the sparsity pattern is fixed from the model's structure (structural
 //!   zeros included), presolve is off and zeros are not dropped. Every solver is built at
 //!   construction ([`WholeBodyController::prepare`], from the problem at a posture with the
@@ -65,7 +67,9 @@ use clarabel::solver::{DefaultSettings, SupportedConeT};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Quaternion, UnitQuaternion, Vector3, Vector6};
 
 use super::com_bias::{com_drift_from_pass, drift_pass, frame_drift_from_pass};
-use super::condensed::{CondensedError, CondensedInstance, CondensedQp, Problem};
+use super::condensed::{
+    CondensedError, CondensedInstance, CondensedQp, Problem, joint_torque as torque,
+};
 pub use super::outcome::{FallbackReason, N_CONTACTS, WbcCounters, WbcStatus};
 use super::pattern::Pattern;
 use super::qp::QpInstance;
@@ -672,7 +676,11 @@ impl WholeBodyController {
             self.forces[c] = Vector3::new(x[nv + 3 * c], x[nv + 3 * c + 1], x[nv + 3 * c + 2]);
         }
         for a in 0..nv - 6 {
-            self.tau[a] = torque(m, &self.h, &self.jc, x, 6 + a);
+            // A limit held at its bound gives τ on it within rounding, and the condensed check
+            // lets the others exceed theirs by 1e-9 relative (`condensed.rs`): the drives get
+            // the limit itself, never a hair above it.
+            let lim = self.tau_max[a];
+            self.tau[a] = torque(m, &self.h, &self.jc, x, 6 + a).clamp(-lim, lim);
         }
         if !finite(self.tau.as_slice()) {
             return Err(FallbackReason::NonFiniteSolution);
@@ -823,11 +831,11 @@ impl WholeBodyController {
         }
     }
 
-    /// Solves the tick's problem into `self.x`: the condensed problem (no torque rows), unless
-    /// the last tick had a torque limit active and clarabel would solve it — a robot at its
-    /// limits (pushed hard, falling) stays there for a while, and that screening solve would be
-    /// wasted. Its optimum is the
-    /// tick's when it respects every limit; otherwise the full problem with its torque rows
+    /// Solves the tick's problem into `self.x`: the condensed problem (the cone solve holding
+    /// the active torque limits, or clarabel without them), unless the last tick had a torque
+    /// limit active and only clarabel would solve it — a robot at its limits (pushed hard,
+    /// falling) stays there for a while, and that screening solve would be wasted. When the
+    /// condensed problem does not settle the limits, the full problem with its torque rows
     /// decides.
     fn solve_path(
         &mut self,
@@ -867,6 +875,7 @@ impl WholeBodyController {
                 w_force: self.p.w_reg_force,
                 friction: self.p.friction,
                 foot_rot: *foot_rot,
+                limited: &self.limited,
                 // A forced path builds clarabel's solver (`prepare`): no shortcut then.
                 active_set: self.p.active_set && forced.is_none(),
             };
@@ -878,19 +887,19 @@ impl WholeBodyController {
                 iterations,
                 solve_time,
             ) {
-                Ok(almost) => {
+                Ok(solved) => {
                     let x = self.condensed.x();
-                    let within = self
-                        .limited
-                        .iter()
-                        .all(|&(dof, tmax)| torque(m, &self.h, &self.jc, x, dof).abs() <= tmax);
-                    if within && finite(x) {
+                    if finite(x) {
                         self.x[..x.len()].copy_from_slice(x);
-                        self.limits_active = false;
-                        return Ok(almost);
+                        self.limits_active = solved.limits;
+                        self.counters.torque_limited += u64::from(solved.limits);
+                        return Ok(solved.almost);
                     }
                     screen = false;
                 }
+                // A torque limit the condensed problem did not settle: the full problem with
+                // its torque rows.
+                Err(CondensedError::Limits) => screen = false,
                 // H or S not positive definite (e.g. a singular leg): the full problem, whose
                 // interior-point KKT system is regularised, decides this tick.
                 Err(CondensedError::Factorisation) => self.counters.condensation_failures += 1,
@@ -1331,19 +1340,6 @@ fn mid_range(model: &Model) -> DVector<f64> {
         }
     }
     q
-}
-
-/// `τ_d = M[d, :] q̈ + h_d − Σ J_c[:, d]ᵀ f` from a solution `x = [q̈, f, …]`.
-fn torque(m: &DMatrix<f64>, h: &DVector<f64>, jc: &DMatrix<f64>, x: &[f64], d: usize) -> f64 {
-    let nv = m.ncols();
-    let mut t = h[d];
-    for c in 0..nv {
-        t += m[(d, c)] * x[c];
-    }
-    for j in 0..3 * N_CONTACTS {
-        t -= jc[(j, d)] * x[nv + j];
-    }
-    t
 }
 
 fn mat3_mul_v(j: &DMatrix<f64>, v: &DVector<f64>) -> Vector3<f64> {

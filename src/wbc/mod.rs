@@ -13,12 +13,14 @@
 //!   counters (the contact frames are the robot's: `crate::robot::BodyFrames`, `CORNERS`).
 //! - `tasks`: the QP's tasks as data and the layout of its variables and rows, decided once
 //!   and read by both formulations.
+//! - `cone`: the cone solve, the condensed problem's exact optimum by Newton steps on its dual.
 //! - `dense`: the condensation's small Cholesky factors and triangular solves.
 //! - `qp`: one clarabel problem with a fixed sparsity pattern, updated in place each tick.
 //! - [`com_bias`]: `J̇ v` drift of the CoM and of several frames from one forward pass.
 
 pub mod com_bias;
 mod condensed;
+mod cone;
 pub mod controller;
 mod dense;
 pub mod outcome;

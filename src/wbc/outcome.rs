@@ -48,12 +48,14 @@ pub struct WbcCounters {
     pub solver_builds: u64,
     /// Ticks whose QP needed the torque-limit rows (a limit active at the optimum).
     pub torque_limited: u64,
+    /// Of those, the ticks the condensed problem settled by holding the active limits
+    /// (`condensed.rs`); the others went to the full problem.
+    pub limits_condensed: u64,
     /// Ticks the condensed problem could not be formed (H or S not positive definite), decided
     /// by the full problem instead.
     pub condensation_failures: u64,
     /// Ticks the condensed problem's optimum was found without clarabel, by the cone solve
-    /// (`condensed.rs`, `cone_optimum`); a torque limit may still send the tick to the full
-    /// problem.
+    /// (`cone.rs`), its torque limits held (`condensed.rs`).
     pub active_set: u64,
     /// Newton steps the cone solve took over those ticks, and the ticks it did not settle
     /// (left to clarabel).
