@@ -34,8 +34,8 @@
 //! `±(M_j q̈ + h_j − J_c,jᵀ f) = τ_max`, is one more row of `C q̈ = d₀ + E f` (C_j = M_j,
 //! d₀_j = ±τ_max − h_j, E_j f = J_c,jᵀ f): q̈ stays free, so the optimum is the full problem's
 //! exactly (fixing q̈ to the inner optimum and bounding the torque would shrink the feasible set).
-//! Which limits are active is found by a primal-dual active set (`hold_limits`): from none, each
-//! round solves the problem with the held rows exactly (the cone solve, whose dual then has one
+//! Which limits are active is found by a primal-dual active set (`hold_limits`): from the last
+//! tick's (else none), each round solves the problem with the held rows exactly (the cone solve, whose dual then has one
 //! more dimension per held row), holds each limit the optimum violates and releases each held
 //! one whose multiplier λ_j = (S⁻¹(ρ + E f))_j = ∂(optimal cost)/∂d₀_j has the wrong sign (the
 //! optimum would move inside the bound). It stops at the KKT point of the problem with its
@@ -171,6 +171,10 @@ pub(crate) struct CondensedQp {
     /// The held limits: index into `Problem::limited`, and the bound's sign.
     held: [(usize, f64); MAX_LIMITS],
     n_held: usize,
+    /// The last settled tick's held limits, where the next tick's active set starts: a robot
+    /// at its limits stays there for a while, and each round saved is a cone solve.
+    last_held: [(usize, f64); MAX_LIMITS],
+    n_last: usize,
     /// u = −H⁻¹ g.
     u: DVector<f64>,
     /// λ = S⁻¹(ρ + E f): the equality rows' multipliers (18 + k).
@@ -225,6 +229,8 @@ impl CondensedQp {
             xr: [0.0; NC_MAX * ND],
             held: [(0, 0.0); MAX_LIMITS],
             n_held: 0,
+            last_held: [(0, 0.0); MAX_LIMITS],
+            n_last: 0,
             u: DVector::zeros(nv),
             lambda: DVector::zeros(NC_MAX),
             tmp: DVector::zeros(nv),
@@ -253,6 +259,11 @@ impl CondensedQp {
             soc: N_CONTACTS,
             force_unit: self.force_unit,
         }
+    }
+
+    /// Forgets the last tick's held limits (a new session starts its active set from none).
+    pub(crate) fn forget(&mut self) {
+        self.n_last = 0;
     }
 
     /// Drops the clarabel solver (the next solve builds a fresh one).
@@ -292,9 +303,12 @@ impl CondensedQp {
             let started = Instant::now();
             let settled = self.hold_limits(pb, counters);
             *solve_time += started.elapsed();
+            self.n_last = 0;
             match settled {
                 Settled::Yes => {
                     let limits = self.n_held > 0;
+                    self.last_held = self.held;
+                    self.n_last = self.n_held;
                     counters.active_set += 1;
                     counters.limits_condensed += u64::from(limits);
                     return Ok(Condensed {
@@ -461,9 +475,24 @@ impl CondensedQp {
         true
     }
 
-    /// The limits' primal-dual active set (module docs), from none held: `Yes` leaves the
-    /// solution in `self.x` with `self.held` the active limits.
+    /// The limits' primal-dual active set (module docs), from the last settled tick's held
+    /// limits (else none): `Yes` leaves the solution in `self.x` with `self.held` the active
+    /// limits.
     fn hold_limits(&mut self, pb: &Problem, counters: &mut WbcCounters) -> Settled {
+        // From the last tick's set when it still names this problem's limits.
+        let warm = self.last_held[..self.n_last]
+            .iter()
+            .all(|&(idx, _)| idx < pb.limited.len());
+        if warm && self.n_last > 0 {
+            self.held = self.last_held;
+            self.n_held = self.n_last;
+            if !self.hold_rows(pb) {
+                self.n_held = 0;
+                if !self.hold_rows(pb) {
+                    return Settled::Limits;
+                }
+            }
+        }
         for round in 0..LIMIT_ROUNDS {
             if round > 0 && !self.hold_rows(pb) {
                 return Settled::Limits;

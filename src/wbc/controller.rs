@@ -570,6 +570,7 @@ impl WholeBodyController {
     pub fn reset(&mut self) {
         self.posture_set = false;
         self.limits_active = false;
+        self.condensed.forget();
         self.last_tau.fill(0.0);
     }
 
