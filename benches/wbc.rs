@@ -166,6 +166,7 @@ fn export_instances(path: &str) {
     for w in [&mut fast, &mut slow] {
         w.set_posture_reference(&model, &home).unwrap();
     }
+    fast.record_condensed_instances();
     let mut out = String::new();
     for Tick { kind, q, v, cmd } in exported_ticks(&model, &home) {
         let (q, v, cmd) = (&q, &v, &cmd);

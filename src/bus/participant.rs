@@ -534,11 +534,6 @@ impl Session<'_> {
             // pull it toward the start posture for the hand-over's length, mid-task (a 6 ms
             // stall of the controller under a push then ended in a fall, measured).
             (Drive::Damping, true) if self.resumable && t - self.since < self.cfg.hold.resume => {
-                self.summary.resumes += 1;
-                tracing::info!(
-                    "t = {t:.3} s: the controller answers again after {:.3} s: its torques at once",
-                    t - self.since
-                );
                 Drive::Control
             }
             (Drive::Hold | Drive::Damping, true) => Drive::Handover,
@@ -561,11 +556,7 @@ impl Session<'_> {
             let delay = c.elapsed().as_secs_f64();
             self.summary.loss_to_damping_max = self.summary.loss_to_damping_max.max(delay);
         }
-        if self.drive == Drive::Damping && next == Drive::Control {
-            // A resume (see `decide`): no new control start.
-        } else {
-            transition(self.drive, next, t, &mut self.summary);
-        }
+        transition(self.drive, next, t - self.since, t, &mut self.summary);
         self.resumable = self.drive == Drive::Control && next == Drive::Damping;
         self.since = t;
         self.drive = next;
@@ -712,8 +703,16 @@ fn tick_behind(a: u32, b: u32) -> bool {
     b.wrapping_sub(a) < u32::MAX / 2 && a != b
 }
 
-fn transition(from: Drive, to: Drive, t: f64, s: &mut BusSummary) {
+/// Counts and logs a change of drive at robot time `t`, `held` s after the last one.
+fn transition(from: Drive, to: Drive, held: f64, t: f64, s: &mut BusSummary) {
     match to {
+        // A resume (`Session::decide`): no new control start.
+        Drive::Control if from == Drive::Damping => {
+            s.resumes += 1;
+            tracing::info!(
+                "t = {t:.3} s: the controller answers again after {held:.3} s: its torques at once"
+            );
+        }
         Drive::Handover => {
             s.handovers += 1;
             tracing::info!("t = {t:.3} s: the controller's torques arrived; handing over");

@@ -35,9 +35,9 @@
 //! d₀_j = ±τ_max − h_j, E_j f = J_c,jᵀ f): q̈ stays free, so the optimum is the full problem's
 //! exactly (fixing q̈ to the inner optimum and bounding the torque would shrink the feasible set).
 //! Which limits are active is found by a primal-dual active set (`hold_limits`): from the last
-//! tick's (else none), each round solves the problem with the held rows exactly (the cone solve, whose dual then has one
-//! more dimension per held row), holds each limit the optimum violates and releases each held
-//! one whose multiplier λ_j = (S⁻¹(ρ + E f))_j = ∂(optimal cost)/∂d₀_j has the wrong sign (the
+//! tick's (else none), each round solves the problem with the held rows exactly (the cone
+//! solve, whose dual then has one more dimension per held row), holds each limit the optimum
+//! violates and releases each held one whose multiplier λ_j = (S⁻¹(ρ + E f))_j = ∂(optimal cost)/∂d₀_j has the wrong sign (the
 //! optimum would move inside the bound). It stops at the KKT point of the problem with its
 //! limits. More than [`MAX_LIMITS`] held, or no settled set within [`LIMIT_ROUNDS`], and the
 //! full problem (clarabel) decides.
@@ -175,6 +175,9 @@ pub(crate) struct CondensedQp {
     /// at its limits stays there for a while, and each round saved is a cone solve.
     last_held: [(usize, f64); MAX_LIMITS],
     n_last: usize,
+    /// Build the reduced QP (`force_qp`) on every tick, for [`Self::instance`]; otherwise
+    /// only for the ticks clarabel solves.
+    record: bool,
     /// u = −H⁻¹ g.
     u: DVector<f64>,
     /// λ = S⁻¹(ρ + E f): the equality rows' multipliers (18 + k).
@@ -231,6 +234,7 @@ impl CondensedQp {
             n_held: 0,
             last_held: [(0, 0.0); MAX_LIMITS],
             n_last: 0,
+            record: false,
             u: DVector::zeros(nv),
             lambda: DVector::zeros(NC_MAX),
             tmp: DVector::zeros(nv),
@@ -245,7 +249,13 @@ impl CondensedQp {
         }
     }
 
-    /// The last reduced QP (allocates: offline use).
+    /// Build the reduced QP on every tick from now on, for [`Self::instance`] (offline use:
+    /// each tick then starts its limits' active set from none).
+    pub(crate) fn record(&mut self) {
+        self.record = true;
+    }
+
+    /// The reduced QP of the last tick that built one (allocates: offline use).
     pub(crate) fn instance(&self) -> CondensedInstance {
         let row_major = |m: &DMatrix<f64>| m.transpose().as_slice().to_vec();
         CondensedInstance {
@@ -294,11 +304,28 @@ impl CondensedQp {
     ) -> Result<Condensed, CondensedError> {
         self.unconstrained(pb)?;
         self.schur_complement(pb)?;
-        self.n_held = 0;
+        // The rows to start from: the last settled tick's held limits (a robot at its limits
+        // stays there for a while, and each round saved is a cone solve), else none. None when
+        // the tick's reduced QP is recorded: that is the problem without limits.
+        let warm = pb.active_set
+            && !self.record
+            && self.last_held[..self.n_last]
+                .iter()
+                .all(|&(idx, _)| idx < pb.limited.len());
+        self.n_held = if warm { self.n_last } else { 0 };
+        self.held = self.last_held;
         if !self.hold_rows(pb) {
-            return Err(CondensedError::Factorisation);
+            if self.n_held == 0 {
+                return Err(CondensedError::Factorisation);
+            }
+            self.n_held = 0;
+            if !self.hold_rows(pb) {
+                return Err(CondensedError::Factorisation);
+            }
         }
-        self.force_qp(pb)?;
+        if self.record {
+            self.force_qp(pb)?;
+        }
         if pb.active_set {
             let started = Instant::now();
             let settled = self.hold_limits(pb, counters);
@@ -316,9 +343,13 @@ impl CondensedQp {
                         limits,
                     });
                 }
+                // No limit held (`hold_limits`): the rows are the reduced QP's.
                 Settled::Unsettled => counters.cone_unsettled += 1,
                 Settled::Limits => return Err(CondensedError::Limits),
             }
+        }
+        if !self.record {
+            self.force_qp(pb)?;
         }
         let run = self.qp.run(
             &self.p_pattern,
@@ -475,24 +506,9 @@ impl CondensedQp {
         true
     }
 
-    /// The limits' primal-dual active set (module docs), from the last settled tick's held
-    /// limits (else none): `Yes` leaves the solution in `self.x` with `self.held` the active
-    /// limits.
+    /// The limits' primal-dual active set (module docs), from the rows `solve` held: `Yes`
+    /// leaves the solution in `self.x` with `self.held` the active limits.
     fn hold_limits(&mut self, pb: &Problem, counters: &mut WbcCounters) -> Settled {
-        // From the last tick's set when it still names this problem's limits.
-        let warm = self.last_held[..self.n_last]
-            .iter()
-            .all(|&(idx, _)| idx < pb.limited.len());
-        if warm && self.n_last > 0 {
-            self.held = self.last_held;
-            self.n_held = self.n_last;
-            if !self.hold_rows(pb) {
-                self.n_held = 0;
-                if !self.hold_rows(pb) {
-                    return Settled::Limits;
-                }
-            }
-        }
         for round in 0..LIMIT_ROUNDS {
             if round > 0 && !self.hold_rows(pb) {
                 return Settled::Limits;
@@ -609,8 +625,8 @@ impl CondensedQp {
         }
     }
 
-    /// The QP in the forces handed to clarabel (no limit held): P, the rows `Bᵀ f − δ = y*`
-    /// and the friction cones, scaled by the force unit.
+    /// The QP in the forces handed to clarabel (from `hold_rows` with no limit held): P, the
+    /// rows `Bᵀ f − δ = y*` and the friction cones, scaled by the force unit.
     fn force_qp(&mut self, pb: &Problem) -> Result<(), CondensedError> {
         // B = J_c,u. The cost ½ fᵀ (B X_u Bᵀ + w_f I) f + ((S⁻¹ρ)_u)ᵀ Bᵀ f is, up to a
         // constant, ½ δᵀ X_u δ + ½ w_f ‖f‖² with δ = Bᵀ f − y*, y* = −X_u⁻¹ (S⁻¹ρ)_u: the

@@ -493,8 +493,17 @@ impl WholeBodyController {
         self.drop_solvers();
     }
 
+    /// From now on every tick builds its condensed QP as clarabel would receive it (without
+    /// the torque limits), for [`Self::condensed_instance`]; the cone solve alone does not need
+    /// it. Offline use: each tick's limits' active set then starts from none.
+    pub fn record_condensed_instances(&mut self) {
+        self.condensed.record();
+    }
+
     /// The condensed QP of the last tick that formed one, as clarabel receives it (allocates:
-    /// for comparing solvers offline, never in the loop). `None` with the full formulation.
+    /// for comparing solvers offline, never in the loop): every tick's after
+    /// [`Self::record_condensed_instances`], else only those clarabel solved. `None` with the
+    /// full formulation.
     pub fn condensed_instance(&self) -> Option<CondensedInstance> {
         (self.p.formulation == WbcFormulation::Condensed).then(|| self.condensed.instance())
     }
