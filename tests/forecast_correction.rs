@@ -302,31 +302,23 @@ fn without_a_forecaster_c1_stands_half_again_c0_s_capability() {
 /// support edge for more than 0.25 s (docs/results/robustness.md). The wrong shapes whose
 /// record shows it (the push ending a second late) are discounted; the exact forecast never is.
 /// A forecast that ends half-way is exact until then: at 1.5 × C0's capability it needs the
-/// guard on its easing (VG-3, `ease_margin`, off by default).
+/// guard on its easing (VG-3, `ease_margin`); with the guard off it kept C1 on the heel edge for
+/// 0.27 s at 44 N.
 #[test]
 fn a_forecast_of_the_wrong_shape_leaves_c1_standing() {
     let _one = serial();
     let s = Scratch::new("fc_shapes");
-    let vg3 = [
-        "--set",
-        "controller.viability.ease_margin=0.1",
-        "--forecast-error-shape",
-        "truncated:0.5",
-    ];
-    for (shape, amplitude, extra) in [
-        ("exact", 40.0, &[][..]),
-        ("truncated:0.5", 40.0, &[][..]),
-        ("decaying:0.3", 40.0, &[][..]),
-        ("step", 40.0, &[][..]),
-        ("stretched:2", 40.0, &[][..]),
-        ("rotated:30", 40.0, &[][..]),
-        ("stretched:2", 1.5 * C0_CAPABILITY, &[][..]),
-        ("truncated:0.5", 1.5 * C0_CAPABILITY, &vg3[..]),
+    for (shape, amplitude) in [
+        ("exact", 40.0),
+        ("truncated:0.5", 40.0),
+        ("decaying:0.3", 40.0),
+        ("step", 40.0),
+        ("stretched:2", 40.0),
+        ("rotated:30", 40.0),
+        ("stretched:2", 1.5 * C0_CAPABILITY),
+        ("truncated:0.5", 1.5 * C0_CAPABILITY),
     ] {
-        let mut args = extra.to_vec();
-        if extra.is_empty() {
-            args.extend(["--forecast-error-shape", shape]);
-        }
+        let args = ["--forecast-error-shape", shape];
         let case = Case {
             controller: "c1",
             amplitude,
@@ -335,15 +327,11 @@ fn a_forecast_of_the_wrong_shape_leaves_c1_standing() {
             correction: true,
             extra: &args,
         };
-        let name = format!(
-            "{}_{amplitude}_{}",
-            shape.replace([':', '.'], "_"),
-            extra.len()
-        );
+        let name = format!("{}_{amplitude}", shape.replace([':', '.'], "_"));
         let j = run(&s, &name, &case);
         let fc = &j["forecast_correction"];
         eprintln!(
-            "{amplitude} N, {shape} {extra:?}: drop {:.1} mm, edge {:.2} s, weight ≥ {:.2}, {} discounts",
+            "{amplitude} N, {shape}: drop {:.1} mm, edge {:.2} s, weight ≥ {:.2}, {} discounts",
             f(&j, "com_height_drop") * 1e3,
             f(&j, "time_at_support_edge"),
             f(fc, "weight_min"),

@@ -24,8 +24,10 @@
 //! A forecast that the measured push will ease is the same bet the other way (VG-3): the robot
 //! eases off before the push does, and if it does not (a forecast that ends too early), the push
 //! drives it toward the edge it leans against. The easing is faded toward the measured push as
-//! ξ_m comes within `ease_margin` of that edge (off by default: an exact forecast's easing is what
-//! lets a short impact's lean come back in time). Allocation-free.
+//! ξ_m comes within `ease_margin` of that edge, and believed again as ξ_m passes beyond it (over
+//! `band`): there the measured push cannot be held whatever the lean, and only its easing can
+//! save the robot (a short impact's peak, which an exact forecast's easing lets the robot ride
+//! out). Allocation-free.
 
 use std::any::Any;
 
@@ -115,10 +117,19 @@ impl ViabilityGuard {
             // Indexed by the departure's sign: a force toward −a (more push along −a, or a
             // push along +a easing) is met by leaning toward +a, and the + edge is at risk.
             scale[a] = [fade(hi - xi, m), fade(xi - lo, m)];
+            // Beyond the edge, the measured push cannot be held whatever the lean: only its
+            // easing can save the robot, so the forecast's easing is believed again.
+            let ease_fade = |d: f64| {
+                if d < 0.0 {
+                    (-d / half / self.s.band).clamp(0.0, 1.0)
+                } else {
+                    fade(d, e)
+                }
+            };
             ease[a] = if e < 0.0 {
                 [1.0; 2]
             } else {
-                [fade(hi - xi, e), fade(xi - lo, e)]
+                [ease_fade(hi - xi), ease_fade(xi - lo)]
             };
             self.last_capture[a] = xi;
         }
@@ -277,8 +288,8 @@ pub struct ViabilitySettings {
     pub band: f64,
     /// The margin for a forecast easing the measured push (VG-3): the robot eases off the push
     /// before it does, and the edge at risk is the one the push drives it toward if it does not
-    /// ease. Negative (the default: it costs the 0.3 s impact's κ × τ map up to a quarter,
-    /// docs/forecast_correction.md): easing is never faded.
+    /// ease. Beyond that edge the easing is believed again (nothing else can save the robot).
+    /// Negative: easing is never faded.
     pub ease_margin: f64,
 }
 
@@ -395,8 +406,28 @@ mod tests {
         g.apply(0.001, [com, 0.0], [0.0; 2], SUPPORT, push, &mut h);
         assert_eq!(h[0][0], -40.0, "more push toward the front edge: faded");
         assert_eq!(h[1][0], -20.0, "its easing, away from the rear edge: kept");
-        // With `ease_margin` < 0 (the default) the easing is never faded.
-        let mut g = guard();
+        // Beyond the rear edge the measured push cannot be held whatever the lean: the easing
+        // is believed again, fully once ξ_m is `band` beyond it.
+        for (beyond, s) in [(0.05, 0.5), (0.1, 1.0), (0.3, 1.0)] {
+            let mut h = vec![[-20.0, 0.0, 0.0]];
+            let com = -0.07 - beyond * 0.07 + 40.0 / g.stiffness;
+            g.apply(0.002, [com, 0.0], [0.0; 2], SUPPORT, push, &mut h);
+            assert!(
+                (h[0][0] - (-40.0 + s * 20.0)).abs() < 1e-9,
+                "ξ_m {beyond} of the half-length beyond the rear edge: easing scaled by {s}, {}",
+                h[0][0]
+            );
+        }
+        // With `ease_margin` < 0 the easing is never faded.
+        let mut g = ViabilityGuard::new(
+            ViabilitySettings {
+                ease_margin: -1.0,
+                ..Default::default()
+            },
+            30.0,
+            9.81,
+            0.5,
+        );
         let mut h = vec![[-20.0, 0.0, 0.0]];
         let com = -0.069 + 40.0 / g.stiffness;
         g.apply(0.0, [com, 0.0], [0.0; 2], SUPPORT, push, &mut h);
