@@ -875,18 +875,36 @@ impl ForecastCorrector {
         }
     }
 
-    /// The corrected hand force over the horizon (FC-4): `out[i]` for t + (i + 1) `period`.
-    pub fn fill(&mut self, t: f64, period: f64, window: &ForecastWindow, out: &mut [V3]) {
-        let e = self.est;
-        // FC-4's factors by recursion over the samples (an exp per sample costs a fifth of
-        // this function).
-        let decay = (-period / self.s.offset_decay).exp();
+    /// FC-4's factors per horizon step, taken by recursion over the samples (an exp per
+    /// sample cost a fifth of `fill`): the offset's decay e^{−T/T_d}, the trend's ramp
+    /// e^{−T/T_r} (0 with the trend off), T_o and T_r.
+    fn horizon_steps(&self, period: f64) -> (f64, f64, f64, f64) {
         let (t_o, t_r) = (self.s.offset_time_constant, self.s.trend_horizon);
         let ramp = if t_r > 0.0 {
             (-period / t_r).exp()
         } else {
             0.0
         };
+        ((-period / self.s.offset_decay).exp(), ramp, t_o, t_r)
+    }
+
+    /// The horizon as the measurement alone predicts it (FC-5's measurement model: FC-4 with
+    /// f_fc ≡ 0), at t + (i+1)·`period`: what C1 previews without a forecaster.
+    pub fn fill_measured_only(&self, period: f64, out: &mut [V3]) {
+        let (decay, ramp, t_o, t_r) = self.horizon_steps(period);
+        let (mut w, mut r) = (1.0, 1.0);
+        for f in out.iter_mut() {
+            w *= decay;
+            r *= ramp;
+            let ahead = t_o + t_r * (1.0 - r);
+            *f = unexplained(&self.offset_meas, &self.trend_meas, ahead, w);
+        }
+    }
+
+    /// The corrected hand force over the horizon (FC-4): `out[i]` for t + (i + 1) `period`.
+    pub fn fill(&mut self, t: f64, period: f64, window: &ForecastWindow, out: &mut [V3]) {
+        let e = self.est;
+        let (decay, ramp, t_o, t_r) = self.horizon_steps(period);
         let mut w = 1.0;
         let mut r = 1.0;
         let mut capped = false;
@@ -1094,6 +1112,7 @@ impl ControllerPart for Correction {
             frame.hand_vel,
         );
         c.fill(frame.t, frame.period, inputs.forecast, &mut frame.f_ext);
+        c.fill_measured_only(frame.period, &mut frame.f_measured_only);
         frame.f_ext_filled = true;
         frame.measured_push = Some(c.measured_push());
         Ok(())

@@ -95,6 +95,9 @@ pub struct TickFrame {
     pub f_ext: Vec<[f64; 3]>,
     pub f_ext_filled: bool,
     pub measured_push: Option<[f64; 3]>,
+    /// `Forecast`: the same horizon as the measurement alone predicts it (what C1 previews
+    /// without a forecaster), where a part knows it (`measured_push` is then set).
+    pub f_measured_only: Vec<[f64; 3]>,
     /// `Disturbance`: the disturbance the preview modelled at the last tick (x, y; N), and the
     /// force a part adds to it with its decay per preview step.
     pub known_disturbance: [f64; 2],
@@ -125,6 +128,7 @@ impl TickFrame {
             f_ext: vec![[0.0; 3]; horizon],
             f_ext_filled: false,
             measured_push: None,
+            f_measured_only: vec![[0.0; 3]; horizon],
             known_disturbance: [0.0; 2],
             com_force: [0.0; 2],
             com_force_decay: None,

@@ -23,11 +23,12 @@
 //!
 //! A forecast that the measured push will ease is the same bet the other way (VG-3): the robot
 //! eases off before the push does, and if it does not (a forecast that ends too early), the push
-//! drives it toward the edge it leans against. The easing is faded toward the measured push as
-//! ξ_m comes within `ease_margin` of that edge, and believed again as ξ_m passes beyond it (over
-//! `band`): there the measured push cannot be held whatever the lean, and only its easing can
-//! save the robot (a short impact's peak, which an exact forecast's easing lets the robot ride
-//! out). Allocation-free.
+//! drives it toward the edge it leans against. An easing faster than the measurement alone
+//! predicts (FC-5's measurement model: what C1 previews without a forecaster) is faded toward
+//! that prediction as ξ_m comes within `ease_margin` of that edge, and believed again as ξ_m
+//! passes beyond it (over `band`): there the measured push cannot be held whatever the lean, and
+//! only its easing can save the robot (a short impact's peak, which an exact forecast's easing
+//! lets the robot ride out). Allocation-free.
 
 use std::any::Any;
 
@@ -50,6 +51,21 @@ pub struct ViabilityCounts {
     pub episodes: u64,
     /// Smallest s seen.
     pub min_scale: f64,
+}
+
+/// The push measured now (N), and over the horizon as the measurement alone predicts it (FC-5's
+/// measurement model), when known: the hedge VG-3 fades an easing toward.
+#[derive(Clone, Copy)]
+pub struct MeasuredPush<'a> {
+    pub now: V3,
+    pub ahead: Option<&'a [V3]>,
+}
+
+impl MeasuredPush<'_> {
+    /// Measured now only (the horizon's hedge is the push now).
+    pub fn now(now: V3) -> Self {
+        Self { now, ahead: None }
+    }
 }
 
 pub struct ViabilityGuard {
@@ -98,9 +114,10 @@ impl ViabilityGuard {
         com: [f64; 2],
         vcom: [f64; 2],
         support: [[f64; 2]; 2],
-        push_now: V3,
+        push: MeasuredPush,
         horizon: &mut [V3],
     ) {
+        let (push_now, measured_only) = (push.now, push.ahead);
         // Per axis, the scale of an unmeasured force toward −a (the robot leans toward +a, the
         // + edge is at risk) and toward +a (the − edge).
         let mut scale = [[1.0; 2]; 2];
@@ -136,16 +153,27 @@ impl ViabilityGuard {
         let mut used = [1.0f64; 2];
         let faded = scale.iter().chain(&ease).flatten().any(|s| *s < 1.0);
         if faded {
-            for f in horizon.iter_mut() {
+            for (i, f) in horizon.iter_mut().enumerate() {
+                let reference = measured_only.and_then(|m| m.get(i));
                 for a in 0..2 {
                     // The forecast's departure from the push measured now: a push to come (the
                     // forecast beyond it along its own direction, all of it where nothing or
-                    // the opposite is measured; VG-2) or the measured push easing (VG-3).
-                    let easing = f[a] * push_now[a] > 0.0 && f[a].abs() < push_now[a].abs();
-                    let base = if f[a] * push_now[a] > 0.0 || easing {
-                        push_now[a]
+                    // the opposite is measured; VG-2) or the measured push easing (VG-3) —
+                    // guarded only below what the measurement alone predicts (what C1 would
+                    // preview without a forecaster), and faded toward that.
+                    let now = push_now[a].abs();
+                    let u = if now > 0.0 { push_now[a] / now } else { 0.0 };
+                    let along = f[a] * u;
+                    let (easing, base) = if along > 0.0 && along < now {
+                        let floor = reference.map_or(now, |m| (m[a] * u).min(now));
+                        if along >= floor {
+                            continue;
+                        }
+                        (true, floor * u)
+                    } else if along > 0.0 {
+                        (false, push_now[a])
                     } else {
-                        0.0
+                        (false, 0.0)
                     };
                     let extra = f[a] - base;
                     if extra == 0.0 || (easing && self.s.ease_margin < 0.0) {
@@ -237,7 +265,10 @@ impl ControllerPart for Guard {
                 [com[0], com[1]],
                 [vcom[0], vcom[1]],
                 frame.support,
-                push,
+                MeasuredPush {
+                    now: push,
+                    ahead: Some(&frame.f_measured_only),
+                },
                 &mut frame.f_ext,
             );
         }
@@ -335,7 +366,14 @@ mod tests {
     fn a_robot_at_rest_keeps_the_whole_forecast() {
         let mut g = guard();
         let mut h = vec![[-80.0, 5.0, 0.0]; 10];
-        g.apply(0.0, [0.0; 2], [0.0; 2], SUPPORT, [0.0; 3], &mut h);
+        g.apply(
+            0.0,
+            [0.0; 2],
+            [0.0; 2],
+            SUPPORT,
+            MeasuredPush::now([0.0; 3]),
+            &mut h,
+        );
         assert!(h.iter().all(|f| *f == [-80.0, 5.0, 0.0]));
         assert_eq!(g.counts.faded_ticks, 0);
     }
@@ -347,7 +385,14 @@ mod tests {
     fn an_unmeasured_lean_fades_and_a_measured_push_lifts_the_fade() {
         let mut g = guard();
         let mut h = vec![[-80.0, 0.0, 0.0]; 10];
-        g.apply(0.0, [0.04, 0.0], [0.1, 0.0], SUPPORT, [0.0; 3], &mut h);
+        g.apply(
+            0.0,
+            [0.04, 0.0],
+            [0.1, 0.0],
+            SUPPORT,
+            MeasuredPush::now([0.0; 3]),
+            &mut h,
+        );
         assert_eq!(g.last_scale[0], 0.0, "{:?}", g.last_capture);
         assert!(h.iter().all(|f| f[0] == 0.0), "{:?}", h[0]);
         assert_eq!((g.counts.faded_ticks, g.counts.episodes), (1, 1));
@@ -358,7 +403,7 @@ mod tests {
             [0.04, 0.0],
             [0.1, 0.0],
             SUPPORT,
-            [-30.0, 0.0, 0.0],
+            MeasuredPush::now([-30.0, 0.0, 0.0]),
             &mut h,
         );
         assert_eq!(g.last_scale, [1.0, 1.0]);
@@ -387,7 +432,14 @@ mod tests {
         let push = [-40.0, 0.0, 0.0];
         // ξ_m = −0.06 m: com − 40 / (M ω²) = −0.06.
         let com = -0.06 + 40.0 / g.stiffness;
-        g.apply(0.0, [com, 0.0], [0.0; 2], SUPPORT, push, &mut h);
+        g.apply(
+            0.0,
+            [com, 0.0],
+            [0.0; 2],
+            SUPPORT,
+            MeasuredPush::now(push),
+            &mut h,
+        );
         assert!((g.last_capture[0] + 0.06).abs() < 1e-12);
         assert_eq!(
             h[0][0], -60.0,
@@ -403,7 +455,14 @@ mod tests {
         assert_eq!(h[2][0], 0.0, "a push to come along +x: faded to none");
         let mut h = vec![[-60.0, 0.0, 0.0], [-20.0, 0.0, 0.0]];
         let com = 0.06 + 40.0 / g.stiffness;
-        g.apply(0.001, [com, 0.0], [0.0; 2], SUPPORT, push, &mut h);
+        g.apply(
+            0.001,
+            [com, 0.0],
+            [0.0; 2],
+            SUPPORT,
+            MeasuredPush::now(push),
+            &mut h,
+        );
         assert_eq!(h[0][0], -40.0, "more push toward the front edge: faded");
         assert_eq!(h[1][0], -20.0, "its easing, away from the rear edge: kept");
         // Beyond the rear edge the measured push cannot be held whatever the lean: the easing
@@ -411,7 +470,14 @@ mod tests {
         for (beyond, s) in [(0.05, 0.5), (0.1, 1.0), (0.3, 1.0)] {
             let mut h = vec![[-20.0, 0.0, 0.0]];
             let com = -0.07 - beyond * 0.07 + 40.0 / g.stiffness;
-            g.apply(0.002, [com, 0.0], [0.0; 2], SUPPORT, push, &mut h);
+            g.apply(
+                0.002,
+                [com, 0.0],
+                [0.0; 2],
+                SUPPORT,
+                MeasuredPush::now(push),
+                &mut h,
+            );
             assert!(
                 (h[0][0] - (-40.0 + s * 20.0)).abs() < 1e-9,
                 "ξ_m {beyond} of the half-length beyond the rear edge: easing scaled by {s}, {}",
@@ -430,9 +496,52 @@ mod tests {
         );
         let mut h = vec![[-20.0, 0.0, 0.0]];
         let com = -0.069 + 40.0 / g.stiffness;
-        g.apply(0.0, [com, 0.0], [0.0; 2], SUPPORT, push, &mut h);
+        g.apply(
+            0.0,
+            [com, 0.0],
+            [0.0; 2],
+            SUPPORT,
+            MeasuredPush::now(push),
+            &mut h,
+        );
         assert_eq!(h[0][0], -20.0);
         assert_eq!(g.counts.faded_ticks, 0);
+    }
+
+    /// With the measurement-only horizon given, an easing is guarded only below it, and faded
+    /// toward it: the forecast that eases no faster than the measurement alone predicts is what
+    /// C1 would preview without a forecaster, and is left as it is.
+    #[test]
+    fn an_easing_is_guarded_below_what_the_measurement_alone_predicts() {
+        let mut g = guard();
+        let push = [-40.0, 0.0, 0.0];
+        // ξ_m 1 mm inside the rear edge: the easing fully faded (s = 0).
+        let com = -0.069 + 40.0 / g.stiffness;
+        let measured_only = [[-30.0, 0.0, 0.0], [-30.0, 0.0, 0.0], [-50.0, 0.0, 0.0]];
+        let mut h = vec![[-35.0, 0.0, 0.0], [-20.0, 0.0, 0.0], [-20.0, 0.0, 0.0]];
+        g.apply(
+            0.0,
+            [com, 0.0],
+            [0.0; 2],
+            SUPPORT,
+            MeasuredPush {
+                now: push,
+                ahead: Some(&measured_only),
+            },
+            &mut h,
+        );
+        assert_eq!(
+            h[0][0], -35.0,
+            "easing slower than the measurement predicts: kept"
+        );
+        assert_eq!(
+            h[1][0], -30.0,
+            "easing faster: held at the measurement's prediction"
+        );
+        assert_eq!(
+            h[2][0], -40.0,
+            "the measurement predicts more: held at the push now"
+        );
     }
 
     /// Between margin and margin + band the unmeasured part is scaled linearly, toward the
@@ -450,7 +559,7 @@ mod tests {
             [xi + 10.0 / g.stiffness, 0.0],
             [0.0; 2],
             SUPPORT,
-            [-10.0, 0.0, 0.0],
+            MeasuredPush::now([-10.0, 0.0, 0.0]),
             &mut h,
         );
         assert!((g.last_scale[0] - 0.5).abs() < 1e-9, "{:?}", g.last_scale);
