@@ -362,6 +362,18 @@ mod tests {
 
     const SUPPORT: [[f64; 2]; 2] = [[-0.07, 0.07], [-0.1, 0.1]];
 
+    /// `apply` with the CoM at rest at `com_x` (y 0) on [`SUPPORT`], the push measured now only.
+    fn at_rest(g: &mut ViabilityGuard, t: f64, com_x: f64, push: V3, h: &mut [V3]) {
+        g.apply(
+            t,
+            [com_x, 0.0],
+            [0.0; 2],
+            SUPPORT,
+            MeasuredPush::now(push),
+            h,
+        );
+    }
+
     #[test]
     fn a_robot_at_rest_keeps_the_whole_forecast() {
         let mut g = guard();
@@ -432,14 +444,7 @@ mod tests {
         let push = [-40.0, 0.0, 0.0];
         // ξ_m = −0.06 m: com − 40 / (M ω²) = −0.06.
         let com = -0.06 + 40.0 / g.stiffness;
-        g.apply(
-            0.0,
-            [com, 0.0],
-            [0.0; 2],
-            SUPPORT,
-            MeasuredPush::now(push),
-            &mut h,
-        );
+        at_rest(&mut g, 0.0, com, push, &mut h);
         assert!((g.last_capture[0] + 0.06).abs() < 1e-12);
         assert_eq!(
             h[0][0], -60.0,
@@ -455,14 +460,7 @@ mod tests {
         assert_eq!(h[2][0], 0.0, "a push to come along +x: faded to none");
         let mut h = vec![[-60.0, 0.0, 0.0], [-20.0, 0.0, 0.0]];
         let com = 0.06 + 40.0 / g.stiffness;
-        g.apply(
-            0.001,
-            [com, 0.0],
-            [0.0; 2],
-            SUPPORT,
-            MeasuredPush::now(push),
-            &mut h,
-        );
+        at_rest(&mut g, 0.001, com, push, &mut h);
         assert_eq!(h[0][0], -40.0, "more push toward the front edge: faded");
         assert_eq!(h[1][0], -20.0, "its easing, away from the rear edge: kept");
         // Beyond the rear edge the measured push cannot be held whatever the lean: the easing
@@ -470,14 +468,7 @@ mod tests {
         for (beyond, s) in [(0.05, 0.5), (0.1, 1.0), (0.3, 1.0)] {
             let mut h = vec![[-20.0, 0.0, 0.0]];
             let com = -0.07 - beyond * 0.07 + 40.0 / g.stiffness;
-            g.apply(
-                0.002,
-                [com, 0.0],
-                [0.0; 2],
-                SUPPORT,
-                MeasuredPush::now(push),
-                &mut h,
-            );
+            at_rest(&mut g, 0.002, com, push, &mut h);
             assert!(
                 (h[0][0] - (-40.0 + s * 20.0)).abs() < 1e-9,
                 "ξ_m {beyond} of the half-length beyond the rear edge: easing scaled by {s}, {}",
@@ -496,14 +487,7 @@ mod tests {
         );
         let mut h = vec![[-20.0, 0.0, 0.0]];
         let com = -0.069 + 40.0 / g.stiffness;
-        g.apply(
-            0.0,
-            [com, 0.0],
-            [0.0; 2],
-            SUPPORT,
-            MeasuredPush::now(push),
-            &mut h,
-        );
+        at_rest(&mut g, 0.0, com, push, &mut h);
         assert_eq!(h[0][0], -20.0);
         assert_eq!(g.counts.faded_ticks, 0);
     }
@@ -554,14 +538,8 @@ mod tests {
         let d = s.margin + 0.5 * s.band;
         let xi = 0.07 - d * 0.07;
         let mut h = vec![[-50.0, 0.0, 0.0]; 3];
-        g.apply(
-            0.0,
-            [xi + 10.0 / g.stiffness, 0.0],
-            [0.0; 2],
-            SUPPORT,
-            MeasuredPush::now([-10.0, 0.0, 0.0]),
-            &mut h,
-        );
+        let com = xi + 10.0 / g.stiffness;
+        at_rest(&mut g, 0.0, com, [-10.0, 0.0, 0.0], &mut h);
         assert!((g.last_scale[0] - 0.5).abs() < 1e-9, "{:?}", g.last_scale);
         assert!((h[0][0] + 30.0).abs() < 1e-9, "{:?}", h[0]);
     }
