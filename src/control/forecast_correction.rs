@@ -875,40 +875,32 @@ impl ForecastCorrector {
         }
     }
 
-    /// FC-4's factors per horizon step, taken by recursion over the samples (an exp per
-    /// sample cost a fifth of `fill`): the offset's decay e^{−T/T_d}, the trend's ramp
-    /// e^{−T/T_r} (0 with the trend off), T_o and T_r.
-    fn horizon_steps(&self, period: f64) -> (f64, f64, f64, f64) {
+    /// The corrected hand force over the horizon (FC-4): `out[i]` for t + (i + 1) `period`;
+    /// and in `measured_only[i]` (as long as `out`) the same horizon as the measurement alone
+    /// predicts it (FC-5's measurement model, FC-4 with f_fc ≡ 0: what C1 previews without a
+    /// forecaster).
+    pub fn fill(
+        &mut self,
+        t: f64,
+        period: f64,
+        window: &ForecastWindow,
+        out: &mut [V3],
+        measured_only: &mut [V3],
+    ) {
+        let e = self.est;
+        // FC-4's factors by recursion over the samples (an exp per sample costs a fifth of
+        // this function).
+        let decay = (-period / self.s.offset_decay).exp();
         let (t_o, t_r) = (self.s.offset_time_constant, self.s.trend_horizon);
         let ramp = if t_r > 0.0 {
             (-period / t_r).exp()
         } else {
             0.0
         };
-        ((-period / self.s.offset_decay).exp(), ramp, t_o, t_r)
-    }
-
-    /// The horizon as the measurement alone predicts it (FC-5's measurement model: FC-4 with
-    /// f_fc ≡ 0), at t + (i+1)·`period`: what C1 previews without a forecaster.
-    pub fn fill_measured_only(&self, period: f64, out: &mut [V3]) {
-        let (decay, ramp, t_o, t_r) = self.horizon_steps(period);
-        let (mut w, mut r) = (1.0, 1.0);
-        for f in out.iter_mut() {
-            w *= decay;
-            r *= ramp;
-            let ahead = t_o + t_r * (1.0 - r);
-            *f = unexplained(&self.offset_meas, &self.trend_meas, ahead, w);
-        }
-    }
-
-    /// The corrected hand force over the horizon (FC-4): `out[i]` for t + (i + 1) `period`.
-    pub fn fill(&mut self, t: f64, period: f64, window: &ForecastWindow, out: &mut [V3]) {
-        let e = self.est;
-        let (decay, ramp, t_o, t_r) = self.horizon_steps(period);
         let mut w = 1.0;
         let mut r = 1.0;
         let mut capped = false;
-        for (i, f) in out.iter_mut().enumerate() {
+        for (i, (f, m_i)) in out.iter_mut().zip(measured_only.iter_mut()).enumerate() {
             w *= decay;
             r *= ramp;
             let s = (i + 1) as f64 * period;
@@ -917,9 +909,10 @@ impl ForecastCorrector {
             let u = unexplained(&e.offset, &e.trend, ahead, w);
             let p = self.scaled(&p);
             *f = [0, 1, 2].map(|c| p[c] + u[c]);
+            let m = unexplained(&self.offset_meas, &self.trend_meas, ahead, w);
+            *m_i = m;
             if e.weight < 1.0 {
                 // FC-5: toward measurement only as the forecast's record falls.
-                let m = unexplained(&self.offset_meas, &self.trend_meas, ahead, w);
                 *f = [0, 1, 2].map(|c| f[c] + (1.0 - e.weight) * (m[c] - f[c]));
             }
             // Never a force that lifts the robot (a tipping robot's hand, a biased sensor).
@@ -1111,8 +1104,13 @@ impl ControllerPart for Correction {
             Some(frame.hand_force),
             frame.hand_vel,
         );
-        c.fill(frame.t, frame.period, inputs.forecast, &mut frame.f_ext);
-        c.fill_measured_only(frame.period, &mut frame.f_measured_only);
+        c.fill(
+            frame.t,
+            frame.period,
+            inputs.forecast,
+            &mut frame.f_ext,
+            &mut frame.f_measured_only,
+        );
         frame.f_ext_filled = true;
         frame.measured_push = Some(c.measured_push());
         Ok(())
@@ -1335,7 +1333,7 @@ mod tests {
             let y = [0, 1, 2].map(|c| stages[1][c] + bias + sigma * noise.gauss());
             corr.set_measurement_lag(declared);
             corr.update(t, &window, Some(y), [0.0; 3]);
-            corr.fill(t, 0.005, &window, &mut out);
+            corr.fill(t, 0.005, &window, &mut out, &mut [[0.0; 3]; 300]);
             let e = *corr.estimate();
             let onset = start;
             if (t - (onset + 0.2)).abs() < 0.5 * dt {
@@ -1523,7 +1521,7 @@ mod tests {
             corr.update(k as f64 * 1e-3, &window, Some([-20.0, 4.0, 0.0]), [0.0; 3]);
         }
         let mut out = vec![[0.0; 3]; 300];
-        corr.fill(0.5, 0.005, &window, &mut out);
+        corr.fill(0.5, 0.005, &window, &mut out, &mut [[0.0; 3]; 300]);
         let t_d = CorrectionSettings::default().offset_decay;
         assert!(
             (out[0][0] + 20.0 * (-0.005f64 / t_d).exp()).abs() < 1e-3,
@@ -1563,7 +1561,7 @@ mod tests {
                     [0.0; 3],
                 );
             }
-            corr.fill(0.6, 0.005, &window, &mut out);
+            corr.fill(0.6, 0.005, &window, &mut out, &mut [[0.0; 3]; 300]);
             let trend = corr.estimate().trend[0];
             eprintln!(
                 "rate {rate}, σ {sigma}: trend {trend:.1} N/s, now {f:.1} N, in 0.15 s {:.1} N",
@@ -1620,7 +1618,7 @@ mod tests {
                 }
                 let y = [push(t, 1.0) + 5.0 + 2.0 * noise.gauss(), 0.0, 0.0];
                 corr.update(t, &window, Some(y), [0.0; 3]);
-                corr.fill(t, 0.005, &window, &mut out);
+                corr.fill(t, 0.005, &window, &mut out, &mut [[0.0; 3]; 300]);
                 let w = corr.estimate().weight;
                 if (start..start + 1.0).contains(&t) {
                     w_push = w_push.min(w);
@@ -1672,7 +1670,7 @@ mod tests {
             );
         }
         let mut out = vec![[0.0; 3]; 300];
-        corr.fill(0.5, 0.005, &window, &mut out);
+        corr.fill(0.5, 0.005, &window, &mut out, &mut [[0.0; 3]; 300]);
         let cap = CorrectionSettings::default().max_lift * weight;
         assert!(out.iter().all(|f| f[2] <= cap), "{:?}", out[0]);
         assert_eq!(out[0][2], cap, "the measured lift, held, is capped");
