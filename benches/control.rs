@@ -93,6 +93,15 @@ fn bench(c: &mut Criterion) {
             true,
             true,
         ),
+        // What a G1 measures (docs/sensing.md): the base estimated from the IMU and the
+        // encoders, every wrench from the joint torques.
+        (
+            "c1_tick_joint_sensing",
+            ControllerKind::C1,
+            &wrenches,
+            true,
+            true,
+        ),
     ] {
         let mut r = humanoid::rig(config, kind);
         if estimated {

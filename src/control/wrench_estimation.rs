@@ -46,6 +46,9 @@ pub struct WrenchObserverSettings {
     pub torque_noise: f64,
     /// K₂ of WO-5 (1/s): a second stage on the residual; 0: none.
     pub filter_gain: f64,
+    /// ω of WO-7 (1/s): the hand's force through a stage of its own that follows a ramp
+    /// without lag; 0: from WO-5's residual as the feet's.
+    pub hand_bandwidth: f64,
     /// WO-6, the drives' friction as identified: Coulomb as a fraction of each joint's effort
     /// limit, the velocity over which it changes sign (rad/s), viscous (N·m·s/rad).
     pub friction_coulomb: f64,
@@ -69,14 +72,14 @@ impl crate::config::PartSettings for WrenchObserverSettings {
         }
         let sizes = [
             self.velocity_noise.as_slice(),
-            &[self.torque_noise, self.filter_gain],
+            &[self.torque_noise, self.filter_gain, self.hand_bandwidth],
             &[self.friction_coulomb, self.friction_viscous],
         ]
         .concat();
         if !sizes.iter().all(|x| x.is_finite() && *x >= 0.0) {
             return Err((
                 "velocity_noise",
-                "the noise sizes, filter gain and friction must be finite and ≥ 0".into(),
+                "the noise sizes, filter gains and friction must be finite and ≥ 0".into(),
             ));
         }
         if self.friction_coulomb > 0.0
@@ -107,6 +110,7 @@ fn build(
         velocity_noise: settings.velocity_noise,
         torque_noise: settings.torque_noise,
         filter_gain: settings.filter_gain,
+        hand_bandwidth: settings.hand_bandwidth,
         friction: DriveFriction {
             coulomb: settings.friction_coulomb,
             velocity: settings.friction_velocity,
@@ -248,7 +252,7 @@ impl ControllerPart for WrenchEstimation {
                 }
                 if e.hand {
                     frame.hand_force = w.hand;
-                    frame.hand_force_lag = self.observer.lag();
+                    frame.hand_force_lag = self.observer.hand_lag();
                     self.counts.hand_ticks += 1;
                 }
             }

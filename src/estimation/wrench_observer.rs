@@ -37,12 +37,22 @@
 //! gain from a white velocity noise to r₂ is K K₂ √(dt / (2 (K + K₂))), which WO-4 then uses
 //! for K.
 //!
+//! The hand's force is read through a stage of its own on r that follows a ramp without lag
+//! (WO-7): the forecast correction and the QP read the hand's force when it changes, where the
+//! feet's wrenches and the CoP are read while they hold. With a₁ = 2ζω, a₂ = ω² (ζ = 1/√2),
+//!
+//!   ẋ = ẋ_r + a₁ (r − x),  ẍ_r = a₂ (r − x),  x = (a₁ s + a₂)/(s² + a₁ s + a₂) r          (WO-7)
+//!
+//! Its mean lag is 0 (the numerator's a₁/a₂ cancels the denominator's), so the hand's is WO-2's
+//! 1/K alone; a ramp is followed without error, a push's curvature f̈ with error f̈/a₂. Its
+//! noise above ω passes at a₁ where WO-5's passes at K₂.
+//!
 //! A drive's torque estimate from its current reads the motor's torque, the link's plus the
 //! gear's friction. The friction identified for the drives is taken off before WO-1 (WO-6):
 //!
 //!   τ_link = τ_est − (c τ_max tanh(v / v_s) + b v)                                      (WO-6)
 
-use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, SVector, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, SMatrix, SVector, Vector3};
 
 use crate::dynamics::{
     Data, DynamicsError, Model, ReferenceFrame, crba, get_frame_jacobian, nonlinear_effects,
@@ -85,6 +95,8 @@ pub struct WrenchObserverGains {
     pub torque_noise: f64,
     /// K₂ of WO-5 (1/s); 0: the residual of WO-2 as it is.
     pub filter_gain: f64,
+    /// ω of WO-7 (1/s), the hand's own stage; 0: the hand's force from WO-5's r₂ as the feet's.
+    pub hand_bandwidth: f64,
     /// WO-6: the drives' Coulomb friction as a fraction c of each joint's effort limit, the
     /// velocity v_s (rad/s) over which it changes sign, and the viscous b (N·m·s/rad).
     pub friction: DriveFriction,
@@ -125,6 +137,10 @@ pub struct WrenchObserver {
     /// r₂ of WO-5: what the split reads.
     filtered: DVector<f64>,
     filter_gain: f64,
+    /// x and ẋ_r of WO-7 (the hand's stage), its ω.
+    tracked: DVector<f64>,
+    tracked_rate: DVector<f64>,
+    hand_bandwidth: f64,
     friction: DriveFriction,
     /// Each velocity coordinate's effort limit (WO-6; the base's six unused).
     effort: DVector<f64>,
@@ -170,6 +186,9 @@ impl WrenchObserver {
             residual: DVector::zeros(nv),
             filtered: DVector::zeros(nv),
             filter_gain: gains.filter_gain,
+            tracked: DVector::zeros(nv),
+            tracked_rate: DVector::zeros(nv),
+            hand_bandwidth: gains.hand_bandwidth,
             friction: gains.friction,
             effort: DVector::from_vec(model.effort_limits()),
             m_prev: DMatrix::zeros(nv, nv),
@@ -202,6 +221,15 @@ impl WrenchObserver {
             0.0
         };
         1.0 / self.gain + second
+    }
+
+    /// The hand force's mean lag (s): WO-2's 1/K when WO-7 reads it, else [`Self::lag`].
+    pub fn hand_lag(&self) -> f64 {
+        if self.hand_bandwidth > 0.0 {
+            1.0 / self.gain
+        } else {
+            self.lag()
+        }
     }
 
     /// The residual of WO-2 through WO-5 (the external generalised force, filtered): what the
@@ -251,6 +279,8 @@ impl WrenchObserver {
                 self.integral[k] = -self.residual[k] / self.gain;
             }
             self.filtered.copy_from(&self.residual);
+            self.tracked.copy_from(&self.residual);
+            self.tracked_rate.fill(0.0);
             self.started = true;
             self.split(0.0)?;
             return Ok(&self.last);
@@ -269,6 +299,21 @@ impl WrenchObserver {
         };
         for k in 0..nv {
             self.filtered[k] += blend * (self.residual[k] - self.filtered[k]);
+        }
+        if self.hand_bandwidth > 0.0 {
+            // WO-7, exact for a residual held over the step: the error e = r − x and ẋ_r
+            // follow (ė, ẍ_r) = [[−a₁, −1], [a₂, 0]] (e, ẋ_r).
+            let (w, zeta) = (self.hand_bandwidth, std::f64::consts::FRAC_1_SQRT_2);
+            let step = (Matrix2::new(-2.0 * zeta * w, -1.0, w * w, 0.0) * dt).exp();
+            for k in 0..nv {
+                let e = self.residual[k] - self.tracked[k];
+                let (e, rate) = (
+                    step[(0, 0)] * e + step[(0, 1)] * self.tracked_rate[k],
+                    step[(1, 0)] * e + step[(1, 1)] * self.tracked_rate[k],
+                );
+                self.tracked[k] = self.residual[k] - e;
+                self.tracked_rate[k] = rate;
+            }
         }
         self.split(dt)?;
         Ok(&self.last)
@@ -322,14 +367,21 @@ impl WrenchObserver {
                 self.aw[(i, k)] = self.a[(i, k)] * w;
             }
         }
-        // (A W Aᵀ + λ I) w = A W r.
+        // (A W Aᵀ + λ I) w = A W r; the hand's from WO-7's x when it runs.
         let mut normal = SMatrix::<f64, NW, NW>::zeros();
         let mut rhs = SVector::<f64, NW>::zeros();
+        let mut rhs_hand = SVector::<f64, NW>::zeros();
+        let tracking = self.hand_bandwidth > 0.0 && dt > 0.0;
         for i in 0..NW {
             // Element by element: a transposed view of the residual would be a new vector.
             rhs[i] = (0..self.model.nv)
                 .map(|k| self.aw[(i, k)] * self.filtered[k])
                 .sum();
+            if tracking {
+                rhs_hand[i] = (0..self.model.nv)
+                    .map(|k| self.aw[(i, k)] * self.tracked[k])
+                    .sum();
+            }
             for j in 0..=i {
                 let x = self.aw.row(i).dot(&self.a.row(j));
                 normal[(i, j)] = x;
@@ -356,7 +408,8 @@ impl WrenchObserver {
                 sum += f.z * self.sole_centre[i] + r * local;
             }
         }
-        self.last.hand = [w[12], w[13], w[14]];
+        let hand = if tracking { chol.solve(&rhs_hand) } else { w };
+        self.last.hand = [hand[12], hand[13], hand[14]];
         self.last.normal_force = total;
         self.last.cop = (total > MIN_NORMAL).then(|| [sum.x / total, sum.y / total]);
         Ok(())
@@ -387,6 +440,7 @@ mod tests {
         velocity_noise: [0.0; 3],
         torque_noise: 0.0,
         filter_gain: 0.0,
+        hand_bandwidth: 0.0,
         friction: DriveFriction {
             coulomb: 0.0,
             velocity: 0.05,
@@ -560,6 +614,7 @@ mod tests {
         let robot = Robot::embedded_default().expect("robot");
         let gains = WrenchObserverGains {
             filter_gain: 100.0,
+            hand_bandwidth: 0.0,
             ..FIRST_ORDER
         };
         let est = pushed_measured(
@@ -578,6 +633,46 @@ mod tests {
                 "t = {t}: {} vs {lagged}",
                 w.hand[0]
             );
+        }
+    }
+
+    /// WO-7: the hand's own stage (ω = 30/s) beside WO-5's (K = 100/s, K₂ = 50/s) follows a
+    /// ramp (10 N/s) WO-2's 1/K = 10 ms behind, the lag [`WrenchObserver::hand_lag`] declares, where the
+    /// hand read from WO-5's residual is 1/K + 1/K₂ = 30 ms behind.
+    #[test]
+    fn the_hands_stage_follows_a_ramp_with_the_first_stages_lag_alone() {
+        let robot = Robot::embedded_default().expect("robot");
+        let cascade = WrenchObserverGains {
+            filter_gain: 50.0,
+            ..FIRST_ORDER
+        };
+        let tracked = WrenchObserverGains {
+            hand_bandwidth: 30.0,
+            ..cascade
+        };
+        let frames = robot.frames();
+        let corners = robot
+            .contacts
+            .each_ref()
+            .map(|c| robot.model.frame_id(c).expect("corner"));
+        let hand = robot.model.frame_id(&frames.hand).expect("hand");
+        for (gains, lag) in [(cascade, 0.03), (tracked, 0.01)] {
+            let declared = WrenchObserver::new(&robot.model, corners, hand, gains).hand_lag();
+            assert!((declared - lag).abs() < 1e-12, "{declared} vs {lag}");
+            // 10 N/s: the floating arm swings less than under the 50 N/s above, for longer.
+            let ramp = |t: f64| Vector3::new(-10.0 * t, 0.0, 0.0);
+            let est = pushed_measured(&robot, ramp, 300, gains, 0.0, |_, _, _| 0.0);
+            // WO-7's transient decays as e^(−ζω t): under 2 % of its start by 0.2 s; the floating
+            // arm swings further from 0.3 s on, which both estimates follow late. The
+            // bound is 5 ms of the ramp, a quarter of the two lags' difference.
+            for (t, w) in est.iter().filter(|(t, _)| *t >= 0.2 && *t < 0.3) {
+                let lagged = -10.0 * (t - lag);
+                assert!(
+                    (w.hand[0] - lagged).abs() < 0.05,
+                    "lag {lag}: t = {t}: {} vs {lagged}",
+                    w.hand[0]
+                );
+            }
         }
     }
 
@@ -604,6 +699,7 @@ mod tests {
         });
         let two = rms(WrenchObserverGains {
             filter_gain: 100.0,
+            hand_bandwidth: 0.0,
             ..FIRST_ORDER
         });
         eprintln!("hand force noise: K = 50 alone {one:.3} N, K = K₂ = 100 {two:.3} N");
