@@ -439,6 +439,48 @@ fn infeasible_com_request_gives_the_best_feasible_solution() {
     assert!((total_force(&sol) - Vector3::new(0.0, 0.0, mg)).norm() <= 0.01 * mg);
 }
 
+/// Limits no torque can keep: the whole robot rising at 2 m/s, whose soles' constraint
+/// (−k J q̇, k = 10/s) asks them for 20 m/s² downward, which the ground cannot pull and legs at a
+/// thousandth of the URDF's efforts cannot give. The QP is infeasible, and the tick commands the
+/// optimum without limits, saturated at them, instead of gravity compensation
+/// (docs/whole_body_qp.md, "Limits that cannot all hold").
+#[test]
+fn limits_that_cannot_all_hold_saturate_instead_of_falling_back() {
+    let scale = 1e-3;
+    let mut tight = setup_with(&WbcConfig {
+        torque_limit_scale: scale,
+        ..config()
+    });
+    tight.v[2] = 2.0;
+    let cmd = hold(&tight);
+    let sol = solve(&mut tight, &cmd);
+    let c = tight.wbc.counters();
+    assert_eq!(sol.status, WbcStatus::Solved, "{c:?}");
+    assert_eq!((c.limits_saturated, c.fallbacks), (1, 0), "{c:?}");
+    // The same tick without binding limits: its optimum, clamped, is what was commanded.
+    let mut free = setup();
+    free.v[2] = 2.0;
+    let reference = solve(&mut free, &cmd);
+    assert_eq!(free.wbc.counters().torque_limited, 0);
+    let effort = tight.model.effort_limits();
+    let mut saturated = 0;
+    for (a, (t, r)) in sol.tau.iter().zip(reference.tau.iter()).enumerate() {
+        let lim = scale * effort[6 + a];
+        let want = r.clamp(-lim, lim);
+        assert!(
+            (t - want).abs() <= 1e-6 * (1.0 + r.abs()),
+            "joint {a}: {t} vs {want}"
+        );
+        saturated += usize::from(r.abs() > lim);
+    }
+    assert!(saturated > 6, "only {saturated} joints beyond their limits");
+    // Back within the limits' reach, nothing more is saturated.
+    let mut s = setup();
+    let sol = solve(&mut s, &cmd);
+    assert_eq!(sol.status, WbcStatus::Solved);
+    assert_eq!(s.wbc.counters().limits_saturated, 0);
+}
+
 #[test]
 fn invalid_input_falls_back_without_panicking() {
     let mut s = setup();

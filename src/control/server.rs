@@ -743,6 +743,7 @@ impl<'a> ControlLoop<'a> {
         s.wbc_active_set_ticks = wc.active_set;
         s.wbc_cone_steps = wc.cone_steps;
         s.wbc_cone_unsettled = wc.cone_unsettled;
+        s.wbc_limits_saturated_ticks = wc.limits_saturated;
         let w = &self.intake.window;
         s.forecasts_accepted = w.accepted;
         s.forecast_never_received = w.accepted == 0;

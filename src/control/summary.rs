@@ -62,6 +62,9 @@ pub struct ServerSummary {
     pub wbc_cone_steps: u64,
     #[serde(default)]
     pub wbc_cone_unsettled: u64,
+    /// Ticks the torque limits made the QP infeasible: solved without them, torques saturated.
+    #[serde(default)]
+    pub wbc_limits_saturated_ticks: u64,
     pub preview_fallbacks: u64,
     /// Falls the controller detected (`controller.fall_drop`), and the ticks it then held joint
     /// damping without preview or QP (until the plant restarted).

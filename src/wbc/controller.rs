@@ -677,7 +677,22 @@ impl WholeBodyController {
         if !(finite(&self.diag) && finite(&self.lin) && finite(&self.b_feet)) {
             return Err(FallbackReason::NonFiniteProblem);
         }
-        let almost = self.solve_path(&data.m, &pose.feet, forced, solve_time, iterations)?;
+        let almost = match self.solve_path(&data.m, &pose.feet, forced, solve_time, iterations) {
+            // No torque within the limits keeps the soles on the ground with these forces
+            // (a foot on its edge under a hard push asks its ankle for more than it has): the
+            // drives saturate whatever is commanded, so command the optimum without the limits,
+            // clamped below, rather than gravity compensation.
+            Err(reason @ FallbackReason::Solver(status))
+                if forced.is_none() && infeasible(status) && !self.limited.is_empty() =>
+            {
+                let a = self
+                    .solve_unlimited(&data.m, &pose.feet, solve_time, iterations)
+                    .map_err(|_| reason)?;
+                self.counters.limits_saturated += 1;
+                a
+            }
+            other => other?,
+        };
 
         // ---- Outputs: q̈, f, τ = M_a q̈ + h_a − J_c,aᵀ f. ----
         let (m, x, nv) = (&data.m, &self.x, self.layout.nv);
@@ -922,6 +937,53 @@ impl WholeBodyController {
             torque(m, &self.h, &self.jc, &self.x, dof).abs() >= (1.0 - 1e-3) * tmax
         });
         Ok(almost)
+    }
+
+    /// The condensed problem without its torque limits (the same optimum as the full problem
+    /// without its torque rows), for a tick the limits made infeasible.
+    fn solve_unlimited(
+        &mut self,
+        m: &DMatrix<f64>,
+        foot_rot: &[Matrix3<f64>; 2],
+        solve_time: &mut Duration,
+        iterations: &mut u32,
+    ) -> Result<bool, FallbackReason> {
+        let pb = Problem {
+            m,
+            h: &self.h,
+            jc: &self.jc,
+            jfeet: &self.jfeet,
+            b_feet: &self.b_feet,
+            diag: &self.diag,
+            lin: &self.lin,
+            tasks: &self.tasks.points,
+            w_force: self.p.w_reg_force,
+            friction: self.p.friction,
+            foot_rot: *foot_rot,
+            limited: &[],
+            active_set: self.p.active_set,
+        };
+        let solved = self
+            .condensed
+            .solve(
+                &pb,
+                &self.settings,
+                self.p.reuse_solver,
+                &mut self.counters,
+                iterations,
+                solve_time,
+            )
+            .map_err(|e| match e {
+                CondensedError::Solver(r) => r,
+                _ => FallbackReason::NonFiniteProblem,
+            })?;
+        let x = self.condensed.x();
+        if !x.iter().all(|v| v.is_finite()) {
+            return Err(FallbackReason::NonFiniteSolution);
+        }
+        self.x[..x.len()].copy_from_slice(x);
+        self.limits_active = true;
+        Ok(solved.almost)
     }
 
     /// The full problem (the reference formulation): assembles the dense P, q, A, b over
@@ -1266,6 +1328,12 @@ fn full_problems(
 }
 
 /// Clarabel's settings for in-place data updates between ticks.
+/// A status that says no point satisfies the constraints (within clarabel's tolerances).
+fn infeasible(status: clarabel::solver::SolverStatus) -> bool {
+    use clarabel::solver::SolverStatus::{AlmostPrimalInfeasible, PrimalInfeasible};
+    matches!(status, PrimalInfeasible | AlmostPrimalInfeasible)
+}
+
 fn clarabel_settings(config: &WbcConfig) -> DefaultSettings<f64> {
     let tol = config.tolerance;
     DefaultSettings {

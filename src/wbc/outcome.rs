@@ -61,4 +61,7 @@ pub struct WbcCounters {
     /// (left to clarabel).
     pub cone_steps: u64,
     pub cone_unsettled: u64,
+    /// Ticks whose QP the torque limits made infeasible, solved without them and the torques
+    /// saturated at the limits (docs/whole_body_qp.md, "Limits that cannot all hold").
+    pub limits_saturated: u64,
 }
