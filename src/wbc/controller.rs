@@ -68,7 +68,7 @@ use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Quaternion, UnitQuaternion, V
 
 use super::com_bias::{com_drift_from_pass, drift_pass, frame_drift_from_pass};
 use super::condensed::{
-    CondensedError, CondensedInstance, CondensedQp, Problem, joint_torque as torque,
+    Condensed, CondensedError, CondensedInstance, CondensedQp, Problem, joint_torque as torque,
 };
 pub use super::outcome::{FallbackReason, N_CONTACTS, WbcCounters, WbcStatus};
 use super::pattern::Pattern;
@@ -888,30 +888,9 @@ impl WholeBodyController {
             None => self.p.formulation == WbcFormulation::Full,
         };
         if use_condensed {
-            let pb = Problem {
-                m,
-                h: &self.h,
-                jc: &self.jc,
-                jfeet: &self.jfeet,
-                b_feet: &self.b_feet,
-                diag: &self.diag,
-                lin: &self.lin,
-                tasks: &self.tasks.points,
-                w_force: self.p.w_reg_force,
-                friction: self.p.friction,
-                foot_rot: *foot_rot,
-                limited: &self.limited,
-                // A forced path builds clarabel's solver (`prepare`): no shortcut then.
-                active_set: self.p.active_set && forced.is_none(),
-            };
-            match self.condensed.solve(
-                &pb,
-                &self.settings,
-                self.p.reuse_solver,
-                &mut self.counters,
-                iterations,
-                solve_time,
-            ) {
+            // A forced path builds clarabel's solver (`prepare`): no shortcut then.
+            let active_set = self.p.active_set && forced.is_none();
+            match self.solve_condensed(m, foot_rot, true, active_set, solve_time, iterations) {
                 Ok(solved) => {
                     let x = self.condensed.x();
                     if finite(x) {
@@ -948,6 +927,32 @@ impl WholeBodyController {
         solve_time: &mut Duration,
         iterations: &mut u32,
     ) -> Result<bool, FallbackReason> {
+        let active_set = self.p.active_set;
+        let solved = self
+            .solve_condensed(m, foot_rot, false, active_set, solve_time, iterations)
+            .map_err(|e| match e {
+                CondensedError::Solver(r) => r,
+                _ => FallbackReason::NonFiniteProblem,
+            })?;
+        let x = self.condensed.x();
+        if !x.iter().all(|v| v.is_finite()) {
+            return Err(FallbackReason::NonFiniteSolution);
+        }
+        self.x[..x.len()].copy_from_slice(x);
+        self.limits_active = true;
+        Ok(solved.almost)
+    }
+
+    /// The condensed problem of this tick, with its torque limits or without them.
+    fn solve_condensed(
+        &mut self,
+        m: &DMatrix<f64>,
+        foot_rot: &[Matrix3<f64>; 2],
+        limits: bool,
+        active_set: bool,
+        solve_time: &mut Duration,
+        iterations: &mut u32,
+    ) -> Result<Condensed, CondensedError> {
         let pb = Problem {
             m,
             h: &self.h,
@@ -960,30 +965,17 @@ impl WholeBodyController {
             w_force: self.p.w_reg_force,
             friction: self.p.friction,
             foot_rot: *foot_rot,
-            limited: &[],
-            active_set: self.p.active_set,
+            limited: if limits { &self.limited } else { &[] },
+            active_set,
         };
-        let solved = self
-            .condensed
-            .solve(
-                &pb,
-                &self.settings,
-                self.p.reuse_solver,
-                &mut self.counters,
-                iterations,
-                solve_time,
-            )
-            .map_err(|e| match e {
-                CondensedError::Solver(r) => r,
-                _ => FallbackReason::NonFiniteProblem,
-            })?;
-        let x = self.condensed.x();
-        if !x.iter().all(|v| v.is_finite()) {
-            return Err(FallbackReason::NonFiniteSolution);
-        }
-        self.x[..x.len()].copy_from_slice(x);
-        self.limits_active = true;
-        Ok(solved.almost)
+        self.condensed.solve(
+            &pb,
+            &self.settings,
+            self.p.reuse_solver,
+            &mut self.counters,
+            iterations,
+            solve_time,
+        )
     }
 
     /// The full problem (the reference formulation): assembles the dense P, q, A, b over
