@@ -687,7 +687,7 @@ impl WholeBodyController {
             {
                 let a = self
                     .solve_unlimited(&data.m, &pose.feet, solve_time, iterations)
-                    .map_err(|_| reason)?;
+                    .ok_or(reason)?;
                 self.counters.limits_saturated += 1;
                 a
             }
@@ -919,28 +919,26 @@ impl WholeBodyController {
     }
 
     /// The condensed problem without its torque limits (the same optimum as the full problem
-    /// without its torque rows), for a tick the limits made infeasible.
+    /// without its torque rows), for a tick the limits made infeasible: its clarabel status
+    /// (`almost`), or `None` when it fails too (the tick then falls back for the first reason).
     fn solve_unlimited(
         &mut self,
         m: &DMatrix<f64>,
         foot_rot: &[Matrix3<f64>; 2],
         solve_time: &mut Duration,
         iterations: &mut u32,
-    ) -> Result<bool, FallbackReason> {
+    ) -> Option<bool> {
         let active_set = self.p.active_set;
         let solved = self
             .solve_condensed(m, foot_rot, false, active_set, solve_time, iterations)
-            .map_err(|e| match e {
-                CondensedError::Solver(r) => r,
-                _ => FallbackReason::NonFiniteProblem,
-            })?;
+            .ok()?;
         let x = self.condensed.x();
         if !x.iter().all(|v| v.is_finite()) {
-            return Err(FallbackReason::NonFiniteSolution);
+            return None;
         }
         self.x[..x.len()].copy_from_slice(x);
         self.limits_active = true;
-        Ok(solved.almost)
+        Some(solved.almost)
     }
 
     /// The condensed problem of this tick, with its torque limits or without them.
