@@ -33,7 +33,7 @@ fn start_forecaster(p: &mut Procs, s: &Scratch, name: &str) {
 
 /// The robot is standing: the CoM is within 3 cm of its initial height.
 fn assert_standing(seen: &Seen) {
-    let drop = seen.com_z0 - seen.com_z_min;
+    let drop = seen.com_drop();
     assert!(drop < 0.03, "the CoM dropped {drop} m: {seen:?}");
 }
 

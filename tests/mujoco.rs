@@ -266,7 +266,7 @@ fn mujoco_real_time_holds_hands_over_and_holds_again_when_the_controller_dies() 
     let lost = obs.get();
     assert_ne!(lost.flags & STATE_FLAG_HOLD, 0, "held again: {lost:?}");
     p.stop(&s, "sim", libc::SIGTERM);
-    let drop = lost.com_z0 - lost.com_z_min;
+    let drop = lost.com_drop();
     assert!(drop < 5e-3, "the CoM dropped {drop} m: {lost:?}");
     assert!(lost.max_slip < 0.05, "the feet slid: {lost:?}");
     let sim = json(&s.path("sim.json"));

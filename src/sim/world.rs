@@ -510,6 +510,13 @@ impl World {
         if let Some(d) = &mut self.door {
             kinematics::placements_unchecked(&d.model, &mut d.data, d.q.as_slice());
         }
+        // Before the first step the report is the initial state's (its CoM, penetration, loop
+        // error): the plant publishes it as state 0, and watchers measure from it.
+        if self.steps == 0 {
+            let mut report = StepReport::default();
+            self.refresh_points_after(&mut report);
+            self.last = report;
+        }
     }
 
     /// Applies `force` (N, world) at the origin of the robot frame `frame` from the next step
@@ -1009,7 +1016,7 @@ impl World {
     pub fn is_floating(&self) -> bool {
         self.floating
     }
-    /// The last step's report (default before the first step).
+    /// The last step's report (that of the initial state before the first step).
     pub fn last_report(&self) -> &StepReport {
         &self.last
     }

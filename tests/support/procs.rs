@@ -49,7 +49,8 @@ impl Scratch {
 
 impl Drop for Scratch {
     fn drop(&mut self) {
-        if !std::thread::panicking() {
+        // A failed test's files stay for a look, and anyone's with UPC_KEEP_SCRATCH set.
+        if !std::thread::panicking() && std::env::var_os("UPC_KEEP_SCRATCH").is_none() {
             let _ = std::fs::remove_dir_all(&self.dir);
         }
     }
@@ -271,6 +272,21 @@ pub struct Seen {
     pub flags: u32,
     pub hold_steps: u64,
     pub max_slip: f64,
+    /// When the fastest slip was seen (s, plant time).
+    pub max_slip_time: f64,
+}
+
+impl Seen {
+    /// How far the CoM fell below its height in the run's first state (m). Fails when that
+    /// state carried no CoM (a humanoid's is well above 0.1 m): measured from zero, the drop
+    /// could never fail a test.
+    pub fn com_drop(&self) -> f64 {
+        assert!(
+            self.com_z0 > 0.1,
+            "no CoM height in the plant's first state: {self:?}"
+        );
+        self.com_z0 - self.com_z_min
+    }
 }
 
 /// Watches `<prefix>/ground_truth` from a thread of the test process.
@@ -299,7 +315,10 @@ impl Observer {
                     }
                     s.flags = g.flags;
                     s.hold_steps = g.hold_steps;
-                    s.max_slip = s.max_slip.max(g.max_slip_speed);
+                    if g.max_slip_speed > s.max_slip {
+                        s.max_slip = g.max_slip_speed;
+                        s.max_slip_time = g.time;
+                    }
                     s.time = g.time;
                     s.com_z_min = s.com_z_min.min(g.com[2]);
                 }
