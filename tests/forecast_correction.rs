@@ -55,9 +55,12 @@ fn run(s: &Scratch, name: &str, c: &Case) -> Value {
         args.extend(["--sim-set".into(), "sim.push=\"none\"".into()]);
     }
     if !c.correction {
+        // As received: neither corrected nor taken along the door's path (FC-0).
         args.extend([
             "--set".into(),
             "controller.forecast_correction.enabled=false".into(),
+            "--set".into(),
+            "controller.forecast_on_free_direction=false".into(),
         ]);
     }
     args.extend(c.extra.iter().map(|a| a.to_string()));

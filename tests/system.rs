@@ -256,7 +256,13 @@ fn a_forecast_of_the_wrong_shape_reaches_the_controller_as_asked() {
     let status = upc()
         .args(["run", "--scenario", "single_impact", "--controller", "c1"])
         .args(["--duration", "2", "--quiet", "--name", "rotated"])
-        .args(["--forecast-error-shape", "rotated:30", "--out"])
+        .args(["--forecast-error-shape", "rotated:30"])
+        // As the forecaster sent it, not along the door's path (FC-0).
+        .args([
+            "--set",
+            "controller.forecast_on_free_direction=false",
+            "--out",
+        ])
         .arg(&out)
         .status()
         .expect("upc runs");

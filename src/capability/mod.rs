@@ -36,8 +36,9 @@ pub enum Variant {
     /// without any forecast.
     #[value(name = "c0obs")]
     C0Obs,
-    /// C1 previewing the forecast as received, without the correction by the measured hand
-    /// force (`controller.forecast_correction.enabled = false`).
+    /// C1 previewing the forecast as received: without the correction by the measured hand
+    /// force (`controller.forecast_correction.enabled = false`) nor taking it along the held
+    /// door's path (`controller.forecast_on_free_direction = false`).
     #[value(name = "c1raw")]
     C1Raw,
 }
@@ -71,13 +72,16 @@ impl Variant {
         }
     }
 
-    /// The config override this variant needs besides its controller kind.
-    pub fn config_set(self) -> Option<&'static str> {
+    /// The config overrides this variant needs besides its controller kind.
+    pub fn config_set(self) -> &'static [&'static str] {
         match self {
-            Variant::C1Zmp => Some("preview.zmp_constraints=true"),
-            Variant::C0Obs => Some("controller.com_observer.enabled=true"),
-            Variant::C1Raw => Some("controller.forecast_correction.enabled=false"),
-            Variant::C0 | Variant::C1 | Variant::C2 => None,
+            Variant::C1Zmp => &["preview.zmp_constraints=true"],
+            Variant::C0Obs => &["controller.com_observer.enabled=true"],
+            Variant::C1Raw => &[
+                "controller.forecast_correction.enabled=false",
+                "controller.forecast_on_free_direction=false",
+            ],
+            Variant::C0 | Variant::C1 | Variant::C2 => &[],
         }
     }
 

@@ -287,7 +287,7 @@ fn case_run_args(cell: &CellArgs, name: &str, scenario: &Path, dir: &Path) -> Ru
                 .sets
                 .iter()
                 .cloned()
-                .chain(cell.variant.config_set().map(str::to_owned))
+                .chain(cell.variant.config_set().iter().map(|s| s.to_string()))
                 .collect(),
         },
         sim_sets,

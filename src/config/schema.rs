@@ -391,6 +391,11 @@ pub struct ControllerConfig {
     /// force is compared with the forecast (a forecast announces the push, not the push less
     /// what the door takes to accelerate).
     pub held_object: HeldObject,
+    /// A held door turns only the push along its handle's path (its free direction e) into
+    /// hinge torque; the rest goes into its hinge. The forecast is taken as that push,
+    /// f ← e eᵀ f, so that a forecast pointing off the door's path announces no sideways push
+    /// the door cannot give. Off, or nothing held: the forecast as received.
+    pub forecast_on_free_direction: bool,
     /// PD on the CoM height (1/s², 1/s).
     pub com_height_kp: f64,
     pub com_height_kd: f64,

@@ -760,3 +760,17 @@ impl ControllerCore {
         (out.status, out.iterations, out.tick_time.as_secs_f64())
     }
 }
+
+/// The held object's free direction e (unit, its sign arbitrary) from its apparent mass at the
+/// hand: a door's is m e eᵀ (`crate::sim::scene::PlacedDoor::apparent_mass`), so its largest
+/// column is m e_k e. `None` when nothing is held (a zero or non-finite mass).
+pub fn free_direction(held_mass: &Matrix3<f64>) -> Option<Vector3<f64>> {
+    let m = held_mass.trace();
+    if !(m.is_finite() && m > 0.0) {
+        return None;
+    }
+    let c = (0..3)
+        .map(|k| held_mass.column(k).into_owned())
+        .max_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))?;
+    Some(c.normalize())
+}

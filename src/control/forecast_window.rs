@@ -68,6 +68,8 @@ pub struct ForecastWindow {
     decay: f64,
     /// M g: a forecast force with F_z ≥ M g would lift the robot.
     weight: f64,
+    /// The held object's free direction e (unit), if the forecast is taken along it.
+    free_dir: Option<[f64; 3]>,
 }
 
 impl ForecastWindow {
@@ -88,7 +90,17 @@ impl ForecastWindow {
             max_lead,
             decay,
             weight,
+            free_dir: None,
         }
+    }
+
+    /// Takes each accepted sample as the push along `e` alone, f ← e eᵀ f: a held door turns
+    /// only that into hinge torque, its hinge takes the rest (`controller.forecast_on_free_direction`).
+    /// `e` need not be unit; a zero or non-finite `e` leaves the forecast as received.
+    pub fn with_free_direction(mut self, e: [f64; 3]) -> Self {
+        let n = e.iter().map(|x| x * x).sum::<f64>().sqrt();
+        self.free_dir = (n.is_finite() && n > 0.0).then(|| e.map(|x| x / n));
+        self
     }
 
     /// Validate `msg` at time `now` and take it if good.
@@ -101,6 +113,12 @@ impl ForecastWindow {
                 }
                 let n = msg.len as usize;
                 self.forces[..n].copy_from_slice(&msg.forces[..n]);
+                if let Some(e) = self.free_dir {
+                    for f in &mut self.forces[..n] {
+                        let along = e[0] * f[0] + e[1] * f[1] + e[2] * f[2];
+                        *f = e.map(|x| x * along);
+                    }
+                }
                 self.t0 = msg.t0;
                 self.dt = msg.dt;
                 self.len = n;
@@ -225,6 +243,36 @@ mod tests {
             *s = [f * i as f64, 0.0, 0.0];
         }
         m
+    }
+
+    /// FC-0: with a held door's free direction each accepted sample is its component along
+    /// it (a push turned 30° off the path keeps cos 30° of itself, along the path); without
+    /// one, or with a zero direction, the forecast is as received.
+    #[test]
+    fn a_forecast_is_taken_along_the_held_objects_path() {
+        let mut m = msg(1, 0.0, 0.01, 10, 0.0);
+        for s in m.forces[..10].iter_mut() {
+            *s = [-40.0 * 30f64.to_radians().cos(), 20.0, 3.0];
+        }
+        let e = [0.99f64, 0.1, 0.0];
+        let n = e.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let mut w = ForecastWindow::new(1.0, 1.0, 0.1, 300.0).with_free_direction(e);
+        w.offer(&m, 0.0).unwrap();
+        let f = w.at(0.045);
+        let along = (e[0] * m.forces[0][0] + e[1] * m.forces[0][1]) / n;
+        for c in 0..3 {
+            assert!((f[c] - along * e[c] / n).abs() < 1e-12, "{f:?}");
+        }
+        // Across the path: nothing.
+        let across = -e[1] * f[0] + e[0] * f[1];
+        assert!(across.abs() < 1e-12, "{f:?}");
+        for mut w in [
+            ForecastWindow::new(1.0, 1.0, 0.1, 300.0),
+            ForecastWindow::new(1.0, 1.0, 0.1, 300.0).with_free_direction([0.0; 3]),
+        ] {
+            w.offer(&m, 0.0).unwrap();
+            assert_eq!(w.at(0.045), m.forces[4]);
+        }
     }
 
     #[test]

@@ -256,7 +256,11 @@ impl<'a> ControlLoop<'a> {
         .with_held_mass(opts.held_mass);
         let n_tau = core.model.nv - 6;
         let horizon_time = config.preview.horizon as f64 * config.preview.period;
-        let intake = forecast_intake(config, &bus, robot_mass, horizon_time)?;
+        let free_dir = cc
+            .forecast_on_free_direction
+            .then(|| super::core::free_direction(&opts.held_mass))
+            .flatten();
+        let intake = forecast_intake(config, &bus, robot_mass, horizon_time, free_dir)?;
         let c2 = start_c2(config, &robot.reduced(), c2_solver)?;
         let logger = start_logger(config, opts, &core)?;
         let status_every = Duration::from_secs_f64(cc.status_every);
@@ -802,16 +806,21 @@ fn forecast_intake(
     bus: &Bus,
     robot_mass: f64,
     horizon_time: f64,
+    free_dir: Option<nalgebra::Vector3<f64>>,
 ) -> Result<ForecastIntake, ChannelError> {
     let cc = &config.controller;
     let lockstep = cc.mode == LoopMode::Lockstep;
+    let mut window = ForecastWindow::new(
+        cc.forecast_max_age,
+        cc.forecast_max_lead,
+        cc.forecast_decay,
+        robot_mass * config.robot.gravity,
+    );
+    if let Some(e) = free_dir {
+        window = window.with_free_direction(e.into());
+    }
     Ok(ForecastIntake::new(
-        ForecastWindow::new(
-            cc.forecast_max_age,
-            cc.forecast_max_lead,
-            cc.forecast_decay,
-            robot_mass * config.robot.gravity,
-        ),
+        window,
         bus.subscriber::<ForecastMsg>()?,
         bus.listener(ServiceKind::Forecast)?,
         (
