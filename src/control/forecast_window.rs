@@ -94,9 +94,10 @@ impl ForecastWindow {
         }
     }
 
-    /// Takes each accepted sample as the push along `e` alone, f ← e eᵀ f: a held door turns
-    /// only that into hinge torque, its hinge takes the rest (`controller.forecast_on_free_direction`).
-    /// `e` need not be unit; a zero or non-finite `e` leaves the forecast as received.
+    /// Takes each accepted sample as the push along `e` alone, f ← e eᵀ f (FC-0,
+    /// `controller.forecast_on_free_direction`): a held door turns only that into hinge
+    /// torque, its hinge takes the rest. `e` need not be unit; a zero or non-finite `e` leaves
+    /// the forecast as received.
     pub fn with_free_direction(mut self, e: [f64; 3]) -> Self {
         let n = e.iter().map(|x| x * x).sum::<f64>().sqrt();
         self.free_dir = (n.is_finite() && n > 0.0).then(|| e.map(|x| x / n));
