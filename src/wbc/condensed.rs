@@ -154,10 +154,12 @@ pub(crate) struct CondensedQp {
     /// newtons the forces are 10–100× the other variables and clarabel needed 9 iterations
     /// (p50, perturbed states) instead of 7.
     force_unit: f64,
-    /// H, then its Cholesky factor L (lower triangle).
+    /// H, then its Cholesky factor L (lower triangle), in the reversed dof order (below).
     h: Cholesky,
-    /// Cᵀ, then W = L⁻¹ Cᵀ (nv × (18 + held limits)).
+    /// Cᵀ, then W = L⁻¹ Cᵀ (nv × (18 + held limits)), reversed order.
     w: DMatrix<f64>,
+    /// The first row of each column of W that is not structurally zero.
+    w_start: [usize; NC_MAX],
     /// S = C H⁻¹ Cᵀ of the 18 rows without limits (lower triangle), kept unfactored.
     s_base: DMatrix<f64>,
     /// S with k limits held, then its Cholesky factor, at index k.
@@ -178,11 +180,11 @@ pub(crate) struct CondensedQp {
     /// Build the reduced QP (`force_qp`) on every tick, for [`Self::instance`]; otherwise
     /// only for the ticks clarabel solves.
     record: bool,
-    /// u = −H⁻¹ g.
+    /// u = −H⁻¹ g, reversed order.
     u: DVector<f64>,
     /// λ = S⁻¹(ρ + E f): the equality rows' multipliers (18 + k).
     lambda: DVector<f64>,
-    /// W λ, then H⁻¹ Cᵀ λ (nv).
+    /// W λ, then H⁻¹ Cᵀ λ (nv), reversed order.
     tmp: DVector<f64>,
     /// Dense scratch of the reduced QP: P, q, A, b.
     pd: DMatrix<f64>,
@@ -225,6 +227,7 @@ impl CondensedQp {
             },
             h: Cholesky::new(nv),
             w: DMatrix::zeros(nv, NC_MAX),
+            w_start: [0; NC_MAX],
             s_base: DMatrix::zeros(NC, NC),
             s: (0..=MAX_LIMITS).map(|k| Cholesky::new(NC + k)).collect(),
             rho: [0.0; NC_MAX],
@@ -389,36 +392,46 @@ impl CondensedQp {
     }
 
     /// H (factored in place into L) and `u = −H⁻¹ g`: the optimum of the q̈ cost terms alone.
+    ///
+    /// H, u, W and the solves are in the reversed dof order (row i' is dof nv − 1 − i'). A
+    /// sole's rows of C touch the base and its leg only, which come first in a depth-first
+    /// model: reversed, its column of Cᵀ is zero down to the last 12–18 rows, and so is its
+    /// column of W = L⁻¹ Cᵀ, whose substitution skips them, as do S's dot products.
     fn unconstrained(&mut self, pb: &Problem) -> Result<(), CondensedError> {
         let nv = self.nv;
         // H = D + Σ w JᵀJ, lower triangle (all the Cholesky reads): per task, down contiguous
-        // columns of H (a task's Jacobian is 3 × nv, column-major).
+        // columns of H (a task's Jacobian is 3 × nv, column-major). Column c' is dof
+        // c = nv − 1 − c', its rows r' ≥ c' the dofs c, c − 1, …, 0.
         {
             let h = self.h.l.as_mut_slice();
             h.fill(0.0);
             for t in pb.tasks {
                 let (j, w) = (t.jac.as_slice(), t.weight);
-                for c in 0..nv {
+                for cr in 0..nv {
+                    let c = nv - 1 - cr;
                     let jc = &j[3 * c..3 * c + 3];
+                    if jc == [0.0; 3] {
+                        continue; // a dof the task does not move (the hand's: the legs')
+                    }
                     let (a0, a1, a2) = (w * jc[0], w * jc[1], w * jc[2]);
-                    let col = &mut h[c * nv + c..(c + 1) * nv];
-                    for (x, jr) in col.iter_mut().zip(j[3 * c..].chunks_exact(3)) {
+                    let col = &mut h[cr * nv + cr..(cr + 1) * nv];
+                    for (x, jr) in col.iter_mut().zip(j[..3 * c + 3].chunks_exact(3).rev()) {
                         *x += a0 * jr[0] + a1 * jr[1] + a2 * jr[2];
                     }
                 }
             }
-            for c in 0..nv {
-                h[c + c * nv] += pb.diag[c];
+            for cr in 0..nv {
+                h[cr + cr * nv] += pb.diag[nv - 1 - cr];
             }
         }
         // g = d − Σ w Jᵀ r, u = −H⁻¹ g.
         for i in 0..nv {
-            self.u[i] = -pb.lin[i];
+            self.u[nv - 1 - i] = -pb.lin[i];
         }
         for t in pb.tasks {
             let (j, r, w) = (&t.jac, &t.target, t.weight);
             for c in 0..nv {
-                self.u[c] += w * (j[(0, c)] * r[0] + j[(1, c)] * r[1] + j[(2, c)] * r[2]);
+                self.u[nv - 1 - c] += w * (j[(0, c)] * r[0] + j[(1, c)] * r[1] + j[(2, c)] * r[2]);
             }
         }
         if !self.h.factor() {
@@ -435,27 +448,26 @@ impl CondensedQp {
         // Cᵀ = [M[:, 0..6], J_sᵀ] (M symmetric), d₀ = [−h_u; b_s].
         for c in 0..6 {
             for i in 0..nv {
-                self.w[(i, c)] = pb.m[(i, c)];
+                self.w[(nv - 1 - i, c)] = pb.m[(i, c)];
             }
             self.rho[c] = -pb.h[c];
         }
         for r in 0..12 {
             for i in 0..nv {
-                self.w[(i, 6 + r)] = pb.jfeet[(r, i)];
+                self.w[(nv - 1 - i, 6 + r)] = pb.jfeet[(r, i)];
             }
             self.rho[6 + r] = pb.b_feet[r];
         }
         let (w, u) = (self.w.as_mut_slice(), self.u.as_slice());
         for (r, col) in w.chunks_exact_mut(nv).take(NC).enumerate() {
-            // ρ = d₀ − C u, then W = L⁻¹ Cᵀ.
+            // ρ = d₀ − C u, then W = L⁻¹ Cᵀ (zero where Cᵀ is zero above).
             self.rho[r] -= dot(col, u);
+            self.w_start[r] = leading_zeros(col);
             self.h.solve_lower(col);
         }
         for c in 0..NC {
-            let wc = &self.w.as_slice()[c * nv..(c + 1) * nv];
             for r in c..NC {
-                let wr = &self.w.as_slice()[r * nv..(r + 1) * nv];
-                self.s_base[(r, c)] = dot(wr, wc);
+                self.s_base[(r, c)] = w_dot(&self.w, &self.w_start, r, c);
             }
         }
         if !self.s_base.iter().all(|x| x.is_finite()) {
@@ -473,9 +485,12 @@ impl CondensedQp {
             let (dof, tmax) = pb.limited[idx];
             // The row M_j (M symmetric: its column j), d₀_j = ±τ_max − h_j.
             let m_j = &pb.m.as_slice()[dof * nv..(dof + 1) * nv];
-            self.rho[NC + i] = sign * tmax - pb.h[dof] - dot(m_j, self.u.as_slice());
             let col = &mut self.w.as_mut_slice()[(NC + i) * nv..(NC + i + 1) * nv];
-            col.copy_from_slice(m_j);
+            for (x, m) in col.iter_mut().zip(m_j.iter().rev()) {
+                *x = *m;
+            }
+            self.rho[NC + i] = sign * tmax - pb.h[dof] - dot(col, self.u.as_slice());
+            self.w_start[NC + i] = leading_zeros(col);
             self.h.solve_lower(col);
         }
         let s = &mut self.s[k];
@@ -484,11 +499,9 @@ impl CondensedQp {
                 s.l[(r, c)] = self.s_base[(r, c)];
             }
         }
-        let w = self.w.as_slice();
         for r in NC..n {
-            let wr = &w[r * nv..(r + 1) * nv];
             for c in 0..=r {
-                s.l[(r, c)] = dot(wr, &w[c * nv..(c + 1) * nv]);
+                s.l[(r, c)] = w_dot(&self.w, &self.w_start, r, c);
             }
         }
         if !s.factor() {
@@ -689,10 +702,26 @@ impl CondensedQp {
             .gemv(1.0, &self.w.columns(0, n), &self.lambda.rows(0, n), 0.0);
         self.h.solve_upper(self.tmp.as_mut_slice());
         for i in 0..nv {
-            self.x[i] = self.u[i] + self.tmp[i];
+            self.x[i] = self.u[nv - 1 - i] + self.tmp[nv - 1 - i];
         }
         self.x[nv..].copy_from_slice(f);
     }
+}
+
+/// Columns r and c of W (`nv` rows, their first non-zero rows `start`) dotted, over the rows
+/// where both can be non-zero.
+fn w_dot(w: &DMatrix<f64>, start: &[usize], r: usize, c: usize) -> f64 {
+    let (nv, w) = (w.nrows(), w.as_slice());
+    let from = start[r].max(start[c]);
+    dot(
+        &w[r * nv + from..(r + 1) * nv],
+        &w[c * nv + from..(c + 1) * nv],
+    )
+}
+
+/// The number of zeros `col` starts with.
+fn leading_zeros(col: &[f64]) -> usize {
+    col.iter().position(|&x| x != 0.0).unwrap_or(col.len())
 }
 
 /// The row of C (and S) of the reduced problem's equality `a`: the 6 base rows, then the held
