@@ -168,12 +168,16 @@ fn upc_run_through_the_bus_keeps_c1_standing_on_the_g1() {
     assert_eq!(u(&c, "tick_errors"), 0, "{c}");
     assert!(u(&bus, "states") > 1500, "{bus}");
     // The controller kept the robot until its run was over: each loss but its exit was followed
-    // by a hand-over back, or by its torques at once after a stall of a few ms. Without real-time scheduling a 2-core machine stalls it past the
-    // bus's 6 ms now and then (damped, then handed back: the designed behaviour); a few at
-    // most, each counted.
+    // by a hand-over back, or by its torques at once after a stall of a few ms. Without
+    // real-time scheduling a 2-core machine stalls it past the bus's 6 ms now and then (damped,
+    // then handed back: the designed behaviour), each counted. How often is the machine's: on
+    // a loaded 2-core VM 4–13 losses in a 12 s run, the same before and after a change to the
+    // tick. The bound, one per second of the bus's run, still catches a controller that
+    // starves (a loss every few of its ~6000 answers).
     let (handovers, losses) = (u(&bus, "handovers"), u(&bus, "losses"));
+    let bound = f(&bus, "wall_time").max(3.0) as u64;
     assert!(
-        handovers >= 1 && handovers + u(&bus, "resumes") == losses && losses <= 3,
+        handovers >= 1 && handovers + u(&bus, "resumes") == losses && losses <= bound,
         "{bus}"
     );
     if losses > 1 {
