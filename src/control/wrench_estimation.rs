@@ -44,6 +44,8 @@ pub struct WrenchObserverSettings {
     /// weights.
     pub velocity_noise: [f64; 3],
     pub torque_noise: f64,
+    /// ε of WO-4: a joint torque's σ grows by this fraction of its effort limit.
+    pub torque_noise_fraction: f64,
     /// K₂ of WO-5 (1/s): a second stage on the residual; 0: none.
     pub filter_gain: f64,
     /// ω of WO-7 (1/s): the hand's force through a stage of its own that follows a ramp
@@ -72,7 +74,8 @@ impl crate::config::PartSettings for WrenchObserverSettings {
         }
         let sizes = [
             self.velocity_noise.as_slice(),
-            &[self.torque_noise, self.filter_gain, self.hand_bandwidth],
+            &[self.torque_noise, self.torque_noise_fraction],
+            &[self.filter_gain, self.hand_bandwidth],
             &[self.friction_coulomb, self.friction_viscous],
         ]
         .concat();
@@ -109,6 +112,7 @@ fn build(
         gain: settings.gain,
         velocity_noise: settings.velocity_noise,
         torque_noise: settings.torque_noise,
+        torque_noise_fraction: settings.torque_noise_fraction,
         filter_gain: settings.filter_gain,
         hand_bandwidth: settings.hand_bandwidth,
         friction: DriveFriction {

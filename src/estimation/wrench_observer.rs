@@ -24,8 +24,12 @@
 //! base velocity estimated to a few mm/s puts tens of newtons on the base's rows (K M ≈ 200/s ×
 //! 35 kg), where a joint's torque estimate errs by a fraction of a newton-metre:
 //!
-//!   W = diag(1 / ((K M_ii σ_v,i)² + σ_τ,i²))                                         (WO-4)
+//!   W = diag(1 / ((K M_ii σ_v,i)² + σ_τ,i²)),  σ_τ,i² = σ_τ² + (ε τ_max,i)²              (WO-4)
 //!
+//! A drive's torque estimate errs in proportion to its rating (its current sensing's range and
+//! its gear's friction scale with the torque it is built for): ε τ_max,i. Weighed uniformly, a
+//! leg's and the waist's large drives, whose friction is a few N·m, pulled the split as much as
+//! an arm's small ones, and the feet's loads and the CoP took their friction.
 //! WO-2 passes a velocity's white noise to r at the gain K (r = K/(s+K) τ_ext + K s/(s+K) M δv).
 //! A second first-order stage at K₂ on r makes the estimate critically damped when K₂ = K:
 //!
@@ -93,6 +97,8 @@ pub struct WrenchObserverGains {
     /// the joints' (rad/s); and of the joint torques (N·m). They weigh WO-3's rows (WO-4).
     pub velocity_noise: [f64; 3],
     pub torque_noise: f64,
+    /// ε of WO-4: the part of a joint torque's σ in proportion to its effort limit.
+    pub torque_noise_fraction: f64,
     /// K₂ of WO-5 (1/s); 0: the residual of WO-2 as it is.
     pub filter_gain: f64,
     /// ω of WO-7 (1/s), the hand's own stage; 0: the hand's force from WO-5's r₂ as the feet's.
@@ -155,7 +161,8 @@ pub struct WrenchObserver {
     /// A W (WO-4).
     aw: DMatrix<f64>,
     velocity_noise: [f64; 3],
-    torque_noise: f64,
+    /// σ_τ,i of WO-4 per velocity coordinate (the base's six unused).
+    torque_sd: DVector<f64>,
     /// Each foot's sole centre and rotation at the last update (world ← sole).
     sole_centre: [Vector3<f64>; 2],
     sole_rot: [Matrix3<f64>; 2],
@@ -172,6 +179,12 @@ impl WrenchObserver {
         gains: WrenchObserverGains,
     ) -> Self {
         let nv = model.nv;
+        let effort = model.effort_limits();
+        let torque_sd = DVector::from_fn(nv, |k, _| {
+            let rated = gains.torque_noise_fraction * effort[k];
+            let rated = if rated.is_finite() { rated } else { 0.0 };
+            gains.torque_noise.hypot(rated)
+        });
         Self {
             data: Data::new(model),
             model: model.clone(),
@@ -190,7 +203,7 @@ impl WrenchObserver {
             tracked_rate: DVector::zeros(nv),
             hand_bandwidth: gains.hand_bandwidth,
             friction: gains.friction,
-            effort: DVector::from_vec(model.effort_limits()),
+            effort: DVector::from_vec(effort),
             m_prev: DMatrix::zeros(nv, nv),
             started: false,
             tau_full: DVector::zeros(nv),
@@ -200,7 +213,7 @@ impl WrenchObserver {
             a: DMatrix::zeros(NW, nv),
             aw: DMatrix::zeros(NW, nv),
             velocity_noise: gains.velocity_noise,
-            torque_noise: gains.torque_noise,
+            torque_sd,
             sole_centre: [Vector3::zeros(); 2],
             sole_rot: [Matrix3::identity(); 2],
             last: ContactWrenches::default(),
@@ -360,7 +373,7 @@ impl WrenchObserver {
                 3..6 => self.velocity_noise[1],
                 _ => self.velocity_noise[2],
             };
-            let st = if k < 6 { 0.0 } else { self.torque_noise };
+            let st = if k < 6 { 0.0 } else { self.torque_sd[k] };
             let var = (noise_gain * self.data.m[(k, k)] * sv).powi(2) + st * st;
             let w = 1.0 / var.max(MIN_VARIANCE);
             for i in 0..NW {
@@ -439,6 +452,7 @@ mod tests {
         gain: 100.0,
         velocity_noise: [0.0; 3],
         torque_noise: 0.0,
+        torque_noise_fraction: 0.0,
         filter_gain: 0.0,
         hand_bandwidth: 0.0,
         friction: DriveFriction {
