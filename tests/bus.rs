@@ -149,7 +149,11 @@ fn a_g1_on_the_bus_stands_and_is_damped_within_10_ms_of_its_controller_s_death()
     assert_eq!(u(&sim, "bad_crc_commands"), 0, "{sim}");
     assert_eq!(u(&sim, "wrong_mode_machine"), 0, "{sim}");
     assert_eq!(u(&sim, "feedforward_over_limit"), 0, "{sim}");
-    assert!((f(&bus, "robot_rate") - 500.0).abs() < 25.0, "{bus}");
+    // The robot's rate as the participant read it: 500 Hz, less the robot's 80 ms silence
+    // and, on a loaded machine without real-time scheduling, the states a newer one superseded
+    // before they were read (91 of 3800 and a 469 Hz reading once on a 2-core CI machine). A
+    // participant that read every other state, or each twice, is far outside.
+    assert!((f(&bus, "robot_rate") - 500.0).abs() < 50.0, "{bus}");
     assert_eq!(u(&bus, "refused_bad_crc"), 0, "{bus}");
     assert_eq!(u(&bus, "clamped_commands"), 0, "{bus}");
 }

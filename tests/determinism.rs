@@ -341,39 +341,55 @@ fn lockstep_waits_for_a_stopped_simulator_and_controller_and_gives_the_same_byte
     let _serial = serial();
     let out = scratch("stopped");
     let a = run(&out, "undisturbed", "c1", "7");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_upc"))
-        .args(["run", "--quiet", "--controller", "c1", "--duration", "7"])
-        .args(["--name", "stopped", "--out"])
-        .arg(&out)
-        .stdout(Stdio::null())
-        .spawn()
-        .expect("upc run");
-    let sim = child_running(child.id(), "sim");
-    let controller = child_running(child.id(), "controller");
-    // Mid-run: the controller has logged a tenth of its ticks or so.
-    let csv = out.join("stopped").join("c1").join("controller.csv");
-    let until = std::time::Instant::now() + std::time::Duration::from_secs(20);
-    while std::fs::metadata(&csv).map_or(0, |m| m.len()) < 16 * 1024 {
-        assert!(std::time::Instant::now() < until, "the run did not start");
-        std::thread::sleep(std::time::Duration::from_millis(2));
+    // The stops are timed by the controller's CSV, which its logging thread writes when it
+    // gets the CPU: on a loaded machine it can lag to the run's end, and a stop sent then finds
+    // the run over. Such an attempt still gives the same bytes; another is made (at most three)
+    // until both stops fell inside one.
+    let mut landed = false;
+    for attempt in 0..3 {
+        let name = format!("stopped{attempt}");
+        let mut child = Command::new(env!("CARGO_BIN_EXE_upc"))
+            .args(["run", "--quiet", "--controller", "c1", "--duration", "7"])
+            .args(["--name", &name, "--out"])
+            .arg(&out)
+            .stdout(Stdio::null())
+            .spawn()
+            .expect("upc run");
+        let sim = child_running(child.id(), "sim");
+        let controller = child_running(child.id(), "controller");
+        // Mid-run: the controller has logged a tenth of its ticks or so.
+        let csv = out.join(&name).join("c1").join("controller.csv");
+        let until = std::time::Instant::now() + std::time::Duration::from_secs(20);
+        while std::fs::metadata(&csv).map_or(0, |m| m.len()) < 16 * 1024 {
+            assert!(std::time::Instant::now() < until, "the run did not start");
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+        freeze(&[sim], 1.2);
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        freeze(&[controller], 2.5);
+        assert!(child.wait().expect("upc run").success(), "upc run failed");
+        let b = out.join(&name).join("c1");
+        assert_same(&a, &b);
+        let read = |f: &str| -> Value {
+            serde_json::from_str(&std::fs::read_to_string(b.join(f)).expect("summary"))
+                .expect("json")
+        };
+        let (c, sim_json) = (read("controller.json"), read("sim.json"));
+        let gap = c["longest_state_gap"].as_f64().unwrap_or(0.0);
+        let wall = sim_json["wall_time"].as_f64().unwrap_or(0.0);
+        // Both stops fell inside the run.
+        if gap > 1.1 && wall > 3.7 {
+            landed = true;
+            break;
+        }
+        eprintln!(
+            "attempt {attempt}: the stops fell outside the run (longest state gap {gap} s, \
+             simulator wall time {wall} s): again"
+        );
     }
-    freeze(&[sim], 1.2);
-    std::thread::sleep(std::time::Duration::from_millis(50));
-    freeze(&[controller], 2.5);
-    assert!(child.wait().expect("upc run").success(), "upc run failed");
-    let b = out.join("stopped").join("c1");
-    assert_same(&a, &b);
-    let c: Value =
-        serde_json::from_str(&std::fs::read_to_string(b.join("controller.json")).expect("summary"))
-            .expect("json");
-    let sim_json: Value =
-        serde_json::from_str(&std::fs::read_to_string(b.join("sim.json")).expect("summary"))
-            .expect("json");
-    // Both stops fell inside the run.
-    assert!(c["longest_state_gap"].as_f64().unwrap_or(0.0) > 1.1, "{c}");
     assert!(
-        sim_json["wall_time"].as_f64().unwrap_or(0.0) > 3.7,
-        "{sim_json}"
+        landed,
+        "in none of three attempts did both stops fall inside the run"
     );
     let _ = std::fs::remove_dir_all(&out);
 }
