@@ -87,6 +87,7 @@ fn a_g1_on_its_own_sensors_stands_with_c1_where_c0_falls_on_both_plants() {
 fn stuck_friction_cop_error(robot: &upc::robot::Robot, fraction: f64) -> f64 {
     use nalgebra::{DMatrix, DVector, Vector3};
     use rand::{Rng, SeedableRng};
+    use upc::control::wrench_estimation::WrenchObserverSettings;
     use upc::dynamics::{
         Data, ReferenceFrame, crba, get_frame_jacobian, nonlinear_effects, update_frame_placements,
     };
@@ -131,13 +132,15 @@ fn stuck_friction_cop_error(robot: &upc::robot::Robot, fraction: f64) -> f64 {
         / fz.sum();
     let hand = model.frame_id(&robot.frames().hand).expect("hand");
     let effort = model.effort_limits();
+    // The embedded defaults' gains and noise sizes, no friction compensated.
+    let d = WrenchObserverSettings::default();
     let gains = WrenchObserverGains {
-        gain: 100.0,
-        velocity_noise: [0.005, 0.002, 0.01],
-        torque_noise: 0.5,
+        gain: d.gain,
+        velocity_noise: d.velocity_noise,
+        torque_noise: d.torque_noise,
         torque_noise_fraction: fraction,
-        filter_gain: 50.0,
-        hand_bandwidth: 0.0,
+        filter_gain: d.filter_gain,
+        hand_bandwidth: d.hand_bandwidth,
         friction: DriveFriction::default(),
     };
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);

@@ -30,6 +30,7 @@
 //! its gear's friction scale with the torque it is built for): ε τ_max,i. Weighed uniformly, a
 //! leg's and the waist's large drives, whose friction is a few N·m, pulled the split as much as
 //! an arm's small ones, and the feet's loads and the CoP took their friction.
+//!
 //! WO-2 passes a velocity's white noise to r at the gain K (r = K/(s+K) τ_ext + K s/(s+K) M δv).
 //! A second first-order stage at K₂ on r makes the estimate critically damped when K₂ = K:
 //!
@@ -161,7 +162,7 @@ pub struct WrenchObserver {
     /// A W (WO-4).
     aw: DMatrix<f64>,
     velocity_noise: [f64; 3],
-    /// σ_τ,i of WO-4 per velocity coordinate (the base's six unused).
+    /// σ_τ,i of WO-4 per velocity coordinate (zero on the base's six: no drive).
     torque_sd: DVector<f64>,
     /// Each foot's sole centre and rotation at the last update (world ← sole).
     sole_centre: [Vector3<f64>; 2],
@@ -181,6 +182,9 @@ impl WrenchObserver {
         let nv = model.nv;
         let effort = model.effort_limits();
         let torque_sd = DVector::from_fn(nv, |k, _| {
+            if k < 6 {
+                return 0.0;
+            }
             let rated = gains.torque_noise_fraction * effort[k];
             let rated = if rated.is_finite() { rated } else { 0.0 };
             gains.torque_noise.hypot(rated)
@@ -373,8 +377,7 @@ impl WrenchObserver {
                 3..6 => self.velocity_noise[1],
                 _ => self.velocity_noise[2],
             };
-            let st = if k < 6 { 0.0 } else { self.torque_sd[k] };
-            let var = (noise_gain * self.data.m[(k, k)] * sv).powi(2) + st * st;
+            let var = (noise_gain * self.data.m[(k, k)] * sv).powi(2) + self.torque_sd[k].powi(2);
             let w = 1.0 / var.max(MIN_VARIANCE);
             for i in 0..NW {
                 self.aw[(i, k)] = self.a[(i, k)] * w;
