@@ -324,31 +324,51 @@ fn constant_lateral_force_shifts_the_zmp_by_the_analytic_amount() {
     );
 }
 
-#[test]
-fn hand_at_rest_transmits_the_external_force() {
+/// The hand previewer of the iCub-like's M_e and nominal gains, a set-point and a push
+/// ([`hold_against`] predicts `n` steps of it).
+struct HandCase {
+    hp: HandPreviewer,
+    m_e: Matrix3<f64>,
+    gains: GainSchedule,
+    des: HandState,
+    f: Vector3<f64>,
+    n: usize,
+}
+
+fn hand_case(n: usize) -> HandCase {
     let c = config_with(&[]);
     let m_e = robot().effective_mass;
-    let n = 200;
-    let mut hp = HandPreviewer::new(c.preview.period, m_e, n).unwrap();
-    let f = Vector3::new(-30.0, 7.0, 4.0);
-    let (kp, kd) = (c.hand.kp, c.nominal_kd(c.hand.kp));
-    let des = HandState {
-        pos: Vector3::new(0.3, -0.1, 0.8),
-        ..Default::default()
-    };
+    HandCase {
+        hp: HandPreviewer::new(c.preview.period, m_e, n).unwrap(),
+        m_e,
+        gains: GainSchedule::constant(n, c.hand.kp, c.nominal_kd(c.hand.kp)),
+        des: HandState {
+            pos: Vector3::new(0.3, -0.1, 0.8),
+            ..Default::default()
+        },
+        f: Vector3::new(-30.0, 7.0, 4.0),
+        n,
+    }
+}
+
+/// The case's hand from `x0` under its constant push, set-point and gains.
+fn hold_against(h: &mut HandCase, x0: &HandState) {
+    let n = h.n;
+    h.hp.predict(x0, &vec![h.des; n], &h.gains, &vec![h.f.into(); n], n)
+        .unwrap();
+}
+
+#[test]
+fn hand_at_rest_transmits_the_external_force() {
+    let mut h = hand_case(200);
+    let (kp, f) = (h.gains.kp[0], h.f);
     // Static equilibrium: K_p M_e (x − x_des) = F_ext.
     let x0 = HandState {
-        pos: des.pos + m_e.try_inverse().unwrap() * f / kp,
+        pos: h.des.pos + h.m_e.try_inverse().unwrap() * f / kp,
         ..Default::default()
     };
-    hp.predict(
-        &x0,
-        &vec![des; n],
-        &GainSchedule::constant(n, kp, kd),
-        &vec![f.into(); n],
-        n,
-    )
-    .unwrap();
+    hold_against(&mut h, &x0);
+    let hp = &h.hp;
     for (i, fd) in hp.disturbance().iter().enumerate() {
         for k in 0..3 {
             assert!(
@@ -359,6 +379,43 @@ fn hand_at_rest_transmits_the_external_force() {
             );
         }
     }
+}
+
+/// HP-1: a held door keeps the hand on its path e. From rest the hand accelerates along e as
+/// the push on e over the arm's and the leaf's mass along e; at equilibrium the arm holds the
+/// push along e, F_dis = F_e M_e e / (eᵀ M_e e), whose part across e the hinge takes; the
+/// push's own part across e never moves the hand.
+#[test]
+fn a_held_door_keeps_the_hand_on_its_path_and_its_hinge_takes_the_rest() {
+    let mut h = hand_case(600);
+    let (m_e, f, des, n) = (h.m_e, h.f, h.des, h.n);
+    let e = Vector3::new(1.0, 0.1, -0.05).normalize();
+    let m = 5.1;
+    h.hp.set_held_path(Some((e, m)));
+    // Started at rest with a stray velocity across e, which the door does not allow.
+    let x0 = HandState {
+        vel: e.cross(&Vector3::z()).normalize() * 0.2,
+        ..des
+    };
+    hold_against(&mut h, &x0);
+    let ee = e.dot(&(m_e * e));
+    let first = h.hp.states()[0].acc;
+    let expected = e * (e.dot(&f) / (ee + m));
+    assert!((first - expected).norm() < 1e-12, "{first} vs {expected}");
+    for (i, x) in h.hp.states().iter().enumerate() {
+        let off = (x.pos - des.pos).cross(&e).norm() + x.vel.cross(&e).norm();
+        assert!(off < 1e-12, "step {i}: the hand left the path by {off}");
+    }
+    let held = m_e * e * (e.dot(&f) / ee);
+    let last = Vector3::from(h.hp.disturbance()[n - 1]);
+    assert!((last - held).norm() < 1e-3, "{last} vs {held}");
+    // Across e the door passes a force the free hand's model never shows.
+    assert!((held - e * e.dot(&held)).norm() > 5.0);
+    // Nothing held: eq. (24) again, the push passed whole.
+    h.hp.set_held_path(None);
+    hold_against(&mut h, &des);
+    let last = Vector3::from(h.hp.disturbance()[n - 1]);
+    assert!((last - f).norm() < 1e-3, "{last} vs {f}");
 }
 
 #[test]

@@ -179,6 +179,10 @@ struct Entry {
     /// (lockstep runs).
     #[serde(skip_serializing_if = "Option::is_none")]
     wrench_estimate_error: Option<upc::estimation::WrenchAccuracy>,
+    /// The plant's true CoP against the support the controller had (lockstep runs): the
+    /// controller's `min_zmp_margin` is its measured CoP's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    true_cop_margin: Option<upc::estimation::TrueMargin>,
 }
 
 pub fn run(mut args: RunArgs) -> CliResult {
@@ -443,6 +447,10 @@ fn run_one(
             &dir.join("sim.csv"),
         ),
         wrench_estimate_error: upc::estimation::wrench_accuracy(
+            &dir.join("controller.csv"),
+            &dir.join("sim.csv"),
+        ),
+        true_cop_margin: upc::estimation::true_margin(
             &dir.join("controller.csv"),
             &dir.join("sim.csv"),
         ),
@@ -1008,9 +1016,10 @@ fn stop(child: &mut Child, grace: Duration) -> Option<i32> {
 
 fn print_table(entries: &[Entry]) {
     println!(
-        "\n{:<4} {:>11} {:>11} {:>10} {:>10} {:>9} {:>9} {:>9} {:>8} {:>9} {:>8} {:>8}",
+        "\n{:<4} {:>11} {:>10} {:>11} {:>10} {:>10} {:>9} {:>9} {:>9} {:>8} {:>9} {:>8} {:>8}",
         "ctrl",
         "ZMP margin",
+        "true CoP",
         "at edge",
         "hand RMS",
         "hand peak",
@@ -1023,8 +1032,9 @@ fn print_table(entries: &[Entry]) {
         "wall"
     );
     println!(
-        "{:<4} {:>11} {:>11} {:>10} {:>10} {:>9} {:>9} {:>9} {:>8} {:>9} {:>8} {:>8}",
+        "{:<4} {:>11} {:>10} {:>11} {:>10} {:>10} {:>9} {:>9} {:>9} {:>8} {:>9} {:>8} {:>8}",
         "",
+        "min (mm)",
         "min (mm)",
         "(s)",
         "(mm)",
@@ -1040,9 +1050,10 @@ fn print_table(entries: &[Entry]) {
     for e in entries {
         match &e.controller_summary {
             Some(s) => println!(
-                "{:<4} {:>11.1} {:>11.3} {:>10.2} {:>10.2} {:>9.0} {:>9.0} {:>9.0} {:>8} {:>9.2} {:>8.1} {:>8.1}",
+                "{:<4} {:>11.1} {:>10.1} {:>11.3} {:>10.2} {:>10.2} {:>9.0} {:>9.0} {:>9.0} {:>8} {:>9.2} {:>8.1} {:>8.1}",
                 e.controller,
                 s.min_zmp_margin * 1e3,
+                e.true_cop_margin.map_or(f64::NAN, |m| m.min * 1e3),
                 s.time_at_support_edge,
                 s.hand_rms_error * 1e3,
                 s.hand_peak_error * 1e3,

@@ -79,6 +79,22 @@ pub struct HandConfig {
     /// The impedance's stiffness and damping matrices: eq. (17)'s K_p M_e, K_d M_e, or those
     /// with no coupling between the held object's free direction and the directions it holds.
     pub stiffness: HandStiffness,
+    /// Whether the previewer keeps a held object's handle on its path (HP-1,
+    /// docs/hand_previewer.md).
+    pub held_path: HeldPath,
+}
+
+/// How the hand previewer treats a held object (`hand.held_path`, HP-1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HeldPath {
+    /// Eq. (24): the hand free in space, whatever it holds.
+    Free,
+    /// The hand moves along the held object's path e only; the object takes the impedance's
+    /// push across e, which F_dis then carries.
+    Path,
+    /// The same, with the object's mass along e (a door leaf's inertia) moved with the hand.
+    PathInertia,
 }
 
 /// How the hand impedance's gains are shaped (`hand.stiffness`).

@@ -92,6 +92,10 @@ pub struct ControllerCore {
     /// direction (from its apparent mass, [`Self::with_held_mass`]); `None`: eq. (17) as is.
     hand_free_dir: Option<Matrix3<f64>>,
     decoupled_stiffness: bool,
+    /// `hand.held_path`: how the previewer (and C2's) keeps the hand on the held object's path
+    /// (HP-1), and that path once known ([`Self::with_held_mass`]).
+    held_path_mode: crate::config::HeldPath,
+    held_path: Option<(Vector3<f64>, f64)>,
     /// The robot as measured this tick (read from the contract once), the tick's shared
     /// quantities and the parts that work on them (`super::parts`).
     sensed: RobotState,
@@ -191,6 +195,8 @@ impl ControllerCore {
             force_feedback: config.controller.hand_force_feedback,
             hand_free_dir: None,
             decoupled_stiffness: config.hand.stiffness == crate::config::HandStiffness::Decoupled,
+            held_path_mode: config.hand.held_path,
+            held_path: None,
             zmp_ref: vec![[0.0; 2]; n],
             hand_desired: vec![HandState::default(); n],
             schedule: nominal.clone(),
@@ -228,6 +234,16 @@ impl ControllerCore {
         for p in self.parts.iter_mut() {
             p.held_object(&rows);
         }
+        // HP-1: the path e and, if asked, the object's mass along it (m e eᵀ's trace).
+        let inertia = held_mass.trace();
+        self.held_path = match self.held_path_mode {
+            crate::config::HeldPath::Free => None,
+            crate::config::HeldPath::Path => free_direction(&held_mass).map(|e| (e, 0.0)),
+            crate::config::HeldPath::PathInertia => {
+                free_direction(&held_mass).map(|e| (e, inertia))
+            }
+        };
+        self.previewer.set_held_path(self.held_path);
         // A door's apparent mass is m e eᵀ: its trace is m, and it over m projects onto e.
         let m = held_mass.trace();
         self.hand_free_dir =
@@ -333,6 +349,7 @@ impl ControllerCore {
             acc: self.hand_acc_cmd,
         };
         out.m_e = *self.previewer.effective_mass();
+        out.held_path = self.held_path;
         out.zmp_ref.copy_from_slice(&self.zmp_ref);
         out.hand_desired.copy_from_slice(&self.hand_desired);
         out.f_ext.copy_from_slice(&self.frame.f_ext);

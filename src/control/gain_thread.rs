@@ -28,6 +28,8 @@ pub struct GainSnapshot {
     pub com: [AxisState; 2],
     pub hand: HandState,
     pub m_e: Matrix3<f64>,
+    /// The held object's path the previewer keeps the hand on (HP-1): its direction and mass.
+    pub held_path: Option<(Vector3<f64>, f64)>,
     pub zmp_ref: Vec<[f64; 2]>,
     pub hand_desired: Vec<HandState>,
     pub f_ext: Vec<[f64; 3]>,
@@ -42,6 +44,7 @@ impl GainSnapshot {
             com: [Vector3::zeros(); 2],
             hand: HandState::default(),
             m_e: Matrix3::identity(),
+            held_path: None,
             zmp_ref: vec![[0.0; 2]; n],
             hand_desired: vec![HandState::default(); n],
             f_ext: vec![[0.0; 3]; n],
@@ -98,6 +101,7 @@ impl GainSolver for GainSearch {
         out: &mut StampedSchedule,
     ) -> Result<(), crate::preview::PreviewError> {
         self.set_effective_mass(snap.m_e)?;
+        self.set_held_path(snap.held_path);
         let inputs = GainSearchInputs {
             com: snap.com,
             zmp_ref: &snap.zmp_ref,

@@ -17,11 +17,13 @@
 
 mod accuracy;
 mod settings;
+mod true_margin;
 mod wrench_accuracy;
 pub mod wrench_observer;
 
 pub use accuracy::{BaseAccuracy, base_accuracy};
 pub use settings::{EstimatorMode, EstimatorSettings};
+pub use true_margin::{TrueMargin, true_margin};
 pub use wrench_accuracy::{ErrorStats, HandSource, WrenchAccuracy, wrench_accuracy};
 
 use nalgebra::{DVector, Matrix3, Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};

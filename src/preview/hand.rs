@@ -8,6 +8,10 @@
 //! - eq. (24) is read as a semi-implicit step: position and velocity advance with the cart-table
 //!   A, then the acceleration at k+1 is the impedance law evaluated at the new position and
 //!   velocity, with the gains, desired state and force of step k+1.
+//! - A held door keeps the hand on its path (HP-1, docs/hand_previewer.md): the hand moves along
+//!   the path's direction e only, carrying the leaf's mass m, and the hinge takes what the
+//!   impedance pushes across e. F_dis (eq. (25)) is then the force the door really passes,
+//!   across e as well.
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -55,6 +59,11 @@ pub struct HandPreviewer {
     states: Vec<HandState>,
     f_dis: Vec<[f64; 3]>,
     len: usize,
+    /// The held object's path (HP-1): e and the object's mass m along it; `None`: free in space.
+    held: Option<(Vector3<f64>, f64)>,
+    /// HP-1's s̈ = a·F_ext + b·ẍ_cmd: a = e / d, b = M_e e / d, d = eᵀ M_e e + m.
+    path_force: Vector3<f64>,
+    path_cmd: Vector3<f64>,
 }
 
 impl HandPreviewer {
@@ -66,6 +75,9 @@ impl HandPreviewer {
             states: vec![HandState::default(); capacity],
             f_dis: vec![[0.0; 3]; capacity],
             len: 0,
+            held: None,
+            path_force: Vector3::zeros(),
+            path_cmd: Vector3::zeros(),
         };
         p.set_effective_mass(m_e)?;
         Ok(p)
@@ -80,7 +92,27 @@ impl HandPreviewer {
         let chol = chol.ok_or(PreviewError::EffectiveMassNotSpd)?;
         self.m_e = m_e;
         self.m_e_inv = chol.inverse();
+        self.update_path();
         Ok(())
+    }
+
+    /// Keep the hand on a held object's path (HP-1): `Some((e, m))`, e the path's unit
+    /// direction (world) and m the object's mass along it (0: its inertia left out); `None`:
+    /// free in space, eq. (24).
+    pub fn set_held_path(&mut self, path: Option<(Vector3<f64>, f64)>) {
+        self.held =
+            path.filter(|(e, m)| (e.norm() - 1.0).abs() < 1e-9 && m.is_finite() && *m >= 0.0);
+        self.update_path();
+    }
+
+    /// HP-1's coefficients for the current M_e and path.
+    fn update_path(&mut self) {
+        if let Some((e, m)) = self.held {
+            let me = self.m_e * e;
+            let d = e.dot(&me) + m;
+            self.path_force = e / d;
+            self.path_cmd = me / d;
+        }
     }
 
     pub fn effective_mass(&self) -> &Matrix3<f64> {
@@ -104,13 +136,38 @@ impl HandPreviewer {
         kd: f64,
         f_ext: &Vector3<f64>,
     ) -> (HandState, Vector3<f64>) {
+        self.step_on(
+            self.held.as_ref().map(|(e, _)| e),
+            x,
+            desired,
+            kp,
+            kd,
+            f_ext,
+        )
+    }
+
+    /// [`Self::step`] with the path given (`predict` reads it once, outside its loop).
+    #[inline(always)]
+    fn step_on(
+        &self,
+        path: Option<&Vector3<f64>>,
+        x: &HandState,
+        desired: &HandState,
+        kp: f64,
+        kd: f64,
+        f_ext: &Vector3<f64>,
+    ) -> (HandState, Vector3<f64>) {
         let t = self.period;
         let pos = x.pos + x.vel * t + x.acc * (t * t / 2.0);
         let vel = x.vel + x.acc * t;
         // eq. (17): the commanded operational-space acceleration of the impedance law.
         let cmd = (desired.pos - pos) * kp + (desired.vel - vel) * kd + desired.acc;
-        // eq. (23) without the J̇J† term: M_e ẍ = F_ext + M_e ẍ_cmd.
-        let acc = cmd + self.m_e_inv * f_ext;
+        let acc = match path {
+            // eq. (23) without the J̇J† term: M_e ẍ = F_ext + M_e ẍ_cmd.
+            None => cmd + self.m_e_inv * f_ext,
+            // HP-1: ẍ = s̈ e, (eᵀ M_e e + m) s̈ = eᵀ F_ext + eᵀ M_e ẍ_cmd.
+            Some(e) => e * (self.path_force.dot(f_ext) + self.path_cmd.dot(&cmd)),
+        };
         // eq. (25): F_dis = −[K_e (x_des − x) + C_e (ẋ_des − ẋ) + M_e ẍ_des] = −M_e ẍ_cmd.
         let f_dis = -(self.m_e * cmd);
         (HandState { pos, vel, acc }, f_dis)
@@ -178,8 +235,15 @@ impl HandPreviewer {
             }
         }
         let mut x = *x0;
+        let path = self.held.map(|(e, _)| e);
+        // On the held path, the hand moves along e only (a door's hinge takes the rest).
+        if let Some(e) = &path {
+            x.vel = e * e.dot(&x.vel);
+            x.acc = e * e.dot(&x.acc);
+        }
         for i in 0..horizon {
-            let (next, f_dis) = self.step(
+            let (next, f_dis) = self.step_on(
+                path.as_ref(),
                 &x,
                 &desired[i],
                 gains.kp[i],

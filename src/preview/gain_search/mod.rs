@@ -126,6 +126,11 @@ impl GainSearch {
         self.problem.hand.set_effective_mass(m_e)
     }
 
+    /// The held object's path the hand previewer keeps the hand on (HP-1, `HandPreviewer::set_held_path`).
+    pub fn set_held_path(&mut self, path: Option<(nalgebra::Vector3<f64>, f64)>) {
+        self.problem.hand.set_held_path(path);
+    }
+
     /// Forget the previous solution: the next search starts from the nominal gains.
     pub fn reset(&mut self) {
         self.warm = false;
