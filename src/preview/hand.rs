@@ -234,16 +234,37 @@ impl HandPreviewer {
                 });
             }
         }
-        let mut x = *x0;
-        let path = self.held.map(|(e, _)| e);
-        // On the held path, the hand moves along e only (a door's hinge takes the rest).
-        if let Some(e) = &path {
-            x.vel = e * e.dot(&x.vel);
-            x.acc = e * e.dot(&x.acc);
+        // Two loops, so that eq. (24)'s carries no test of the path per step.
+        match self.held.map(|(e, _)| e) {
+            None => self.roll(*x0, None, desired, gains, f_ext, horizon),
+            Some(e) => {
+                // On the held path the hand moves along e only (a door's hinge takes the rest).
+                let x = HandState {
+                    vel: e * e.dot(&x0.vel),
+                    acc: e * e.dot(&x0.acc),
+                    ..*x0
+                };
+                self.roll(x, Some(&e), desired, gains, f_ext, horizon);
+            }
         }
+        self.len = horizon;
+        Ok(())
+    }
+
+    /// eq. (24) over `horizon` steps from `x` (inputs checked by `predict`).
+    #[inline(always)]
+    fn roll(
+        &mut self,
+        mut x: HandState,
+        path: Option<&Vector3<f64>>,
+        desired: &[HandState],
+        gains: &GainSchedule,
+        f_ext: &[[f64; 3]],
+        horizon: usize,
+    ) {
         for i in 0..horizon {
             let (next, f_dis) = self.step_on(
-                path.as_ref(),
+                path,
                 &x,
                 &desired[i],
                 gains.kp[i],
@@ -254,8 +275,6 @@ impl HandPreviewer {
             self.f_dis[i] = f_dis.into();
             x = next;
         }
-        self.len = horizon;
-        Ok(())
     }
 
     /// Predicted hand states at k+1…k+N of the last [`HandPreviewer::predict`].
