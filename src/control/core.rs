@@ -235,14 +235,14 @@ impl ControllerCore {
             p.held_object(&rows);
         }
         // HP-1: the path e and, if asked, the object's mass along it (m e eᵀ's trace).
-        let inertia = held_mass.trace();
-        self.held_path = match self.held_path_mode {
-            crate::config::HeldPath::Free => None,
-            crate::config::HeldPath::Path => free_direction(&held_mass).map(|e| (e, 0.0)),
-            crate::config::HeldPath::PathInertia => {
-                free_direction(&held_mass).map(|e| (e, inertia))
-            }
+        use crate::config::HeldPath;
+        let mass = match self.held_path_mode {
+            HeldPath::PathInertia => held_mass.trace(),
+            HeldPath::Path | HeldPath::Free => 0.0,
         };
+        self.held_path = free_direction(&held_mass)
+            .filter(|_| self.held_path_mode != HeldPath::Free)
+            .map(|e| (e, mass));
         self.previewer.set_held_path(self.held_path);
         // A door's apparent mass is m e eᵀ: its trace is m, and it over m projects onto e.
         let m = held_mass.trace();

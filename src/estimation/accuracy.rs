@@ -42,6 +42,17 @@ pub(super) fn columns(text: &str) -> HashMap<&str, Vec<f64>> {
     cols
 }
 
+/// Samples of a log by time in ms (both logs print t to 0.1 ms).
+pub(super) fn by_time(log: &HashMap<&str, Vec<f64>>) -> Option<HashMap<i64, usize>> {
+    Some(
+        log.get("t")?
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| ((t * 1e3).round() as i64, i))
+            .collect(),
+    )
+}
+
 /// The estimate's error, or `None` when the logs hold no estimate (a measured base) or no truth.
 pub fn base_accuracy(controller_csv: &Path, sim_csv: &Path) -> Option<BaseAccuracy> {
     let c = std::fs::read_to_string(controller_csv).ok()?;

@@ -8,7 +8,7 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use super::accuracy::columns;
+use super::accuracy::{by_time, columns};
 
 /// The smallest signed distance of the true CoP to the support's nearest edge (m; negative:
 /// outside), when it happened, and the smallest along each axis.
@@ -34,17 +34,12 @@ fn margin_of(
     ctrl: &HashMap<&str, Vec<f64>>,
     truth: &HashMap<&str, Vec<f64>>,
 ) -> Option<TrueMargin> {
-    let [tc, x0, x1, y0, y1] =
-        ["t", "sup_x_min", "sup_x_max", "sup_y_min", "sup_y_max"].map(|k| ctrl.get(k));
-    let (tc, x0, x1, y0, y1) = (tc?, x0?, x1?, y0?, y1?);
+    let [x0, x1, y0, y1] =
+        ["sup_x_min", "sup_x_max", "sup_y_min", "sup_y_max"].map(|k| ctrl.get(k));
+    let (x0, x1, y0, y1) = (x0?, x1?, y0?, y1?);
     let [ts, zx, zy] = ["t", "zmp_x", "zmp_y"].map(|k| truth.get(k));
     let (ts, zx, zy) = (ts?, zx?, zy?);
-    // Both logs print t to 0.1 ms: match them on whole milliseconds.
-    let at: HashMap<i64, usize> = tc
-        .iter()
-        .enumerate()
-        .map(|(i, &t)| ((t * 1e3).round() as i64, i))
-        .collect();
+    let at = by_time(ctrl)?;
     let mut out: Option<TrueMargin> = None;
     for (j, &t) in ts.iter().enumerate() {
         let Some(&i) = at.get(&((t * 1e3).round() as i64)) else {

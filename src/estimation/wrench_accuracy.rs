@@ -12,7 +12,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use super::accuracy::columns;
+use super::accuracy::{by_time, columns};
 
 /// A true horizontal hand force at least this large (N) is a push.
 pub const PUSH_FORCE: f64 = 5.0;
@@ -93,17 +93,6 @@ pub fn wrench_accuracy(controller_csv: &Path, sim_csv: &Path) -> Option<WrenchAc
     let c = std::fs::read_to_string(controller_csv).ok()?;
     let s = std::fs::read_to_string(sim_csv).ok()?;
     accuracy_of(&columns(&c), &columns(&s))
-}
-
-/// Samples of a log by time in ms (both logs print t to 0.1 ms).
-fn by_time(log: &HashMap<&str, Vec<f64>>) -> Option<HashMap<i64, usize>> {
-    Some(
-        log.get("t")?
-            .iter()
-            .enumerate()
-            .map(|(i, &t)| ((t * 1e3).round() as i64, i))
-            .collect(),
-    )
 }
 
 /// A column that holds at least one finite value.
