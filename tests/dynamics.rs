@@ -227,6 +227,89 @@ fn aba_inverts_rnea() {
     }
 }
 
+/// Bit for bit: a stale placement differs from a fresh one at least in a zero's sign.
+fn same_bits(a: &[SE3], b: &[SE3]) -> bool {
+    let bits = |x: &SE3| {
+        x.rot
+            .iter()
+            .chain(x.trans.iter())
+            .map(|v| v.to_bits())
+            .collect::<Vec<_>>()
+    };
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| bits(x) == bits(y))
+}
+
+/// The placements are computed once per configuration and shared by the algorithms run at it
+/// (kinematics.rs): whatever ran before on the same `Data`, at another configuration or at
+/// this one, every algorithm gives the bits a fresh `Data` gives.
+#[test]
+fn shared_placements_give_what_a_fresh_workspace_gives() {
+    let mut rng = Rng(11);
+    let model = humanoid();
+    let mut data = Data::new(&model);
+    let q1 = rng.configuration(&model);
+    let q2 = rng.configuration(&model);
+    let v = rng.vector(model.nv, 2.0);
+    let frames = |data: &mut Data, q: &DVector<f64>| {
+        forward_kinematics(&model, data, q).expect("fk");
+        data.o_m_f.clone()
+    };
+    let fresh = |q: &DVector<f64>| frames(&mut Data::new(&model), q);
+    // CRBA at q1, RNEA at q2 (which places the joints only), then the frames at q1 and q2.
+    crba(&model, &mut data, &q1).expect("crba");
+    let h2 = nonlinear_effects(&model, &mut data, &q2, &v)
+        .expect("rnea")
+        .clone();
+    let h2_fresh = nonlinear_effects(&model, &mut Data::new(&model), &q2, &v)
+        .expect("rnea")
+        .clone();
+    assert_eq!(h2, h2_fresh);
+    // RNEA at q1 now: the joints it placed at q2 are not q1's.
+    let h = |data: &mut Data, q: &DVector<f64>| {
+        nonlinear_effects(&model, data, q, &v)
+            .expect("rnea")
+            .clone()
+    };
+    assert_eq!(h(&mut data, &q1), h(&mut Data::new(&model), &q1));
+    assert!(same_bits(&frames(&mut data, &q1), &fresh(&q1)));
+    assert!(same_bits(&frames(&mut data, &q2), &fresh(&q2)));
+    // ABA at q1 after placements at q2, then the CoM Jacobian at q2.
+    let tau = rng.vector(model.nv, 3.0);
+    let a1 = aba(&model, &mut data, &q1, &v, &tau).expect("aba").clone();
+    let a1_fresh = aba(&model, &mut Data::new(&model), &q1, &v, &tau)
+        .expect("aba")
+        .clone();
+    assert_eq!(a1, a1_fresh);
+    assert_eq!(h(&mut data, &q2), h(&mut Data::new(&model), &q2));
+    let jcom = jacobian_center_of_mass(&model, &mut data, &q2)
+        .expect("jcom")
+        .clone();
+    let jcom_fresh = jacobian_center_of_mass(&model, &mut Data::new(&model), &q2)
+        .expect("jcom")
+        .clone();
+    assert_eq!(jcom, jcom_fresh);
+    let joint = model
+        .joints
+        .iter()
+        .rposition(|j| j.nq() == 1)
+        .expect("a joint");
+    // Another model of the same shape (a link 1 cm longer) with the same workspace: its own
+    // placements.
+    let mut other = humanoid();
+    other.joints[joint].placement.trans.x += 0.01;
+    assert!(same_bits(
+        &{
+            forward_kinematics(&other, &mut data, &q2).expect("fk");
+            data.o_m_i.clone()
+        },
+        &{
+            let mut d = Data::new(&other);
+            forward_kinematics(&other, &mut d, &q2).expect("fk");
+            d.o_m_i.clone()
+        }
+    ));
+}
+
 #[test]
 fn crba_equals_rnea_column_by_column_and_is_spd() {
     let mut rng = Rng(11);

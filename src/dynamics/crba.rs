@@ -38,16 +38,9 @@ pub(crate) fn crba_unchecked(model: &Model, data: &mut Data, q: &[f64]) {
 
 /// Placements, world Jacobian columns and body inertias in world axes.
 fn forward_pass(model: &Model, data: &mut Data, q: &[f64]) {
+    super::kinematics::placements_unchecked(model, data, q);
     for (i, j) in model.joints.iter().enumerate() {
-        let li = j
-            .kind
-            .placed_transform(&j.placement, &q[j.idx_q..j.idx_q + j.nq()]);
-        data.li_m_i[i] = li;
-        let o = match j.parent {
-            Some(p) => data.o_m_i[p].compose(&li),
-            None => li,
-        };
-        data.o_m_i[i] = o;
+        let o = data.o_m_i[i];
         match j.kind {
             // S = (0, axis) carried to the world origin: ω = R axis, v = p × ω.
             JointKind::Revolute { axis } => {

@@ -57,9 +57,44 @@ pub struct Data {
     pub com: Vector3<f64>,
     pub vcom: Vector3<f64>,
     pub jcom: DMatrix<f64>,
+    /// What `li_m_i`, `o_m_i` hold: the model (its address) and the configuration (its bits)
+    /// they were placed at (`None`: not placed, or invalidated), and whether `o_m_f` follows
+    /// them. A tick runs several algorithms at one q; each placed the whole tree again
+    /// (kinematics.rs, [`super::kinematics::placements_unchecked`]).
+    pub(crate) placed_model: Option<usize>,
+    pub(crate) placed_q: Vec<f64>,
+    pub(crate) frames_placed: bool,
 }
 
 impl Data {
+    /// Whether `li_m_i`, `o_m_i` are `model`'s placements at `q`, bit for bit (so that reuse
+    /// is exact by construction: −0.0 == 0.0, yet sin(−0.0) is −0.0).
+    #[inline]
+    pub(crate) fn placed_at(&self, model: &Model, q: &[f64]) -> bool {
+        self.placed_model == Some(model as *const Model as usize)
+            && self.placed_q.len() == q.len()
+            && self
+                .placed_q
+                .iter()
+                .zip(q)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+    }
+
+    /// `li_m_i`, `o_m_i` placed at `q` (after the caller wrote them all).
+    #[inline]
+    pub(crate) fn mark_placed(&mut self, model: &Model, q: &[f64]) {
+        self.placed_model = Some(model as *const Model as usize);
+        self.placed_q.copy_from_slice(q);
+        self.frames_placed = false;
+    }
+
+    /// `li_m_i` or `o_m_i` written at another configuration than the one marked.
+    #[inline]
+    pub(crate) fn unmark_placed(&mut self) {
+        self.placed_model = None;
+        self.frames_placed = false;
+    }
+
     pub fn new(model: &Model) -> Self {
         let n = model.njoints();
         let nf = model.frames.len();
@@ -97,6 +132,9 @@ impl Data {
             com: Vector3::zeros(),
             vcom: Vector3::zeros(),
             jcom: DMatrix::zeros(3, nv),
+            placed_model: None,
+            placed_q: vec![0.0; model.nq],
+            frames_placed: false,
         }
     }
 }

@@ -196,6 +196,11 @@ pub(crate) struct CondensedQp {
     qp: QpInstance,
     /// Solution [q̈; f].
     x: Vec<f64>,
+    /// τ of every limited dof (indexed by dof) at `x`, as the active set's last round computed
+    /// it; `torques_at_x`: whether that round's x is the solution left in `x`. The drives' τ
+    /// reads them instead of computing them again (the same operations, the same bits).
+    tau: Vec<f64>,
+    torques_at_x: bool,
 }
 
 impl CondensedQp {
@@ -249,6 +254,8 @@ impl CondensedQp {
             p_pattern,
             qp,
             x: vec![0.0; nv + NF],
+            tau: vec![0.0; nv],
+            torques_at_x: false,
         }
     }
 
@@ -293,6 +300,12 @@ impl CondensedQp {
         &self.x
     }
 
+    /// [`joint_torque`] of every limited dof at [`Self::x`] (indexed by dof), when the active
+    /// set settled the last solve (`None` otherwise).
+    pub(crate) fn limited_torques(&self) -> Option<&[f64]> {
+        self.torques_at_x.then_some(&self.tau[..])
+    }
+
     /// Solves the tick's problem with its torque limits: by the cone solve and the limits'
     /// active set, else by clarabel when no limit is active. The solution `[q̈; f]` is left in
     /// [`Self::x`].
@@ -305,6 +318,7 @@ impl CondensedQp {
         iterations: &mut u32,
         solve_time: &mut Duration,
     ) -> Result<Condensed, CondensedError> {
+        self.torques_at_x = false;
         self.unconstrained(pb)?;
         self.schur_complement(pb)?;
         // The rows to start from: the last settled tick's held limits (a robot at its limits
@@ -336,6 +350,8 @@ impl CondensedQp {
             self.n_last = 0;
             match settled {
                 Settled::Yes => {
+                    // The last round's update_held computed every limited τ at this x.
+                    self.torques_at_x = true;
                     let limits = self.n_held > 0;
                     self.last_held = self.held;
                     self.n_last = self.n_held;
@@ -569,10 +585,11 @@ impl CondensedQp {
         // Limits held this round are judged by their multipliers only: the solution sits on
         // their bounds, within rounding.
         for (idx, &(dof, tmax)) in pb.limited.iter().enumerate() {
+            let tau = joint_torque(pb.m, pb.h, pb.jc, &self.x, dof);
+            self.tau[dof] = tau;
             if was[..k].iter().any(|&(j, _)| j == idx) {
                 continue;
             }
-            let tau = joint_torque(pb.m, pb.h, pb.jc, &self.x, dof);
             if tau.abs() > tmax * (1.0 + LIMIT_SLACK) {
                 if kept == MAX_LIMITS {
                     return None;

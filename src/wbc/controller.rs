@@ -295,8 +295,10 @@ pub struct WholeBodyController {
     diag: Vec<f64>,
     lin: Vec<f64>,
     b_feet: [f64; 12],
-    /// Copy of the accepted solution.
+    /// Copy of the accepted solution, and whether it is the condensed solve's (whose limited
+    /// τ the outputs then read: `CondensedQp::limited_torques`).
     x: Vec<f64>,
+    x_from_condensed: bool,
     /// The last tick's optimum had a torque limit active (condensed formulation: see `solve`).
     limits_active: bool,
     /// The posture reference (length nq), meaningful when `posture_set`: stored by
@@ -380,6 +382,7 @@ impl WholeBodyController {
             b_feet: [0.0; 12],
             x: vec![0.0; layout.nz],
             limits_active: false,
+            x_from_condensed: false,
             posture_ref: model.neutral(),
             posture_set: false,
             tau: DVector::zeros(na),
@@ -700,12 +703,21 @@ impl WholeBodyController {
         for c in 0..N_CONTACTS {
             self.forces[c] = Vector3::new(x[nv + 3 * c], x[nv + 3 * c + 1], x[nv + 3 * c + 2]);
         }
+        // The limited dofs' τ as the condensed solve's active set left them, when x is its.
+        let known = self
+            .condensed
+            .limited_torques()
+            .filter(|_| self.x_from_condensed);
         for a in 0..nv - 6 {
             // A limit held at its bound gives τ on it within rounding, and the condensed check
             // lets the others exceed theirs by 1e-9 relative (`condensed.rs`): the drives get
             // the limit itself, never a hair above it.
             let lim = self.tau_max[a];
-            self.tau[a] = torque(m, &self.h, &self.jc, x, 6 + a).clamp(-lim, lim);
+            let t = match known {
+                Some(t) if lim.is_finite() => t[6 + a],
+                _ => torque(m, &self.h, &self.jc, x, 6 + a),
+            };
+            self.tau[a] = t.clamp(-lim, lim);
         }
         if !finite(self.tau.as_slice()) {
             return Err(FallbackReason::NonFiniteSolution);
@@ -871,6 +883,7 @@ impl WholeBodyController {
         iterations: &mut u32,
     ) -> Result<bool, FallbackReason> {
         let finite = |s: &[f64]| s.iter().all(|x| x.is_finite());
+        self.x_from_condensed = false;
         let use_condensed = match forced {
             Some(path) => path == Path::Condensed,
             // With the cone solve the screening costs the condensation and a few Newton steps
@@ -895,6 +908,7 @@ impl WholeBodyController {
                     let x = self.condensed.x();
                     if finite(x) {
                         self.x[..x.len()].copy_from_slice(x);
+                        self.x_from_condensed = true;
                         self.limits_active = solved.limits;
                         self.counters.torque_limited += u64::from(solved.limits);
                         return Ok(solved.almost);
