@@ -179,6 +179,9 @@ const ANSWER_POLL: Duration = Duration::from_micros(50);
 /// robot whose states are lost on the way but which still listens keeps receiving it.
 const SILENT_REPEAT: Duration = Duration::from_millis(2);
 
+/// How many times the damping is written, every [`SILENT_REPEAT`], when the bus stops.
+const FINAL_DAMPING: usize = 5;
+
 /// How long a state waits for the lab's sample of its tick (s).
 const LAB_WAIT: f64 = 3e-4;
 
@@ -323,8 +326,13 @@ pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError>
     let (cpu0, wall0) = (cpu_time(), Instant::now());
     let mut ep = ep;
     let result = session.run(&mut ep, opts.duration, stop);
-    // Leave the robot damped, not under the last torques.
-    let _ = ep.commands.write(session.command(Drive::Damping, 0.0));
+    // Leave the robot damped, not under the last torques: written for a few of a G1's state
+    // periods, since one sample written just before the participant goes can be lost with it
+    // (a CI run's robot kept the hold as its last command) and the drives keep the last.
+    for _ in 0..FINAL_DAMPING {
+        let _ = ep.commands.write(session.command(Drive::Damping, 0.0));
+        std::thread::sleep(SILENT_REPEAT);
+    }
     let mut s = session.finish(&ep);
     s.wall_time = wall0.elapsed().as_secs_f64();
     s.cpu_share = (cpu_time() - cpu0) / s.wall_time.max(1e-9);
