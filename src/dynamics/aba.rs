@@ -84,20 +84,9 @@ pub(crate) fn aba_unchecked(
     fext: Option<&[Force]>,
 ) -> Result<(), DynamicsError> {
     // Pass 1: kinematics, bias accelerations c, rigid inertias, bias forces p (eq. 7.36-7.38).
-    let placed = data.placed_at(model, q);
-    if !placed {
-        data.unmark_placed();
-    }
+    let placed = super::kinematics::joints_placed(model, data, q);
     for (i, j) in model.joints.iter().enumerate() {
-        let li = if placed {
-            data.li_m_i[i]
-        } else {
-            let li = j
-                .kind
-                .placed_transform(&j.placement, &q[j.idx_q..j.idx_q + j.nq()]);
-            data.li_m_i[i] = li;
-            li
-        };
+        let li = super::kinematics::joint_placement(model, data, q, i, placed);
         let vj = j.kind.motion(&v[j.idx_v..j.idx_v + j.nv()]);
         let vi = match j.parent {
             Some(p) => li.act_inv_motion(&data.v[p]) + vj,

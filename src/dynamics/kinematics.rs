@@ -74,9 +74,41 @@ pub(crate) fn placements_unchecked(model: &Model, data: &mut Data, q: &[f64]) {
     data.mark_placed(model, q);
 }
 
+/// For RNEA and ABA, which place the joints in their parents only (`li_m_i`): whether they
+/// are placed at `q` already. If not, the record goes, as they leave `o_m_i` behind.
+#[inline]
+pub(crate) fn joints_placed(model: &Model, data: &mut Data, q: &[f64]) -> bool {
+    let placed = data.placed_at(model, q);
+    if !placed {
+        data.unmark_placed();
+    }
+    placed
+}
+
+/// Joint `i`'s placement in its parent: the recorded one when `placed` ([`joints_placed`]),
+/// else computed and stored.
+#[inline(always)]
+pub(crate) fn joint_placement(
+    model: &Model,
+    data: &mut Data,
+    q: &[f64],
+    i: usize,
+    placed: bool,
+) -> SE3 {
+    if placed {
+        return data.li_m_i[i];
+    }
+    let j = &model.joints[i];
+    let li = j
+        .kind
+        .placed_transform(&j.placement, &q[j.idx_q..j.idx_q + j.nq()]);
+    data.li_m_i[i] = li;
+    li
+}
+
 /// `data.o_m_f` from `data.o_m_i` (run after the placements; once per placement).
 pub fn update_frame_placements(model: &Model, data: &mut Data) {
-    if data.frames_placed && data.placed_model.is_some() {
+    if data.frames_placed {
         return;
     }
     for (k, f) in model.frames.iter().enumerate() {

@@ -74,20 +74,9 @@ pub(crate) fn rnea_unchecked(
     };
     // Forward pass: velocities, accelerations, net body wrenches (RBDA eq. 5.7–5.9). The
     // joints' placements as placed at this q, else placed here (and o_m_i left behind).
-    let placed = data.placed_at(model, q);
-    if !placed {
-        data.unmark_placed();
-    }
+    let placed = super::kinematics::joints_placed(model, data, q);
     for (i, j) in model.joints.iter().enumerate() {
-        let li = if placed {
-            data.li_m_i[i]
-        } else {
-            let li = j
-                .kind
-                .placed_transform(&j.placement, &q[j.idx_q..j.idx_q + j.nq()]);
-            data.li_m_i[i] = li;
-            li
-        };
+        let li = super::kinematics::joint_placement(model, data, q, i, placed);
         let vj = match v {
             Some(v) => j.kind.motion(&v[j.idx_v..j.idx_v + j.nv()]),
             None => Motion::zero(),
