@@ -138,9 +138,11 @@ fn a_g1_on_the_bus_stands_and_is_damped_within_10_ms_of_its_controller_s_death()
     // The bound: the controller's last torques → the damping command, within 10 ms of the
     // participant's live time. Without real-time scheduling the participant itself can be
     // descheduled for ms (a loaded 2-core machine: it overslept a 1 ms poll by 7 ms, and the
-    // damping came 11.2 ms after the last torques); its own worst stall is added.
+    // damping came 11.2 ms after the last torques); its own worst stalls are added, the wait's
+    // and the publication's, since one loss can meet both (a CI run: 15.1 ms with a 4.6 ms
+    // overslept wait and a 4.5 ms publication).
     let delay = f(&bus, "loss_to_damping_max");
-    let own_stall = f(&bus, "wait_overshoot_max").max(f(&bus, "publish_max"));
+    let own_stall = f(&bus, "wait_overshoot_max") + f(&bus, "publish_max");
     assert!(delay > 0.0 && delay <= 0.010 + own_stall, "{bus}");
     // The robot received damping from a loss on (once per loss at most), valid and echoed.
     let starts = sim["damping_starts"].as_array().expect("damping_starts");
