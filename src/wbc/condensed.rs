@@ -25,10 +25,11 @@
 //! a QP in the 24 forces, given to clarabel with `y = Bᵀ f` as 6 more variables (so P is
 //! diagonal but for X_u, and the KKT factor stays sparse): 30 variables, 30 rows, against 68
 //! variables and 112 rows with the dense M_u and torque rows in the full problem, whose
-//! factorisation took most of the tick. H and S are
-//! factored by Cholesky (both are symmetric positive definite when the regularisation is
-//! positive and the two soles' constraints are independent of the floating-base rows); a
-//! failed factorisation is reported and the caller solves the full problem instead.
+//! factorisation took most of the tick. H is the diagonal D plus the point tasks' rank 6, and
+//! is factored as such in O(n r²) (`low_rank.rs`); S by a dense Cholesky. Both are symmetric
+//! positive definite when the regularisation is positive and the two soles' constraints are
+//! independent of the floating-base rows; a failed factorisation is reported and the caller
+//! solves the full problem instead.
 //!
 //! Torque limits are held as equalities, not dropped. A limit active at the optimum,
 //! `±(M_j q̈ + h_j − J_c,jᵀ f) = τ_max`, is one more row of `C q̈ = d₀ + E f` (C_j = M_j,
@@ -49,13 +50,16 @@ use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, SMatrix, SVector, Vector6};
 
 use super::cone::{Cone, cone_newton};
 use super::dense::{Cholesky, dot};
+use super::low_rank::LowRankCholesky;
 use super::outcome::{FallbackReason, N_CONTACTS, WbcCounters};
 use super::pattern::Pattern;
 use super::qp::QpInstance;
-use super::tasks::PointTask;
+use super::tasks::{POINT_TASKS, PointTask};
 
 /// Number of contact force variables.
 const NF: usize = 3 * N_CONTACTS;
+/// H's rank above its diagonal: 3 per point task.
+const RANK: usize = 3 * POINT_TASKS;
 /// Rows of C without limits: 6 floating-base rows of the equations of motion, 6 per sole.
 const NC: usize = 18;
 /// Variables of the reduced QP: the forces and the base wrench error δ (6, see `force_qp`).
@@ -154,8 +158,8 @@ pub(crate) struct CondensedQp {
     /// newtons the forces are 10–100× the other variables and clarabel needed 9 iterations
     /// (p50, perturbed states) instead of 7.
     force_unit: f64,
-    /// H, then its Cholesky factor L (lower triangle), in the reversed dof order (below).
-    h: Cholesky,
+    /// H = D + Σ w JᵀJ and its factor, in the reversed dof order (below).
+    h: LowRankCholesky<RANK>,
     /// Cᵀ, then W = L⁻¹ Cᵀ (nv × (18 + held limits)), reversed order.
     w: DMatrix<f64>,
     /// The first row of each column of W that is not structurally zero.
@@ -230,7 +234,7 @@ impl CondensedQp {
             } else {
                 1.0
             },
-            h: Cholesky::new(nv),
+            h: LowRankCholesky::new(nv),
             w: DMatrix::zeros(nv, NC_MAX),
             w_start: [0; NC_MAX],
             s_base: DMatrix::zeros(NC, NC),
@@ -407,7 +411,7 @@ impl CondensedQp {
         })
     }
 
-    /// H (factored in place into L) and `u = −H⁻¹ g`: the optimum of the q̈ cost terms alone.
+    /// H (factored: `H = L D̄ Lᵀ`) and `u = −H⁻¹ g`: the optimum of the q̈ cost terms alone.
     ///
     /// H, u, W and the solves are in the reversed dof order (row i' is dof nv − 1 − i'). A
     /// sole's rows of C touch the base and its leg only, which come first in a depth-first
@@ -415,29 +419,19 @@ impl CondensedQp {
     /// column of W = L⁻¹ Cᵀ, whose substitution skips them, as do S's dot products.
     fn unconstrained(&mut self, pb: &Problem) -> Result<(), CondensedError> {
         let nv = self.nv;
-        // H = D + Σ w JᵀJ, lower triangle (all the Cholesky reads): per task, down contiguous
-        // columns of H (a task's Jacobian is 3 × nv, column-major). Column c' is dof
-        // c = nv − 1 − c', its rows r' ≥ c' the dofs c, c − 1, …, 0.
-        {
-            let h = self.h.l.as_mut_slice();
-            h.fill(0.0);
-            for t in pb.tasks {
-                let (j, w) = (t.jac.as_slice(), t.weight);
-                for cr in 0..nv {
-                    let c = nv - 1 - cr;
-                    let jc = &j[3 * c..3 * c + 3];
-                    if jc == [0.0; 3] {
-                        continue; // a dof the task does not move (the hand's: the legs')
-                    }
-                    let (a0, a1, a2) = (w * jc[0], w * jc[1], w * jc[2]);
-                    let col = &mut h[cr * nv + cr..(cr + 1) * nv];
-                    for (x, jr) in col.iter_mut().zip(j[..3 * c + 3].chunks_exact(3).rev()) {
-                        *x += a0 * jr[0] + a1 * jr[1] + a2 * jr[2];
-                    }
-                }
-            }
-            for cr in 0..nv {
-                h[cr + cr * nv] += pb.diag[nv - 1 - cr];
+        // H = D + Σ w JᵀJ as its diagonal and the tasks' stacked Jacobian (`low_rank.rs`): row
+        // i' is dof nv − 1 − i'.
+        for (i, d) in self.h.d.iter_mut().enumerate() {
+            *d = pb.diag[nv - 1 - i];
+        }
+        if pb.tasks.len() != POINT_TASKS {
+            return Err(CondensedError::Factorisation);
+        }
+        for (t, task) in pb.tasks.iter().enumerate() {
+            let j = task.jac.as_slice();
+            self.h.w[3 * t..3 * t + 3].fill(task.weight);
+            for c in 0..nv {
+                self.h.v[nv - 1 - c][3 * t..3 * t + 3].copy_from_slice(&j[3 * c..3 * c + 3]);
             }
         }
         // g = d − Σ w Jᵀ r, u = −H⁻¹ g.
@@ -461,32 +455,37 @@ impl CondensedQp {
     /// W = L⁻¹ Cᵀ and S = Wᵀ W (lower triangle, kept unfactored for `hold_rows`).
     fn schur_complement(&mut self, pb: &Problem) -> Result<(), CondensedError> {
         let nv = self.nv;
-        // Cᵀ = [M[:, 0..6], J_sᵀ] (M symmetric), d₀ = [−h_u; b_s].
+        // Cᵀ = [M[:, 0..6], J_sᵀ] (M symmetric), d₀ = [−h_u; b_s]; by slices (W's columns,
+        // M's columns and J_s's rows 12 apart), reversed.
+        let (w, u) = (self.w.as_mut_slice(), self.u.as_slice());
+        let (m, jf) = (pb.m.as_slice(), pb.jfeet.as_slice());
         for c in 0..6 {
-            for i in 0..nv {
-                self.w[(nv - 1 - i, c)] = pb.m[(i, c)];
+            let col = &mut w[c * nv..(c + 1) * nv];
+            for (x, y) in col.iter_mut().zip(m[c * nv..(c + 1) * nv].iter().rev()) {
+                *x = *y;
             }
             self.rho[c] = -pb.h[c];
         }
         for r in 0..12 {
-            for i in 0..nv {
-                self.w[(nv - 1 - i, 6 + r)] = pb.jfeet[(r, i)];
+            let col = &mut w[(6 + r) * nv..(7 + r) * nv];
+            for (x, y) in col.iter_mut().zip(jf[r..].iter().step_by(12).rev()) {
+                *x = *y;
             }
             self.rho[6 + r] = pb.b_feet[r];
         }
-        let (w, u) = (self.w.as_mut_slice(), self.u.as_slice());
         for (r, col) in w.chunks_exact_mut(nv).take(NC).enumerate() {
-            // ρ = d₀ − C u, then W = L⁻¹ Cᵀ (zero where Cᵀ is zero above).
+            // ρ = d₀ − C u; W = L⁻¹ Cᵀ below is zero where Cᵀ is zero above.
             self.rho[r] -= dot(col, u);
             self.w_start[r] = leading_zeros(col);
-            self.h.solve_lower(col);
         }
+        // All 18 columns in one pass: their recursions overlap (`low_rank.rs`).
+        self.h.solve_lower(&mut w[..NC * nv]);
         for c in 0..NC {
             for r in c..NC {
                 self.s_base[(r, c)] = w_dot(&self.w, &self.w_start, r, c);
             }
         }
-        if !self.s_base.iter().all(|x| x.is_finite()) {
+        if !self.s_base.as_slice().iter().all(|x| x.is_finite()) {
             return Err(CondensedError::Solver(FallbackReason::NonFiniteProblem));
         }
         Ok(())
@@ -756,10 +755,8 @@ pub(crate) fn joint_torque(
     d: usize,
 ) -> f64 {
     let nv = m.ncols();
-    // M symmetric: its row d is its (contiguous) column d.
-    let mut t = h[d] + dot(&m.as_slice()[d * nv..(d + 1) * nv], &x[..nv]);
-    for j in 0..NF {
-        t -= jc[(j, d)] * x[nv + j];
-    }
-    t
+    // M symmetric: its row d is its (contiguous) column d; J_c's column d too (24 × nv,
+    // column-major), dotted with the forces in four partial sums.
+    let jc_d = &jc.as_slice()[d * NF..(d + 1) * NF];
+    h[d] + dot(&m.as_slice()[d * nv..(d + 1) * nv], &x[..nv]) - dot(jc_d, &x[nv..nv + NF])
 }

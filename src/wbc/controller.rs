@@ -38,8 +38,8 @@
 //!   convex: the solution is unique).
 //! - Formulation handed to clarabel (`wbc.formulation`): by default the problem **condensed**
 //!   onto the 24 contact forces (`condensed.rs`: q̈ and the task residuals eliminated in
-//!   closed form through the equality rows; 30 variables and 30 rows, one 38 × 38 and one
-//!   18 × 18 Cholesky per tick), which has the same optimum. Its exact optimum comes from the
+//!   closed form through the equality rows; 30 variables and 30 rows, H's diagonal-plus-rank-6
+//!   factor and one 18 × 18 Cholesky per tick), which has the same optimum. Its exact optimum comes from the
 //!   cone solve (`cone.rs`), the active torque limits held as equalities, and clarabel decides
 //!   only the rare tick it does not settle; the **full** problem below stays as the reference
 //!   (tests compare the two) and decides any tick whose condensation fails (H or S not positive

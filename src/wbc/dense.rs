@@ -94,36 +94,43 @@ fn cholesky_kernel(n: usize, s: &mut [f64], inv_diag: &mut [f64]) -> bool {
 }
 
 /// Per column of B, four columns of L at a time: their 4 × 4 triangle by substitution, then
-/// one pass below it (skipped while B's column is still zero, as a sole's is at first).
+/// one pass below it (skipped while B's column is still zero, as a sole's is at first). B's
+/// columns are taken in groups of [`GROUP`], each step of L over the whole group: their
+/// chains of dependent operations are independent, and overlap (each column's operations are
+/// those of a column alone, in the same order).
 fn lower_kernel(n: usize, l: &[f64], inv_diag: &[f64], b: &mut [f64]) {
-    for col in b.chunks_exact_mut(n) {
+    for group in b.chunks_mut(n * GROUP) {
         let mut j = 0;
         while j + 4 <= n {
-            let mut x = [0.0; 4];
-            for a in 0..4 {
-                let xa = col[j + a] * inv_diag[j + a];
-                col[j + a] = xa;
-                x[a] = xa;
-                for r in a + 1..4 {
-                    col[j + r] -= l[(j + a) * n + j + r] * xa;
+            for col in group.chunks_exact_mut(n) {
+                let mut x = [0.0; 4];
+                for a in 0..4 {
+                    let xa = col[j + a] * inv_diag[j + a];
+                    col[j + a] = xa;
+                    x[a] = xa;
+                    for r in a + 1..4 {
+                        col[j + r] -= l[(j + a) * n + j + r] * xa;
+                    }
                 }
-            }
-            if x != [0.0; 4] {
-                let c = |a: usize| &l[(j + a) * n + j + 4..(j + a + 1) * n];
-                let (c0, c1, c2, c3) = (c(0), c(1), c(2), c(3));
-                for (i, y) in col[j + 4..].iter_mut().enumerate() {
-                    *y -= (c0[i] * x[0] + c1[i] * x[1]) + (c2[i] * x[2] + c3[i] * x[3]);
+                if x != [0.0; 4] {
+                    let c = |a: usize| &l[(j + a) * n + j + 4..(j + a + 1) * n];
+                    let (c0, c1, c2, c3) = (c(0), c(1), c(2), c(3));
+                    for (i, y) in col[j + 4..].iter_mut().enumerate() {
+                        *y -= (c0[i] * x[0] + c1[i] * x[1]) + (c2[i] * x[2] + c3[i] * x[3]);
+                    }
                 }
             }
             j += 4;
         }
         for j in j..n {
-            let x = col[j] * inv_diag[j];
-            col[j] = x;
-            if x != 0.0 {
-                let lj = &l[j * n + j + 1..(j + 1) * n];
-                for (y, a) in col[j + 1..].iter_mut().zip(lj) {
-                    *y -= a * x;
+            let lj = &l[j * n + j + 1..(j + 1) * n];
+            for col in group.chunks_exact_mut(n) {
+                let x = col[j] * inv_diag[j];
+                col[j] = x;
+                if x != 0.0 {
+                    for (y, a) in col[j + 1..].iter_mut().zip(lj) {
+                        *y -= a * x;
+                    }
                 }
             }
         }
@@ -131,15 +138,21 @@ fn lower_kernel(n: usize, l: &[f64], inv_diag: &[f64], b: &mut [f64]) {
 }
 
 /// Per column of B, from the bottom: x_j = (b_j − L[j+1.., j] · x[j+1..]) / L_jj, a dot down
-/// a contiguous column of L.
+/// a contiguous column of L; B's columns in groups as in [`lower_kernel`].
 fn upper_kernel(n: usize, l: &[f64], inv_diag: &[f64], b: &mut [f64]) {
-    for col in b.chunks_exact_mut(n) {
+    for group in b.chunks_mut(n * GROUP) {
         for j in (0..n).rev() {
-            let below = dot(&l[j * n + j + 1..(j + 1) * n], &col[j + 1..]);
-            col[j] = (col[j] - below) * inv_diag[j];
+            let lj = &l[j * n + j + 1..(j + 1) * n];
+            for col in group.chunks_exact_mut(n) {
+                let below = dot(lj, &col[j + 1..]);
+                col[j] = (col[j] - below) * inv_diag[j];
+            }
         }
     }
 }
+
+/// Columns of B a solve steps through together.
+const GROUP: usize = 4;
 
 /// `aᵀ b` with four partial sums (a single running sum is one long chain of dependent adds).
 pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {

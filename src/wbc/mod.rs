@@ -15,6 +15,7 @@
 //!   and read by both formulations.
 //! - `cone`: the cone solve, the condensed problem's exact optimum by Newton steps on its dual.
 //! - `dense`: the condensation's small Cholesky factors and triangular solves.
+//! - `low_rank`: the q̈ cost's Hessian (diagonal plus the point tasks' rank) factored in O(n r²).
 //! - `qp`: one clarabel problem with a fixed sparsity pattern, updated in place each tick.
 //! - [`com_bias`]: `J̇ v` drift of the CoM and of several frames from one forward pass.
 
@@ -23,6 +24,7 @@ mod condensed;
 mod cone;
 pub mod controller;
 mod dense;
+mod low_rank;
 pub mod outcome;
 mod pattern;
 mod qp;

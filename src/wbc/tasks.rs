@@ -80,6 +80,9 @@ pub(crate) struct TaskList {
 }
 
 /// Indices of the tasks the controller sets each tick.
+/// The point tasks: the CoM's and the hand's (the condensation's H has rank 3 each above its
+/// diagonal, `condensed.rs`).
+pub(crate) const POINT_TASKS: usize = 2;
 pub(crate) const COM: usize = 0;
 pub(crate) const HAND: usize = 1;
 pub(crate) const BASE_ORIENTATION: usize = 1;
@@ -104,6 +107,7 @@ impl TaskList {
             JointTask::new("posture", 6..nv, w.posture),
         ];
         let list = Self { points, joints };
+        debug_assert_eq!(list.points.len(), POINT_TASKS);
         debug_assert_eq!(list.points[COM].point, Point::Com);
         debug_assert_eq!(list.joints[POSTURE].name, "posture");
         list
