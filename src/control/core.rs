@@ -415,8 +415,10 @@ impl ControllerCore {
         };
         for stage in [Stage::Measure, Stage::Forecast, Stage::Disturbance] {
             parts::run_stage(&mut self.parts, stage, &inputs, &mut self.frame)?;
-            if stage == Stage::Measure && !self.frame.f_ext_filled {
-                // Without a part correcting it, the horizon's hand force is the forecast's.
+            if stage == Stage::Forecast && !self.frame.f_ext_filled {
+                // Without a part correcting it, the horizon's hand force is the forecast's
+                // (sampled only then: a correcting part fills all of it, and the Forecast
+                // stage's other parts act on it only when one did, `TickFrame::f_ext`).
                 for (i, f) in self.frame.f_ext.iter_mut().enumerate() {
                     *f = forecast.at(t + (i + 1) as f64 * self.period);
                 }

@@ -90,8 +90,11 @@ pub struct TickFrame {
     /// `Measure`: how far (s) `hand_force` lags the force on the hand (an estimate's filter;
     /// 0 for a sensor's).
     pub hand_force_lag: f64,
-    /// `Forecast`: the hand force over the horizon at t + (i+1)·T (filled from the forecast as
-    /// received unless a part filled it) and the push measured now, when a part knows it.
+    /// `Forecast`: the hand force over the horizon at t + (i+1)·T and the push measured now,
+    /// when a part knows it. A part that fills `f_ext` fills all of it and sets `f_ext_filled`;
+    /// otherwise the core fills it from the forecast as received after the `Forecast` stage,
+    /// so a `Forecast` part reads it only after one that fills it (as the viability guard
+    /// does, on `measured_push`).
     pub f_ext: Vec<[f64; 3]>,
     pub f_ext_filled: bool,
     pub measured_push: Option<[f64; 3]>,

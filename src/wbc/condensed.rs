@@ -479,7 +479,8 @@ impl CondensedQp {
             self.w_start[r] = leading_zeros(col);
         }
         // All 18 columns in one pass: their recursions overlap (`low_rank.rs`).
-        self.h.solve_lower(&mut w[..NC * nv]);
+        self.h
+            .solve_lower_from(&mut w[..NC * nv], &self.w_start[..NC]);
         for c in 0..NC {
             for r in c..NC {
                 self.s_base[(r, c)] = w_dot(&self.w, &self.w_start, r, c);

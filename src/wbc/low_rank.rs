@@ -95,25 +95,43 @@ impl<const R: usize> LowRankCholesky<R> {
     }
 
     /// `B ← D̄^(-½) L⁻¹ B`, B column-major with n rows (a vector is one column).
+    pub(crate) fn solve_lower(&mut self, b: &mut [f64]) {
+        self.solve_lower_from(b, &[]);
+    }
+
+    /// [`Self::solve_lower`] of columns that are zero above row `start[c]` (0 where `start`
+    /// is shorter): rows above a group of four's first non-zero are skipped, since a zero
+    /// right-hand side gives x = 0 and leaves the state at 0 (the same bits).
     ///
     /// Rows outer, columns four at a time inner: each row's groups of four are independent
     /// chains the core overlaps, x stays in registers, and the states in L1.
-    pub(crate) fn solve_lower(&mut self, b: &mut [f64]) {
+    pub(crate) fn solve_lower_from(&mut self, b: &mut [f64], start: &[usize]) {
         let n = self.n;
         if b.len() == n {
             self.solve_lower_vector(b);
             return;
         }
-        for block in b.chunks_mut(n * BLOCK) {
+        for (block_index, block) in b.chunks_mut(n * BLOCK).enumerate() {
             let k = block.len() / n;
             let groups = k.div_ceil(LANES);
             let state = &mut self.state[..groups];
             for s in state.iter_mut() {
                 *s = [[0.0; LANES]; R];
             }
+            let mut first = [0; BLOCK / LANES];
+            for (q, f) in first[..groups].iter_mut().enumerate() {
+                let c0 = block_index * BLOCK + q * LANES;
+                *f = (c0..c0 + LANES)
+                    .map(|c| start.get(c).copied().unwrap_or(0))
+                    .min()
+                    .unwrap_or(0);
+            }
             for i in 0..n {
                 let (vi, gi, scale) = (&self.v[i], &self.g[i], self.inv_sqrt[i]);
                 for (q, s) in state.iter_mut().enumerate() {
+                    if i < first[q] {
+                        continue;
+                    }
                     let cols = q * LANES..(q * LANES + LANES).min(k);
                     let mut x = [0.0; LANES];
                     for (x, c) in x.iter_mut().zip(cols.clone()) {
@@ -282,6 +300,28 @@ mod tests {
                 "column {c}"
             );
         }
+        // Skipping the zero rows gives the same bits, for any grouping of the starts.
+        for starts in [
+            (0..30)
+                .map(|c| if c % 2 == 1 { 20 } else { 0 })
+                .collect::<Vec<_>>(),
+            (0..30)
+                .map(|c| if c < 12 { 0 } else { 20 * (c % 2) })
+                .collect(),
+            vec![0; 3],
+        ] {
+            let mut skipped = b.clone();
+            f.solve_lower_from(skipped.as_mut_slice(), &starts);
+            assert_eq!(skipped, y);
+        }
+        let mut tail = b.columns(12, 4).clone_owned();
+        for c in 0..4 {
+            tail.column_mut(c).rows_mut(0, 20).fill(0.0);
+        }
+        let mut whole = tail.clone();
+        f.solve_lower(whole.as_mut_slice());
+        f.solve_lower_from(tail.as_mut_slice(), &[20; 4]);
+        assert_eq!(tail, whole);
         let mut z = b.column(3).clone_owned();
         f.solve_upper(z.as_mut_slice());
         let lt = l.transpose();
