@@ -421,11 +421,11 @@ impl CondensedQp {
         let nv = self.nv;
         // H = D + Σ w JᵀJ as its diagonal and the tasks' stacked Jacobian (`low_rank.rs`): row
         // i' is dof nv − 1 − i'.
-        for (i, d) in self.h.d.iter_mut().enumerate() {
-            *d = pb.diag[nv - 1 - i];
-        }
         if pb.tasks.len() != POINT_TASKS {
             return Err(CondensedError::Factorisation);
+        }
+        for (i, d) in self.h.d.iter_mut().enumerate() {
+            *d = pb.diag[nv - 1 - i];
         }
         for (t, task) in pb.tasks.iter().enumerate() {
             let j = task.jac.as_slice();

@@ -22,11 +22,10 @@
 /// `solve_lower` is `(L D̄^½)⁻¹`. R is a constant so that the r-vectors live in registers.
 pub(crate) struct LowRankCholesky<const R: usize> {
     n: usize,
-    /// d (n), then read by `factor`.
+    /// H's data, set before each `factor`: the diagonal D (n); v_i, dof i's column of the
+    /// stacked task Jacobians; P₀'s diagonal, each row's task weight.
     pub(crate) d: Vec<f64>,
-    /// v_i (dof i's column of the stacked task Jacobians).
     pub(crate) v: Vec<[f64; R]>,
-    /// P₀'s diagonal: each row's task weight.
     pub(crate) w: [f64; R],
     /// g_i.
     g: Vec<[f64; R]>,
