@@ -897,17 +897,21 @@ impl ForecastCorrector {
         } else {
             0.0
         };
+        // The forecast as received, at the fitted shift, first: its lookups branch, and the
+        // pass after them then runs without a branch on the sample.
+        for (i, f) in out.iter_mut().enumerate() {
+            let s = (i + 1) as f64 * period;
+            *f = self.forecast_at(window, t + s - e.shift);
+        }
         let mut w = 1.0;
         let mut r = 1.0;
         let mut capped = false;
-        for (i, (f, m_i)) in out.iter_mut().zip(measured_only.iter_mut()).enumerate() {
+        for (f, m_i) in out.iter_mut().zip(measured_only.iter_mut()) {
             w *= decay;
             r *= ramp;
-            let s = (i + 1) as f64 * period;
-            let p = self.forecast_at(window, t + s - e.shift);
             let ahead = t_o + t_r * (1.0 - r);
             let u = unexplained(&e.offset, &e.trend, ahead, w);
-            let p = self.scaled(&p);
+            let p = self.scaled(f);
             *f = [0, 1, 2].map(|c| p[c] + u[c]);
             let m = unexplained(&self.offset_meas, &self.trend_meas, ahead, w);
             *m_i = m;
@@ -916,9 +920,10 @@ impl ForecastCorrector {
                 *f = [0, 1, 2].map(|c| f[c] + (1.0 - e.weight) * (m[c] - f[c]));
             }
             // Never a force that lifts the robot (a tipping robot's hand, a biased sensor).
-            if f[2] > self.lift_cap {
+            let over = f[2] > self.lift_cap;
+            capped |= over;
+            if over {
                 f[2] = self.lift_cap;
-                capped = true;
             }
         }
         if capped {

@@ -127,7 +127,8 @@ enum Piece {
 impl Cone<'_> {
     fn piece(&self, v: &Vector3<f64>) -> Piece {
         let l = self.rot.transpose() * v;
-        let (r, n) = (l.x.hypot(l.y), l.z);
+        // Not `hypot`: forces never come near its overflow guard, which cost 2 % of the C1 tick.
+        let (r, n) = ((l.x * l.x + l.y * l.y).sqrt(), l.z);
         if r <= self.mu * n {
             Piece::Inside
         } else if self.mu * r <= -n {
