@@ -142,7 +142,7 @@ mod tests {
     use super::Argv;
     use crate::cli::bridge::BridgeArgs;
     use crate::cli::cell::CellArgs;
-    use crate::cli::common::{ConfigArgs, RobotArg};
+    use crate::cli::common::{CaseSetup, ConfigArgs, RobotArg};
     use crate::cli::controller::ControllerArgs;
     use crate::cli::forecast::ForecastArgs;
     use crate::cli::run::{RunArgs, Which};
@@ -308,10 +308,12 @@ mod tests {
             edge_time: 0.2,
             com_drop: 0.005,
             plant: PlantChoice::Mujoco,
-            sensing: Some(upc::sim::sensors::Sensing::Realistic),
-            sim_sets: vec!["sim.sensors.seed=2".into()],
-            robot: robot(),
-            config: config(),
+            setup: CaseSetup {
+                sensing: Some(upc::sim::sensors::Sensing::Realistic),
+                sim_sets: vec!["sim.sensors.seed=2".into()],
+                robot: robot(),
+                config: config(),
+            },
         };
         let mut argv = Argv::of("sweep-cell", &cell);
         argv.extend(["--scratch".into(), "s".into()]);

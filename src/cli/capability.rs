@@ -14,7 +14,7 @@ use upc::report::series::{Quantity, Series, SeriesSource};
 
 use super::CliResult;
 use super::cell::{CellArgs, Outcome};
-use super::common::{ConfigArgs, RobotArg};
+use super::common::CaseSetup;
 use super::engine::{Engine, EngineArgs, EngineKind, pool};
 use super::sim::PlantChoice;
 
@@ -69,17 +69,8 @@ pub struct CapabilityArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
-    /// What the plant publishes: its truth, or through the sensor models (docs/sensing.md).
-    #[arg(long, value_enum)]
-    pub sensing: Option<upc::sim::sensors::Sensing>,
-    /// Every case's plant config key (`upc run --sim-set`), e.g. `sim.sensors.seed=2`.
-    #[arg(long = "sim-set", value_name = "KEY=VALUE")]
-    pub sim_sets: Vec<String>,
     #[command(flatten)]
-    pub robot: RobotArg,
-    /// Config files and `--set` keys for every case's controller (the variant's own key last).
-    #[command(flatten)]
-    pub config: ConfigArgs,
+    pub setup: CaseSetup,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -116,8 +107,8 @@ pub fn run(args: CapabilityArgs) -> CliResult {
         max_edge_time: args.edge_time,
         max_com_drop: args.com_drop,
     };
-    let robot = args.robot.load()?;
-    let config = args.config.load(&robot, None, &[])?;
+    let robot = args.setup.robot.load()?;
+    let config = args.setup.config.load(&robot, None, &[])?;
     let reduced = robot.reduced();
     let out = args.out.clone().unwrap_or_else(|| {
         let secs = std::time::SystemTime::now()
@@ -343,10 +334,7 @@ impl Sweep<'_> {
             edge_time: self.criteria.max_edge_time,
             com_drop: self.criteria.max_com_drop,
             plant: args.plant,
-            sensing: args.sensing,
-            sim_sets: args.sim_sets.clone(),
-            robot: args.robot.clone(),
-            config: args.config.clone(),
+            setup: args.setup.clone(),
         }
         .absolute()
     }
@@ -408,7 +396,7 @@ fn write_data(
     std::fs::write(
         out.join("capability.json"),
         serde_json::to_string_pretty(&serde_json::json!({
-            "robot": args.robot.robot,
+            "robot": args.setup.robot.robot,
             "plant": args.plant.name(),
             "criteria": criteria,
             "max": args.max,
@@ -469,19 +457,7 @@ fn preamble(
         criteria.max_com_drop * 1e3,
         criteria.max_edge_time,
     );
-    // What the user layered over the defaults, so a table is never read as the defaults'.
-    for f in &args.config.configs {
-        md += &format!("Config file: `{}`\n\n", f.display());
-    }
-    for kv in &args.config.sets {
-        md += &format!("Config: `--set {kv}`\n\n");
-    }
-    if let Some(s) = args.sensing {
-        md += &format!("Sensing: `{}` (docs/sensing.md)\n\n", s.name());
-    }
-    for kv in &args.sim_sets {
-        md += &format!("Plant: `--sim-set {kv}`\n\n");
-    }
+    md += &args.setup.layers_md();
     if let Some(step) = args.monotone {
         md += &format!(
             "Monotone check (`--monotone {step}`): after each bisection, a grid of {step} N from \

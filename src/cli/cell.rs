@@ -15,7 +15,7 @@ use upc::forecast::ForecastShape;
 use super::CliResult;
 use super::argv::{Argv, ToArgv, fields};
 use super::capability::BoxError;
-use super::common::{ConfigArgs, RobotArg};
+use super::common::{CaseSetup, ConfigArgs};
 use super::run::{RunArgs, Which};
 use super::sim::PlantChoice;
 
@@ -60,16 +60,8 @@ pub struct CellArgs {
     pub com_drop: f64,
     #[arg(long, value_enum, default_value = "upc")]
     pub plant: PlantChoice,
-    #[arg(long, value_enum)]
-    pub sensing: Option<upc::sim::sensors::Sensing>,
-    /// Plant config keys (`upc run --sim-set`).
-    #[arg(long = "sim-set", value_name = "KEY=VALUE")]
-    pub sim_sets: Vec<String>,
     #[command(flatten)]
-    pub robot: RobotArg,
-    /// The user's config files and `--set` keys (the variant's own key is added last).
-    #[command(flatten)]
-    pub config: ConfigArgs,
+    pub setup: CaseSetup,
 }
 
 impl ToArgv for CellArgs {
@@ -88,17 +80,12 @@ impl ToArgv for CellArgs {
             edge_time,
             com_drop,
             plant,
-            sensing,
-            sim_sets,
-            robot,
-            config,
+            setup,
         } = self;
         fields!(w; choice variant, val duration, choice direction, val forecast_scale,
                 val forecast_shift, val forecast_shape, switch phantom, val max, val tol,
-                opt monotone, val edge_time, val com_drop, choice plant, opt_choice sensing,
-                many sim_sets);
-        w.nested(robot);
-        w.nested(config);
+                opt monotone, val edge_time, val com_drop, choice plant);
+        w.nested(setup);
     }
 }
 
@@ -122,11 +109,13 @@ impl CellArgs {
     /// worker of a cluster on a shared filesystem).
     pub fn absolute(mut self) -> Self {
         let abs = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
-        for c in &mut self.config.configs {
+        for c in &mut self.setup.config.configs {
             *c = abs(c);
         }
-        if Path::new(&self.robot.robot).is_file() {
-            self.robot.robot = abs(Path::new(&self.robot.robot)).display().to_string();
+        if Path::new(&self.setup.robot.robot).is_file() {
+            self.setup.robot.robot = abs(Path::new(&self.setup.robot.robot))
+                .display()
+                .to_string();
         }
         self
     }
@@ -253,7 +242,7 @@ fn full_case(
 /// The `upc run` of a case named `name`, its scenario written at `scenario`, its run directory
 /// under `dir`.
 fn case_run_args(cell: &CellArgs, name: &str, scenario: &Path, dir: &Path) -> RunArgs {
-    let mut sim_sets = cell.sim_sets.clone();
+    let mut sim_sets = cell.setup.sim_sets.clone();
     if cell.direction == Direction::Y {
         sim_sets.push("sim.push=\"hand\"".to_string());
     }
@@ -281,8 +270,9 @@ fn case_run_args(cell: &CellArgs, name: &str, scenario: &Path, dir: &Path) -> Ru
         forecast_error_shift: cell.forecast_shift,
         forecast_error_shape: cell.forecast_shape,
         config: ConfigArgs {
-            configs: cell.config.configs.clone(),
+            configs: cell.setup.config.configs.clone(),
             sets: cell
+                .setup
                 .config
                 .sets
                 .iter()
@@ -292,8 +282,8 @@ fn case_run_args(cell: &CellArgs, name: &str, scenario: &Path, dir: &Path) -> Ru
         },
         sim_sets,
         plant: cell.plant,
-        sensing: cell.sensing,
-        robot: cell.robot.clone(),
+        sensing: cell.setup.sensing,
+        robot: cell.setup.robot.clone(),
         bus: None,
         bus_settings: Default::default(),
     }

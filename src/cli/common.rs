@@ -76,6 +76,59 @@ impl RobotArg {
     }
 }
 
+/// What every case of a sweep runs on besides its own variant and impact (`upc capability`,
+/// `upc robustness`, one cell of either): the robot, the plant's sensing and keys, and the
+/// controller's config layers.
+#[derive(clap::Args, Debug, Clone)]
+pub struct CaseSetup {
+    /// What the plant publishes: its truth, or through the sensor models (docs/sensing.md).
+    #[arg(long, value_enum)]
+    pub sensing: Option<upc::sim::sensors::Sensing>,
+    /// Every case's plant config key (`upc run --sim-set`), e.g. `sim.sensors.seed=2`.
+    #[arg(long = "sim-set", value_name = "KEY=VALUE")]
+    pub sim_sets: Vec<String>,
+    #[command(flatten)]
+    pub robot: RobotArg,
+    /// Config files and `--set` keys for every case's controller (the variant's own key last).
+    #[command(flatten)]
+    pub config: ConfigArgs,
+}
+
+impl CaseSetup {
+    /// What the user layered over the defaults, a Markdown paragraph each, so that a sweep's
+    /// table is never read as the defaults'.
+    pub fn layers_md(&self) -> String {
+        let mut md = String::new();
+        for f in &self.config.configs {
+            md += &format!("Config file: `{}`\n\n", f.display());
+        }
+        for kv in &self.config.sets {
+            md += &format!("Config: `--set {kv}`\n\n");
+        }
+        if let Some(s) = self.sensing {
+            md += &format!("Sensing: `{}` (docs/sensing.md)\n\n", s.name());
+        }
+        for kv in &self.sim_sets {
+            md += &format!("Plant: `--sim-set {kv}`\n\n");
+        }
+        md
+    }
+}
+
+impl ToArgv for CaseSetup {
+    fn write(&self, w: &mut Argv) {
+        let CaseSetup {
+            sensing,
+            sim_sets,
+            robot,
+            config,
+        } = self;
+        fields!(w; opt_choice sensing, many sim_sets);
+        w.nested(robot);
+        w.nested(config);
+    }
+}
+
 /// The Python of upc's Python participants (the MuJoCo plant, the remote forecaster): the
 /// given one, `$UPC_PYTHON`, the `.venv` that `scripts/setup.sh` makes, else `python3`.
 pub fn python(arg: &Option<PathBuf>) -> PathBuf {

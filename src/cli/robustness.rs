@@ -16,7 +16,7 @@ use upc::forecast::ForecastShape;
 use super::CliResult;
 use super::capability::{BoxError, runs_bar};
 use super::cell::{CellArgs, Outcome};
-use super::common::{ConfigArgs, RobotArg};
+use super::common::CaseSetup;
 use super::engine::{Engine, EngineArgs, EngineKind};
 use super::sim::PlantChoice;
 
@@ -76,17 +76,8 @@ pub struct RobustnessArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
-    /// What the plant publishes: its truth, or through the sensor models (docs/sensing.md).
-    #[arg(long, value_enum)]
-    pub sensing: Option<upc::sim::sensors::Sensing>,
-    /// Every case's plant config key (`upc run --sim-set`), e.g. `sim.sensors.seed=2`.
-    #[arg(long = "sim-set", value_name = "KEY=VALUE")]
-    pub sim_sets: Vec<String>,
     #[command(flatten)]
-    pub robot: RobotArg,
-    /// Config files and `--set` keys for every case's controller (the variant's own key last).
-    #[command(flatten)]
-    pub config: ConfigArgs,
+    pub setup: CaseSetup,
 }
 
 /// How a full-simulation case's forecast departs from the impact the plant plays.
@@ -427,10 +418,7 @@ impl Sweep<'_> {
             edge_time: crit.max_edge_time,
             com_drop: crit.max_com_drop,
             plant: args.plant,
-            sensing: args.sensing,
-            sim_sets: args.sim_sets.clone(),
-            robot: args.robot.clone(),
-            config: args.config.clone(),
+            setup: args.setup.clone(),
         }
         .absolute()
     }
@@ -493,7 +481,7 @@ fn write_data(
     std::fs::write(
         out.join("robustness.json"),
         serde_json::to_string_pretty(&serde_json::json!({
-            "robot": args.robot.robot,
+            "robot": args.setup.robot.robot,
             "plant": args.plant.name(),
             "tol": args.tol,
             "wall_time": wall,
@@ -541,24 +529,12 @@ fn preamble(args: &RobustnessArgs, wall: f64, engine: &str) -> String {
          the same at every κ, τ). Phantom: the plant does not push, the forecast announces \
          the impact; the largest phantom survived with a CoM drop under {} mm, searched up to \
          twice C1's exact-forecast capability. Wall time: {wall:.0} s, {engine}.\n\n",
-        args.robot.robot,
+        args.setup.robot.robot,
         args.plant.name(),
         args.tol,
         args.phantom_com_drop * 1e3
     );
-    // What the user layered over the defaults, so a table is never read as the defaults'.
-    for f in &args.config.configs {
-        let _ = writeln!(md, "Config file: `{}`\n", f.display());
-    }
-    for kv in &args.config.sets {
-        let _ = writeln!(md, "Config: `--set {kv}`\n");
-    }
-    if let Some(s) = args.sensing {
-        let _ = writeln!(md, "Sensing: `{}` (docs/sensing.md)\n", s.name());
-    }
-    for kv in &args.sim_sets {
-        let _ = writeln!(md, "Plant: `--sim-set {kv}`\n");
-    }
+    md += &args.setup.layers_md();
     if let Some(step) = args.monotone {
         let _ = writeln!(
             md,
