@@ -14,12 +14,25 @@ use support::robots::installed;
 
 /// One controller on the G1 with its own sensors; the run's controller summary.
 fn run(s: &Scratch, plant: &str, controller: &str) -> serde_json::Value {
-    let name = format!("{plant}_{controller}");
+    run_on(s, "g1", "g1", plant, controller, &[])
+}
+
+/// One controller on `robot` with a G1's sensing (`--sensing realistic`), `extra` arguments
+/// added, as run `tag`; the run's controller summary.
+fn run_on(
+    s: &Scratch,
+    tag: &str,
+    robot: &str,
+    plant: &str,
+    controller: &str,
+    extra: &[&str],
+) -> serde_json::Value {
+    let name = format!("{tag}_{plant}_{controller}");
     let out = Command::new(env!("CARGO_BIN_EXE_upc"))
         .args([
             "run",
             "--robot",
-            "g1",
+            robot,
             "--sensing",
             "realistic",
             "--plant",
@@ -34,6 +47,7 @@ fn run(s: &Scratch, plant: &str, controller: &str) -> serde_json::Value {
             "--out",
         ])
         .arg(&s.dir)
+        .args(extra)
         .env("RUST_LOG", "warn")
         .output()
         .expect("upc run");
@@ -77,6 +91,46 @@ fn a_g1_on_its_own_sensors_stands_with_c1_where_c0_falls_on_both_plants() {
         let c0 = run(&s, plant, "c0");
         assert_eq!(u(&c0, "falls"), 1, "{plant}: C0 stood: {c0}");
     }
+}
+
+/// The iCub-like measuring what a G1 measures (`config/robots/icub_like_joint_torques.toml`),
+/// on a noise seed where its C1 falls: the drives' friction in the estimated hand force, fed
+/// back to the QP sample by sample, is negative friction at the arm (docs/whole_body_qp.md, "The
+/// hand force fed back"). With the corrected force fed back instead
+/// (`controller.hand_force_feedback_from = "corrected"`) C1 stands.
+#[test]
+fn the_icub_like_on_joint_torques_stands_on_the_corrected_hand_force_where_the_estimate_fells_it() {
+    let _one = serial();
+    let s = Scratch::new("icub_like_joint_torques");
+    let robot = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/config/robots/icub_like_joint_torques.toml"
+    );
+    let seed = ["--sim-set", "sim.sensors.seed=2"];
+    let corrected = [
+        seed[0],
+        seed[1],
+        "--set",
+        "controller.hand_force_feedback_from=corrected",
+    ];
+    let c1 = run_on(&s, "corrected", robot, "upc", "c1", &corrected);
+    assert!(
+        u(&c1["wrench_observer"], "hand_ticks") + 5 >= u(&c1, "ticks"),
+        "{c1}"
+    );
+    assert_eq!(
+        u(&c1, "falls"),
+        0,
+        "C1 fell on the corrected hand force: {c1}"
+    );
+    assert!(f(&c1, "com_height_drop") < 0.01, "{c1}");
+    let fed_back = run_on(&s, "measured", robot, "upc", "c1", &seed);
+    assert_eq!(
+        u(&fed_back, "falls"),
+        1,
+        "C1 stood with the estimate fed back as measured, where the drives' friction felled it: \
+         the test no longer shows what the corrected force is for: {fed_back}"
+    );
 }
 
 /// The CoP's RMS error over twenty draws of drives stuck with a friction of ±2 % of their

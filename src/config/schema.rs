@@ -97,6 +97,18 @@ pub enum HeldPath {
     PathInertia,
 }
 
+/// Which hand force the whole-body QP is given (`controller.hand_force_feedback_from`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HandForceSource {
+    /// The hand force as measured (or estimated from the joint torques), every tick.
+    Measured,
+    /// The forecast correction's hand force for the horizon's first sample (FC-4), which
+    /// follows the measurement through its offset observer instead of sample by sample; the
+    /// measured one where no part corrects the forecast (C0).
+    Corrected,
+}
+
 /// How the hand impedance's gains are shaped (`hand.stiffness`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -403,6 +415,8 @@ pub struct ControllerConfig {
     /// Feed the hand force measured by the simulator (a wrist force sensor on a robot) to the
     /// whole-body QP, so that the arm behaves as the hand impedance model (eq. 23) says.
     pub hand_force_feedback: bool,
+    /// Which hand force is fed back (docs/whole_body_qp.md, "The hand force fed back").
+    pub hand_force_feedback_from: HandForceSource,
     /// What the hand holds: its inertia is taken out of the measured hand force before the
     /// force is compared with the forecast (a forecast announces the push, not the push less
     /// what the door takes to accelerate).

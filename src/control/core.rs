@@ -30,7 +30,7 @@ use super::gain_thread::StampedSchedule;
 use super::parts::{self, ControllerPart, PartSetup, Stage, TickFrame, TickInputs};
 use super::record::Record;
 use crate::channels::{MAX_DOF, StateMsg};
-use crate::config::{Config, ControllerKind};
+use crate::config::{Config, ControllerKind, HandForceSource};
 use crate::dynamics::{
     Data, DynamicsError, Model, OpSpaceWorkspace, ReferenceFrame, center_of_mass_velocity,
     frame_velocity,
@@ -88,6 +88,8 @@ pub struct ControllerCore {
     height_gains: [f64; 2],
     /// Feed the measured hand force to the whole-body QP (`controller.hand_force_feedback`).
     force_feedback: bool,
+    /// Which hand force (`controller.hand_force_feedback_from`).
+    force_source: HandForceSource,
     /// `hand.stiffness = "decoupled"`: the projector P = e eᵀ onto the held object's free
     /// direction (from its apparent mass, [`Self::with_held_mass`]); `None`: eq. (17) as is.
     hand_free_dir: Option<Matrix3<f64>>,
@@ -193,6 +195,7 @@ impl ControllerCore {
             dt: control_period,
             height_gains,
             force_feedback: config.controller.hand_force_feedback,
+            force_source: config.controller.hand_force_feedback_from,
             hand_free_dir: None,
             decoupled_stiffness: config.hand.stiffness == crate::config::HandStiffness::Decoupled,
             held_path_mode: config.hand.held_path,
@@ -730,7 +733,15 @@ impl ControllerCore {
         // and the hand task asks for the impedance law's own response to it, eq. (23):
         // M_e ẍ = F_ext + M_e ẍ_cmd, i.e. ẍ = ẍ_cmd + M_e⁻¹ F_ext. Without it the QP ignores the
         // force, which then folds the arm's lightest joints instead of acting through M_e.
-        let f_hand = Vector3::from(self.frame.hand_force);
+        // The corrected force (FC-4's first sample): an estimate's drive friction, which moves
+        // with the arm, then does not come back as force at the arm's own speed (negative
+        // friction; docs/whole_body_qp.md, "The hand force fed back").
+        let corrected = self.force_source == HandForceSource::Corrected;
+        let f_hand = Vector3::from(if corrected && self.frame.f_ext_filled {
+            self.frame.f_ext[0]
+        } else {
+            self.frame.hand_force
+        });
         // Only a force the parts vouch for (the wrist tare: not while it is taken, nor after a
         // refused one).
         let fed_back = self.force_feedback
