@@ -548,8 +548,12 @@ impl ControllerCore {
         tau: &mut [f64],
     ) -> WbcStatus {
         self.fallen_ticks += 1;
-        for (t, v) in tau.iter_mut().zip(self.frame.v.iter().skip(6)) {
-            *t = -self.fallen_damping * v;
+        // Within the drives' limits as every other command: a falling robot's joints move fast
+        // (a bus clamped these on a G1 that fell, `tests/bus.rs`).
+        let limits = self.wbc.torque_limits();
+        for (i, (t, v)) in tau.iter_mut().zip(self.frame.v.iter().skip(6)).enumerate() {
+            let lim = limits.get(i).copied().unwrap_or(f64::INFINITY);
+            *t = (-self.fallen_damping * v).clamp(-lim, lim);
         }
         self.last = TickRecord {
             time: self.sensed.time,
