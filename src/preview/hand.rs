@@ -21,6 +21,12 @@ fn finite(v: &Vector3<f64>) -> bool {
     v.iter().all(|c| c.is_finite())
 }
 
+/// The gains' bounds: K_p > 0, K_d ≥ 0, both finite (without early exit, so that a pass over
+/// the schedule vectorises).
+fn gains_in_bounds(kp: f64, kd: f64) -> bool {
+    kp.is_finite() & (kp > 0.0) & kd.is_finite() & (kd >= 0.0)
+}
+
 /// Position, velocity and acceleration of the hand (m, world-aligned axes).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct HandState {
@@ -210,9 +216,7 @@ impl HandPreviewer {
         let gains_ok = gains.kp[..horizon]
             .iter()
             .zip(&gains.kd[..horizon])
-            .fold(true, |ok, (&kp, &kd)| {
-                ok & kp.is_finite() & (kp > 0.0) & kd.is_finite() & (kd >= 0.0)
-            });
+            .fold(true, |ok, (&kp, &kd)| ok & gains_in_bounds(kp, kd));
         if !gains_ok {
             return Err(self.first_bad_input(desired, gains, f_ext, horizon));
         }
@@ -253,7 +257,7 @@ impl HandPreviewer {
     ) -> PreviewError {
         for i in 0..horizon {
             let (kp, kd) = (gains.kp[i], gains.kd[i]);
-            if !(kp.is_finite() && kd.is_finite() && kp > 0.0 && kd >= 0.0) {
+            if !gains_in_bounds(kp, kd) {
                 return PreviewError::BadGain {
                     step: i + 1,
                     kp,
