@@ -178,10 +178,11 @@ fn upc_run_through_the_bus_keeps_c1_standing_on_the_g1() {
     // real-time scheduling a 2-core machine stalls it past the bus's 6 ms now and then (damped,
     // then handed back: the designed behaviour), each counted. How often is the machine's: on
     // a loaded 2-core VM 4–13 losses in a 12 s run, the same before and after a change to the
-    // tick. The bound, one per second of the bus's run, still catches a controller that
-    // starves (a loss every few of its ~6000 answers).
+    // tick (13 in 12.1 s failed a bound of one per second on a CI machine, 12 of them resumed
+    // at once). The bound, two per second of the bus's run, still catches a controller that
+    // starves (a loss every few of its ~6000 answers: hundreds).
     let (handovers, losses) = (u(&bus, "handovers"), u(&bus, "losses"));
-    let bound = f(&bus, "wall_time").max(3.0) as u64;
+    let bound = 2 * f(&bus, "wall_time").max(3.0) as u64;
     assert!(
         handovers >= 1 && handovers + u(&bus, "resumes") == losses && losses <= bound,
         "{bus}"
