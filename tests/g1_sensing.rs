@@ -94,13 +94,21 @@ fn a_g1_on_its_own_sensors_stands_with_c1_where_c0_falls_on_both_plants() {
 }
 
 /// The iCub-like measuring what a G1 measures (`config/robots/icub_like_joint_torques.toml`),
-/// on a noise seed where its C1 falls: the drives' friction in the estimated hand force, fed
-/// back to the QP sample by sample, is negative friction at the arm (docs/whole_body_qp.md, "The
-/// hand force fed back"). With the corrected force fed back instead
-/// (`controller.hand_force_feedback_from = "corrected"`) C1 stands.
+/// on a noise seed where its C1 falls on MuJoCo: the drives' friction in the estimated hand
+/// force, fed back to the QP sample by sample, is negative friction at the arm
+/// (docs/whole_body_qp.md, "The hand force fed back"). With the corrected force fed back instead
+/// (`controller.hand_force_feedback_from = "corrected"`) C1 stands. (On upc's plant the same seed
+/// now ends standing either way, 0.34 s on the support's edge with the estimate.)
 #[test]
 fn the_icub_like_on_joint_torques_stands_on_the_corrected_hand_force_where_the_estimate_fells_it() {
     let _one = serial();
+    if !upc::sim::mujoco::AVAILABLE {
+        support::prereq::missing(
+            upc::sim::mujoco::UNAVAILABLE,
+            "scripts/setup.sh && cargo clean -p upc",
+        );
+        return;
+    }
     let s = Scratch::new("icub_like_joint_torques");
     let robot = concat!(
         env!("CARGO_MANIFEST_DIR"),
@@ -113,7 +121,7 @@ fn the_icub_like_on_joint_torques_stands_on_the_corrected_hand_force_where_the_e
         "--set",
         "controller.hand_force_feedback_from=corrected",
     ];
-    let c1 = run_on(&s, "corrected", robot, "upc", "c1", &corrected);
+    let c1 = run_on(&s, "corrected", robot, "mujoco", "c1", &corrected);
     assert!(
         u(&c1["wrench_observer"], "hand_ticks") + 5 >= u(&c1, "ticks"),
         "{c1}"
@@ -124,7 +132,7 @@ fn the_icub_like_on_joint_torques_stands_on_the_corrected_hand_force_where_the_e
         "C1 fell on the corrected hand force: {c1}"
     );
     assert!(f(&c1, "com_height_drop") < 0.01, "{c1}");
-    let fed_back = run_on(&s, "measured", robot, "upc", "c1", &seed);
+    let fed_back = run_on(&s, "measured", robot, "mujoco", "c1", &seed);
     assert_eq!(
         u(&fed_back, "falls"),
         1,
