@@ -1310,7 +1310,7 @@ mod tests {
         }
 
         fn tick(&mut self, k: usize, t: f64, f: impl Fn(f64) -> V3) {
-            if k % 100 != 0 {
+            if !k.is_multiple_of(100) {
                 return;
             }
             let msg = &mut self.msg;
