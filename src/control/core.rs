@@ -263,6 +263,11 @@ impl ControllerCore {
         self.wbc.counters()
     }
 
+    /// Each actuated joint's effort limit (N·m; ∞ where the robot gives none).
+    pub fn torque_limits(&self) -> &[f64] {
+        self.wbc.torque_limits().as_slice()
+    }
+
     /// The support rectangle (latched at the first tick, then following the feet),
     /// [[x_min, x_max], [y_min, y_max]].
     pub fn support(&self) -> Option<[[f64; 2]; 2]> {
@@ -550,11 +555,8 @@ impl ControllerCore {
         self.fallen_ticks += 1;
         // Within the drives' limits as every other command: a falling robot's joints move fast
         // (a bus clamped these on a G1 that fell, `tests/bus.rs`).
-        let limits = self.wbc.torque_limits();
-        for (i, (t, v)) in tau.iter_mut().zip(self.frame.v.iter().skip(6)).enumerate() {
-            let lim = limits.get(i).copied().unwrap_or(f64::INFINITY);
-            *t = (-self.fallen_damping * v).clamp(-lim, lim);
-        }
+        let qd = self.frame.v.as_slice().get(6..).unwrap_or(&[]);
+        crate::wbc::damping_torques(self.fallen_damping, qd, self.torque_limits(), tau);
         self.last = TickRecord {
             time: self.sensed.time,
             com: com.into(),

@@ -41,7 +41,7 @@ use crate::channels::{
 use crate::col;
 use crate::config::{Config, ControllerKind, LoopMode};
 use crate::robot::{ReducedModel, Robot};
-use crate::wbc::{FallbackReason, WbcStatus};
+use crate::wbc::{FallbackReason, WbcStatus, damping_torques};
 
 /// The phase lock's lead and step, as a fraction of the period: 1/8, well inside the grace
 /// wait (`state_grace`, half a period by default).
@@ -85,6 +85,8 @@ struct DampingMsg<'a> {
     damping: f64,
     /// Joint rates of the last state (length: the actuated joints).
     qd: &'a [f64],
+    /// The drives' effort limits.
+    limits: &'a [f64],
 }
 
 /// Publishes joint damping torques flagged [`TORQUE_FLAG_FALLBACK`] and wakes the plant.
@@ -98,11 +100,10 @@ fn send_damping(
         m.state_step = d.step;
         m.session = d.session;
         m.controller = d.controller;
-        m.n = d.qd.len() as u32;
+        let n = d.qd.len().min(m.tau.len());
+        m.n = n as u32;
         m.flags = TORQUE_FLAG_FALLBACK;
-        for (t, qd) in m.tau.iter_mut().zip(d.qd) {
-            *t = -d.damping * qd;
-        }
+        damping_torques(d.damping, d.qd, d.limits, &mut m.tau[..n]);
     })?;
     events.notify()
 }
@@ -584,16 +585,9 @@ impl<'a> ControlLoop<'a> {
                         self.s.tick_errors
                     );
                 }
-                let damping = self.config.wbc.fallback_damping;
-                for (i, t) in tau.iter_mut().enumerate() {
-                    let qd = state
-                        .v
-                        .get(6 + i)
-                        .copied()
-                        .filter(|v| v.is_finite())
-                        .unwrap_or(0.0);
-                    *t = -damping * qd;
-                }
+                let qd = state.v.get(6..).unwrap_or(&[]);
+                let limits = self.core.torque_limits();
+                damping_torques(self.config.wbc.fallback_damping, qd, limits, tau);
                 TORQUE_FLAG_FALLBACK
             }
         }
@@ -631,6 +625,7 @@ impl<'a> ControlLoop<'a> {
         self.seq += 1;
         let (seq, session, id) = (self.seq, self.link.session(), self.controller_id);
         let (n, damping, qd) = (self.n_tau, self.config.wbc.fallback_damping, &self.last_qd);
+        let limits = self.core.torque_limits();
         let sent = self.ports.torques.send_with(|m| {
             m.seq = seq;
             m.state_step = step;
@@ -639,9 +634,7 @@ impl<'a> ControlLoop<'a> {
             m.n = n as u32;
             m.flags = TORQUE_FLAG_FALLBACK;
             m.compute_ns = tick_start.elapsed().as_nanos() as u64;
-            for (t, qd) in m.tau[..n].iter_mut().zip(&qd[..n]) {
-                *t = -damping * qd;
-            }
+            damping_torques(damping, &qd[..n], limits, &mut m.tau[..n]);
         });
         self.or_safe_torques(sent)?;
         let woken = self.ports.torque_events.notify();
@@ -698,7 +691,7 @@ impl<'a> ControlLoop<'a> {
     /// An IPC step that fails ends the run: first, one attempt at damping torques for the last
     /// state (flagged fallback), so the plant is not left with the last control torques.
     fn or_safe_torques<T>(&mut self, step: Result<T, ChannelError>) -> Result<T, ChannelError> {
-        let (ports, last_qd, n) = (&self.ports, &self.last_qd, self.n_tau);
+        let (ports, last_qd, n, core) = (&self.ports, &self.last_qd, self.n_tau, &self.core);
         let (seq, link) = (&mut self.seq, &self.link);
         let (controller, damping) = (self.controller_id, self.config.wbc.fallback_damping);
         or_safe_torques(step, || match link.last_step() {
@@ -714,6 +707,7 @@ impl<'a> ControlLoop<'a> {
                         controller,
                         damping,
                         qd: &last_qd[..n],
+                        limits: core.torque_limits(),
                     },
                 )
                 .map(|()| true)
@@ -933,7 +927,8 @@ mod tests {
     }
 
     /// Over real IPC: after a failed step, a torque subscriber on the prefix sees the damping
-    /// torques of the last state, flagged fallback, and the failure is still returned.
+    /// torques of the last state within the drives' limits, flagged fallback, and the failure
+    /// is still returned.
     #[test]
     fn safe_torques_reach_a_subscriber_after_a_failed_step() {
         let prefix = format!("upc_test_safe_torques_{}", std::process::id());
@@ -953,6 +948,7 @@ mod tests {
                     controller: 5,
                     damping: 2.0,
                     qd: &qd,
+                    limits: &[10.0, 10.0, 3.0],
                 },
             )
             .map(|()| true)
@@ -962,7 +958,8 @@ mod tests {
         let m = plant.latest().expect("receive").expect("a torque message");
         assert_eq!(m.flags, TORQUE_FLAG_FALLBACK);
         assert_eq!((m.seq, m.state_step, m.session, m.n), (9, 41, 3, 3));
-        assert_eq!(&m.tau[..3], &[-1.0, 2.0, -4.0]);
+        // The third joint's −4 N·m held at its 3 N·m limit.
+        assert_eq!(&m.tau[..3], &[-1.0, 2.0, -3.0]);
         assert!(m.tau[3..].iter().all(|&t| t == 0.0));
     }
 }

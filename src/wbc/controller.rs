@@ -1433,3 +1433,31 @@ fn mat3_mul_v(j: &DMatrix<f64>, v: &DVector<f64>) -> Vector3<f64> {
     }
     out
 }
+
+/// Joint damping toward rest, τ_i = −D q̇_i, within each drive's effort limit: the command of
+/// every path that runs without the QP (a fallen robot, a bad or a stale state, a failing IPC
+/// step), like every other command a drive gets. A rate that is not finite damps nothing; a
+/// joint without a limit (∞, or none given) is not clamped.
+pub fn damping_torques(damping: f64, qd: &[f64], limits: &[f64], tau: &mut [f64]) {
+    for (i, t) in tau.iter_mut().enumerate() {
+        let v = qd.get(i).copied().filter(|v| v.is_finite()).unwrap_or(0.0);
+        let lim = limits.get(i).copied().unwrap_or(f64::INFINITY);
+        *t = (-damping * v).clamp(-lim, lim);
+    }
+}
+
+#[cfg(test)]
+mod damping_tests {
+    use super::damping_torques;
+
+    #[test]
+    fn damping_stays_within_each_drives_limit() {
+        let qd = [2.0, -40.0, f64::NAN, 30.0, -1.0];
+        let limits = [10.0, 5.0, 5.0, f64::INFINITY];
+        let mut tau = [7.0; 5];
+        damping_torques(0.5, &qd, &limits, &mut tau);
+        // Within its limit: −D q̇; beyond it: the limit, with the sign of −D q̇; a rate that is
+        // not finite: 0; no limit (∞ or none given): −D q̇ as it is.
+        assert_eq!(tau, [-1.0, 5.0, 0.0, -15.0, 0.5]);
+    }
+}

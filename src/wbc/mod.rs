@@ -33,5 +33,5 @@ mod tasks;
 pub use condensed::CondensedInstance;
 pub use controller::{
     FallbackReason, N_CONTACTS, WbcCommand, WbcCounters, WbcError, WbcOutput, WbcStatus,
-    WholeBodyController,
+    WholeBodyController, damping_torques,
 };
