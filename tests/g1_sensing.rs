@@ -98,7 +98,8 @@ fn a_g1_on_its_own_sensors_stands_with_c1_where_c0_falls_on_both_plants() {
 /// force, fed back to the QP sample by sample, is negative friction at the arm
 /// (docs/whole_body_qp.md, "The hand force fed back"). With the corrected force fed back instead
 /// (`controller.hand_force_feedback_from = "corrected"`) C1 stands. (On upc's plant the same seed
-/// now ends standing either way, 0.34 s on the support's edge with the estimate.)
+/// now ends standing either way, 0.26 s on the support's edge with the estimate. Seed 2 fell
+/// until FC-1c, docs/forecast_correction.md, and now stands either way.)
 #[test]
 fn the_icub_like_on_joint_torques_stands_on_the_corrected_hand_force_where_the_estimate_fells_it() {
     let _one = serial();
@@ -114,7 +115,7 @@ fn the_icub_like_on_joint_torques_stands_on_the_corrected_hand_force_where_the_e
         env!("CARGO_MANIFEST_DIR"),
         "/config/robots/icub_like_joint_torques.toml"
     );
-    let seed = ["--sim-set", "sim.sensors.seed=2"];
+    let seed = ["--sim-set", "sim.sensors.seed=3"];
     let corrected = [
         seed[0],
         seed[1],

@@ -11,7 +11,10 @@
 //!
 //!   f_meas(t) + Λ ẍ_h(t) ≈ κ f_fc(t − τ − δ) + d.                           (FC-1b)
 //!
-//! ẍ_h the hand's acceleration (the change of its bin-mean velocity over a bin). κ and τ estimated
+//! ẍ_h the hand's acceleration: the change of its bin-mean velocity over K bins (FC-1c,
+//! [`acceleration_bins`]): one with exact velocities, with a wrist sensor's force or with the
+//! corrected force fed back; with an estimated base, the fewest that keep Λ ẍ_h's noise within a
+//! force sample's, as far as the force's own lag allows. κ and τ estimated
 //! from a short window of the measured push against the forecast's past, d by an observer on
 //! what κ and τ leave unexplained. The horizon the previewer sees is
 //!
@@ -44,7 +47,7 @@ use super::core::TickError;
 use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
 use super::record::Record;
 use crate::col;
-use crate::config::ControllerKind;
+use crate::config::{ControllerKind, HandForceSource};
 
 /// The correction's current estimate, for logs and the summary.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -125,6 +128,43 @@ const SHIFT_SIGNIFICANCE: f64 = 5.0;
 const DISCOUNTED: f64 = 0.5;
 const TRUSTED: f64 = 0.9;
 
+/// FC-1c's largest K (40 ms at 5 ms bins): a longer difference lags a push's rise.
+const MAX_ACCELERATION_BINS: usize = 8;
+
+/// FC-1c: the bins K over which the hand's bin-mean velocity is differenced. The fewest that
+/// keep the door-inertia term Λ ẍ_h's noise within one force sample's: a velocity error of σ_v
+/// in each of two bins K T_b apart gives Λ ẍ_h an error of m √2 σ_v / (K T_b), m = tr Λ (Λ's
+/// largest eigenvalue for a door's m e eᵀ, a bound otherwise), so K ≥ m √2 σ_v / (T_b σ_f).
+/// The error is taken as the same in every bin: an estimated base's velocity error is
+/// low-passed by its filter and does not average out over a bin. But no more than keep ẍ_h as
+/// fresh as the force it is added to: the difference is centred K T_b / 2 behind the bin's
+/// centre, the force's own door inertia δ (`lag`, FC-1b) behind it, so K ≤ 2 δ / T_b. A wrist
+/// sensor's force (δ = 0) takes K = 1 whatever the noise: a lagging ẍ_h left the door's
+/// inertia in its push. Exact velocities (σ_v = 0) take K = 1. Within [1,
+/// [`MAX_ACCELERATION_BINS`]].
+pub fn acceleration_bins(
+    mass: f64,
+    velocity_noise: f64,
+    bin: f64,
+    force_noise: f64,
+    lag: f64,
+) -> usize {
+    let noisy = mass * std::f64::consts::SQRT_2 * velocity_noise / (bin * force_noise);
+    // The tolerance keeps a lag of a whole number of half-bins (1/K of WO-2: 10 ms) from
+    // rounding down.
+    let fresh = (2.0 * lag / bin + 1e-9).floor();
+    let k = if noisy.is_nan() {
+        1.0
+    } else {
+        noisy.ceil().min(fresh)
+    };
+    if k.is_nan() || k <= 1.0 {
+        1
+    } else {
+        k.min(MAX_ACCELERATION_BINS as f64) as usize
+    }
+}
+
 fn dot(a: &V3, b: &V3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
@@ -169,12 +209,16 @@ pub struct ForecastCorrector {
     acc_n: usize,
     /// Λ: the held object's apparent mass at the hand (world, kg; zero: nothing held).
     held_mass: [V3; 3],
-    /// The sum of the hand's velocity over the bin being accumulated, the previous bin's mean
-    /// velocity, and the newest acceleration: the change of the bins' mean velocities over a
-    /// bin (a measured velocity's white noise enters divided by √(ticks per bin), not by one).
+    /// The sum of the hand's velocity over the bin being accumulated, the last bins' mean
+    /// velocities (newest first; `vel_known` of them), and the newest acceleration: the change
+    /// of the bins' mean velocities over K bins (FC-1c; a measured velocity's white noise enters
+    /// divided by √(ticks per bin), not by one).
     acc_vel: V3,
-    bin_mean_vel: Option<V3>,
+    vel_hist: [V3; MAX_ACCELERATION_BINS + 1],
+    vel_known: usize,
     last_acc: V3,
+    /// σ (m/s) of the hand's velocity as the controller has it (0: taken as exact).
+    velocity_noise: f64,
     /// Scratch: the forecast timeline g over [t_b − (n_W − 1 + M) T_b, t_b + M T_b] and its
     /// prefix sums (Σ|g|², Σg).
     g: Vec<V3>,
@@ -263,8 +307,10 @@ impl ForecastCorrector {
             acc_n: 0,
             held_mass: [[0.0; 3]; 3],
             acc_vel: [0.0; 3],
-            bin_mean_vel: None,
+            vel_hist: [[0.0; 3]; MAX_ACCELERATION_BINS + 1],
+            vel_known: 0,
             last_acc: [0.0; 3],
+            velocity_noise: 0.0,
             g: vec![[0.0; 3]; timeline],
             g_rev: std::array::from_fn(|_| vec![0.0; timeline]),
             p2: vec![0.0; timeline + 1],
@@ -305,6 +351,25 @@ impl ForecastCorrector {
         self
     }
 
+    /// σ (m/s) of the hand's velocity as the controller has it this tick: the base's velocity
+    /// error when the base is estimated, 0 when it is measured (FC-1c). Not finite or negative:
+    /// 0.
+    pub fn set_velocity_noise(&mut self, sigma: f64) {
+        self.velocity_noise = if sigma.is_finite() {
+            sigma.max(0.0)
+        } else {
+            0.0
+        };
+    }
+
+    /// K (FC-1c): the bins the hand's acceleration is differenced over, for the held mass, the
+    /// velocity's and the force's noise and the measurement's lag as they are now.
+    pub fn acceleration_window_bins(&self) -> usize {
+        let mass = (0..3).map(|r| self.held_mass[r][r]).sum::<f64>();
+        let (v, f) = (self.velocity_noise, self.s.force_noise);
+        acceleration_bins(mass, v, self.bin, f, self.lag)
+    }
+
     /// The push the measured force `y` says, with the hand accelerating at `acc`: y + Λ acc.
     fn push(&self, y: &V3, acc: &V3) -> V3 {
         [0, 1, 2].map(|r| y[r] + dot(&self.held_mass[r], acc))
@@ -332,7 +397,7 @@ impl ForecastCorrector {
         self.acc_fc = [0.0; 3];
         self.acc_n = 0;
         self.acc_vel = [0.0; 3];
-        self.bin_mean_vel = None;
+        self.vel_known = 0;
         self.last_acc = [0.0; 3];
         self.est = CorrectionEstimate::default();
         self.prior_factor = 1.0;
@@ -436,14 +501,19 @@ impl ForecastCorrector {
         let i_m = self.bins as usize % self.meas.len();
         let i_f = self.bins as usize % self.fc.len();
         // The bin's push (FC-1): its mean measured force plus Λ times the hand's acceleration,
-        // the change of the mean velocity from the previous bin to this one (none known for a
-        // session's first bin; it lags the bin by half a bin).
-        let mean_vel = self.acc_vel.map(|v| v * inv);
-        self.last_acc = match self.bin_mean_vel {
-            Some(v0) => [0, 1, 2].map(|c| (mean_vel[c] - v0[c]) / self.bin),
-            None => [0.0; 3],
+        // the change of the mean velocity from K bins back to this one (FC-1c; over fewer while
+        // a session has fewer, none for its first bin; it lags the bin by K/2 bins).
+        self.vel_hist.copy_within(..MAX_ACCELERATION_BINS, 1);
+        self.vel_hist[0] = self.acc_vel.map(|v| v * inv);
+        self.vel_known = (self.vel_known + 1).min(MAX_ACCELERATION_BINS + 1);
+        let k = self.acceleration_window_bins().min(self.vel_known - 1);
+        self.last_acc = match k {
+            0 => [0.0; 3],
+            _ => {
+                let (v, v0, span) = (self.vel_hist[0], self.vel_hist[k], k as f64 * self.bin);
+                [0, 1, 2].map(|c| (v[c] - v0[c]) / span)
+            }
         };
-        self.bin_mean_vel = Some(mean_vel);
         self.acc_vel = [0.0; 3];
         self.meas[i_m] = self.push(&self.acc_meas.map(|v| v * inv), &self.last_acc);
         self.fc[i_f] = self.acc_fc.map(|v| v * inv);
@@ -985,6 +1055,9 @@ pub struct CorrectionSettings {
     pub max_shift: f64,
     /// σ: standard deviation of one measured force sample (N), the estimation's noise model.
     pub force_noise: f64,
+    /// σ_v (m/s): the hand's velocity error while the base is estimated (its filter's velocity
+    /// error, which the hand inherits); a measured base's is taken as exact. Sets FC-1c's K.
+    pub hand_velocity_noise: f64,
     /// ε: the part of the force no amplitude and shift explain (the door's and the arm's own
     /// dynamics), relative to the forecast's RMS over the window; adds (ε·RMS)² to a bin's
     /// variance.
@@ -1056,6 +1129,7 @@ impl crate::config::PartSettings for CorrectionSettings {
             ("max_shift", self.max_shift),
             ("trend_horizon", self.trend_horizon),
             ("skill_time", self.skill_time),
+            ("hand_velocity_noise", self.hand_velocity_noise),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err((key, format!("must be finite and ≥ 0, got {v}")));
@@ -1089,6 +1163,9 @@ struct ShiftFit {
 /// it fills the horizon's hand force from the forecast and the measured force.
 pub struct Correction {
     corrector: Option<ForecastCorrector>,
+    /// The corrected force is fed back to the whole-body QP: its door-inertia term then closes
+    /// a loop through the hand's acceleration, which a lag of K bins destabilises (FC-1c: K = 1).
+    fed_back: bool,
 }
 
 /// This part in `super::parts::PIPELINE`.
@@ -1101,7 +1178,11 @@ fn build(
     let p = &s.config.preview;
     let corrector = (settings.enabled && s.kind != ControllerKind::C0)
         .then(|| ForecastCorrector::new(settings, p.period, s.dt, s.cart.mass * s.cart.gravity));
-    Ok(Box::new(Correction { corrector }))
+    let fed_back = s.config.controller.hand_force_feedback_from == HandForceSource::Corrected;
+    Ok(Box::new(Correction {
+        corrector,
+        fed_back,
+    }))
 }
 
 impl Correction {
@@ -1135,6 +1216,10 @@ impl ControllerPart for Correction {
             return Ok(());
         };
         c.set_measurement_lag(frame.hand_force_lag);
+        c.set_velocity_noise(match frame.estimate_base && !self.fed_back {
+            true => c.settings().hand_velocity_noise,
+            false => 0.0,
+        });
         c.update(
             frame.t,
             inputs.forecast,
@@ -1576,6 +1661,76 @@ mod tests {
         );
         let (dk, _) = run_on_door(1.5, true);
         assert!(dk < 0.05, "×1.5 with known Λ: |κ̂ − 2/3| {dk:.3}");
+    }
+
+    /// FC-1c's K: the fewest bins for the noise, no more than the force's lag allows.
+    #[test]
+    fn the_acceleration_is_differenced_over_the_bins_the_noise_needs_and_the_lag_allows() {
+        // m √2 σ_v / (T_b σ_f) = 5.1 √2 0.005 / (0.005 · 2) = 3.6; 2 δ / T_b = 4.
+        let k = |v, lag| acceleration_bins(5.1, v, 0.005, 2.0, lag);
+        assert_eq!(k(0.005, 0.010), 4);
+        assert_eq!(k(0.0, 0.010), 1, "exact velocities");
+        assert_eq!(k(0.005, 0.0), 1, "a wrist sensor's force does not lag");
+        assert_eq!(k(0.005, 0.0075), 3, "the lag bounds it");
+        assert_eq!(k(0.002, 0.010), 2, "the noise bounds it");
+        assert_eq!(k(0.1, 1.0), MAX_ACCELERATION_BINS);
+        assert_eq!(k(f64::NAN, 0.010), 1);
+        assert_eq!(acceleration_bins(5.1, 0.005, 0.005, 0.0, 0.010), 4);
+        assert_eq!(
+            acceleration_bins(0.0, 0.005, 0.005, 2.0, 0.010),
+            1,
+            "nothing held"
+        );
+    }
+
+    /// FC-1c on a door at rest read through an estimated base's velocity (an error of σ_v =
+    /// 5 mm/s, constant over each bin and independent between bins, the model's): through Λ the
+    /// one-bin difference puts m √2 σ_v / T_b = 7.2 N of noise on the push; with the K = 4 that
+    /// a force lagging 10 ms allows, 1.8 N, within the force sensor's σ_f = 2 N.
+    #[test]
+    fn an_estimated_velocitys_noise_stays_out_of_the_push() {
+        let rms = |lag: f64| {
+            let mut held = [[0.0; 3]; 3];
+            held[0][0] = 5.1;
+            let settings = CorrectionSettings::default();
+            let mut corr =
+                ForecastCorrector::new(settings, 0.005, 1e-3, 300.0).with_held_mass(held);
+            corr.set_measurement_lag(lag);
+            corr.set_velocity_noise(0.005);
+            let (fc, mut noise, mut err) = (Forecaster::new(), Noise(7), Vec::new());
+            let mut v = 0.0;
+            for step in 0..3000 {
+                if step % 5 == 0 {
+                    v = 0.005 * noise.gauss();
+                }
+                corr.update(
+                    step as f64 * 1e-3,
+                    &fc.window,
+                    Some([0.0; 3]),
+                    [v, 0.0, 0.0],
+                );
+                if step >= 100 && step % 5 == 4 {
+                    err.push(corr.measured_push()[0]);
+                }
+            }
+            let k = corr.acceleration_window_bins();
+            (
+                k,
+                (err.iter().map(|e| e * e).sum::<f64>() / err.len() as f64).sqrt(),
+            )
+        };
+        let (k1, one) = rms(0.0);
+        let (k4, four) = rms(0.010);
+        eprintln!("K = {k1}: {one:.2} N, K = {k4}: {four:.2} N");
+        assert_eq!((k1, k4), (1, 4));
+        assert!(
+            (one - 7.2).abs() < 0.7,
+            "K = 1: {one:.2} N (7.2 N expected)"
+        );
+        assert!(
+            (four - 1.8).abs() < 0.3 && four < 2.0,
+            "K = 4: {four:.2} N (1.8 N expected)"
+        );
     }
 
     #[test]
