@@ -105,6 +105,9 @@ pub struct CorrectionCounts {
     pub weight_min: f64,
     pub discounts: u64,
     pub discounted_time: f64,
+    /// Gaps in plant time longer than two bins between ticks (a stalled controller), across
+    /// which no hand acceleration was taken (FC-1c).
+    pub time_gaps: u64,
 }
 
 type V3 = [f64; 3];
@@ -214,6 +217,10 @@ pub struct ForecastCorrector {
     /// of the bins' mean velocities over K bins (FC-1c; a measured velocity's white noise enters
     /// divided by √(ticks per bin), not by one).
     acc_vel: V3,
+    acc_vel_n: usize,
+    /// Plant time of the last tick with a measurement: a gap longer than two bins (a stalled
+    /// controller) restarts the velocity history, whose differences assume contiguous bins.
+    last_t: f64,
     vel_hist: [V3; MAX_ACCELERATION_BINS + 1],
     vel_known: usize,
     last_acc: V3,
@@ -307,6 +314,8 @@ impl ForecastCorrector {
             acc_n: 0,
             held_mass: [[0.0; 3]; 3],
             acc_vel: [0.0; 3],
+            acc_vel_n: 0,
+            last_t: f64::NEG_INFINITY,
             vel_hist: [[0.0; 3]; MAX_ACCELERATION_BINS + 1],
             vel_known: 0,
             last_acc: [0.0; 3],
@@ -397,6 +406,8 @@ impl ForecastCorrector {
         self.acc_fc = [0.0; 3];
         self.acc_n = 0;
         self.acc_vel = [0.0; 3];
+        self.acc_vel_n = 0;
+        self.last_t = f64::NEG_INFINITY;
         self.vel_known = 0;
         self.last_acc = [0.0; 3];
         self.est = CorrectionEstimate::default();
@@ -492,7 +503,19 @@ impl ForecastCorrector {
         // The bin: means of the measured force and of the forecast for the same ticks.
         axpy(&mut self.acc_meas, 1.0, &y);
         axpy(&mut self.acc_fc, 1.0, &now);
+        let since = t - self.last_t;
+        if since.is_nan() || since < 0.0 || since > 2.0 * self.bin {
+            // A gap (or time going back): no acceleration from velocities across it.
+            if self.last_t.is_finite() {
+                self.counts.time_gaps += 1;
+            }
+            self.acc_vel = [0.0; 3];
+            self.acc_vel_n = 0;
+            self.vel_known = 0;
+        }
+        self.last_t = t;
         axpy(&mut self.acc_vel, 1.0, &hand_vel);
+        self.acc_vel_n += 1;
         self.acc_n += 1;
         if self.acc_n < self.bin_ticks {
             return;
@@ -504,7 +527,8 @@ impl ForecastCorrector {
         // the change of the mean velocity from K bins back to this one (FC-1c; over fewer while
         // a session has fewer, none for its first bin; it lags the bin by K/2 bins).
         self.vel_hist.copy_within(..MAX_ACCELERATION_BINS, 1);
-        self.vel_hist[0] = self.acc_vel.map(|v| v * inv);
+        let inv_vel = 1.0 / self.acc_vel_n as f64;
+        self.vel_hist[0] = self.acc_vel.map(|v| v * inv_vel);
         self.vel_known = (self.vel_known + 1).min(MAX_ACCELERATION_BINS + 1);
         let k = self.acceleration_window_bins().min(self.vel_known - 1);
         self.last_acc = match k {
@@ -515,6 +539,7 @@ impl ForecastCorrector {
             }
         };
         self.acc_vel = [0.0; 3];
+        self.acc_vel_n = 0;
         self.meas[i_m] = self.push(&self.acc_meas.map(|v| v * inv), &self.last_acc);
         self.fc[i_f] = self.acc_fc.map(|v| v * inv);
         self.acc_meas = [0.0; 3];
@@ -1324,6 +1349,9 @@ pub struct CorrectionSummary {
     pub weight_min: f64,
     pub discounts: u64,
     pub discounted_time: f64,
+    /// Gaps in plant time across which no hand acceleration was taken.
+    #[serde(default)]
+    pub time_gaps: u64,
 }
 
 impl CorrectionSummary {
@@ -1343,6 +1371,7 @@ impl CorrectionSummary {
             weight_min: c.weight_min,
             discounts: c.discounts,
             discounted_time: c.discounted_time,
+            time_gaps: c.time_gaps,
         }
     }
 }
@@ -1731,6 +1760,33 @@ mod tests {
             (four - 1.8).abs() < 0.3 && four < 2.0,
             "K = 4: {four:.2} N (1.8 N expected)"
         );
+    }
+
+    /// FC-1c across a stalled controller: the hand accelerating steadily at 2 m/s² and the
+    /// ticks resuming 50 ms later. A difference across the gap would take its 70 ms for K = 4
+    /// bins' 20 ms and read 3.5 a (the push 25 N off, where Λ a is 10.2 N); the history restarts
+    /// instead, so the push errs by at most Λ a while it refills, and the gap is counted.
+    #[test]
+    fn no_acceleration_is_taken_across_a_gap_in_time() {
+        let (a, dt) = (2.0, 1e-3);
+        let mut held = [[0.0; 3]; 3];
+        held[0][0] = 5.1;
+        let settings = CorrectionSettings::default();
+        let mut corr = ForecastCorrector::new(settings, 0.005, dt, 300.0).with_held_mass(held);
+        corr.set_measurement_lag(0.010);
+        corr.set_velocity_noise(0.005);
+        let fc = Forecaster::new();
+        let mut worst = 0.0f64;
+        for step in (0..400).chain(450..800) {
+            let t = step as f64 * dt;
+            // The door takes Λ a from the hand: the sensor reads −Λ a, the push is zero.
+            corr.update(t, &fc.window, Some([-5.1 * a, 0.0, 0.0]), [a * t, 0.0, 0.0]);
+            if step >= 100 {
+                worst = worst.max(corr.measured_push()[0].abs());
+            }
+        }
+        assert_eq!(corr.counts.time_gaps, 1);
+        assert!(worst <= 5.1 * a + 1e-6, "push {worst:.2} N across the gap");
     }
 
     #[test]
