@@ -173,6 +173,13 @@ fn upc_run_through_the_bus_keeps_c1_standing_on_the_g1() {
     assert_eq!(u(&c, "falls"), 0, "controller: {c}\nbus: {bus}");
     assert_eq!(u(&c, "tick_errors"), 0, "{c}");
     assert!(u(&bus, "states") > 1500, "{bus}");
+    // The bus announces the scenario as its robot is pushed (scaled to the G1's weight): the
+    // one the controller was started for, and the forecaster's forces.
+    assert_eq!(
+        c["plant_scenario_mismatch"],
+        serde_json::Value::Bool(false),
+        "{c}"
+    );
     // The controller kept the robot until its run was over: each loss but its exit was followed
     // by a hand-over back, or by its torques at once after a stall of a few ms. Without
     // real-time scheduling a 2-core machine stalls it past the bus's 6 ms now and then (damped,
