@@ -179,8 +179,13 @@ fn lockstep_controller_waits_for_a_restarted_simulator_when_configured() {
     p.stop(&s, "forecaster", libc::SIGTERM);
     let c = json(&s.path("controller.json"));
     assert_eq!(u(&c, "reconnects"), 1, "{c}");
-    // The kill; perhaps the end of sim2 too, before the controller got its signal.
-    assert!((1..=2).contains(&u(&c, "stale_periods")), "{c}");
+    // The kill's silence, as the controller measured it (the 0.9 s sleep and sim2's start).
+    assert!(f(&c, "longest_state_gap") >= 0.9, "{c}");
+    // Counted as a stale period when the controller polled during it (the end of sim2 may be
+    // another, before the controller got its signal). Not always: once on a loaded 2-core CI
+    // machine none was counted with a 1.04 s gap measured, the loop kept from polling through
+    // it (no timeout, no re-answer counted), so the gap above is the assertion.
+    assert!(u(&c, "stale_periods") <= 2, "{c}");
     assert_eq!(
         u(&c, "stale_ticks"),
         0,
