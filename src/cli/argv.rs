@@ -145,7 +145,7 @@ mod tests {
     use crate::cli::common::{CaseSetup, ConfigArgs, RobotArg};
     use crate::cli::controller::ControllerArgs;
     use crate::cli::forecast::ForecastArgs;
-    use crate::cli::run::{RunArgs, Which};
+    use crate::cli::run::{CpuLayout, RunArgs, Which};
     use crate::cli::sim::{ModeChoice, PlantArgs, PlantChoice, SimArgs};
     use crate::{Cli, Command};
 
@@ -274,6 +274,7 @@ mod tests {
             viewer: false,
             connect: Some("u".into()),
             quiet: true,
+            cpus: CpuLayout::Shared,
             forecast_error_scale: 0.5,
             forecast_error_shift: -0.25,
             forecast_error_shape: upc::forecast::ForecastShape::Truncated(0.5),

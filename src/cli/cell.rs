@@ -16,7 +16,7 @@ use super::CliResult;
 use super::argv::{Argv, ToArgv, fields};
 use super::capability::BoxError;
 use super::common::{CaseSetup, ConfigArgs};
-use super::run::{RunArgs, Which};
+use super::run::{CpuLayout, RunArgs, Which};
 use super::sim::PlantChoice;
 
 /// One cell: what is searched, against which criteria, on which robot, plant and config.
@@ -266,6 +266,8 @@ fn case_run_args(cell: &CellArgs, name: &str, scenario: &Path, dir: &Path) -> Ru
         viewer: false,
         connect: None,
         quiet: true,
+        // Cells run side by side and are judged on their outcome, not their tick.
+        cpus: CpuLayout::Shared,
         forecast_error_scale: cell.forecast_scale,
         forecast_error_shift: cell.forecast_shift,
         forecast_error_shape: cell.forecast_shape,

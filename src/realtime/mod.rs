@@ -6,8 +6,10 @@
 //! A bottom module: it depends on [`crate::config`] only, so the plant and the transports time
 //! their loops without depending on the controller.
 
+pub mod cpus;
 pub mod latency;
 
+pub use cpus::ControlCpu;
 pub use latency::LatencyHistogram;
 
 use crate::config::RealtimeSettings;
