@@ -61,6 +61,8 @@ fn bench(c: &mut Criterion) {
         * 9.81;
     // (name, controller, settings, estimated base, hand force measured as forecast; else none:
     // a phantom, whose forecast FC-5 discounts and blends toward measurement only).
+    let case = std::env::var("UPC_BENCH_CASE").ok();
+    let only = case.as_deref();
     for (name, kind, config, estimated, measured) in [
         ("c0_tick", ControllerKind::C0, &config, false, true),
         ("c1_tick", ControllerKind::C1, &config, false, true),
@@ -117,21 +119,27 @@ fn bench(c: &mut Criterion) {
         let mut k = 0u64;
         let last = r.state.nq as usize - 1;
         let q_last = r.state.q[last];
-        g.bench_function(name, |b| {
-            b.iter(|| {
-                r.state.q[last] = q_last + (k % 2) as f64 * 1e-9;
-                r.state.time = (k % 1000) as f64 * 0.001;
-                r.state.stamps = [r.state.time; 4];
-                r.state.hand_force = if measured {
-                    r.window.at(r.state.time)
-                } else {
-                    [0.0; 3]
-                };
-                k += 1;
-                let out = r.core.tick(&r.state, &r.window, None, &mut r.tau);
-                black_box((out.is_ok(), r.tau[0]));
-            })
-        });
+        let mut tick = || {
+            r.state.q[last] = q_last + (k % 2) as f64 * 1e-9;
+            r.state.time = (k % 1000) as f64 * 0.001;
+            r.state.stamps = [r.state.time; 4];
+            r.state.hand_force = if measured {
+                r.window.at(r.state.time)
+            } else {
+                [0.0; 3]
+            };
+            k += 1;
+            let out = r.core.tick(&r.state, &r.window, None, &mut r.tau);
+            black_box((out.is_ok(), r.tau[0]));
+        };
+        match fixed_ticks() {
+            Some(n) if only.is_none_or(|o| o == name) => (0..n).for_each(|_| tick()),
+            Some(_) => continue,
+            None => {
+                g.bench_function(name, |b| b.iter(&mut tick));
+            }
+        }
+        drop(tick);
         let c = r.core.wbc_counters();
         eprintln!(
             "{name}: {} ticks, cone solve {} ({} Newton steps), left to clarabel {}, torque-limited {} \
@@ -144,9 +152,19 @@ fn bench(c: &mut Criterion) {
             c.limits_condensed
         );
     }
+    if fixed_ticks().is_some() {
+        return;
+    }
     offers(&mut g);
     handoff(&mut g, &config);
     g.finish();
+}
+
+/// `UPC_BENCH_TICKS=N`: each case (or only `UPC_BENCH_CASE`'s) runs N ticks and no criterion
+/// measurement, for `valgrind --tool=callgrind --toggle-collect='*ControllerCore::tick'`, whose
+/// instruction count per tick does not move with this VM's speed as its times do.
+fn fixed_ticks() -> Option<u64> {
+    std::env::var("UPC_BENCH_TICKS").ok()?.parse().ok()
 }
 
 /// What the loop pays to hand C2 a snapshot and to read its newest schedule while the search

@@ -467,9 +467,10 @@ impl CondensedQp {
             self.rho[c] = -pb.h[c];
         }
         for r in 0..12 {
+            // Row r of J_s (12 × nv, column-major: entries 12 apart), reversed.
             let col = &mut w[(6 + r) * nv..(7 + r) * nv];
-            for (x, y) in col.iter_mut().zip(jf[r..].iter().step_by(12).rev()) {
-                *x = *y;
+            for (i, x) in col.iter_mut().enumerate() {
+                *x = jf[r + 12 * (nv - 1 - i)];
             }
             self.rho[6 + r] = pb.b_feet[r];
         }

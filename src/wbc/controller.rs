@@ -268,6 +268,9 @@ pub struct WholeBodyController {
     // Model-derived.
     corner_ids: [usize; N_CONTACTS],
     foot_ids: [usize; 2],
+    /// The dofs that move each sole (its ancestors' velocity indices): the only columns where
+    /// its Jacobian, and its corners', can be non-zero.
+    foot_dofs: [Vec<usize>; 2],
     hand_id: usize,
     /// Velocity indices of the torque-limited joints and their limits (N·m, scaled).
     limited: Vec<(usize, f64)>,
@@ -360,6 +363,15 @@ impl WholeBodyController {
             tasks,
             corner_ids,
             foot_ids,
+            foot_dofs: foot_ids.map(|f| {
+                (0..nv)
+                    .filter(|&d| {
+                        model.frames[f]
+                            .parent
+                            .is_some_and(|p| model.is_ancestor(model.dof_joint[d], p))
+                    })
+                    .collect()
+            }),
             hand_id,
             limited,
             tau_max,
@@ -804,7 +816,11 @@ impl WholeBodyController {
             // Soles at rest: J_s q̈ = −J̇_s v − k J_s v.
             for i in 0..6 {
                 let jr = 6 * foot + i;
-                let jv: f64 = (0..nv).map(|c| self.jfeet[(jr, c)] * v[c]).sum();
+                // Over the dofs that move the sole: its Jacobian is zero on the others.
+                let jv: f64 = self.foot_dofs[foot]
+                    .iter()
+                    .map(|&c| self.jfeet[(jr, c)] * v[c])
+                    .sum();
                 self.b_feet[jr] = -drift[i] - self.p.contact_damping * jv;
             }
         }
@@ -1197,9 +1213,10 @@ impl WholeBodyController {
                 continue;
             }
             // On the sole's body: v_corner = v_sole + ω × r, r from the sole to the corner
-            // (world axes), one cross product per column instead of a walk up the leg.
+            // (world axes), one cross product per column instead of a walk up the leg; only on
+            // the dofs that move the sole (the others' columns stay the zeros they were made).
             let r = data.o_m_f[id].trans - data.o_m_f[self.foot_ids[k]].trans;
-            for col in 0..self.jc.ncols() {
+            for &col in &self.foot_dofs[k] {
                 let j = self.jfeet.column(col);
                 let v = Vector3::new(j[6 * k], j[6 * k + 1], j[6 * k + 2]);
                 let w = Vector3::new(j[6 * k + 3], j[6 * k + 4], j[6 * k + 5]);
