@@ -139,7 +139,6 @@ fn bench(c: &mut Criterion) {
                 g.bench_function(name, |b| b.iter(&mut tick));
             }
         }
-        drop(tick);
         let c = r.core.wbc_counters();
         eprintln!(
             "{name}: {} ticks, cone solve {} ({} Newton steps), left to clarabel {}, torque-limited {} \

@@ -109,7 +109,14 @@ fn forces_scale_with_the_robot_mass() {
         "the variant's arm holds as much: {want}"
     );
     assert_eq!(bent.force_scale().expect("scale"), want);
+    // The scenario as the variant is pushed: every plant and process takes it so.
+    let pushed = bent.scenario("multiple_impacts").expect("scenario");
+    assert_eq!(pushed.force_scale, want);
     let s = Scenario::load("multiple_impacts").expect("scenario");
+    assert_eq!(
+        pushed.content_hash(),
+        s.clone().with_force_scale(want).content_hash()
+    );
     let same = s.clone().with_force_scale(1.0);
     assert_eq!(same.content_hash(), s.content_hash());
     let double = s.clone().with_force_scale(2.0);

@@ -260,13 +260,10 @@ pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError>
     };
     // The forces this robot is pushed with, as every plant announces them: the forecaster
     // scales its forecast and the controller checks the hash by them.
-    let scale = opts
+    let scenario = opts
         .robot
-        .force_scale()
+        .scenario(&opts.sim.scenario)
         .map_err(|e| BusError::Setup(e.to_string()))?;
-    let scenario = crate::scenario::Scenario::load(&opts.sim.scenario)
-        .map_err(|e| BusError::Setup(e.to_string()))?
-        .with_force_scale(scale);
     let contract = Bus::open(&opts.prefix, &opts.node_name)?;
     let ep = Endpoints {
         states,

@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use upc::channels::DEFAULT_PREFIX;
 use upc::config::{ControllerKind, HeldObject};
 use upc::control::server::{ServerOptions, run_server};
-use upc::scenario::Scenario;
 use upc::shutdown::stop_flag;
 use upc::sim::sensors::Sensing;
 
@@ -87,7 +86,7 @@ impl ToArgv for ControllerArgs {
 pub fn run(args: ControllerArgs) -> CliResult {
     let robot = args.robot.load()?;
     // The forces the plant pushes this robot with (its hash is what the plant announces).
-    let scenario = Scenario::load(&args.scenario)?.with_force_scale(robot.force_scale()?);
+    let scenario = robot.scenario(&args.scenario)?;
     let mut extra = Vec::new();
     if let Some(k) = args.controller {
         extra.push(format!("controller.kind=\"{}\"", k.name()));

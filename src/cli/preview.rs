@@ -70,7 +70,7 @@ pub fn load_config(
 
 pub fn run(args: PreviewArgs) -> CliResult {
     let robot = args.robot.load()?;
-    let scenario = Scenario::load(&args.scenario)?.with_force_scale(robot.force_scale()?);
+    let scenario = robot.scenario(&args.scenario)?;
     let config = load_config(&args, &robot, &scenario)?;
     let controllers: &[ControllerKind] = match args.controller {
         ControllerChoice::C0 => &[ControllerKind::C0],

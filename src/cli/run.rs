@@ -206,7 +206,7 @@ pub fn run(mut args: RunArgs) -> CliResult {
     // A robot's bus runs at the robot's pace: real time.
     args.realtime |= args.bus.is_some();
     let robot = args.robot.load()?;
-    let scenario = Scenario::load(&args.scenario)?.with_force_scale(robot.force_scale()?);
+    let scenario = robot.scenario(&args.scenario)?;
     // Fail early on a bad config, before starting processes.
     let config = args.config.load(&robot, Some(&scenario), &[])?;
     upc::sim::SimConfig::load(&[], &args.sim_sets)?;

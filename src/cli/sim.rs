@@ -2,7 +2,6 @@
 
 use std::path::{Path, PathBuf};
 
-use upc::scenario::Scenario;
 use upc::shutdown::stop_flag;
 use upc::sim::process::{RunOptions, run};
 use upc::sim::{Engine, SimConfig};
@@ -202,7 +201,7 @@ fn write_bundle(
 ) -> Result<PathBuf, Box<dyn std::error::Error + Send + Sync>> {
     let config = load_config(args)?;
     let robot = args.robot.load()?;
-    let scenario = Scenario::load(&config.scenario)?.with_force_scale(robot.force_scale()?);
+    let scenario = robot.scenario(&config.scenario)?;
     let scene = upc::sim::mujoco::build(&robot, &config, &scenario)?;
     std::fs::create_dir_all(dir).map_err(|e| format!("bundle directory {}: {e}", dir.display()))?;
     let write = |name: &str, text: &str| {

@@ -85,11 +85,12 @@ pub struct CompareOutput {
 /// cover the same time.
 fn run_scenario(run: &RunDir, robot: &Robot) -> Result<Scenario, String> {
     let mut scenario = match &run.scenario_source {
-        Some(src) => Scenario::load(src).or_else(|_| Scenario::load(&run.scenario)),
-        None => Scenario::load(&run.scenario),
+        Some(src) => robot
+            .scenario(src)
+            .or_else(|_| robot.scenario(&run.scenario)),
+        None => robot.scenario(&run.scenario),
     }
-    .map_err(|e| e.to_string())?
-    .with_force_scale(robot.force_scale().map_err(|e| e.to_string())?);
+    .map_err(|e| e.to_string())?;
     scenario.duration = run.duration;
     Ok(scenario)
 }

@@ -30,7 +30,7 @@ use crate::config::{ConfigError, Layers};
 use crate::dynamics::{
     BaseJoint, Data, DynamicsError, Model, OpSpaceWorkspace, center_of_mass, forward_kinematics,
 };
-use crate::scenario::ContentHash;
+use crate::scenario::{ContentHash, Scenario};
 
 /// The robot every process uses without `--robot`.
 pub const DEFAULT: &str = "icub_like";
@@ -360,6 +360,23 @@ impl Robot {
         let (mass, capacity) = reference()?;
         Ok((self.derived.mass / mass).min(self.derived.hand_force_capacity / capacity))
     }
+
+    /// The scenario `name_or_path` ([`Scenario::load`]) as this robot is pushed: its forces ×
+    /// [`Self::force_scale`]. Every plant, process and report takes a scenario through here, so
+    /// that none announces or forecasts the forces unscaled.
+    pub fn scenario(&self, name_or_path: &str) -> Result<Scenario, RobotScenarioError> {
+        let scale = self.force_scale()?;
+        Ok(Scenario::load(name_or_path)?.with_force_scale(scale))
+    }
+}
+
+/// Why [`Robot::scenario`] has no scenario.
+#[derive(Debug, thiserror::Error)]
+pub enum RobotScenarioError {
+    #[error(transparent)]
+    Scenario(#[from] crate::scenario::ScenarioError),
+    #[error(transparent)]
+    Robot(#[from] RobotError),
 }
 
 /// Mass (kg) and arm force capacity (N) of the embedded default robot, computed once.

@@ -230,9 +230,7 @@ fn mujoco_plant(
     robot: &crate::robot::Robot,
 ) -> Result<Plant<super::mujoco::MujocoPlant>, ProcessError> {
     let setup = |e: &dyn std::fmt::Display| ProcessError::Setup(e.to_string());
-    let scenario = crate::scenario::Scenario::load(&cfg.scenario)
-        .map_err(|e| setup(&e))?
-        .with_force_scale(robot.force_scale().map_err(|e| setup(&e))?);
+    let scenario = robot.scenario(&cfg.scenario).map_err(|e| setup(&e))?;
     let scene = super::mujoco::build(robot, cfg, &scenario)?;
     let physics = super::mujoco::MujocoPlant::new(robot, &scene)?;
     let version = super::mujoco::version().unwrap_or_default();

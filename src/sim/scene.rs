@@ -233,7 +233,7 @@ pub fn default_scene(
     config: &SimConfig,
     robot: &Robot,
 ) -> Result<(Scene, Scenario), Box<dyn std::error::Error + Send + Sync>> {
-    let scenario = Scenario::load(&config.scenario)?.with_force_scale(robot.force_scale()?);
+    let scenario = robot.scenario(&config.scenario)?;
     let scene = robot_scene(
         robot,
         PhysicsParams::from_config(config),

@@ -541,16 +541,13 @@ impl Physics for MujocoPlant {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scenario::Scenario;
     use crate::sim::SimConfig;
 
     fn plant(sets: &[&str]) -> (Robot, MujocoPlant) {
         let robot = Robot::embedded_default().expect("robot");
         let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
         let cfg = SimConfig::load(&[], &sets).expect("config");
-        let scenario = Scenario::load(&cfg.scenario)
-            .expect("scenario")
-            .with_force_scale(robot.force_scale().expect("scale"));
+        let scenario = robot.scenario(&cfg.scenario).expect("scenario");
         let scene = super::super::scene::build(&robot, &cfg, &scenario).expect("scene");
         let plant = MujocoPlant::new(&robot, &scene).expect("plant");
         (robot, plant)
