@@ -242,6 +242,7 @@ pub fn run(mut args: RunArgs) -> CliResult {
     }
     // Held until the run ends: the claim is the lock.
     let control_cpu = control_cpu(&args, &config);
+    let cpu = control_cpu.as_ref().map(ControlCpu::cpu);
     let mut entries = Vec::new();
     for kind in kinds {
         let plan = RunPlan {
@@ -251,11 +252,10 @@ pub fn run(mut args: RunArgs) -> CliResult {
             root: &root,
             name: &name,
             live: live.as_deref(),
-            control_cpu: control_cpu.as_ref().map(ControlCpu::cpu),
+            control_cpu: cpu,
         };
         entries.push(run_one(&plan, kind)?);
     }
-    let cpu = control_cpu.as_ref().map(ControlCpu::cpu);
     write_summary(&args, &robot, &scenario, duration, &root, &entries, cpu)?;
     print_table(&entries);
     println!(

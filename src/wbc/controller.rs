@@ -363,15 +363,7 @@ impl WholeBodyController {
             tasks,
             corner_ids,
             foot_ids,
-            foot_dofs: foot_ids.map(|f| {
-                (0..nv)
-                    .filter(|&d| {
-                        model.frames[f]
-                            .parent
-                            .is_some_and(|p| model.is_ancestor(model.dof_joint[d], p))
-                    })
-                    .collect()
-            }),
+            foot_dofs: foot_ids.map(|f| (0..nv).filter(|&d| moves_frame(model, d, f)).collect()),
             hand_id,
             limited,
             tau_max,
@@ -1379,6 +1371,14 @@ fn clarabel_settings(config: &WbcConfig) -> DefaultSettings<f64> {
 /// The full problem's constraint sparsity, from the model's structure (structural zeros
 /// included, so the pattern never changes): a dof acts on a frame when its joint is on the
 /// frame's path to the world, and two dofs couple in M when one's joint is the other's ancestor.
+/// Whether dof `dof` moves frame `frame` (its joint is an ancestor of the frame's body): where
+/// the frame's Jacobian can be non-zero.
+fn moves_frame(model: &Model, dof: usize, frame: usize) -> bool {
+    model.frames[frame]
+        .parent
+        .is_some_and(|p| model.is_ancestor(model.dof_joint[dof], p))
+}
+
 fn constraint_pattern(
     model: &Model,
     layout: &Layout,
@@ -1387,11 +1387,7 @@ fn constraint_pattern(
     corner_ids: &[usize; N_CONTACTS],
     limited: &[(usize, f64)],
 ) -> Pattern {
-    let supports = |dof: usize, frame: usize| {
-        model.frames[frame]
-            .parent
-            .is_some_and(|p| model.is_ancestor(model.dof_joint[dof], p))
-    };
+    let supports = |dof: usize, frame: usize| moves_frame(model, dof, frame);
     let m_struct = |a: usize, b: usize| {
         let (ja, jb) = (model.dof_joint[a], model.dof_joint[b]);
         model.is_ancestor(ja, jb) || model.is_ancestor(jb, ja)
