@@ -110,6 +110,8 @@ fn a_forecast_too_strong_by_half_no_longer_topples_c1() {
         "the uncorrected forecast should topple C1: {raw}"
     );
     assert!(!fell(&corrected), "{corrected}");
+    // A wrist sensor measures the hand force: `"auto"` feeds it back as measured.
+    assert_eq!(u(&corrected, "hand_force_modelled_ticks"), 0, "{corrected}");
     // The forecast is 1.5 × the force: κ̂ ≈ 1/1.5 while the push is measured (its middle,
     // 1.2–1.8 s), read from the controller's CSV.
     let text = std::fs::read_to_string(s.path("corrected/c1/controller.csv")).expect("csv");

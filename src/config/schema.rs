@@ -107,6 +107,30 @@ pub enum HandForceSource {
     /// follows the measurement through its offset observer instead of sample by sample; the
     /// measured one where no part corrects the forecast (C0).
     Corrected,
+    /// The corrected push less the held object's inertia at the hand's commanded acceleration,
+    /// −Λ ẍ_cmd, solved with the impedance law in the same tick: no measured acceleration, so
+    /// no lag nor velocity noise in the force fed back; the measured one where no part corrects
+    /// the forecast (C0).
+    Modelled,
+    /// `Modelled` where the hand force is estimated (its part declares a lag,
+    /// `TickFrame::hand_force_lag` > 0), `Measured` where a sensor measures it.
+    Auto,
+}
+
+impl HandForceSource {
+    /// The source for a tick whose hand force lags `hand_force_lag` s (`Auto` resolved).
+    pub fn resolve(self, hand_force_lag: f64) -> Self {
+        match self {
+            Self::Auto if hand_force_lag > 0.0 => Self::Modelled,
+            Self::Auto => Self::Measured,
+            s => s,
+        }
+    }
+
+    /// Whether the whole-body QP is given the forecast correction's force, not the measured one.
+    pub fn from_correction(self) -> bool {
+        matches!(self, Self::Corrected | Self::Modelled)
+    }
 }
 
 /// How the hand impedance's gains are shaped (`hand.stiffness`).

@@ -93,6 +93,8 @@ pub struct ControllerCore {
     /// `hand.stiffness = "decoupled"`: the projector P = e eᵀ onto the held object's free
     /// direction (from its apparent mass, [`Self::with_held_mass`]); `None`: eq. (17) as is.
     hand_free_dir: Option<Matrix3<f64>>,
+    /// The held object's apparent mass at the hand Λ (world, kg; zero: nothing held).
+    held_mass: Matrix3<f64>,
     decoupled_stiffness: bool,
     /// `hand.held_path`: how the previewer (and C2's) keeps the hand on the held object's path
     /// (HP-1), and that path once known ([`Self::with_held_mass`]).
@@ -117,6 +119,8 @@ pub struct ControllerCore {
     f_dis_total: Vec<[f64; 3]>,
     /// Ticks where the disturbance forecast was invalid and C0 ran instead.
     pub preview_fallbacks: u64,
+    /// Ticks the QP was given the held object's modelled force ([`held_object_force`]).
+    pub hand_force_modelled_ticks: u64,
     /// The fall detector: the drop (fraction of the latched CoM height) that means a fall
     /// (0: off), the joint damping held then, whether the robot is fallen in this session, the
     /// falls detected and the ticks held fallen.
@@ -197,6 +201,7 @@ impl ControllerCore {
             force_feedback: config.controller.hand_force_feedback,
             force_source: config.controller.hand_force_feedback_from,
             hand_free_dir: None,
+            held_mass: Matrix3::zeros(),
             decoupled_stiffness: config.hand.stiffness == crate::config::HandStiffness::Decoupled,
             held_path_mode: config.hand.held_path,
             held_path: None,
@@ -212,6 +217,7 @@ impl ControllerCore {
             zmp_offset,
             f_dis_total: vec![[0.0; 3]; n],
             preview_fallbacks: 0,
+            hand_force_modelled_ticks: 0,
             fall_drop: config.controller.fall_drop,
             support_follow: config.controller.support_follow,
             fallen_damping: config.wbc.fallback_damping,
@@ -249,6 +255,11 @@ impl ControllerCore {
         self.previewer.set_held_path(self.held_path);
         // A door's apparent mass is m e eᵀ: its trace is m, and it over m projects onto e.
         let m = held_mass.trace();
+        self.held_mass = if m.is_finite() {
+            held_mass
+        } else {
+            Matrix3::zeros()
+        };
         self.hand_free_dir =
             (m.is_finite() && m > 0.0 && self.decoupled_stiffness).then(|| held_mass / m);
         self
@@ -742,8 +753,11 @@ impl ControllerCore {
         // The corrected force (FC-4's first sample): an estimate's drive friction, which moves
         // with the arm, then does not come back as force at the arm's own speed (negative
         // friction; docs/whole_body_qp.md, "The hand force fed back").
-        let corrected = self.force_source == HandForceSource::Corrected;
-        let f_hand = Vector3::from(if corrected && self.frame.f_ext_filled {
+        // `"modelled"`: the same, less the held object's inertia at the hand's own acceleration
+        // (below).
+        let source = self.force_source.resolve(self.frame.hand_force_lag);
+        let corrected = source.from_correction() && self.frame.f_ext_filled;
+        let f_hand = Vector3::from(if corrected {
             self.frame.f_ext[0]
         } else {
             self.frame.hand_force
@@ -754,11 +768,6 @@ impl ControllerCore {
             && self.frame.hand_force_trusted
             && f_hand.iter().all(|x| x.is_finite());
         let f_hand = if fed_back { f_hand } else { Vector3::zeros() };
-        let acc_ext = if m_e_ok {
-            self.op.lambda_inv * f_hand
-        } else {
-            Vector3::zeros()
-        };
         let law = (latched.hand_target - hand.pos) * kp - hand.vel * kd;
         // `hand.stiffness = "decoupled"`: the arm's force M_d ẍ_law with M_d = P M_e P + Q M_e Q
         // instead of M_e ẍ_law, i.e. ẍ = M_e⁻¹ M_d ẍ_law; the QP's own law is corrected through
@@ -770,6 +779,17 @@ impl ControllerCore {
                 self.op.lambda_inv * (p * m_e * p + q * m_e * q) * law - law
             }
             _ => Vector3::zeros(),
+        };
+        let f_hand = if source == HandForceSource::Modelled && corrected && fed_back && m_e_ok {
+            self.hand_force_modelled_ticks += 1;
+            held_object_force(&f_hand, &self.op.m_e, &self.held_mass, &(law + coupling))
+        } else {
+            f_hand
+        };
+        let acc_ext = if m_e_ok {
+            self.op.lambda_inv * f_hand
+        } else {
+            Vector3::zeros()
         };
         self.hand_acc_cmd = law + coupling + acc_ext;
 
@@ -800,6 +820,24 @@ impl ControllerCore {
 /// The held object's free direction e (unit, its sign arbitrary) from its apparent mass at the
 /// hand: a door's is m e eᵀ (`crate::sim::scene::PlacedDoor::apparent_mass`), so its largest
 /// column is m e_k e. `None` when nothing is held (a zero or non-finite mass).
+/// The force a held object passes to the hand when it is pushed with `push` and the hand
+/// follows eq. (23)'s impedance law (its acceleration `law`, arm's inertia `m_e`), the object's
+/// apparent mass `held` riding on the hand: F = P − Λ ẍ with M_e (ẍ − ẍ_law) = F, i.e.
+/// (M_e + Λ) ẍ = P + M_e ẍ_law. The inertia term is the hand's commanded acceleration, not a
+/// measured one: no lag and no velocity noise (docs/whole_body_qp.md, "The hand force fed
+/// back"). `push` itself when M_e + Λ is singular.
+pub fn held_object_force(
+    push: &Vector3<f64>,
+    m_e: &Matrix3<f64>,
+    held: &Matrix3<f64>,
+    law: &Vector3<f64>,
+) -> Vector3<f64> {
+    match (m_e + held).try_inverse() {
+        Some(inv) => push - held * (inv * (push + m_e * law)),
+        None => *push,
+    }
+}
+
 pub fn free_direction(held_mass: &Matrix3<f64>) -> Option<Vector3<f64>> {
     let m = held_mass.trace();
     if !(m.is_finite() && m > 0.0) {
@@ -809,4 +847,35 @@ pub fn free_direction(held_mass: &Matrix3<f64>) -> Option<Vector3<f64>> {
         .map(|k| held_mass.column(k).into_owned())
         .max_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))?;
     Some(c.normalize())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_held_doors_force_is_the_push_less_its_inertia_at_the_hands_acceleration() {
+        // A door of 5 kg along e = x on an arm of 2 kg: a 14 N push with the law at rest moves
+        // both, (2 + 5) ẍ = 14, so the door takes 5 · 2 = 10 N and passes 4 N.
+        let m_e = Matrix3::identity() * 2.0;
+        let e = Vector3::x();
+        let held = e * e.transpose() * 5.0;
+        let f = held_object_force(&(e * 14.0), &m_e, &held, &Vector3::zeros());
+        assert!((f - e * 4.0).norm() < 1e-12, "{f}");
+        // Across e the door takes nothing: the push passes whole.
+        let side = Vector3::new(0.0, 3.0, -1.0);
+        let f = held_object_force(&side, &m_e, &held, &Vector3::zeros());
+        assert!((f - side).norm() < 1e-12, "{f}");
+        // Any arm, door and law: the force and the hand's acceleration satisfy both equations.
+        let m_e = Matrix3::new(2.0, 0.3, -0.1, 0.3, 1.5, 0.2, -0.1, 0.2, 3.0);
+        let e = Vector3::new(0.99, 0.1, 0.0).normalize();
+        let held = e * e.transpose() * 5.1;
+        let (push, law) = (Vector3::new(-60.0, 8.0, 3.0), Vector3::new(0.4, -1.2, 0.7));
+        let f = held_object_force(&push, &m_e, &held, &law);
+        let acc = law + m_e.try_inverse().unwrap() * f;
+        assert!((f - (push - held * acc)).norm() < 1e-9, "{f} {acc}");
+        // Nothing held: the push itself.
+        let f = held_object_force(&push, &m_e, &Matrix3::zeros(), &law);
+        assert!((f - push).norm() < 1e-12, "{f}");
+    }
 }

@@ -1188,9 +1188,10 @@ struct ShiftFit {
 /// it fills the horizon's hand force from the forecast and the measured force.
 pub struct Correction {
     corrector: Option<ForecastCorrector>,
-    /// The corrected force is fed back to the whole-body QP: its door-inertia term then closes
-    /// a loop through the hand's acceleration, which a lag of K bins destabilises (FC-1c: K = 1).
-    fed_back: bool,
+    /// The hand force the whole-body QP is given: when it is the corrected force, its
+    /// door-inertia term closes a loop through the hand's acceleration, which a lag of K bins
+    /// destabilises (FC-1c: K = 1).
+    fed_back: HandForceSource,
 }
 
 /// This part in `super::parts::PIPELINE`.
@@ -1203,7 +1204,7 @@ fn build(
     let p = &s.config.preview;
     let corrector = (settings.enabled && s.kind != ControllerKind::C0)
         .then(|| ForecastCorrector::new(settings, p.period, s.dt, s.cart.mass * s.cart.gravity));
-    let fed_back = s.config.controller.hand_force_feedback_from == HandForceSource::Corrected;
+    let fed_back = s.config.controller.hand_force_feedback_from;
     Ok(Box::new(Correction {
         corrector,
         fed_back,
@@ -1241,7 +1242,11 @@ impl ControllerPart for Correction {
             return Ok(());
         };
         c.set_measurement_lag(frame.hand_force_lag);
-        c.set_velocity_noise(match frame.estimate_base && !self.fed_back {
+        let fed_back = self
+            .fed_back
+            .resolve(frame.hand_force_lag)
+            .from_correction();
+        c.set_velocity_noise(match frame.estimate_base && !fed_back {
             true => c.settings().hand_velocity_noise,
             false => 0.0,
         });

@@ -732,6 +732,7 @@ impl<'a> ControlLoop<'a> {
             s.deadline_misses = t.missed;
         }
         s.preview_fallbacks = self.core.preview_fallbacks;
+        s.hand_force_modelled_ticks = self.core.hand_force_modelled_ticks;
         (s.falls, s.fallen_ticks) = (self.core.falls, self.core.fallen_ticks);
         self.core.summarize(&mut s.parts);
         let wc = self.core.wbc_counters();

@@ -66,6 +66,10 @@ pub struct ServerSummary {
     #[serde(default)]
     pub wbc_limits_saturated_ticks: u64,
     pub preview_fallbacks: u64,
+    /// Ticks whose whole-body QP was given the held object's modelled force
+    /// (`controller.hand_force_feedback_from`, "modelled" or "auto" on an estimated force).
+    #[serde(default)]
+    pub hand_force_modelled_ticks: u64,
     /// Falls the controller detected (`controller.fall_drop`), and the ticks it then held joint
     /// damping without preview or QP (until the plant restarted).
     #[serde(default)]
