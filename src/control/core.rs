@@ -817,12 +817,9 @@ impl ControllerCore {
     }
 }
 
-/// The held object's free direction e (unit, its sign arbitrary) from its apparent mass at the
-/// hand: a door's is m e eᵀ (`crate::sim::scene::PlacedDoor::apparent_mass`), so its largest
-/// column is m e_k e. `None` when nothing is held (a zero or non-finite mass).
 /// The force a held object passes to the hand when it is pushed with `push` and the hand
 /// follows eq. (23)'s impedance law (its acceleration `law`, arm's inertia `m_e`), the object's
-/// apparent mass `held` riding on the hand: F = P − Λ ẍ with M_e (ẍ − ẍ_law) = F, i.e.
+/// apparent mass `held` riding on the hand (HF-1): F = P − Λ ẍ with M_e (ẍ − ẍ_law) = F, i.e.
 /// (M_e + Λ) ẍ = P + M_e ẍ_law. The inertia term is the hand's commanded acceleration, not a
 /// measured one: no lag and no velocity noise (docs/whole_body_qp.md, "The hand force fed
 /// back"). `push` itself when M_e + Λ is singular.
@@ -838,6 +835,9 @@ pub fn held_object_force(
     }
 }
 
+/// The held object's free direction e (unit, its sign arbitrary) from its apparent mass at the
+/// hand: a door's is m e eᵀ (`crate::sim::scene::PlacedDoor::apparent_mass`), so its largest
+/// column is m e_k e. `None` when nothing is held (a zero or non-finite mass).
 pub fn free_direction(held_mass: &Matrix3<f64>) -> Option<Vector3<f64>> {
     let m = held_mass.trace();
     if !(m.is_finite() && m > 0.0) {
