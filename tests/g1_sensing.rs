@@ -120,7 +120,9 @@ fn the_icub_like_on_joint_torques_stands_on_the_modelled_hand_force_where_the_es
         env!("CARGO_MANIFEST_DIR"),
         "/config/robots/icub_like_joint_torques.toml"
     );
-    let seed = ["--sim-set", "sim.sensors.seed=3"];
+    // Seed 3 felled it until the hand was read ahead (WO-8, docs/estimation.md); seed 4 still
+    // does (and seed 2, on both plants).
+    let seed = ["--sim-set", "sim.sensors.seed=4"];
     let c1 = run_on(&s, "default", robot, "mujoco", "c1", &seed);
     let ticks = u(&c1, "ticks");
     assert!(u(&c1["wrench_observer"], "hand_ticks") + 5 >= ticks, "{c1}");
@@ -214,6 +216,7 @@ fn stuck_friction_cop_error(robot: &upc::robot::Robot, fraction: f64) -> f64 {
         torque_noise_fraction: fraction,
         filter_gain: d.filter_gain,
         hand_bandwidth: d.hand_bandwidth,
+        hand_lead: d.hand_lead,
         friction: DriveFriction::default(),
     };
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);

@@ -112,16 +112,16 @@ pub enum HandForceSource {
     /// no lag nor velocity noise in the force fed back; the measured one where no part corrects
     /// the forecast (C0).
     Modelled,
-    /// `Modelled` where the hand force is estimated (its part declares a lag,
-    /// `TickFrame::hand_force_lag` > 0), `Measured` where a sensor measures it.
+    /// `Modelled` where the hand force is estimated (`TickFrame::hand_force_estimated`),
+    /// `Measured` where a sensor measures it.
     Auto,
 }
 
 impl HandForceSource {
-    /// The source for a tick whose hand force lags `hand_force_lag` s (`Auto` resolved).
-    pub fn resolve(self, hand_force_lag: f64) -> Self {
+    /// The source for a tick whose hand force is `estimated` or measured (`Auto` resolved).
+    pub fn resolve(self, estimated: bool) -> Self {
         match self {
-            Self::Auto if hand_force_lag > 0.0 => Self::Modelled,
+            Self::Auto if estimated => Self::Modelled,
             Self::Auto => Self::Measured,
             s => s,
         }

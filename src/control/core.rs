@@ -501,6 +501,7 @@ impl ControllerCore {
         f.hand_force = s.hand_force;
         f.hand_force_trusted = true;
         f.hand_force_lag = 0.0;
+        f.hand_force_estimated = false;
         f.f_ext_filled = false;
         f.measured_push = None;
         f.com_force = [0.0; 2];
@@ -755,7 +756,7 @@ impl ControllerCore {
         // friction; docs/whole_body_qp.md, "The hand force fed back").
         // `"modelled"`: the same, less the held object's inertia at the hand's own acceleration
         // (below).
-        let source = self.force_source.resolve(self.frame.hand_force_lag);
+        let source = self.force_source.resolve(self.frame.hand_force_estimated);
         let corrected = source.from_correction() && self.frame.f_ext_filled;
         let f_hand = Vector3::from(if corrected {
             self.frame.f_ext[0]

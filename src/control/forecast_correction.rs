@@ -1244,7 +1244,7 @@ impl ControllerPart for Correction {
         c.set_measurement_lag(frame.hand_force_lag);
         let fed_back = self
             .fed_back
-            .resolve(frame.hand_force_lag)
+            .resolve(frame.hand_force_estimated)
             .from_correction();
         c.set_velocity_noise(match frame.estimate_base && !fed_back {
             true => c.settings().hand_velocity_noise,

@@ -90,6 +90,9 @@ pub struct TickFrame {
     /// `Measure`: how far (s) `hand_force` lags the force on the hand (an estimate's filter;
     /// 0 for a sensor's).
     pub hand_force_lag: f64,
+    /// `Measure`: whether `hand_force` is estimated (a part stands in for a wrist sensor the
+    /// robot does not have), not measured.
+    pub hand_force_estimated: bool,
     /// `Forecast`: the hand force over the horizon at t + (i+1)·T and the push measured now,
     /// when a part knows it. A part that fills `f_ext` fills all of it and sets `f_ext_filled`;
     /// otherwise the core fills it from the forecast as received after the `Forecast` stage,
@@ -128,6 +131,7 @@ impl TickFrame {
             hand_force: [0.0; 3],
             hand_force_trusted: true,
             hand_force_lag: 0.0,
+            hand_force_estimated: false,
             f_ext: vec![[0.0; 3]; horizon],
             f_ext_filled: false,
             measured_push: None,

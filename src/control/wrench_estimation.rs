@@ -51,6 +51,8 @@ pub struct WrenchObserverSettings {
     /// ω of WO-7 (1/s): the hand's force through a stage of its own that follows a ramp
     /// without lag; 0: from WO-5's residual as the feet's.
     pub hand_bandwidth: f64,
+    /// WO-8: the hand's force read ahead by WO-2's lag 1/K through WO-7's rate (with WO-7).
+    pub hand_lead: bool,
     /// WO-6, the drives' friction as identified: Coulomb as a fraction of each joint's effort
     /// limit, the velocity over which it changes sign (rad/s), viscous (N·m·s/rad).
     pub friction_coulomb: f64,
@@ -115,6 +117,7 @@ fn build(
         torque_noise_fraction: settings.torque_noise_fraction,
         filter_gain: settings.filter_gain,
         hand_bandwidth: settings.hand_bandwidth,
+        hand_lead: settings.hand_lead,
         friction: DriveFriction {
             coulomb: settings.friction_coulomb,
             velocity: settings.friction_velocity,
@@ -257,6 +260,7 @@ impl ControllerPart for WrenchEstimation {
                 if e.hand {
                     frame.hand_force = w.hand;
                     frame.hand_force_lag = self.observer.hand_lag();
+                    frame.hand_force_estimated = true;
                     self.counts.hand_ticks += 1;
                 }
             }
