@@ -8,7 +8,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
-use upc::channels::{Bus, GroundTruthMsg};
+use upc::channels::{Bus, GroundTruthMsg, StateMsg};
 
 /// The real-time tests share two cores with everything else: one at a time.
 pub static SERIAL: Mutex<()> = Mutex::new(());
@@ -274,6 +274,9 @@ pub struct Seen {
     pub max_slip: f64,
     /// When the fastest slip was seen (s, plant time).
     pub max_slip_time: f64,
+    /// Plant time at which the current run's scenario started, as the plant announces it in
+    /// its state (negative: not yet).
+    pub scenario_start: f64,
 }
 
 impl Seen {
@@ -304,6 +307,7 @@ impl Observer {
         let thread = std::thread::spawn(move || {
             let bus = Bus::open(&prefix, "faults-observer").expect("observer bus");
             let truth = bus.subscriber::<GroundTruthMsg>().expect("ground truth");
+            let state = bus.subscriber::<StateMsg>().expect("state");
             while !stop_t.load(Ordering::Relaxed) {
                 while let Some(g) = truth.receive().expect("receive") {
                     let mut s = seen_t.lock().unwrap();
@@ -312,6 +316,7 @@ impl Observer {
                         s.com_z0 = g.com[2];
                         s.com_z_min = g.com[2];
                         s.max_slip = 0.0;
+                        s.scenario_start = -1.0;
                     }
                     s.flags = g.flags;
                     s.hold_steps = g.hold_steps;
@@ -321,6 +326,14 @@ impl Observer {
                     }
                     s.time = g.time;
                     s.com_z_min = s.com_z_min.min(g.com[2]);
+                }
+                while let Some(m) = state.receive().expect("receive") {
+                    // A state of the run the ground truth is on (a restarted plant's time
+                    // starts again below it).
+                    let mut s = seen_t.lock().unwrap();
+                    if s.runs > 0 && m.time <= s.time + 0.5 && m.time >= s.time - 0.5 {
+                        s.scenario_start = m.scenario_start;
+                    }
                 }
                 std::thread::sleep(Duration::from_millis(2));
             }
@@ -338,10 +351,31 @@ impl Observer {
 
     /// Wait until the simulator's run number `run` reaches simulated time `t`.
     pub fn wait_for(&self, run: u32, t: f64, procs: &mut Procs, s: &Scratch) {
+        self.wait_until(run, procs, s, &format!("t = {t} s"), |seen| seen.time >= t);
+    }
+
+    /// Wait until the simulator's run number `run` has played `t` s of its scenario (from the
+    /// start the plant announces: a real-time plant starts it once a controller has the robot,
+    /// however long that took).
+    pub fn wait_for_scenario(&self, run: u32, t: f64, procs: &mut Procs, s: &Scratch) {
+        let what = format!("scenario time {t} s");
+        self.wait_until(run, procs, s, &what, |seen| {
+            seen.scenario_start >= 0.0 && seen.time >= seen.scenario_start + t
+        });
+    }
+
+    fn wait_until(
+        &self,
+        run: u32,
+        procs: &mut Procs,
+        s: &Scratch,
+        what: &str,
+        reached: impl Fn(&Seen) -> bool,
+    ) {
         let until = Instant::now() + Duration::from_secs(40);
         loop {
             let seen = self.get();
-            if seen.runs > run || (seen.runs == run && seen.time >= t) {
+            if seen.runs > run || (seen.runs == run && reached(&seen)) {
                 return;
             }
             // A process that died early fails here with its log rather than by a timeout.
@@ -352,7 +386,7 @@ impl Observer {
             }
             assert!(
                 Instant::now() < until,
-                "simulator run {run} did not reach t = {t} s: {seen:?}"
+                "simulator run {run} did not reach {what}: {seen:?}"
             );
             std::thread::sleep(Duration::from_millis(10));
         }
