@@ -253,13 +253,14 @@ impl ControllerCore {
             .filter(|_| self.held_path_mode != HeldPath::Free)
             .map(|e| (e, mass));
         self.previewer.set_held_path(self.held_path);
-        // A door's apparent mass is m e eᵀ: its trace is m, and it over m projects onto e.
-        let m = held_mass.trace();
-        self.held_mass = if m.is_finite() {
+        // HF-1 inverts M_e + Λ each tick: a Λ with a non-finite entry is not held at all.
+        self.held_mass = if held_mass.iter().all(|x| x.is_finite()) {
             held_mass
         } else {
             Matrix3::zeros()
         };
+        // A door's apparent mass is m e eᵀ: its trace is m, and it over m projects onto e.
+        let m = held_mass.trace();
         self.hand_free_dir =
             (m.is_finite() && m > 0.0 && self.decoupled_stiffness).then(|| held_mass / m);
         self

@@ -1191,7 +1191,7 @@ pub struct Correction {
     /// The hand force the whole-body QP is given: when it is the corrected force, its
     /// door-inertia term closes a loop through the hand's acceleration, which a lag of K bins
     /// destabilises (FC-1c: K = 1).
-    fed_back: HandForceSource,
+    qp_force: HandForceSource,
 }
 
 /// This part in `super::parts::PIPELINE`.
@@ -1204,10 +1204,10 @@ fn build(
     let p = &s.config.preview;
     let corrector = (settings.enabled && s.kind != ControllerKind::C0)
         .then(|| ForecastCorrector::new(settings, p.period, s.dt, s.cart.mass * s.cart.gravity));
-    let fed_back = s.config.controller.hand_force_feedback_from;
+    let qp_force = s.config.controller.hand_force_feedback_from;
     Ok(Box::new(Correction {
         corrector,
-        fed_back,
+        qp_force,
     }))
 }
 
@@ -1243,7 +1243,7 @@ impl ControllerPart for Correction {
         };
         c.set_measurement_lag(frame.hand_force_lag);
         let fed_back = self
-            .fed_back
+            .qp_force
             .resolve(frame.hand_force_estimated)
             .from_correction();
         c.set_velocity_noise(match frame.estimate_base && !fed_back {
