@@ -59,7 +59,7 @@
 //!
 //! whose mean lag is 0 (to first order in s the lead's 1/K cancels WO-2's), and a ramp is
 //! followed without error; the noise above ω passes at a₁ + a₂/K instead of a₁ (51/s against
-//! 42/s at ω = 30/s, K = 100/s), where raising ω to cut the same lag would pass it at a₁ itself.
+//! 42/s at ω = 30/s, K = 100/s). Raising ω instead would leave WO-2's 1/K where it is.
 //!
 //! A drive's torque estimate from its current reads the motor's torque, the link's plus the
 //! gear's friction. The friction identified for the drives is taken off before WO-1 (WO-6):
