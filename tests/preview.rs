@@ -418,6 +418,35 @@ fn a_held_door_keeps_the_hand_on_its_path_and_its_hinge_takes_the_rest() {
     assert!((last - f).norm() < 1e-3, "{last} vs {f}");
 }
 
+/// FC-0b against HP-1: a push F_e along the path, taken where the held hand feels it
+/// (`felt_direction`) and previewed by the free hand of eq. (24), reaches the body at rest as
+/// the same F_dis as the push itself previewed on the door's path (HP-1): two derivations of
+/// the hinge's share, one in the forecast and one in the previewer.
+#[test]
+fn a_push_felt_at_the_held_hand_is_the_held_paths_disturbance_at_rest() {
+    let mut h = hand_case(600);
+    let (m_e, des, n) = (h.m_e, h.des, h.n);
+    let e = Vector3::new(1.0, 0.1, -0.05).normalize();
+    let push = e * -60.0;
+    h.hp.set_held_path(Some((e, 0.0)));
+    h.f = push;
+    hold_against(&mut h, &des);
+    let on_path = Vector3::from(h.hp.disturbance()[n - 1]);
+    let d = upc::control::core::felt_direction(&e, &m_e).unwrap();
+    assert!((e.dot(&d) - 1.0).abs() < 1e-12, "{d}");
+    h.hp.set_held_path(None);
+    h.f = d * e.dot(&push);
+    hold_against(&mut h, &des);
+    let felt = Vector3::from(h.hp.disturbance()[n - 1]);
+    assert!((felt - on_path).norm() < 1e-3, "{felt} vs {on_path}");
+    // The hinge's share is real here: the felt push leaves e by more than 5 N.
+    assert!((felt - e * e.dot(&felt)).norm() > 5.0, "{felt}");
+    // An isotropic stiffness pushes back along e itself: FC-0 again.
+    let d = upc::control::core::felt_direction(&e, &Matrix3::identity()).unwrap();
+    assert!((d - e).norm() < 1e-12, "{d}");
+    assert!(upc::control::core::felt_direction(&e, &Matrix3::zeros()).is_none());
+}
+
 #[test]
 fn softer_stiffness_delays_and_lowers_the_disturbance_peak() {
     let c = config_with(&[]);

@@ -450,6 +450,10 @@ pub struct ControllerConfig {
     /// f ← e eᵀ f, so that a forecast pointing off the door's path announces no sideways push
     /// the door cannot give. Off, or nothing held: the forecast as received.
     pub forecast_on_free_direction: bool,
+    /// With `forecast_on_free_direction`: the push along e taken where the held hand feels it,
+    /// F_e K_e e / (eᵀ K_e e), the arm's reaction along K_e e and the hinge's share across e
+    /// (docs/forecast_correction.md, FC-0b). Off: along e.
+    pub forecast_felt_at_hand: bool,
     /// PD on the CoM height (1/s², 1/s).
     pub com_height_kp: f64,
     pub com_height_kd: f64,

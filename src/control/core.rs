@@ -100,6 +100,8 @@ pub struct ControllerCore {
     /// (HP-1), and that path once known ([`Self::with_held_mass`]).
     held_path_mode: crate::config::HeldPath,
     held_path: Option<(Vector3<f64>, f64)>,
+    /// The held object's free direction e, whatever `hand.held_path` (FC-0b).
+    door_path: Option<Vector3<f64>>,
     /// The robot as measured this tick (read from the contract once), the tick's shared
     /// quantities and the parts that work on them (`super::parts`).
     sensed: RobotState,
@@ -205,6 +207,7 @@ impl ControllerCore {
             decoupled_stiffness: config.hand.stiffness == crate::config::HandStiffness::Decoupled,
             held_path_mode: config.hand.held_path,
             held_path: None,
+            door_path: None,
             zmp_ref: vec![[0.0; 2]; n],
             hand_desired: vec![HandState::default(); n],
             schedule: nominal.clone(),
@@ -249,7 +252,9 @@ impl ControllerCore {
             HeldPath::PathInertia => held_mass.trace(),
             HeldPath::Path | HeldPath::Free => 0.0,
         };
-        self.held_path = free_direction(&held_mass)
+        self.door_path = free_direction(&held_mass);
+        self.held_path = self
+            .door_path
             .filter(|_| self.held_path_mode != HeldPath::Free)
             .map(|e| (e, mass));
         self.previewer.set_held_path(self.held_path);
@@ -264,6 +269,18 @@ impl ControllerCore {
         self.hand_free_dir =
             (m.is_finite() && m > 0.0 && self.decoupled_stiffness).then(|| held_mass / m);
         self
+    }
+
+    /// FC-0b for this controller's hand: [`felt_direction`] with K_e ∝ M_e (eq. (17)) or ∝ 1
+    /// (`hand.stiffness = "decoupled"`); `None` without a held object or a usable M_e.
+    pub fn felt_direction(&self) -> Option<[f64; 3]> {
+        let e = self.door_path?;
+        let shape = if self.decoupled_stiffness {
+            Matrix3::identity()
+        } else {
+            *self.previewer.effective_mass()
+        };
+        felt_direction(&e, &shape).map(Into::into)
     }
 
     pub fn horizon(&self) -> usize {
@@ -849,6 +866,16 @@ pub fn free_direction(held_mass: &Matrix3<f64>) -> Option<Vector3<f64>> {
         .map(|k| held_mass.column(k).into_owned())
         .max_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))?;
     Some(c.normalize())
+}
+
+/// Where a hand held by a stiffness of shape `k_e` feels a push along a door's path `e` (unit),
+/// per newton along e: d = K_e e / (eᵀ K_e e) (FC-0b). Held on the path, the hand's error s e
+/// pushes back along K_e e; the push balances its part along e (eᵀd = 1) and the hinge the rest.
+/// `None` when eᵀ K_e e is not positive.
+pub fn felt_direction(e: &Vector3<f64>, k_e: &Matrix3<f64>) -> Option<Vector3<f64>> {
+    let k = k_e * e;
+    let s = e.dot(&k);
+    (s.is_finite() && s > 0.0).then(|| k / s)
 }
 
 #[cfg(test)]

@@ -70,6 +70,8 @@ pub struct ForecastWindow {
     weight: f64,
     /// The held object's free direction e (unit), if the forecast is taken along it.
     free_dir: Option<[f64; 3]>,
+    /// Where the hand feels a push along e (FC-0b): d with eᵀd = 1; e itself when unset.
+    felt_dir: Option<[f64; 3]>,
 }
 
 impl ForecastWindow {
@@ -91,6 +93,7 @@ impl ForecastWindow {
             decay,
             weight,
             free_dir: None,
+            felt_dir: None,
         }
     }
 
@@ -104,6 +107,22 @@ impl ForecastWindow {
         self
     }
 
+    /// FC-0b: a push of F_e along the path reaches the held hand as F_e d, d = K_e e / (eᵀ K_e e)
+    /// (the arm's stiffness K_e pushes back along K_e e, the hinge takes the rest). Windows
+    /// accepted from now on are taken so. `None`, a non-finite `d` or one with eᵀd away from 1
+    /// (a d of another path) takes them along e.
+    pub fn set_felt_direction(&mut self, d: Option<[f64; 3]>) {
+        self.felt_dir = match (self.free_dir, d) {
+            (Some(e), Some(d))
+                if d.iter().all(|x| x.is_finite())
+                    && (e[0] * d[0] + e[1] * d[1] + e[2] * d[2] - 1.0).abs() < 1e-9 =>
+            {
+                Some(d)
+            }
+            _ => None,
+        };
+    }
+
     /// Validate `msg` at time `now` and take it if good.
     pub fn offer(&mut self, msg: &ForecastMsg, now: f64) -> Result<(), ForecastRejection> {
         let r = self.check(msg, now);
@@ -115,9 +134,10 @@ impl ForecastWindow {
                 let n = msg.len as usize;
                 self.forces[..n].copy_from_slice(&msg.forces[..n]);
                 if let Some(e) = self.free_dir {
+                    let d = self.felt_dir.unwrap_or(e);
                     for f in &mut self.forces[..n] {
                         let along = e[0] * f[0] + e[1] * f[1] + e[2] * f[2];
-                        *f = e.map(|x| x * along);
+                        *f = d.map(|x| x * along);
                     }
                 }
                 self.t0 = msg.t0;
@@ -274,6 +294,33 @@ mod tests {
             w.offer(&m, 0.0).unwrap();
             assert_eq!(w.at(0.045), m.forces[4]);
         }
+    }
+
+    /// FC-0b: with a felt direction d (eᵀd = 1) each accepted sample is d (eᵀf); a d that
+    /// does not belong to e (eᵀd ≠ 1), or none, leaves FC-0's e (eᵀf).
+    #[test]
+    fn a_forecast_is_felt_where_the_held_hand_pushes_back() {
+        let mut m = msg(1, 0.0, 0.01, 10, 0.0);
+        for s in m.forces[..10].iter_mut() {
+            *s = [-40.0, 20.0, 3.0];
+        }
+        let e = [1.0f64, 0.0, 0.0];
+        let d = [1.0, -0.3, 0.25];
+        let mut w = ForecastWindow::new(1.0, 1.0, 0.1, 300.0).with_free_direction(e);
+        w.set_felt_direction(Some(d));
+        w.offer(&m, 0.0).unwrap();
+        assert_eq!(w.at(0.045), [-40.0, 12.0, -10.0]);
+        for bad in [Some([0.9, -0.3, 0.25]), Some([f64::NAN, 0.0, 0.0]), None] {
+            let mut w = ForecastWindow::new(1.0, 1.0, 0.1, 300.0).with_free_direction(e);
+            w.set_felt_direction(bad);
+            w.offer(&m, 0.0).unwrap();
+            assert_eq!(w.at(0.045), [-40.0, 0.0, 0.0], "{bad:?}");
+        }
+        // Nothing held: no felt direction either.
+        let mut w = ForecastWindow::new(1.0, 1.0, 0.1, 300.0);
+        w.set_felt_direction(Some(d));
+        w.offer(&m, 0.0).unwrap();
+        assert_eq!(w.at(0.045), m.forces[4]);
     }
 
     #[test]

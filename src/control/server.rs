@@ -566,6 +566,12 @@ impl<'a> ControlLoop<'a> {
         }
         inputs.c2_log =
             schedule.map(|sch| (sch.cost, sch.nominal_cost, sch.iterations, sch.solve_time));
+        if self.config.controller.forecast_felt_at_hand {
+            // FC-0b with the arm's inertia of the last tick: the next windows are taken so.
+            self.intake
+                .window
+                .set_felt_direction(self.core.felt_direction());
+        }
         let tau = &mut self.tau[..self.n_tau];
         let result = self.core.tick(state, &self.intake.window, schedule, tau);
         match result {
