@@ -452,7 +452,8 @@ pub struct ControllerConfig {
     pub forecast_on_free_direction: bool,
     /// With `forecast_on_free_direction`: the push along e taken where the held hand feels it,
     /// F_e K_e e / (eᵀ K_e e), the arm's reaction along K_e e and the hinge's share across e
-    /// (docs/forecast_correction.md, FC-0b). Off: along e.
+    /// (docs/forecast_correction.md, FC-0b), the hinge's share as far as the forecast's weight
+    /// (FC-5) believes it. Off: along e.
     pub forecast_felt_at_hand: bool,
     /// PD on the CoM height (1/s², 1/s).
     pub com_height_kp: f64,

@@ -272,7 +272,8 @@ impl ControllerCore {
     }
 
     /// FC-0b for this controller's hand: [`felt_direction`] with K_e ∝ M_e (eq. (17)) or ∝ 1
-    /// (`hand.stiffness = "decoupled"`); `None` without a held object or a usable M_e.
+    /// (`hand.stiffness = "decoupled"`), as far as the correction believes the forecast
+    /// ([`believed_felt_direction`]); `None` without a held object or a usable M_e.
     pub fn felt_direction(&self) -> Option<[f64; 3]> {
         let e = self.door_path?;
         let shape = if self.decoupled_stiffness {
@@ -280,7 +281,12 @@ impl ControllerCore {
         } else {
             *self.previewer.effective_mass()
         };
-        felt_direction(&e, &shape).map(Into::into)
+        let d = felt_direction(&e, &shape)?;
+        let w = self
+            .part::<super::forecast_correction::Correction>()
+            .and_then(|c| c.corrector())
+            .map_or(1.0, |c| c.estimate().weight);
+        Some(believed_felt_direction(&e, &d, w).into())
     }
 
     pub fn horizon(&self) -> usize {
@@ -878,9 +884,40 @@ pub fn felt_direction(e: &Vector3<f64>, k_e: &Matrix3<f64>) -> Option<Vector3<f6
     (s.is_finite() && s > 0.0).then(|| k / s)
 }
 
+/// FC-0b as far as the forecast is believed: e + w (d − e), w the forecast's weight (FC-5).
+/// The hinge's share across e is the forecast's claim, wrong whenever the forecast is; a
+/// discounted forecast keeps it only in part (w = 0: FC-0's e; a non-finite w counts as 0).
+/// eᵀ(e + w (d − e)) = 1 for every w: the push along the path is the forecast's.
+pub fn believed_felt_direction(e: &Vector3<f64>, d: &Vector3<f64>, w: f64) -> Vector3<f64> {
+    let w = if w.is_finite() {
+        w.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    e + (d - e) * w
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_discounted_forecast_keeps_the_hinges_share_only_as_far_as_it_is_believed() {
+        let e = Vector3::new(0.995, 0.1, 0.0).normalize();
+        let k_e = Matrix3::new(2.0, 0.3, -0.1, 0.3, 1.5, 0.2, -0.1, 0.2, 3.0);
+        let d = felt_direction(&e, &k_e).unwrap();
+        assert!((d - e).norm() > 0.05, "a share across e to keep: {d}");
+        let at = |w| believed_felt_direction(&e, &d, w);
+        assert!((at(1.0) - d).norm() < 1e-15);
+        assert!((at(0.0) - e).norm() < 1e-15);
+        assert!((at(0.25) - (e * 0.75 + d * 0.25)).norm() < 1e-15);
+        for w in [-1.0, 0.0, 0.3, 0.7, 1.0, 2.0, f64::NAN, f64::INFINITY] {
+            assert!((e.dot(&at(w)) - 1.0).abs() < 1e-12, "w {w}: {}", at(w));
+        }
+        assert!((at(2.0) - d).norm() < 1e-15);
+        assert!((at(-1.0) - e).norm() < 1e-15);
+        assert!((at(f64::NAN) - e).norm() < 1e-15);
+    }
 
     #[test]
     fn a_held_doors_force_is_the_push_less_its_inertia_at_the_hands_acceleration() {
