@@ -1,13 +1,13 @@
 //! The controller's rerun log, written by its own thread. The loop hands records over a bounded
 //! channel with `try_send` (a full channel drops the record and counts it): logging never blocks
-//! the real-time loop. In lockstep (`lossless`) tick records wait for room instead, so that the
-//! CSV of a rerun holds the same rows. Horizon-sized plan records come from a small pool of preallocated buffers that the
-//! logger returns after use, so the loop does not allocate either.
+//! the real-time loop. In lockstep (`lossless`) tick and plan records wait for room instead, so
+//! that a rerun logs the same records. Horizon-sized plan records come from a small pool of
+//! preallocated buffers that the logger returns after use, so the loop does not allocate either.
 
 use std::io::Write;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{Receiver, SyncSender, TryRecvError, sync_channel};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
 
 use rerun::blueprint::{
@@ -145,20 +145,27 @@ impl ControlLogger {
         }
     }
 
-    /// Borrow a free plan buffer, let `fill` write it, queue it. Skipped if none is free.
+    /// Borrow a free plan buffer, let `fill` write it, queue it. Skipped if none is free; in
+    /// lockstep it waits for the logger to return one, as tick records wait for room, so that a
+    /// rerun logs the same plans.
     pub fn plan(&self, fill: impl FnOnce(&mut PlanLog)) {
-        match self.free.try_recv() {
-            Ok(mut p) => {
-                fill(&mut p);
-                if let Some(tx) = &self.tx
-                    && tx.try_send(Item::Plan(p)).is_err()
-                {
-                    self.dropped.fetch_add(1, Ordering::Relaxed);
-                }
-            }
-            Err(TryRecvError::Empty | TryRecvError::Disconnected) => {
-                self.dropped.fetch_add(1, Ordering::Relaxed);
-            }
+        let buffer = if self.lossless {
+            self.free.recv().ok()
+        } else {
+            self.free.try_recv().ok()
+        };
+        let Some(mut p) = buffer else {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+            return;
+        };
+        fill(&mut p);
+        let sent = match &self.tx {
+            Some(tx) if self.lossless => tx.send(Item::Plan(p)).is_ok(),
+            Some(tx) => tx.try_send(Item::Plan(p)).is_ok(),
+            None => true,
+        };
+        if !sent {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
         }
     }
 
