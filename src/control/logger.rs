@@ -134,11 +134,17 @@ impl ControlLogger {
     }
 
     pub fn tick(&self, t: TickLog) {
+        self.queue(Item::Tick(t));
+    }
+
+    /// Hands `item` to the logger thread: in lockstep it waits for room, in real time a full
+    /// channel drops it (counted).
+    fn queue(&self, item: Item) {
         let Some(tx) = &self.tx else { return };
         let sent = if self.lossless {
-            tx.send(Item::Tick(t)).is_ok()
+            tx.send(item).is_ok()
         } else {
-            tx.try_send(Item::Tick(t)).is_ok()
+            tx.try_send(item).is_ok()
         };
         if !sent {
             self.dropped.fetch_add(1, Ordering::Relaxed);
@@ -159,14 +165,7 @@ impl ControlLogger {
             return;
         };
         fill(&mut p);
-        let sent = match &self.tx {
-            Some(tx) if self.lossless => tx.send(Item::Plan(p)).is_ok(),
-            Some(tx) => tx.try_send(Item::Plan(p)).is_ok(),
-            None => true,
-        };
-        if !sent {
-            self.dropped.fetch_add(1, Ordering::Relaxed);
-        }
+        self.queue(Item::Plan(p));
     }
 
     /// Flush and close the file (the last tick is in it once this returns).
