@@ -23,36 +23,10 @@ use std::time::Duration;
 
 use support::procs::*;
 use support::robots::installed;
+use support::starved::again_if_starved;
 
 fn domain(d: u16) -> String {
     format!("bus.domain={d}")
-}
-
-/// A real-time test's verdict is the machine's as much as the code's. `body` runs in a scratch
-/// directory named `name`; if it fails and `starved` finds, in what that run left there, that the
-/// machine starved the test's own processes (the bus participant overslept a wait by more than
-/// 5 ms, the test's robot fell below 95 % of its rate or went silent unasked), it runs once more
-/// in a fresh one, saying so, and that verdict stands. A failure without such evidence stands
-/// at once. (On 2-core CI machines, three of these tests failed together right after a build,
-/// their own robots at 424–469 Hz of 500; run again they passed.)
-fn again_if_starved(
-    name: &str,
-    starved: impl Fn(&Scratch) -> Option<String>,
-    body: impl Fn(&Scratch),
-) {
-    let first = Scratch::new(name);
-    let Err(failure) = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| body(&first)))
-    else {
-        return;
-    };
-    let Some(why) = starved(&first) else {
-        std::panic::resume_unwind(failure);
-    };
-    eprintln!(
-        "note: {name} failed on a machine that starved the test's own processes ({why}); \
-         run once more, whose verdict stands"
-    );
-    body(&Scratch::new(&format!("{name}_again")));
 }
 
 /// A summary the failed run may not have written (no evidence then).

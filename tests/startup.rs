@@ -11,6 +11,7 @@ use std::time::Duration;
 
 use serde_json::Value;
 use support::procs::*;
+use support::starved::again_if_starved;
 use upc::channels::STATE_FLAG_HOLD;
 
 /// Start the unit `unit` as process `name`, with `extra` arguments appended.
@@ -247,48 +248,54 @@ fn simulator_killed_mid_push_and_restarted_is_held_handed_over_and_stands() {
 #[test]
 fn controller_killed_and_restarted_plant_holds_and_the_new_one_takes_over() {
     let _serial = serial();
-    let s = Scratch::new("startup_ctl_restart");
-    let mut p = Procs::default();
-    let obs = Observer::start(&s.prefix);
-    start_sim(&mut p, &s, "sim");
-    start_unit(&mut p, &s, "upc-controller", "controller", &[]);
-    start_unit(&mut p, &s, "upc-forecaster", "forecaster", &[]);
-    // Between the 60 N push (ends at 2.75 s of the scenario) and the 40 N one (3.6 s): killed
-    // once the robot is back from the first, the controller is lost 0.05 s later, and the new
-    // one's 0.2 s handover ends ≈ 3.4 s. A push that lands while the plant holds the robot (a
-    // posture PD does not balance) or during the handover can leave its capture point beyond
-    // the heel before the controller has it. Killed at 3.1 s (the handover overlapping the
-    // 40 N push), 2 of some 25 runs slid or fell on 2-core machines; from here, a restart
-    // up to 0.5 s later stood in every run (2026-11-28).
-    obs.wait_for(1, 2.95, &mut p, &s);
-    p.signal("controller", libc::SIGKILL);
-    let _ = p.wait("controller", Duration::from_secs(5));
-    pause(&mut p, &s, 0.2);
-    let held = obs.get();
-    let csv = s.path("controller2.csv").display().to_string();
-    start_unit(&mut p, &s, "upc-controller", "controller", &["--csv", &csv]);
-    obs.wait_for(1, held.time + 3.0, &mut p, &s);
-    let seen = obs.get();
-    // The simulator first: stopping the controller first would be a second loss.
-    stop_all(&mut p, &s, &["sim", "controller", "forecaster"]);
-    assert_ne!(
-        held.flags & STATE_FLAG_HOLD,
-        0,
-        "the plant held the robot: {held:?}"
-    );
-    assert_stands(&seen, "restarted controller");
-    let sim = json(&s.path("sim.json"));
-    assert_eq!(u(&sim["hold"], "losses"), 1, "{sim}");
-    assert_eq!(u(&sim["hold"], "handovers"), 2, "{sim}");
-    assert_eq!(u(&sim["commands"], "controller_changes"), 1, "{sim}");
-    assert_eq!(u(&sim["commands"], "out_of_order"), 0, "{sim}");
-    eprintln!(
-        "controller restart: CoM drop {:.2} mm, slip {:.3} m/s at {:.2} s, hold steps {}, stale commands {}",
-        (seen.com_z0 - seen.com_z_min) * 1e3,
-        seen.max_slip,
-        seen.max_slip_time,
-        u(&sim["hold"], "hold_steps"),
-        u(&sim["commands"], "stale")
+    // Steal by the host (no evidence of its own: the plant holds through any stall).
+    again_if_starved(
+        "startup_ctl_restart",
+        |_| None,
+        |s| {
+            let mut p = Procs::default();
+            let obs = Observer::start(&s.prefix);
+            start_sim(&mut p, s, "sim");
+            start_unit(&mut p, s, "upc-controller", "controller", &[]);
+            start_unit(&mut p, s, "upc-forecaster", "forecaster", &[]);
+            // Between the 60 N push (ends at 2.75 s of the scenario) and the 40 N one (3.6 s): killed
+            // once the robot is back from the first, the controller is lost 0.05 s later, and the new
+            // one's 0.2 s handover ends ≈ 3.4 s. A push that lands while the plant holds the robot (a
+            // posture PD does not balance) or during the handover can leave its capture point beyond
+            // the heel before the controller has it. Killed at 3.1 s (the handover overlapping the
+            // 40 N push), 2 of some 25 runs slid or fell on 2-core machines; from here, a restart
+            // up to 0.5 s later stood in every run (2026-11-28).
+            obs.wait_for(1, 2.95, &mut p, s);
+            p.signal("controller", libc::SIGKILL);
+            let _ = p.wait("controller", Duration::from_secs(5));
+            pause(&mut p, s, 0.2);
+            let held = obs.get();
+            let csv = s.path("controller2.csv").display().to_string();
+            start_unit(&mut p, s, "upc-controller", "controller", &["--csv", &csv]);
+            obs.wait_for(1, held.time + 3.0, &mut p, s);
+            let seen = obs.get();
+            // The simulator first: stopping the controller first would be a second loss.
+            stop_all(&mut p, s, &["sim", "controller", "forecaster"]);
+            assert_ne!(
+                held.flags & STATE_FLAG_HOLD,
+                0,
+                "the plant held the robot: {held:?}"
+            );
+            assert_stands(&seen, "restarted controller");
+            let sim = json(&s.path("sim.json"));
+            assert_eq!(u(&sim["hold"], "losses"), 1, "{sim}");
+            assert_eq!(u(&sim["hold"], "handovers"), 2, "{sim}");
+            assert_eq!(u(&sim["commands"], "controller_changes"), 1, "{sim}");
+            assert_eq!(u(&sim["commands"], "out_of_order"), 0, "{sim}");
+            eprintln!(
+                "controller restart: CoM drop {:.2} mm, slip {:.3} m/s at {:.2} s, hold steps {}, stale commands {}",
+                (seen.com_z0 - seen.com_z_min) * 1e3,
+                seen.max_slip,
+                seen.max_slip_time,
+                u(&sim["hold"], "hold_steps"),
+                u(&sim["commands"], "stale")
+            );
+        },
     );
 }
 

@@ -8,4 +8,5 @@ pub mod prereq;
 pub mod procs;
 pub mod robots;
 pub mod rrd;
+pub mod starved;
 pub mod upc_run;
