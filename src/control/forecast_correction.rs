@@ -721,7 +721,9 @@ impl ForecastCorrector {
             self.counts.discounts += 1;
             if self.counts.discounts.is_power_of_two() {
                 tracing::warn!(
-                    "the forecast predicts the measured hand force worse than the measurement                      alone at t = {:.3} s (RMS error {:.1} N against {:.1} N): its weight is                      {w:.2} ({} times so far)",
+                    "the forecast predicts the measured hand force worse than the measurement alone at \
+                     t = {:.3} s (RMS error {:.1} N against {:.1} N): its weight is {w:.2} ({} \
+                     times so far)",
                     self.last_bin_t,
                     self.est.error_forecast,
                     self.est.error_measured,
