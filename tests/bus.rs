@@ -5,6 +5,7 @@
 //!   controller: the robot held, handed over, standing, silent for a while (damped, handed
 //!   back), then its controller killed and the
 //!   drives damped within the stated bound; no feed-forward torque above an effort limit.
+//!   `upc bus` itself stopped and continued: a new DDS participant, the robot handed back.
 //! - `upc run --bus unitree`: the same verdict as on upc's contract.
 //! - An independent robot on the other side of the wire: CycloneDDS 0.10.2 (Debian's library,
 //!   its Python binding built against it by scripts/setup.sh) with Unitree's IDL types and its
@@ -49,59 +50,12 @@ fn a_g1_on_the_bus_stands_and_is_damped_within_10_ms_of_its_controller_s_death()
     }
     let starved = |s: &Scratch| participant_starved(&s.path("bus.json"));
     again_if_starved("bus_damping", starved, |s| {
-        let mut p = Procs::default();
-        let d = domain(21);
-        let sim_summary = s.path("sim.json").display().to_string();
-        let scenario = s.scenario();
-        p.start(
+        let mut p = g1_bus_and_controller(
             s,
-            "sim",
-            &[
-                "sim",
-                "--bus",
-                "unitree",
-                "--robot",
-                "g1",
-                "--scenario",
-                &scenario,
-                "--duration",
-                "0",
-                "--summary",
-                &sim_summary,
-                "--bus-set",
-                &d,
-                // The robot's states lost on the wire for 80 ms, 4 s in: damped, then handed back.
-                // (Not SIGSTOP: rustdds's event loop ends on the EINTR it brings.)
-                "--bus-set",
-                "bus.sim.silence=[4.0, 0.08]",
-            ],
-        );
-        // `upc bus` as its systemd unit starts it (services/upc-bus.service: the G1's domain and
-        // network, SCHED_FIFO, its summary in the log directory, here the scratch one), moved to
-        // the test's domain, the loopback and the default scheduler by later `--bus-set`s.
-        let mut bus = unit_args("upc-bus", s);
-        assert!(bus.iter().any(|a| a.ends_with("bus.json")), "{bus:?}");
-        bus.extend(
-            [
-                "--scenario",
-                &scenario,
-                "--bus-set",
-                &d,
-                "--bus-set",
-                "bus.interface=127.0.0.1",
-                "--bus-set",
-                "bus.realtime.fifo_priority=0",
-                "--bus-set",
-                "bus.realtime.lock_memory=false",
-            ]
-            .map(String::from),
-        );
-        let bus: Vec<&str> = bus.iter().map(String::as_str).collect();
-        p.start(s, "bus", &bus);
-        start_controller(
-            &mut p,
-            s,
-            &["--robot", "g1", "--set", "controller.rate_hz=500.0"],
+            21,
+            // The robot's states lost on the wire for 80 ms, 4 s in: damped, then handed back.
+            // (The participant itself stopped is the next test's.)
+            &["--bus-set", "bus.sim.silence=[4.0, 0.08]"],
         );
         std::thread::sleep(Duration::from_secs(6));
         // A 15 ms stall of the controller (stopped and continued): damped, then its torques again at
@@ -173,6 +127,108 @@ fn a_g1_on_the_bus_stands_and_is_damped_within_10_ms_of_its_controller_s_death()
         assert_eq!(u(&bus, "refused_bad_crc"), 0, "{bus}");
         assert_eq!(u(&bus, "clamped_commands"), 0, "{bus}");
     });
+}
+
+/// `upc bus` itself stopped for 15 ms and continued (a debugger, Ctrl-Z): rustdds's threads end
+/// on the interrupted poll that brings (docs/bus.md, "Safety"), the robot falls silent to the
+/// participant, and it joins the bus again with a new DDS participant: the robot heard again
+/// well within `bus.robot_lost`, then handed back to the controller through the hold.
+#[test]
+fn a_g1_participant_stopped_and_continued_joins_the_bus_again_and_hands_the_robot_back() {
+    let _one = serial();
+    if installed("g1").is_none() {
+        return;
+    }
+    let starved = |s: &Scratch| participant_starved(&s.path("bus.json"));
+    again_if_starved("bus_rejoin", starved, |s| {
+        let mut p = g1_bus_and_controller(s, 26, &[]);
+        std::thread::sleep(Duration::from_secs(5));
+        p.freeze(&["bus"], 0.015);
+        std::thread::sleep(Duration::from_secs(3));
+        p.stop(s, "bus", libc::SIGTERM);
+        p.stop(s, "sim", libc::SIGTERM);
+        let bus = json(&s.path("bus.json"));
+        let sim = json(&s.path("sim.json"));
+        assert!(bus["error"].is_null(), "{bus}");
+        assert_eq!(u(&bus, "dds_rejoins"), 1, "{bus}");
+        let silence = f(&bus, "robot_silence_max");
+        assert!((0.0..0.5).contains(&silence) && silence > 0.0, "{bus}");
+        eprintln!(
+            "the participant stopped 15 ms: a new DDS participant, the robot heard again after \
+             {silence:.3} s"
+        );
+        // The hand-over at the start and the one after the robot's silence.
+        assert!(u(&bus, "handovers") >= 2, "{bus}");
+        // The robot kept receiving the participant's commands after it joined again: nine in
+        // ten of its states from the first command on (a participant that never came back
+        // would have answered only the 4 s of 7 before the stop).
+        let commanded = f(&sim, "sim_time") - f(&sim, "first_command");
+        assert!(
+            u(&sim, "commands") as f64 > 0.9 * 500.0 * commanded,
+            "{sim}"
+        );
+        assert_eq!(u(&sim, "bad_crc_commands"), 0, "{sim}");
+    });
+}
+
+/// upc's plant as a G1 on DDS domain `d` (`upc sim --bus unitree`, forever, with `sim_extra`),
+/// `upc bus` as its systemd unit starts it, and a real-time controller of the G1.
+fn g1_bus_and_controller(s: &Scratch, d: u16, sim_extra: &[&str]) -> Procs {
+    let mut p = Procs::default();
+    let d = domain(d);
+    let sim_summary = s.path("sim.json").display().to_string();
+    let scenario = s.scenario();
+    p.start(
+        s,
+        "sim",
+        &[
+            "sim",
+            "--bus",
+            "unitree",
+            "--robot",
+            "g1",
+            "--scenario",
+            &scenario,
+            "--duration",
+            "0",
+            "--summary",
+            &sim_summary,
+            "--bus-set",
+            &d,
+        ]
+        .iter()
+        .chain(sim_extra)
+        .copied()
+        .collect::<Vec<_>>(),
+    );
+    // `upc bus` as its systemd unit starts it (services/upc-bus.service: the G1's domain and
+    // network, SCHED_FIFO, its summary in the log directory, here the scratch one), moved to
+    // the test's domain, the loopback and the default scheduler by later `--bus-set`s.
+    let mut bus = unit_args("upc-bus", s);
+    assert!(bus.iter().any(|a| a.ends_with("bus.json")), "{bus:?}");
+    bus.extend(
+        [
+            "--scenario",
+            &scenario,
+            "--bus-set",
+            &d,
+            "--bus-set",
+            "bus.interface=127.0.0.1",
+            "--bus-set",
+            "bus.realtime.fifo_priority=0",
+            "--bus-set",
+            "bus.realtime.lock_memory=false",
+        ]
+        .map(String::from),
+    );
+    let bus: Vec<&str> = bus.iter().map(String::as_str).collect();
+    p.start(s, "bus", &bus);
+    start_controller(
+        &mut p,
+        s,
+        &["--robot", "g1", "--set", "controller.rate_hz=500.0"],
+    );
+    p
 }
 
 #[test]

@@ -64,6 +64,47 @@ pub fn participant(net: BusNetwork) -> Result<DomainParticipant, DdsError> {
         })
 }
 
+/// Whether a participant's own threads still run. rustdds (0.15) ends its event loop and its
+/// discovery thread on the first interrupted poll, and on Linux a thread blocked in
+/// `epoll_wait` is interrupted (EINTR) whenever its process is stopped and continued, with or
+/// without a handler (signal(7)): a debugger, Ctrl-Z, a paused container. The participant then
+/// neither sends nor receives and says nothing; only its threads' absence shows it.
+#[derive(Debug, Clone, Copy)]
+pub struct Liveness {
+    /// rustdds's named threads in this process once the participant was built.
+    threads: usize,
+}
+
+/// The kernel keeps 15 bytes of a thread's name: rustdds names its event loop
+/// "RustDDS Participant N event loop" and its discovery "RustDDS discovery thread".
+const LIBRARY_THREAD: &str = "RustDDS ";
+
+/// rustdds's named threads in this process (`None` without a readable /proc).
+fn library_threads() -> Option<usize> {
+    let tasks = std::fs::read_dir("/proc/self/task").ok()?;
+    Some(
+        tasks
+            .filter_map(|t| std::fs::read_to_string(t.ok()?.path().join("comm")).ok())
+            .filter(|name| name.starts_with(LIBRARY_THREAD))
+            .count(),
+    )
+}
+
+impl Liveness {
+    /// Taken right after the process's participant is built (one participant per process).
+    pub fn of_new_participant() -> Self {
+        Self {
+            threads: library_threads().unwrap_or(0),
+        }
+    }
+
+    /// Whether one of the participant's threads has ended (false when it cannot be known).
+    /// Reads /proc: a few tens of µs, for when the bus has gone silent, not for every sample.
+    pub fn ended(&self) -> bool {
+        library_threads().is_some_and(|n| n < self.threads)
+    }
+}
+
 /// Writer QoS of Unitree's SDK: reliable, last sample only, nothing kept for late joiners.
 pub fn writer_qos() -> QosPolicies {
     QosPolicyBuilder::new()

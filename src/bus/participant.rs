@@ -25,7 +25,7 @@ use std::time::{Duration, Instant};
 use nalgebra::DVector;
 
 use super::config::{BadCrc, BusConfig};
-use super::dds::{DdsError, Inbox, Outbox, participant};
+use super::dds::{DdsError, Inbox, Liveness, Outbox, participant};
 use super::lab::{LAB_STATE_TOPIC, LabState};
 use super::motors::{MotorMap, Slot};
 use super::ros2::{
@@ -131,6 +131,8 @@ pub struct BusSummary {
     /// spoke again), and the longest silence (s).
     pub robot_silences: u64,
     pub robot_silence_max: f64,
+    /// Times the DDS participant's threads had ended and a new participant joined the bus.
+    pub dds_rejoins: u64,
     pub hold_states: u64,
     pub damping_states: u64,
     /// The longest publication of a state on the contract and to ROS 2 (s).
@@ -179,19 +181,55 @@ const ANSWER_POLL: Duration = Duration::from_micros(50);
 /// robot whose states are lost on the way but which still listens keeps receiving it.
 const SILENT_REPEAT: Duration = Duration::from_millis(2);
 
+/// How often, while the robot is silent, the participant checks that its own DDS threads run.
+const LIVENESS_CHECK: Duration = Duration::from_millis(10);
+
 /// How many times the damping is written, every [`SILENT_REPEAT`], when the bus stops.
 const FINAL_DAMPING: usize = 5;
 
 /// How long a state waits for the lab's sample of its tick (s).
 const LAB_WAIT: f64 = 3e-4;
 
-/// The participant's endpoints: the robot's bus and upc's contract.
-struct Endpoints {
+/// The participant's side of the robot's bus: a DDS participant and its readers and writers,
+/// replaced whole when the participant's threads end ([`Session::rejoin_if_ended`]).
+struct RobotBus {
     states: Inbox<LowState>,
     labs: Inbox<LabState>,
     commands: Outbox<LowCmd>,
     joint_states: Outbox<JointState>,
     wrenches: Outbox<WrenchStamped>,
+    live: Liveness,
+    /// Last: dropped after the readers and writers that belong to it.
+    #[expect(dead_code, reason = "held for its readers and writers, never read")]
+    dp: rustdds::DomainParticipant,
+}
+
+impl RobotBus {
+    /// A new participant on `net` with the bus's readers and writers; `before_writing` runs
+    /// once the readers are there and before any writer is (nothing is written here).
+    fn open(
+        net: super::dds::BusNetwork,
+        before_writing: impl FnOnce(&rustdds::DomainParticipant) -> Result<(), BusError>,
+    ) -> Result<Self, BusError> {
+        let dp = participant(net)?;
+        let states = Inbox::new(&dp, LOW_STATE_TOPIC)?;
+        let labs = Inbox::new(&dp, LAB_STATE_TOPIC)?;
+        before_writing(&dp)?;
+        Ok(Self {
+            states,
+            labs,
+            commands: Outbox::new(&dp, LOW_CMD_TOPIC)?,
+            joint_states: Outbox::new(&dp, JOINT_STATE_TOPIC)?,
+            wrenches: Outbox::new(&dp, HAND_WRENCH_TOPIC)?,
+            live: Liveness::of_new_participant(),
+            dp,
+        })
+    }
+}
+
+/// The participant's endpoints: the robot's bus and upc's contract.
+struct Endpoints {
+    bus: RobotBus,
     state_out: crate::channels::Publisher<StateMsg>,
     torques: crate::channels::Subscriber<TorqueMsg>,
     state_event: crate::channels::Notifier,
@@ -242,17 +280,14 @@ pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError>
         control_start: -1.0,
         ..Default::default()
     };
-    let dp = participant(cfg.network())?;
-    refuse_other_controllers(&dp, cfg, stop)?;
-    let mut states = Inbox::<LowState>::new(&dp, LOW_STATE_TOPIC)?;
-    let labs = Inbox::<LabState>::new(&dp, LAB_STATE_TOPIC)?;
+    let mut bus = RobotBus::open(cfg.network(), |dp| refuse_other_controllers(dp, cfg, stop))?;
     // The first valid state: nothing is commanded before it.
     let first = Instant::now() + Duration::from_secs_f64(cfg.first_state_timeout);
     let state = loop {
         if stop.load(Ordering::Relaxed) {
             return Ok(summary);
         }
-        match states.wait(first)? {
+        match bus.states.wait(first)? {
             None => return Err(BusError::NoRobot(cfg.first_state_timeout)),
             Some(s) if valid(&s, cfg.bad_crc, &mut summary) => break s,
             Some(_) => {}
@@ -266,11 +301,7 @@ pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError>
         .map_err(|e| BusError::Setup(e.to_string()))?;
     let contract = Bus::open(&opts.prefix, &opts.node_name)?;
     let ep = Endpoints {
-        states,
-        labs,
-        commands: Outbox::new(&dp, LOW_CMD_TOPIC)?,
-        joint_states: Outbox::new(&dp, JOINT_STATE_TOPIC)?,
-        wrenches: Outbox::new(&dp, HAND_WRENCH_TOPIC)?,
+        bus,
         state_out: contract.publisher()?,
         torques: contract.subscriber()?,
         state_event: contract.notifier(ServiceKind::State)?,
@@ -334,7 +365,7 @@ pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError>
     // periods, since one sample written just before the participant goes can be lost with it
     // (a CI run's robot kept the hold as its last command) and the drives keep the last.
     for _ in 0..FINAL_DAMPING {
-        let _ = ep.commands.write(session.command(Drive::Damping, 0.0));
+        let _ = ep.bus.commands.write(session.command(Drive::Damping, 0.0));
         std::thread::sleep(SILENT_REPEAT);
     }
     let mut s = session.finish(&ep);
@@ -397,7 +428,7 @@ impl Session<'_> {
                 _ => 0.0,
             };
             let w = Instant::now();
-            ep.commands.write(self.command(self.drive, blend))?;
+            ep.bus.commands.write(self.command(self.drive, blend))?;
             self.summary.write_max = self.summary.write_max.max(w.elapsed().as_secs_f64());
             self.summary.commands += 1;
             let total = self.received.elapsed();
@@ -415,7 +446,7 @@ impl Session<'_> {
     /// The lab's sample of this state's tick, if the lab publishes: it may trail the robot's.
     fn pair_lab(&mut self, ep: &mut Endpoints) -> Result<(), BusError> {
         let robot = &mut self.robot;
-        while let Some(l) = ep.labs.try_take()? {
+        while let Some(l) = ep.bus.labs.try_take()? {
             robot.lab = Some(l);
         }
         if robot
@@ -424,7 +455,7 @@ impl Session<'_> {
             .is_some_and(|l| l.tick != robot.state.tick)
         {
             let until = self.received + Duration::from_secs_f64(LAB_WAIT);
-            while let Some(l) = ep.labs.wait(until)? {
+            while let Some(l) = ep.bus.labs.wait(until)? {
                 let this = l.tick == robot.state.tick;
                 robot.lab = Some(l);
                 if this {
@@ -467,7 +498,7 @@ impl Session<'_> {
         let msg = &self.msg;
         ep.state_out.send_with(|m| *m = **msg)?;
         ep.state_event.notify()?;
-        publish_ros(&ep.joint_states, &ep.wrenches, &self.robot, t)?;
+        publish_ros(&ep.bus.joint_states, &ep.bus.wrenches, &self.robot, t)?;
         Ok(())
     }
 
@@ -582,8 +613,9 @@ impl Session<'_> {
     fn next_state(&mut self, ep: &mut Endpoints) -> Result<(), BusError> {
         let waiting = Instant::now();
         let silent = waiting + Duration::from_secs_f64(self.cfg.state_timeout);
-        let lost = waiting + Duration::from_secs_f64(self.cfg.robot_lost);
+        let mut lost = waiting + Duration::from_secs_f64(self.cfg.robot_lost);
         let mut counted = false;
+        let mut liveness_checked: Option<Instant> = None;
         loop {
             let now = Instant::now();
             let driven = matches!(self.drive, Drive::Handover | Drive::Control);
@@ -597,7 +629,7 @@ impl Session<'_> {
                 (now + SILENT_REPEAT).min(lost)
             };
             let until = controller.map_or(robot, |c| c.min(robot));
-            match ep.states.wait_newest(until)? {
+            match ep.bus.states.wait_newest(until)? {
                 None if Instant::now() >= lost => {
                     return Err(BusError::RobotLost(self.cfg.robot_lost));
                 }
@@ -614,6 +646,16 @@ impl Session<'_> {
                     self.switch(Drive::Damping, t);
                     // The robot's silence: when it speaks again, the hold and a hand-over.
                     self.resumable = false;
+                    // Our own participant may be what went silent: checked as the silence
+                    // begins, then every LIVENESS_CHECK.
+                    let now = Instant::now();
+                    if liveness_checked.is_none_or(|c| now - c >= LIVENESS_CHECK) {
+                        liveness_checked = Some(now);
+                        if self.rejoin_if_ended(ep)? {
+                            // The new participant gets the whole time to hear the robot.
+                            lost = Instant::now() + Duration::from_secs_f64(self.cfg.robot_lost);
+                        }
+                    }
                     self.write_damping(ep)?;
                 }
                 None => {
@@ -647,9 +689,33 @@ impl Session<'_> {
         }
     }
 
+    /// A new participant in place of one whose threads ended (see [`Liveness`]); whether it was
+    /// replaced. The robot, which kept publishing, is heard again once discovery matches the new
+    /// one; the drives meanwhile keep the last command they got (the robot's own watchdog
+    /// stands behind that).
+    fn rejoin_if_ended(&mut self, ep: &mut Endpoints) -> Result<bool, BusError> {
+        if !ep.bus.live.ended() {
+            return Ok(false);
+        }
+        tracing::warn!(
+            "t = {:.3} s: the DDS participant's threads ended (rustdds stops on an interrupted \
+             poll: this process was stopped and continued?): joining the bus again",
+            self.time()
+        );
+        let fresh = RobotBus::open(self.cfg.network(), |_| Ok(()))?;
+        let old = std::mem::replace(&mut ep.bus, fresh);
+        self.summary.undecodable += old.states.undecodable + old.labs.undecodable;
+        self.summary.superseded += old.states.superseded;
+        // Its surviving thread, if any, ends with it: counted only the new participant's after.
+        drop(old);
+        ep.bus.live = Liveness::of_new_participant();
+        self.summary.dds_rejoins += 1;
+        Ok(true)
+    }
+
     /// A damping command between states (the controller or the robot silent), counted.
     fn write_damping(&mut self, ep: &mut Endpoints) -> Result<(), BusError> {
-        ep.commands.write(self.command(Drive::Damping, 0.0))?;
+        ep.bus.commands.write(self.command(Drive::Damping, 0.0))?;
         self.summary.commands += 1;
         Ok(())
     }
@@ -673,8 +739,9 @@ impl Session<'_> {
         } else {
             0.0
         };
-        s.undecodable = ep.states.undecodable + ep.labs.undecodable;
-        s.superseded = ep.states.superseded;
+        // Added to the counts of participants replaced before this one.
+        s.undecodable += ep.bus.states.undecodable + ep.bus.labs.undecodable;
+        s.superseded += ep.bus.states.superseded;
         s.controller_commands = self.gate.stats;
         s.adapter_p50 = self.adapter.quantile(0.5);
         s.adapter_p99 = self.adapter.quantile(0.99);

@@ -120,5 +120,10 @@ pub fn run_cli(args: BusArgs) -> CliResult {
             .map(|e| format!("; ended: {e}"))
             .unwrap_or_default()
     );
-    Ok(())
+    // The robot lost ends the run as a failure, its figures written: a service manager
+    // restarts the participant (services/upc-bus.service), `upc run` stops.
+    match s.error {
+        Some(e) => Err(e.into()),
+        None => Ok(()),
+    }
 }
