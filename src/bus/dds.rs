@@ -99,7 +99,7 @@ impl Liveness {
     }
 
     /// Whether one of the participant's threads has ended (false when it cannot be known).
-    /// Reads /proc: a few tens of µs, for when the bus has gone silent, not for every sample.
+    /// Reads /proc and allocates: for when the bus has gone silent, never for every sample.
     pub fn ended(&self) -> bool {
         library_threads().is_some_and(|n| n < self.threads)
     }
