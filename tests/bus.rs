@@ -76,6 +76,16 @@ fn a_g1_on_the_bus_stands_and_is_damped_within_10_ms_of_its_controller_s_death()
         // too: the bus then damps and hands the robot back, as designed. Each loss but the last was
         // followed by a handover, and every one was damped within the bound below.
         assert!(bus["error"].is_null(), "{bus}");
+        // config/bus.toml's wake-up latency bound, held where the OS lets it (root: as the
+        // systemd unit runs, and as CI does).
+        // SAFETY: geteuid has no preconditions.
+        let root = unsafe { libc::geteuid() } == 0;
+        let held = bus["realtime"]["cpu_latency_held"].as_bool();
+        assert_eq!(
+            held,
+            Some(root),
+            "wake-up latency bound held as root only: {bus}"
+        );
         assert!(u(&bus, "robot_silences") >= 1, "{bus}");
         let silence = f(&bus, "robot_silence_max");
         assert!((0.06..1.0).contains(&silence), "{bus}");

@@ -13,4 +13,8 @@ pub struct RealtimeSettings {
     pub lock_memory: bool,
     /// CPU to pin the control thread to; none if absent.
     pub cpu: Option<usize>,
+    /// Bound the machine's CPU wake-up latency to this many µs while the process runs (a PM QoS
+    /// request, `crate::realtime::cpu_latency`): 0 keeps idle CPUs polling instead of halting.
+    /// None if absent; a value above every idle state's exit latency bounds nothing.
+    pub cpu_latency_us: Option<u32>,
 }

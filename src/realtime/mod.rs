@@ -1,11 +1,12 @@
 //! Real-time process setup, shared by every process with a loop (controller, plant, bridge, bus):
-//! SCHED_FIFO priority, locked memory, CPU affinity, background and lower-priority threads, the
+//! SCHED_FIFO priority, locked memory, CPU affinity, the CPUs' wake-up latency, background and lower-priority threads, the
 //! log threads' drain loop, and loop latency statistics ([`latency`]). Each step that the OS
 //! refuses (no CAP_SYS_NICE, container limits) degrades with a warning, never an error.
 //!
 //! A bottom module: it depends on [`crate::config`] only, so the plant and the transports time
 //! their loops without depending on the controller.
 
+pub mod cpu_latency;
 pub mod cpus;
 pub mod latency;
 
@@ -20,6 +21,9 @@ pub struct RealtimeReport {
     pub fifo: bool,
     pub memory_locked: bool,
     pub pinned: bool,
+    /// The CPUs' wake-up latency bound held ([`cpu_latency`]); absent in older summaries.
+    #[serde(default)]
+    pub cpu_latency_held: bool,
 }
 
 /// Apply to the calling thread (and, for mlockall, the process).
@@ -50,6 +54,9 @@ pub fn apply(s: &RealtimeSettings) -> RealtimeReport {
                 std::io::Error::last_os_error()
             );
         }
+    }
+    if let Some(us) = s.cpu_latency_us {
+        r.cpu_latency_held = cpu_latency::hold(us);
     }
     if let Some(cpu) = s.cpu {
         // SAFETY: cpu_set_t is plain data; CPU_SET bounds are checked against its size.
