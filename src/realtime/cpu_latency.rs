@@ -6,8 +6,8 @@
 //! deep C-state, or a virtual CPU halted and descheduled by its host, takes its exit latency to
 //! run again. A request of 0 µs keeps idle CPUs polling instead of halting. Measured on this
 //! project's 2-core VM (docs/results/bus.md, "The CPUs' wake-up latency"): the G1's bus
-//! participant overslept 1 ms waits by 10–17 ms with the CPUs halting and the host then took
-//! 35–45 % of them as steal; with the request held, 0.9 % steal and no oversleep past 5 ms.
+//! participant overslept 1 ms waits by 9.8–17.0 ms with the CPUs halting and the host then took
+//! 35–45 % of them as steal; with the request held, the bus tests passed at 0.3–0.9 % steal.
 //! The price: idle CPUs spin (power and, in a VM, the host's CPU time) while the process runs.
 
 use std::io::Write;

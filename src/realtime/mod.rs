@@ -1,6 +1,7 @@
 //! Real-time process setup, shared by every process with a loop (controller, plant, bridge, bus):
-//! SCHED_FIFO priority, locked memory, CPU affinity, the CPUs' wake-up latency, background and lower-priority threads, the
-//! log threads' drain loop, and loop latency statistics ([`latency`]). Each step that the OS
+//! SCHED_FIFO priority, locked memory, CPU affinity, the CPUs' wake-up latency, background and
+//! lower-priority threads, the log threads' drain loop, and loop latency statistics
+//! ([`latency`]). Each step that the OS
 //! refuses (no CAP_SYS_NICE, container limits) degrades with a warning, never an error.
 //!
 //! A bottom module: it depends on [`crate::config`] only, so the plant and the transports time
