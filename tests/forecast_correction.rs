@@ -24,7 +24,11 @@ const C0_CAPABILITY: f64 = 30.0;
 struct Case<'a> {
     controller: &'a str,
     amplitude: f64,
+    /// The impact's duration (s).
+    duration: f64,
+    /// The forecast is `scale` × the force, `shift` s late.
     scale: f64,
+    shift: f64,
     phantom: bool,
     correction: bool,
     extra: &'a [&'a str],
@@ -33,7 +37,11 @@ struct Case<'a> {
 /// The controller summary of one `upc run` of the case.
 fn run(s: &Scratch, name: &str, c: &Case) -> Value {
     let scenario = s.path(&format!("{name}.toml"));
-    std::fs::write(&scenario, impact_toml(c.amplitude, 1.0, Direction::X)).expect("scenario");
+    std::fs::write(
+        &scenario,
+        impact_toml(c.amplitude, c.duration, Direction::X),
+    )
+    .expect("scenario");
     let mut args: Vec<String> = [
         "run",
         "--quiet",
@@ -45,6 +53,8 @@ fn run(s: &Scratch, name: &str, c: &Case) -> Value {
         s.dir.to_str().expect("utf-8"),
         "--forecast-error-scale",
         &c.scale.to_string(),
+        "--forecast-error-shift",
+        &c.shift.to_string(),
     ]
     .iter()
     .map(|a| a.to_string())
@@ -90,7 +100,9 @@ fn a_forecast_too_strong_by_half_no_longer_topples_c1() {
     let case = |correction| Case {
         controller: "c1",
         amplitude: 52.0,
+        duration: 1.0,
         scale: 1.5,
+        shift: 0.0,
         phantom: false,
         correction,
         extra: &[],
@@ -138,7 +150,9 @@ fn a_phantom_push_beyond_c1_s_capability_leaves_the_robot_standing() {
     let case = |correction| Case {
         controller: "c1",
         amplitude,
+        duration: 1.0,
         scale: 1.0,
+        shift: 0.0,
         phantom: true,
         correction,
         extra: &[],
@@ -174,7 +188,9 @@ fn an_exact_forecast_keeps_c1_s_figures() {
     let case = |correction| Case {
         controller: "c1",
         amplitude: 0.9 * C1_MONOTONE_CAPABILITY,
+        duration: 1.0,
         scale: 1.0,
+        shift: 0.0,
         phantom: false,
         correction,
         extra: &[],
@@ -210,7 +226,9 @@ fn without_a_forecaster_the_measured_force_is_previewed() {
     let case = Case {
         controller: "c1",
         amplitude,
+        duration: 1.0,
         scale: 1.0,
+        shift: 0.0,
         phantom: false,
         correction: true,
         extra: &["--no-forecaster"],
@@ -280,7 +298,9 @@ fn without_a_forecaster_c1_stands_half_again_c0_s_capability() {
     let case = |controller| Case {
         controller,
         amplitude: 1.5 * C0_CAPABILITY,
+        duration: 1.0,
         scale: 1.0,
+        shift: 0.0,
         phantom: false,
         correction: true,
         extra: &["--no-forecaster"],
@@ -327,7 +347,9 @@ fn a_forecast_of_the_wrong_shape_leaves_c1_standing() {
         let case = Case {
             controller: "c1",
             amplitude,
+            duration: 1.0,
             scale: 1.0,
+            shift: 0.0,
             phantom: false,
             correction: true,
             extra: &args,
@@ -349,6 +371,64 @@ fn a_forecast_of_the_wrong_shape_leaves_c1_standing() {
             _ => {}
         }
     }
+}
+
+/// A late, weak forecast of a short impact (half the force, 150 ms late; 0.3 s, 94 N): the
+/// correction finds it within 50 ms of the onset (κ̂ ≈ 2, τ̂ ≈ −150 ms), but FC-5's record still
+/// holds the predictions made before it did, and its hedge toward the measurement (w ≈ 0.75 at
+/// the peak) previewed a quarter of the peak push past the push's end: 0.315 s on the heel edge,
+/// a fall by `upc capability`'s criteria. The capture point under the measured push is then
+/// beyond the heel, where holding the push cannot save the robot and only its easing can
+/// (FC-5b): the forecast's easing is kept from the hedge and C1 stands. Read back from the
+/// CSV: ticks where the easing was believed in full, the forecast discounted and the capture
+/// point beyond the heel edge.
+#[test]
+fn a_late_weak_forecast_of_a_short_impact_keeps_its_easing_beyond_the_edge() {
+    let _one = serial();
+    let s = Scratch::new("fc_late_weak");
+    let case = Case {
+        controller: "c1",
+        amplitude: 94.0,
+        duration: 0.3,
+        scale: 0.5,
+        shift: 0.15,
+        phantom: false,
+        correction: true,
+        extra: &[],
+    };
+    let j = run(&s, "late_weak", &case);
+    let fc = &j["forecast_correction"];
+    eprintln!(
+        "94 N, 0.3 s, κ 0.5, τ +150 ms: drop {:.1} mm, edge {:.3} s, weight ≥ {:.2}, easing believed {:.3} s",
+        f(&j, "com_height_drop") * 1e3,
+        f(&j, "time_at_support_edge"),
+        f(fc, "weight_min"),
+        f(fc, "easing_believed_time")
+    );
+    assert!(!fell(&j), "{j}");
+    assert!(f(fc, "easing_believed_time") > 0.0, "{fc}");
+    let text = std::fs::read_to_string(s.path("late_weak/c1/controller.csv")).expect("csv");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).expect(name);
+    let (believed, w, capture, heel) = (
+        col("corr_easing_believed_x"),
+        col("corr_weight"),
+        col("capture_x"),
+        col("sup_x_min"),
+    );
+    let kept = lines
+        .map(|l| {
+            l.split(',')
+                .map(|v| v.parse::<f64>().unwrap_or(f64::NAN))
+                .collect::<Vec<_>>()
+        })
+        .filter(|c| c[believed] == 1.0 && c[w] < 0.9 && c[capture] < c[heel])
+        .count();
+    assert!(
+        kept > 0,
+        "no tick kept the easing from a hedge beyond the heel"
+    );
 }
 
 /// `upc robustness` end to end on a one-cell grid: the table, the CSV and the heat map, with

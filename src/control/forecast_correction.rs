@@ -34,6 +34,10 @@
 //!
 //!   f̂ = w f̂_forecast + (1 − w) f̂_measured.                                  (FC-5)
 //!
+//! That blend hedges a forecast's easing on the push staying; where the capture point under the
+//! measured push is beyond the edge it drives the robot toward, the push cannot be held if it
+//! stays, and the easing is kept from the hedge (FC-5b, [`ForecastCorrector::fill`]).
+//!
 //! Real-time: every buffer is allocated in [`ForecastCorrector::new`]; a tick is O(1) but one
 //! tick in `bin_ticks`, which re-estimates κ and τ in O(window × shifts).
 
@@ -46,6 +50,7 @@ use serde::{Deserialize, Serialize};
 use super::core::TickError;
 use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
 use super::record::Record;
+use super::viability::{CapturePoint, ViabilitySettings, easing_believed};
 use crate::col;
 use crate::config::{ControllerKind, HandForceSource};
 
@@ -68,6 +73,9 @@ pub struct CorrectionEstimate {
     /// the last `skill_time` (FC-5): how well each explained the measurement so far.
     pub error_forecast: f64,
     pub error_measured: f64,
+    /// FC-5b (x, y): how far the horizon's easing of the measured push was kept from FC-5's
+    /// hedge at the last fill (0 where no easing sample was hedged).
+    pub easing_believed: [f64; 2],
 }
 
 impl Default for CorrectionEstimate {
@@ -81,6 +89,7 @@ impl Default for CorrectionEstimate {
             weight: 1.0,
             error_forecast: 0.0,
             error_measured: 0.0,
+            easing_believed: [0.0; 2],
         }
     }
 }
@@ -105,6 +114,8 @@ pub struct CorrectionCounts {
     pub weight_min: f64,
     pub discounts: u64,
     pub discounted_time: f64,
+    /// FC-5b: plant time (s) an easing of the measured push was kept from FC-5's hedge.
+    pub easing_believed_time: f64,
     /// Gaps in plant time longer than two bins between ticks (a stalled controller), across
     /// which no hand acceleration was taken (FC-1c).
     pub time_gaps: u64,
@@ -1007,7 +1018,9 @@ impl ForecastCorrector {
     /// The corrected hand force over the horizon (FC-4): `out[i]` for t + (i + 1) `period`;
     /// and in `measured_only[i]` (as long as `out`) the same horizon as the measurement alone
     /// predicts it (FC-5's measurement model, FC-4 with f_fc ≡ 0: what C1 previews without a
-    /// forecaster).
+    /// forecaster). `easing_believed` (x, y; in [0, 1]): how far a sample where the forecast
+    /// eases the push measured now below the measurement's prediction is kept from FC-5's hedge
+    /// (FC-5b, `viability::easing_believed`; zero: FC-5 alone).
     pub fn fill(
         &mut self,
         t: f64,
@@ -1015,8 +1028,11 @@ impl ForecastCorrector {
         window: &ForecastWindow,
         out: &mut [V3],
         measured_only: &mut [V3],
+        easing_believed: [f64; 2],
     ) {
         let e = self.est;
+        let push = self.last_push;
+        let mut believed = [0.0; 2];
         // FC-4's factors by recursion over the samples (an exp per sample costs a fifth of
         // this function).
         let decay = (-period / self.s.offset_decay).exp();
@@ -1045,8 +1061,17 @@ impl ForecastCorrector {
             let m = unexplained(&self.offset_meas, &self.trend_meas, ahead, w);
             *m_i = m;
             if e.weight < 1.0 {
-                // FC-5: toward measurement only as the forecast's record falls.
-                *f = [0, 1, 2].map(|c| f[c] + (1.0 - e.weight) * (m[c] - f[c]));
+                // FC-5: toward measurement only as the forecast's record falls; FC-5b: but not
+                // an easing of the measured push (f below m along it) where only its easing
+                // can save the robot.
+                for c in 0..3 {
+                    let mut weight = e.weight;
+                    if c < 2 && easing_believed[c] > 0.0 && (f[c] - m[c]) * push[c] < 0.0 {
+                        weight += (1.0 - weight) * easing_believed[c];
+                        believed[c] = easing_believed[c];
+                    }
+                    f[c] += (1.0 - weight) * (m[c] - f[c]);
+                }
             }
             // Never a force that lifts the robot (a tipping robot's hand, a biased sensor).
             let over = f[2] > self.lift_cap;
@@ -1054,6 +1079,10 @@ impl ForecastCorrector {
             if over {
                 f[2] = self.lift_cap;
             }
+        }
+        self.est.easing_believed = believed;
+        if believed != [0.0; 2] {
+            self.counts.easing_believed_time += self.dt;
         }
         if capped {
             self.counts.lift_capped += 1;
@@ -1190,6 +1219,9 @@ struct ShiftFit {
 /// it fills the horizon's hand force from the forecast and the measured force.
 pub struct Correction {
     corrector: Option<ForecastCorrector>,
+    /// FC-5b, with the capture-point guard on: the cart-table's capture point (VG-1) and the
+    /// guard's `band`.
+    easing: Option<(CapturePoint, f64)>,
     /// The hand force the whole-body QP is given: when it is the corrected force, its
     /// door-inertia term closes a loop through the hand's acceleration, which a lag of K bins
     /// destabilises (FC-1c: K = 1).
@@ -1207,8 +1239,17 @@ fn build(
     let corrector = (settings.enabled && s.kind != ControllerKind::C0)
         .then(|| ForecastCorrector::new(settings, p.period, s.dt, s.cart.mass * s.cart.gravity));
     let qp_force = s.config.controller.hand_force_feedback_from;
+    let guard: ViabilitySettings = s.config.controller.parts.get()?;
+    let c = s.cart;
+    let easing = guard.enabled.then(|| {
+        (
+            CapturePoint::new(c.mass, c.gravity, c.com_height),
+            guard.band,
+        )
+    });
     Ok(Box::new(Correction {
         corrector,
+        easing,
         qp_force,
     }))
 }
@@ -1258,15 +1299,28 @@ impl ControllerPart for Correction {
             Some(frame.hand_force),
             frame.hand_vel,
         );
+        let push = c.measured_push();
+        let believed = self.easing.map_or([0.0; 2], |(capture, band)| {
+            let (com, vcom) = (frame.com, frame.com_vel);
+            easing_believed(
+                &capture,
+                [com[0], com[1]],
+                [vcom[0], vcom[1]],
+                frame.support,
+                push,
+                band,
+            )
+        });
         c.fill(
             frame.t,
             frame.period,
             inputs.forecast,
             &mut frame.f_ext,
             &mut frame.f_measured_only,
+            believed,
         );
         frame.f_ext_filled = true;
-        frame.measured_push = Some(c.measured_push());
+        frame.measured_push = Some(push);
         Ok(())
     }
 
@@ -1310,6 +1364,14 @@ impl ControllerPart for Correction {
         out.put(
             col!(fixed("corr_error_measured", 3).plot("correction/error_measured")),
             e.error_measured,
+        );
+        out.put(
+            col!(fixed("corr_easing_believed_x", 3).plot("correction/easing_believed_x")),
+            e.easing_believed[0],
+        );
+        out.put(
+            col!(fixed("corr_easing_believed_y", 3)),
+            e.easing_believed[1],
         );
     }
 
@@ -1356,6 +1418,8 @@ pub struct CorrectionSummary {
     pub weight_min: f64,
     pub discounts: u64,
     pub discounted_time: f64,
+    /// FC-5b: plant time (s) an easing of the measured push was kept from FC-5's hedge.
+    pub easing_believed_time: f64,
     /// Gaps in plant time across which no hand acceleration was taken.
     #[serde(default)]
     pub time_gaps: u64,
@@ -1378,6 +1442,7 @@ impl CorrectionSummary {
             weight_min: c.weight_min,
             discounts: c.discounts,
             discounted_time: c.discounted_time,
+            easing_believed_time: c.easing_believed_time,
             time_gaps: c.time_gaps,
         }
     }
@@ -1507,7 +1572,7 @@ mod tests {
             let y = [0, 1, 2].map(|c| stages[1][c] + bias + sigma * noise.gauss());
             corr.set_measurement_lag(declared);
             corr.update(t, window, Some(y), [0.0; 3]);
-            corr.fill(t, 0.005, window, &mut out, &mut [[0.0; 3]; 300]);
+            corr.fill(t, 0.005, window, &mut out, &mut [[0.0; 3]; 300], [0.0; 2]);
             let e = *corr.estimate();
             let onset = start;
             if (t - (onset + 0.2)).abs() < 0.5 * dt {
@@ -1813,7 +1878,14 @@ mod tests {
             corr.update(k as f64 * 1e-3, &window, Some([-20.0, 4.0, 0.0]), [0.0; 3]);
         }
         let mut out = vec![[0.0; 3]; 300];
-        corr.fill(0.5, 0.005, &window, &mut out, &mut [[0.0; 3]; 300]);
+        corr.fill(
+            0.5,
+            0.005,
+            &window,
+            &mut out,
+            &mut [[0.0; 3]; 300],
+            [0.0; 2],
+        );
         let t_d = CorrectionSettings::default().offset_decay;
         assert!(
             (out[0][0] + 20.0 * (-0.005f64 / t_d).exp()).abs() < 1e-3,
@@ -1853,7 +1925,14 @@ mod tests {
                     [0.0; 3],
                 );
             }
-            corr.fill(0.6, 0.005, &window, &mut out, &mut [[0.0; 3]; 300]);
+            corr.fill(
+                0.6,
+                0.005,
+                &window,
+                &mut out,
+                &mut [[0.0; 3]; 300],
+                [0.0; 2],
+            );
             let trend = corr.estimate().trend[0];
             eprintln!(
                 "rate {rate}, σ {sigma}: trend {trend:.1} N/s, now {f:.1} N, in 0.15 s {:.1} N",
@@ -1902,7 +1981,14 @@ mod tests {
                 fc.tick(k, t, |s| [push(s, len), 0.0, 0.0]);
                 let y = [push(t, 1.0) + 5.0 + 2.0 * noise.gauss(), 0.0, 0.0];
                 corr.update(t, &fc.window, Some(y), [0.0; 3]);
-                corr.fill(t, 0.005, &fc.window, &mut out, &mut [[0.0; 3]; 300]);
+                corr.fill(
+                    t,
+                    0.005,
+                    &fc.window,
+                    &mut out,
+                    &mut [[0.0; 3]; 300],
+                    [0.0; 2],
+                );
                 let w = corr.estimate().weight;
                 if (start..start + 1.0).contains(&t) {
                     w_push = w_push.min(w);
@@ -1937,6 +2023,59 @@ mod tests {
         }
     }
 
+    /// FC-5b: the forecast's weight at 0.5, the push measured now 80 N along −x, the forecast
+    /// 120 N for 0.1 s and then none, the measurement's prediction 80 N decaying. Where the
+    /// forecast eases below the measurement's prediction the horizon is FC-5's blend as far as
+    /// the easing is not believed, and the forecast's own as far as it is; where it adds push
+    /// (its first 0.1 s) it is the blend whatever is believed; y, whose easing is not believed,
+    /// is the blend.
+    #[test]
+    fn an_easing_is_kept_from_the_hedge_as_far_as_it_is_believed() {
+        let mut corr = ForecastCorrector::new(CorrectionSettings::default(), 0.005, 1e-3, 300.0);
+        let mut fc = Forecaster::new();
+        fc.tick(0, 0.0, |s| [if s < 0.1 { -120.0 } else { 0.0 }, 0.0, 0.0]);
+        corr.est.weight = 0.5;
+        corr.offset_meas = [-80.0, 10.0, 0.0];
+        corr.last_push = [-80.0, 10.0, 0.0];
+        let (early, late) = (9, 39); // 50 ms and 200 ms ahead
+        for believed in [0.0, 0.5, 1.0] {
+            let (mut out, mut m) = (vec![[0.0; 3]; 60], vec![[0.0; 3]; 60]);
+            corr.fill(0.0, 0.005, &fc.window, &mut out, &mut m, [believed, 0.0]);
+            let w = 0.5 + 0.5 * believed;
+            assert!(m[late][0] < -50.0, "{:?}", m[late]);
+            assert!(
+                (out[late][0] - (1.0 - w) * m[late][0]).abs() < 1e-9,
+                "{believed}: {:?}",
+                out[late]
+            );
+            assert!(
+                (out[early][0] - 0.5 * (-120.0 + m[early][0])).abs() < 1e-9,
+                "{:?}",
+                out[early]
+            );
+            assert!(
+                (out[late][1] - 0.5 * m[late][1]).abs() < 1e-9,
+                "{:?}",
+                out[late]
+            );
+            assert_eq!(corr.estimate().easing_believed, [believed, 0.0]);
+        }
+        corr.est.weight = 1.0;
+        corr.fill(
+            0.0,
+            0.005,
+            &fc.window,
+            &mut [[0.0; 3]; 60],
+            &mut [[0.0; 3]; 60],
+            [1.0; 2],
+        );
+        assert_eq!(
+            corr.estimate().easing_believed,
+            [0.0; 2],
+            "nothing hedged at w = 1"
+        );
+    }
+
     /// A robot tipping over pulls on its hand: a measured upward force beyond its weight must
     /// not preview as a force lifting it (eq. (10) needs M g − F_z > 0). The horizon is capped
     /// at `max_lift` M g, counted; the other axes are left alone.
@@ -1954,7 +2093,14 @@ mod tests {
             );
         }
         let mut out = vec![[0.0; 3]; 300];
-        corr.fill(0.5, 0.005, &window, &mut out, &mut [[0.0; 3]; 300]);
+        corr.fill(
+            0.5,
+            0.005,
+            &window,
+            &mut out,
+            &mut [[0.0; 3]; 300],
+            [0.0; 2],
+        );
         let cap = CorrectionSettings::default().max_lift * weight;
         assert!(out.iter().all(|f| f[2] <= cap), "{:?}", out[0]);
         assert_eq!(out[0][2], cap, "the measured lift, held, is capped");

@@ -28,7 +28,9 @@
 //! that prediction as ξ_m comes within `ease_margin` of that edge, and believed again as ξ_m
 //! passes beyond it (over `band`): there the measured push cannot be held whatever the lean, and
 //! only its easing can save the robot (a short impact's peak, which an exact forecast's easing
-//! lets the robot ride out). Allocation-free.
+//! lets the robot ride out). For the same reason FC-5's hedge of an easing toward the
+//! measurement is lifted there ([`easing_believed`], FC-5b, applied by the correction).
+//! Allocation-free.
 
 use std::any::Any;
 
@@ -68,11 +70,78 @@ impl MeasuredPush<'_> {
     }
 }
 
-pub struct ViabilityGuard {
-    s: ViabilitySettings,
-    /// M ω² = M g / z_c (N/m) and 1/ω (s) of the cart-table.
+/// The capture point of the cart-table under a constant force (VG-1), per horizontal axis.
+#[derive(Debug, Clone, Copy)]
+pub struct CapturePoint {
+    /// M ω² = M g / z_c (N/m) and 1/ω (s).
     stiffness: f64,
     inv_omega: f64,
+}
+
+impl CapturePoint {
+    /// For a cart-table of `mass` (kg) at `com_height` (m) under `gravity` (m/s²).
+    pub fn new(mass: f64, gravity: f64, com_height: f64) -> Self {
+        let omega2 = gravity / com_height;
+        Self {
+            stiffness: mass * omega2,
+            inv_omega: 1.0 / omega2.sqrt(),
+        }
+    }
+
+    /// ξ_m = x + ẋ/ω + F/(M ω²) on one axis (VG-1): where the ZMP must be for the robot to stop
+    /// under `push` (N) held as it is.
+    pub fn at(&self, com: f64, vcom: f64, push: f64) -> f64 {
+        com + vcom * self.inv_omega + push / self.stiffness
+    }
+}
+
+/// How far beyond an edge the capture point is: `d` its distance to the edge (m, negative
+/// beyond it), `half` the support's half-length (m); 0 inside, rising to 1 at `band` half-lengths
+/// beyond. There the measured push cannot be held whatever the lean (VG-3's second line).
+pub fn beyond_edge(d: f64, half: f64, band: f64) -> f64 {
+    if d < 0.0 {
+        (-d / half / band).clamp(0.0, 1.0)
+    } else {
+        0.0
+    }
+}
+
+/// FC-5b: per horizontal axis, how far a forecast's easing of the push measured now (`push`, N)
+/// is believed over FC-5's hedge toward the measurement: [`beyond_edge`] of the capture point
+/// under that push (`com`, `vcom`: m, m/s) to the edge of `support` ([[x_min, x_max],
+/// [y_min, y_max]]) the push drives the robot toward. If the push stays, the robot cannot stop
+/// there with the hedge or without it; if it eases, believing the easing is what lets it ride
+/// the push out. 0 on an axis with nothing measured or non-finite inputs.
+pub fn easing_believed(
+    capture: &CapturePoint,
+    com: [f64; 2],
+    vcom: [f64; 2],
+    support: [[f64; 2]; 2],
+    push: V3,
+    band: f64,
+) -> [f64; 2] {
+    [0, 1].map(|a| {
+        let xi = capture.at(com[a], vcom[a], push[a]);
+        let [lo, hi] = support[a];
+        let half = 0.5 * (hi - lo);
+        let d = if push[a] < 0.0 {
+            xi - lo
+        } else if push[a] > 0.0 {
+            hi - xi
+        } else {
+            return 0.0;
+        };
+        if d.is_finite() && half > 0.0 {
+            beyond_edge(d, half, band)
+        } else {
+            0.0
+        }
+    })
+}
+
+pub struct ViabilityGuard {
+    s: ViabilitySettings,
+    capture: CapturePoint,
     fading: bool,
     /// The last tick's scales (x, y) and capture points (m).
     pub last_scale: [f64; 2],
@@ -83,11 +152,9 @@ pub struct ViabilityGuard {
 impl ViabilityGuard {
     /// For a cart-table of `mass` (kg) at `com_height` (m) under `gravity` (m/s²).
     pub fn new(settings: ViabilitySettings, mass: f64, gravity: f64, com_height: f64) -> Self {
-        let omega2 = gravity / com_height;
         Self {
             s: settings,
-            stiffness: mass * omega2,
-            inv_omega: 1.0 / omega2.sqrt(),
+            capture: CapturePoint::new(mass, gravity, com_height),
             fading: false,
             last_scale: [1.0; 2],
             last_capture: [0.0; 2],
@@ -123,7 +190,7 @@ impl ViabilityGuard {
         let mut scale = [[1.0; 2]; 2];
         let mut ease = [[1.0; 2]; 2];
         for a in 0..2 {
-            let xi = com[a] + vcom[a] * self.inv_omega + push_now[a] / self.stiffness;
+            let xi = self.capture.at(com[a], vcom[a], push_now[a]);
             let [lo, hi] = support[a];
             let half = 0.5 * (hi - lo);
             if !(xi.is_finite() && half > 0.0 && push_now[a].is_finite()) {
@@ -138,7 +205,7 @@ impl ViabilityGuard {
             // easing can save the robot, so the forecast's easing is believed again.
             let ease_fade = |d: f64| {
                 if d < 0.0 {
-                    (-d / half / self.s.band).clamp(0.0, 1.0)
+                    beyond_edge(d, half, self.s.band)
                 } else {
                     fade(d, e)
                 }
@@ -443,7 +510,7 @@ mod tests {
         let mut h = vec![[-60.0, 0.0, 0.0], [-20.0, 0.0, 0.0], [30.0, 0.0, 0.0]];
         let push = [-40.0, 0.0, 0.0];
         // ξ_m = −0.06 m: com − 40 / (M ω²) = −0.06.
-        let com = -0.06 + 40.0 / g.stiffness;
+        let com = -0.06 + 40.0 / g.capture.stiffness;
         at_rest(&mut g, 0.0, com, push, &mut h);
         assert!((g.last_capture[0] + 0.06).abs() < 1e-12);
         assert_eq!(
@@ -459,7 +526,7 @@ mod tests {
         );
         assert_eq!(h[2][0], 0.0, "a push to come along +x: faded to none");
         let mut h = vec![[-60.0, 0.0, 0.0], [-20.0, 0.0, 0.0]];
-        let com = 0.06 + 40.0 / g.stiffness;
+        let com = 0.06 + 40.0 / g.capture.stiffness;
         at_rest(&mut g, 0.001, com, push, &mut h);
         assert_eq!(h[0][0], -40.0, "more push toward the front edge: faded");
         assert_eq!(h[1][0], -20.0, "its easing, away from the rear edge: kept");
@@ -467,7 +534,7 @@ mod tests {
         // is believed again, fully once ξ_m is `band` beyond it.
         for (beyond, s) in [(0.05, 0.5), (0.1, 1.0), (0.3, 1.0)] {
             let mut h = vec![[-20.0, 0.0, 0.0]];
-            let com = -0.07 - beyond * 0.07 + 40.0 / g.stiffness;
+            let com = -0.07 - beyond * 0.07 + 40.0 / g.capture.stiffness;
             at_rest(&mut g, 0.002, com, push, &mut h);
             assert!(
                 (h[0][0] - (-40.0 + s * 20.0)).abs() < 1e-9,
@@ -486,7 +553,7 @@ mod tests {
             0.5,
         );
         let mut h = vec![[-20.0, 0.0, 0.0]];
-        let com = -0.069 + 40.0 / g.stiffness;
+        let com = -0.069 + 40.0 / g.capture.stiffness;
         at_rest(&mut g, 0.0, com, push, &mut h);
         assert_eq!(h[0][0], -20.0);
         assert_eq!(g.counts.faded_ticks, 0);
@@ -500,7 +567,7 @@ mod tests {
         let mut g = guard();
         let push = [-40.0, 0.0, 0.0];
         // ξ_m 1 mm inside the rear edge: the easing fully faded (s = 0).
-        let com = -0.069 + 40.0 / g.stiffness;
+        let com = -0.069 + 40.0 / g.capture.stiffness;
         let measured_only = [[-30.0, 0.0, 0.0], [-30.0, 0.0, 0.0], [-50.0, 0.0, 0.0]];
         let mut h = vec![[-35.0, 0.0, 0.0], [-20.0, 0.0, 0.0], [-20.0, 0.0, 0.0]];
         g.apply(
@@ -528,6 +595,45 @@ mod tests {
         );
     }
 
+    /// FC-5b's belief in an easing: 0 while the capture point under the measured push is inside
+    /// the support, rising over `band` beyond the edge that push drives the robot toward (the
+    /// heel for a push along −x, the toe along +x), 0 with nothing measured on the axis.
+    #[test]
+    fn an_easing_is_believed_beyond_the_edge_the_push_drives_toward() {
+        let s = ViabilitySettings::default();
+        let capture = CapturePoint::new(30.0, 9.81, 0.5);
+        let k = 30.0 * 9.81 / 0.5;
+        let believed = |com: f64, push: f64| {
+            easing_believed(
+                &capture,
+                [com, 0.0],
+                [0.0; 2],
+                SUPPORT,
+                [push, 0.0, 0.0],
+                s.band,
+            )
+        };
+        // 60 N along −x: F/(M ω²) ≈ 102 mm behind the CoM.
+        let behind = 60.0 / k;
+        assert_eq!(believed(behind, -60.0), [0.0; 2], "inside");
+        let half_band = 0.5 * s.band * 0.07;
+        let b = believed(-0.07 - half_band + behind, -60.0)[0];
+        assert!((b - 0.5).abs() < 1e-9, "{b}");
+        assert_eq!(
+            believed(-0.07 - 0.02 + behind, -60.0),
+            [1.0, 0.0],
+            "beyond the heel"
+        );
+        // The same capture point with the push along +x: the toe edge is far, nothing believed.
+        assert_eq!(believed(-0.07 - 0.02 - behind, 60.0), [0.0; 2]);
+        assert_eq!(
+            believed(0.07 + 0.02 - behind, 60.0),
+            [1.0, 0.0],
+            "beyond the toe"
+        );
+        assert_eq!(believed(0.5, 0.0), [0.0; 2], "nothing measured");
+    }
+
     /// Between margin and margin + band the unmeasured part is scaled linearly, toward the
     /// measured push (not toward zero).
     #[test]
@@ -538,7 +644,7 @@ mod tests {
         let d = s.margin + 0.5 * s.band;
         let xi = 0.07 - d * 0.07;
         let mut h = vec![[-50.0, 0.0, 0.0]; 3];
-        let com = xi + 10.0 / g.stiffness;
+        let com = xi + 10.0 / g.capture.stiffness;
         at_rest(&mut g, 0.0, com, [-10.0, 0.0, 0.0], &mut h);
         assert!((g.last_scale[0] - 0.5).abs() < 1e-9, "{:?}", g.last_scale);
         assert!((h[0][0] + 30.0).abs() < 1e-9, "{:?}", h[0]);
