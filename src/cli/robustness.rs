@@ -463,7 +463,7 @@ fn write_outputs(
             }
             forecasting_section(&mut md, &fig_dir, args, rows, v, d)?;
         }
-        shape_table(&mut md, args, variants, rows, d);
+        shape_table(&mut md, &fig_dir, args, variants, rows, d)?;
     }
     std::fs::write(out.join("robustness.md"), md)?;
     Ok(())
@@ -593,15 +593,25 @@ fn forecasting_section(
         d * 1e3
     );
     let c0_cap = map_capability(rows, Variant::C0.label(), d).map(|c| c.survived);
+    let shifts: Vec<String> = args
+        .shifts
+        .iter()
+        .map(|s| format!("τ {:+.0} ms", s * 1e3))
+        .collect();
     std::fs::write(
         fig_dir.join(format!("{name}.svg")),
         heat_map(
             &format!("{} — {d} s impact: largest survived (N)", v.label()),
-            &args.scales,
-            &args.shifts,
+            &args
+                .scales
+                .iter()
+                .map(|k| format!("κ {k}"))
+                .collect::<Vec<_>>(),
+            &shifts,
             &grid,
             max_or(rows, d),
-            c0_cap,
+            &vec![c0_cap; shifts.len()],
+            c0_cap.map(|c| format!("red outline: below C0's {c:.0} N")),
         ),
     )?;
     let _ = writeln!(md, "\n![{}](figures/{name}.svg)\n", v.label());
@@ -653,21 +663,38 @@ fn on_map(r: &Row) -> bool {
     !r.phantom && r.shape == ForecastShape::Exact
 }
 
+/// The share of the same controller's capability without a forecast that a forecast of the
+/// wrong shape must keep: attaching a forecaster never makes the robot less safe (#47's promise,
+/// within a bisection's noise).
+const SHAPE_PROMISE: f64 = 0.95;
+
 /// The shape errors of duration `d`: each shape × each forecasting controller, beside the same
-/// controller with an exact forecast and with none (κ = 0), when the sweep has those cells.
-fn shape_table(md: &mut String, args: &RobustnessArgs, variants: &[Variant], rows: &[Row], d: f64) {
+/// controller with an exact forecast and with none (κ = 0), when the sweep has those cells; as
+/// a table and a heat map (`figures/robustness_shapes_<d>ms.svg`), its cells below
+/// [`SHAPE_PROMISE`] of no forecast outlined.
+fn shape_table(
+    md: &mut String,
+    fig_dir: &Path,
+    args: &RobustnessArgs,
+    variants: &[Variant],
+    rows: &[Row],
+    d: f64,
+) -> Result<(), BoxError> {
     if args.shapes.is_empty() {
-        return;
+        return Ok(());
     }
     let forecasting: Vec<Variant> = variants
         .iter()
         .copied()
         .filter(|v| v.uses_forecast())
         .collect();
-    let cell = |v: Variant, pick: &dyn Fn(&Row) -> bool| {
+    let find = |v: Variant, pick: &dyn Fn(&Row) -> bool| {
         rows.iter()
             .find(|r| r.controller == v.label() && r.duration == d && pick(r))
-            .map_or("–".into(), |r| Capability::text(&r.capability))
+            .map(|r| r.capability)
+    };
+    let cell = |v: Variant, pick: &dyn Fn(&Row) -> bool| {
+        find(v, pick).map_or("–".into(), |c| Capability::text(&c))
     };
     let _ = writeln!(
         md,
@@ -692,14 +719,50 @@ fn shape_table(md: &mut String, args: &RobustnessArgs, variants: &[Variant], row
         }
         *md += "\n";
     }
+    let shaped = |s: ForecastShape| move |r: &Row| !r.phantom && r.shape == s;
     for &s in &args.shapes {
         let _ = write!(md, "| `{s}` |");
         for &v in &forecasting {
-            let _ = write!(md, " {} |", cell(v, &|r: &Row| !r.phantom && r.shape == s));
+            let _ = write!(md, " {} |", cell(v, &shaped(s)));
         }
         *md += "\n";
     }
     *md += "\n";
+    let mut labels = vec!["exact".to_string(), "none (κ = 0)".to_string()];
+    labels.extend(args.shapes.iter().map(|s| s.to_string()));
+    let line = |pick: &dyn Fn(&Row) -> bool| -> Vec<Option<f64>> {
+        forecasting
+            .iter()
+            .map(|&v| find(v, pick).map(|c| c.survived))
+            .collect()
+    };
+    let mut grid = vec![line(&exact), line(&none)];
+    grid.extend(args.shapes.iter().map(|&s| line(&shaped(s))));
+    let floor: Vec<Option<f64>> = forecasting
+        .iter()
+        .map(|&v| find(v, &none).map(|c| SHAPE_PROMISE * c.survived))
+        .collect();
+    let name = format!("robustness_shapes_{:.0}ms", d * 1e3);
+    std::fs::write(
+        fig_dir.join(format!("{name}.svg")),
+        heat_map(
+            &format!("Forecasts of the wrong shape — {d} s impact: largest survived (N)"),
+            &labels,
+            &forecasting
+                .iter()
+                .map(|v| v.label().to_string())
+                .collect::<Vec<_>>(),
+            &grid,
+            max_or(rows, d),
+            &floor,
+            Some(format!(
+                "red outline: below {:.0} % of the same controller without a forecast",
+                SHAPE_PROMISE * 100.0
+            )),
+        ),
+    )?;
+    let _ = writeln!(md, "![Forecasts of the wrong shape](figures/{name}.svg)\n");
+    Ok(())
 }
 
 fn max_or(rows: &[Row], d: f64) -> f64 {
@@ -709,34 +772,48 @@ fn max_or(rows: &[Row], d: f64) -> f64 {
         .fold(1.0, f64::max)
 }
 
-/// A heat map as SVG: one cell per (κ, τ), its colour the amplitude survived over the search's
-/// bound (white → dark blue), cells below C0's capability outlined in red.
+/// A heat map as SVG: one cell per row (κ, or a forecast's shape) and column (τ, or a
+/// controller), its colour the amplitude survived over the search's bound (white → dark blue),
+/// cells below their column's `floor` outlined in red (`legend` says what the floor is).
 fn heat_map(
     title: &str,
-    scales: &[f64],
-    shifts: &[f64],
+    row_labels: &[String],
+    col_labels: &[String],
     grid: &[Vec<Option<f64>>],
     max: f64,
-    c0: Option<f64>,
+    floor: &[Option<f64>],
+    legend: Option<String>,
 ) -> String {
-    let (cw, ch, left, top) = (70.0, 34.0, 70.0, 50.0);
-    let w = left + cw * shifts.len() as f64 + 20.0;
-    let h = top + ch * scales.len() as f64 + 50.0;
+    let longest = row_labels
+        .iter()
+        .map(|l| l.chars().count())
+        .max()
+        .unwrap_or(0);
+    let (cw, ch, top) = (70.0, 34.0, 50.0);
+    let labels = (12.0 + 7.5 * longest as f64).max(70.0);
+    let cells = labels + cw * col_labels.len() as f64 + 20.0;
+    // Wide enough for the cells, the title (14 px) and the legend (12 px); the cells centred.
+    let chars = |t: &str| t.chars().count() as f64;
+    let w = cells
+        .max(8.0 * chars(title) + 20.0)
+        .max(legend.as_deref().map_or(0.0, |l| 6.8 * chars(l) + 20.0));
+    let left = labels + 0.5 * (w - cells);
+    let h = top + ch * row_labels.len() as f64 + 50.0;
     let mut s = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"12\">\n\
          <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n\
          <text x=\"{}\" y=\"20\" text-anchor=\"middle\" font-size=\"14\">{title}</text>\n",
         w / 2.0
     );
-    for (i, k) in scales.iter().enumerate() {
+    for (i, label) in row_labels.iter().enumerate() {
         let y = top + ch * i as f64;
         let _ = writeln!(
             s,
-            "<text x=\"{}\" y=\"{}\" text-anchor=\"end\">κ {k}</text>",
+            "<text x=\"{}\" y=\"{}\" text-anchor=\"end\">{label}</text>",
             left - 6.0,
             y + ch / 2.0 + 4.0
         );
-        for (j, _) in shifts.iter().enumerate() {
+        for j in 0..col_labels.len() {
             let x = left + cw * j as f64;
             let v = grid.get(i).and_then(|l| l.get(j)).copied().flatten();
             let (fill, text) = match v {
@@ -755,7 +832,7 @@ fn heat_map(
                 }
                 None => ("rgb(220,220,220)".into(), "–".into()),
             };
-            let below = matches!((v, c0), (Some(v), Some(c)) if v < c);
+            let below = matches!((v, floor.get(j).copied().flatten()), (Some(v), Some(c)) if v < c);
             let stroke = if below {
                 "red\" stroke-width=\"3"
             } else {
@@ -775,20 +852,19 @@ fn heat_map(
             );
         }
     }
-    for (j, sh) in shifts.iter().enumerate() {
+    for (j, label) in col_labels.iter().enumerate() {
         let _ = writeln!(
             s,
-            "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">τ {:+.0} ms</text>",
+            "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{label}</text>",
             left + cw * j as f64 + cw / 2.0,
-            top + ch * scales.len() as f64 + 18.0,
-            sh * 1e3
+            top + ch * row_labels.len() as f64 + 18.0,
         );
     }
-    if let Some(c) = c0 {
+    if let Some(legend) = legend {
         let _ = writeln!(
             s,
-            "<text x=\"{left}\" y=\"{}\">red outline: below C0's {c:.0} N</text>",
-            top + ch * scales.len() as f64 + 40.0
+            "<text x=\"10\" y=\"{}\">{legend}</text>",
+            top + ch * row_labels.len() as f64 + 40.0
         );
     }
     s += "</svg>\n";

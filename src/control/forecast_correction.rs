@@ -1064,14 +1064,14 @@ impl ForecastCorrector {
                 // FC-5: toward measurement only as the forecast's record falls; FC-5b: but not
                 // an easing of the measured push (f below m along it) where only its easing
                 // can save the robot.
-                for c in 0..3 {
-                    let mut weight = e.weight;
-                    if c < 2 && easing_believed[c] > 0.0 && (f[c] - m[c]) * push[c] < 0.0 {
-                        weight += (1.0 - weight) * easing_believed[c];
+                let mut weight = [e.weight; 3];
+                for c in 0..2 {
+                    if easing_believed[c] > 0.0 && (f[c] - m[c]) * push[c] < 0.0 {
+                        weight[c] += (1.0 - e.weight) * easing_believed[c];
                         believed[c] = easing_believed[c];
                     }
-                    f[c] += (1.0 - weight) * (m[c] - f[c]);
                 }
+                *f = [0, 1, 2].map(|c| f[c] + (1.0 - weight[c]) * (m[c] - f[c]));
             }
             // Never a force that lifts the robot (a tipping robot's hand, a biased sensor).
             let over = f[2] > self.lift_cap;
