@@ -504,7 +504,10 @@ fn the_robustness_sweep_writes_its_map() {
     // promise (95 % of no forecast) as the outline's floor.
     let shapes = std::fs::read_to_string(out.join("figures/robustness_shapes_1000ms.svg"))
         .expect("the shape heat map");
-    assert!(shapes.contains(">rotated:30<") && shapes.contains(">C1<"), "{shapes}");
+    assert!(
+        shapes.contains(">rotated:30<") && shapes.contains(">C1<"),
+        "{shapes}"
+    );
     assert!(md.contains("figures/robustness_shapes_1000ms.svg"), "{md}");
     // Each cell was saved as it ended: the same sweep again runs none and writes the same map.
     let again = std::process::Command::new(env!("CARGO_BIN_EXE_upc"))

@@ -664,8 +664,8 @@ fn on_map(r: &Row) -> bool {
 }
 
 /// The share of the same controller's capability without a forecast that a forecast of the
-/// wrong shape must keep: attaching a forecaster never makes the robot less safe (#47's promise,
-/// within a bisection's noise).
+/// wrong shape must keep: attaching a forecaster never makes the robot less safe, within a
+/// bisection's noise (docs/results/robustness.md).
 const SHAPE_PROMISE: f64 = 0.95;
 
 /// The shape errors of duration `d`: each shape × each forecasting controller, beside the same
