@@ -438,8 +438,13 @@ fn the_robustness_sweep_writes_its_map() {
     let _one = serial();
     let s = Scratch::new("fc_sweep");
     let out = s.dir.join("sweep");
+    // A config layer that changes nothing, until its text changes below.
+    let layer = s.path("layer.toml");
+    std::fs::write(&layer, "# a lab's layer\n").expect("layer");
     let args = [
         "robustness",
+        "--config",
+        layer.to_str().expect("utf-8"),
         "--controllers",
         "c0,c1",
         "--durations",
@@ -519,6 +524,23 @@ fn the_robustness_sweep_writes_its_map() {
     let err = String::from_utf8_lossy(&again.stderr);
     assert!(again.status.success(), "{err}");
     assert!(err.contains("3 of 3 cells already done"), "{err}");
+    assert_eq!(
+        std::fs::read_to_string(out.join("robustness.csv")).expect("csv"),
+        csv
+    );
+    // A saved cell stands for the build and the files its command line names: the config
+    // file's text changed (a comment only), the same command runs every cell again, to the
+    // same map.
+    std::fs::write(&layer, "# a lab's layer, edited\n").expect("layer");
+    let edited = std::process::Command::new(env!("CARGO_BIN_EXE_upc"))
+        .args(args)
+        .arg(&out)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("upc starts");
+    let err = String::from_utf8_lossy(&edited.stderr);
+    assert!(edited.status.success(), "{err}");
+    assert!(!err.contains("already done"), "{err}");
     assert_eq!(
         std::fs::read_to_string(out.join("robustness.csv")).expect("csv"),
         csv

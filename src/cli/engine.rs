@@ -97,8 +97,13 @@ impl Engine<'_> {
     pub fn run(&self, cells: &[CellArgs]) -> Result<Vec<CellResult>, BoxError> {
         let dir = self.out.join("cells");
         std::fs::create_dir_all(&dir)?;
+        let build = build_id(self.exe)?;
+        let store = Store {
+            dir: &dir,
+            build: &build,
+        };
         let mut results: Vec<Option<CellResult>> =
-            cells.iter().map(|c| searched(&dir, c)).collect();
+            cells.iter().map(|c| store.searched(c)).collect();
         let pending: Vec<usize> = (0..cells.len()).filter(|&i| results[i].is_none()).collect();
         let resumed = cells.len() - pending.len();
         if resumed > 0 {
@@ -112,11 +117,11 @@ impl Engine<'_> {
         if !pending.is_empty() {
             let todo: Vec<&CellArgs> = pending.iter().map(|&i| &cells[i]).collect();
             match self.args.engine {
-                EngineKind::Local => self.run_local(&todo, &dir)?,
-                EngineKind::Ray => self.run_ray(&todo, &dir)?,
+                EngineKind::Local => self.run_local(&todo, &store)?,
+                EngineKind::Ray => self.run_ray(&todo, &store)?,
             }
             for &i in &pending {
-                results[i] = Some(saved(&dir, &cells[i]).ok_or_else(|| {
+                results[i] = Some(store.saved(&cells[i]).ok_or_else(|| {
                     format!(
                         "the engine returned without the result of {}",
                         cells[i].argv().join(" ")
@@ -128,7 +133,7 @@ impl Engine<'_> {
     }
 
     /// The pending cells, `--jobs` at a time, each saved when done.
-    fn run_local(&self, todo: &[&CellArgs], dir: &Path) -> Result<(), BoxError> {
+    fn run_local(&self, todo: &[&CellArgs], store: &Store) -> Result<(), BoxError> {
         let scratch = self.out.join("cases");
         std::fs::create_dir_all(&scratch)?;
         pool(todo, self.args.jobs(), |cell| {
@@ -139,20 +144,21 @@ impl Engine<'_> {
             };
             // The bar counted the longest search: settle the difference.
             self.bar.inc(self.per_cell.saturating_sub(runs));
-            save(dir, cell, result)
+            store.save(cell, result)
         })?;
         Ok(())
     }
 
     /// The pending cells as Ray tasks: the driver saves each result as it arrives.
-    fn run_ray(&self, todo: &[&CellArgs], dir: &Path) -> Result<(), BoxError> {
+    fn run_ray(&self, todo: &[&CellArgs], store: &Store) -> Result<(), BoxError> {
+        let dir = store.dir;
         let ray_dir = self.out.join("ray");
         std::fs::create_dir_all(&ray_dir)?;
         let list = ray_dir.join("cells.jsonl");
         let mut lines = String::new();
         for cell in todo {
             lines += &serde_json::to_string(&serde_json::json!({
-                "key": key(cell),
+                "key": store.key(cell),
                 "argv": cell.argv(),
             }))?;
             lines.push('\n');
@@ -203,35 +209,68 @@ fn count(n: u64, what: &str) -> String {
     }
 }
 
-/// A cell's name under `<out>/cells/`: a digest of its command line.
-fn key(cell: &CellArgs) -> String {
-    let digest = Sha256::digest(cell.argv().join("\0").as_bytes());
-    digest[..8].iter().map(|b| format!("{b:02x}")).collect()
+/// The `upc` build that runs a sweep's cases: the SHA-256 of its executable (the embedded
+/// defaults, robots and scenarios included).
+fn build_id(exe: &Path) -> Result<String, BoxError> {
+    let bytes = std::fs::read(exe)
+        .map_err(|e| format!("cannot read {} to name its build: {e}", exe.display()))?;
+    Ok(hex(&Sha256::digest(&bytes)))
 }
 
-/// `cell`'s saved result, if one is saved for exactly this cell.
-fn saved(dir: &Path, cell: &CellArgs) -> Option<CellResult> {
-    let text = std::fs::read_to_string(dir.join(format!("{}.json", key(cell)))).ok()?;
-    let s: Saved = serde_json::from_str(&text).ok()?;
-    (s.argv == cell.argv()).then_some(s.result)
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
-/// `cell`'s saved result if it was searched (a failed cell is run again by a new sweep).
-fn searched(dir: &Path, cell: &CellArgs) -> Option<CellResult> {
-    saved(dir, cell).filter(|r| matches!(r.outcome, Outcome::Searched { .. }))
+/// The saved cells of a sweep run by one build (`<out>/cells/`).
+struct Store<'a> {
+    dir: &'a Path,
+    build: &'a str,
 }
 
-/// Saves `result` for `cell`, whole or not at all (written aside, then renamed).
-fn save(dir: &Path, cell: &CellArgs, result: CellResult) -> Result<(), BoxError> {
-    let k = key(cell);
-    let tmp = dir.join(format!(".{k}.json.tmp"));
-    let text = serde_json::to_string_pretty(&Saved {
-        argv: cell.argv(),
-        result,
-    })?;
-    std::fs::write(&tmp, text)?;
-    std::fs::rename(&tmp, dir.join(format!("{k}.json")))?;
-    Ok(())
+impl Store<'_> {
+    /// A cell's name under the store: a digest of the build, the cell's command line and the
+    /// contents of the files that command line names (config files, a robot description file;
+    /// not the files those name). A result is read back only for what produced it: after a new
+    /// build or an edited config file the sweep runs its cells again.
+    fn key(&self, cell: &CellArgs) -> String {
+        let mut h = Sha256::new();
+        h.update(self.build.as_bytes());
+        h.update(b"\0");
+        h.update(cell.argv().join("\0").as_bytes());
+        let robot = Path::new(&cell.setup.robot.robot);
+        let named = cell.setup.config.configs.iter().map(|p| p.as_path());
+        for file in named.chain(robot.is_file().then_some(robot)) {
+            h.update(b"\0");
+            h.update(std::fs::read(file).unwrap_or_default());
+        }
+        hex(&h.finalize()[..8])
+    }
+
+    /// `cell`'s saved result, if one is saved for exactly this cell.
+    fn saved(&self, cell: &CellArgs) -> Option<CellResult> {
+        let path = self.dir.join(format!("{}.json", self.key(cell)));
+        let s: Saved = serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()?;
+        (s.argv == cell.argv()).then_some(s.result)
+    }
+
+    /// `cell`'s saved result if it was searched (a failed cell is run again by a new sweep).
+    fn searched(&self, cell: &CellArgs) -> Option<CellResult> {
+        self.saved(cell)
+            .filter(|r| matches!(r.outcome, Outcome::Searched { .. }))
+    }
+
+    /// Saves `result` for `cell`, whole or not at all (written aside, then renamed).
+    fn save(&self, cell: &CellArgs, result: CellResult) -> Result<(), BoxError> {
+        let k = self.key(cell);
+        let tmp = self.dir.join(format!(".{k}.json.tmp"));
+        let text = serde_json::to_string_pretty(&Saved {
+            argv: cell.argv(),
+            result,
+        })?;
+        std::fs::write(&tmp, text)?;
+        std::fs::rename(&tmp, self.dir.join(format!("{k}.json")))?;
+        Ok(())
+    }
 }
 
 /// The Ray cluster as the driver saw it last (`<out>/ray/runs.jsonl`, a line per driver run),
