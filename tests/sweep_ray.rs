@@ -1,7 +1,8 @@
 //! Sweeps on Ray (`--engine ray`, docs/sweeps.md) against the local pool: the same map, a
 //! worker node killed mid-sweep, a cell that cannot run, a stopped sweep resumed, a worker with
 //! another build. Every Ray process here is on loopback (node address 127.0.0.2, usage stats
-//! off) and stopped by the process group the test started, never by Ray's own machine-wide stop command.
+//! off) and stopped by the process group the test started, never by Ray's own machine-wide
+//! stop command.
 
 mod support;
 
