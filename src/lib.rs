@@ -20,6 +20,8 @@
 //! - [`channels`]: the iceoryx2 channel contract shared by every process.
 //! - [`bridge`]: the contract over Zenoh, for forecasters and viewers on other hosts.
 //! - [`bus`]: upc on a robot's own DDS bus (the Unitree G1's `rt/lowstate`, `rt/lowcmd`).
+//! - [`record`]: self-describing records (a value with its column's name, format and rerun path)
+//!   for the CSVs and rerun logs.
 //! - [`recording`]: where the rerun recordings go (`.rrd` files, a live viewer).
 
 // Outside tests, no unwrap or expect: bad input is an error value with a message, and the
@@ -39,6 +41,7 @@ pub mod logging;
 pub mod offline;
 pub mod preview;
 pub mod realtime;
+pub mod record;
 pub mod recording;
 pub mod report;
 pub mod robot;

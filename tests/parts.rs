@@ -12,7 +12,8 @@ use support::humanoid::rig;
 use upc::col;
 use upc::config::{Config, ControllerKind};
 use upc::control::parts::{PIPELINE, Stage, TickFrame, TickInputs};
-use upc::control::{ControllerPart, Record, TickError};
+use upc::control::{ControllerPart, TickError};
+use upc::record::Record;
 
 /// A part that adds a constant force on the CoM (as an observer would) and counts its calls.
 struct ConstantPush {

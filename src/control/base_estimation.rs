@@ -7,9 +7,9 @@ use std::any::Any;
 
 use super::core::TickError;
 use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
-use super::record::Record;
 use crate::col;
 use crate::estimation::{BaseEstimate, BaseEstimator, EstimatorMode, EstimatorSettings};
+use crate::record::Record;
 
 pub struct BaseEstimation {
     estimator: BaseEstimator,

@@ -15,9 +15,9 @@ use serde::{Deserialize, Serialize};
 
 use super::core::TickError;
 use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
-use super::record::Record;
 use crate::col;
 use crate::config::ControllerKind;
+use crate::record::Record;
 
 /// The observer's state, both horizontal axes.
 #[derive(Debug, Clone)]

@@ -28,7 +28,6 @@ use super::TickRecord;
 use super::forecast_window::ForecastWindow;
 use super::gain_thread::StampedSchedule;
 use super::parts::{self, ControllerPart, PartSetup, Stage, TickFrame, TickInputs};
-use super::record::Record;
 use crate::channels::{MAX_DOF, StateMsg};
 use crate::config::{Config, ControllerKind, HandForceSource};
 use crate::dynamics::{
@@ -39,6 +38,7 @@ use crate::estimation::EstimatorError;
 use crate::preview::{
     AxisState, GainSchedule, HandPreviewer, HandState, PreviewError, PreviewPlan, ZmpPreview,
 };
+use crate::record::Record;
 use crate::robot::{Robot, RobotState};
 use crate::wbc::{FallbackReason, WbcCommand, WbcStatus, WholeBodyController};
 

@@ -49,10 +49,10 @@ use serde::{Deserialize, Serialize};
 
 use super::core::TickError;
 use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
-use super::record::Record;
 use super::viability::{CapturePoint, ViabilitySettings, easing_believed};
 use crate::col;
 use crate::config::{ControllerKind, HandForceSource};
+use crate::record::Record;
 
 /// The correction's current estimate, for logs and the summary.
 #[derive(Debug, Clone, Copy, PartialEq)]

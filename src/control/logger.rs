@@ -14,7 +14,7 @@ use rerun::blueprint::{
     Blueprint, BlueprintActivation, Horizontal, Spatial3DView, TimeSeriesView, Vertical,
 };
 
-use super::record::{Column, Record};
+use crate::record::{Column, Record};
 
 /// One tick's record (the core's, the parts' and the loop's columns) at plant time `time`.
 #[derive(Debug, Clone, Copy)]

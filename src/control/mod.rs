@@ -5,8 +5,8 @@
 //!   state message is read (into a [`crate::robot::RobotState`]); [`tick_record`]: what a
 //!   tick produced.
 //! - [`parts`]: the controller's parts behind one trait, run by stage in the order of
-//!   [`parts::PIPELINE`]; [`record`]: self-describing records (name, format and value together)
-//!   for the CSV, rerun and tests. The parts:
+//!   [`parts::PIPELINE`]; the records they log are
+//!   [`crate::record`]'s (name, format and value together). The parts:
 //!   - [`wrench_estimation`]: the feet's wrenches, the CoP and the hand force from the joint
 //!     torques, for a robot without force sensors;
 //!   - [`base_estimation`]: the floating base from the IMU, joints and foot wrenches;
@@ -34,7 +34,6 @@ pub mod gain_thread;
 pub mod logger;
 pub mod parts;
 pub mod plant_link;
-pub mod record;
 pub mod run_metrics;
 pub mod server;
 pub mod summary;
@@ -52,6 +51,5 @@ pub use forecast_correction::{
 pub use forecast_window::{ForecastRejection, ForecastWindow};
 pub use gain_thread::{GainHandoff, GainSnapshot, StampedSchedule};
 pub use parts::{ControllerPart, Stage};
-pub use record::{Column, Record};
 pub use tick_record::TickRecord;
 pub use timing::Ticker;

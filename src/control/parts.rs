@@ -14,10 +14,10 @@ use nalgebra::DVector;
 
 use super::core::TickError;
 use super::forecast_window::ForecastWindow;
-use super::record::Record;
 use crate::config::{Config, ConfigError, ControllerKind, Layers, PartSettings, PartTables};
 use crate::dynamics::Model;
 use crate::preview::CartTable;
+use crate::record::Record;
 use crate::robot::N_CONTACTS;
 use crate::robot::{Robot, RobotState};
 

@@ -30,7 +30,6 @@ use super::forecast_intake::ForecastIntake;
 use super::gain_thread::GainSolver;
 use super::logger::{ControlLogger, TickLog};
 use super::plant_link::{LinkTimeouts, PlantLink, Verdict};
-use super::record::{Column, Record};
 use super::run_metrics::RunMetrics;
 pub use super::summary::ServerSummary;
 use super::{ControllerCore, ForecastWindow, GainHandoff, Ticker};
@@ -40,6 +39,7 @@ use crate::channels::{
 };
 use crate::col;
 use crate::config::{Config, ControllerKind, LoopMode};
+use crate::record::{Column, Record};
 use crate::robot::{ReducedModel, Robot};
 use crate::wbc::{FallbackReason, WbcStatus, damping_torques};
 

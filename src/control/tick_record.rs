@@ -1,8 +1,8 @@
 //! What one tick of the controller core produced ([`TickRecord`]), and its columns of the
 //! tick's [`Record`] (the parts add theirs: `super::parts`).
 
-use super::record::Record;
 use crate::col;
+use crate::record::Record;
 
 /// What one tick produced, for logging and the summary.
 #[derive(Debug, Clone, Copy, Default)]

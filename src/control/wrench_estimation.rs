@@ -14,11 +14,11 @@ use serde::{Deserialize, Serialize};
 
 use super::core::TickError;
 use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
-use super::record::Record;
 use crate::col;
 use crate::estimation::wrench_observer::{
     ContactWrenches, DriveFriction, WrenchObserver, WrenchObserverGains,
 };
+use crate::record::Record;
 
 /// When the observer's estimates are used (`controller.wrench_observer.mode`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]

@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 
 use super::core::TickError;
 use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
-use super::record::Record;
+use crate::record::Record;
 
 /// Ticks count toward the tare only while the forecast's force is below this (N)...
 const QUIET_FORCE: f64 = 1.0;

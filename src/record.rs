@@ -1,7 +1,7 @@
-//! Self-describing tick records: every value the controller logs is put with its column (name,
-//! CSV format, rerun path) in the same call, so that a column's name and value cannot drift
-//! apart, and a part adds its columns by putting them. `controller.csv`'s header is the
-//! columns of a record ([`Record::columns`]); readers go by name.
+//! Self-describing records: every value a process logs is put with its column (name, CSV
+//! format, rerun path) in the same call, so that a column's name and value cannot drift apart,
+//! and a controller part adds its columns by putting them. A CSV's header is the columns of a
+//! record ([`Record::columns`]); readers go by name.
 
 /// How a column's value is printed in the CSV.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -64,7 +64,7 @@ impl Column {
 #[macro_export]
 macro_rules! col {
     ($($c:tt)*) => {{
-        const C: &$crate::control::record::Column = &$crate::control::record::Column::$($c)*;
+        const C: &$crate::record::Column = &$crate::record::Column::$($c)*;
         C
     }};
 }
