@@ -129,7 +129,7 @@ fn bench(c: &mut Criterion) {
                 [0.0; 3]
             };
             k += 1;
-            let out = r.core.tick(&r.state, &r.window, None, &mut r.tau);
+            let out = r.tick(None);
             black_box((out.is_ok(), r.tau[0]));
         };
         match fixed_ticks() {
@@ -175,9 +175,7 @@ fn handoff(g: &mut criterion::BenchmarkGroup<criterion::measurement::WallTime>, 
     r.window
         .offer(&humanoid::push_forecast(0.0, -50.0), 0.0)
         .expect("forecast");
-    r.core
-        .tick(&r.state, &r.window, None, &mut r.tau)
-        .expect("tick");
+    r.tick(None).expect("tick");
     let robot = upc::robot::Robot::embedded_default()
         .expect("robot")
         .reduced();

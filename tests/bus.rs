@@ -316,9 +316,9 @@ fn upc_run_through_the_bus_on_what_a_g1_measures_keeps_c1_standing() {
         assert_eq!(u(&c, "tick_errors"), 0, "{c}");
         // The base from the IMU and the encoders, the feet and the hand from the torques: on
         // (nearly) every tick, the stance found.
-        let ticks = u(&c["estimator"], "ticks");
+        let ticks = u(&c["base_estimation"], "ticks");
         assert!(ticks > 1500, "{c}");
-        assert!(u(&c["estimator"], "no_stance") < ticks / 100, "{c}");
+        assert!(u(&c["base_estimation"], "no_stance") < ticks / 100, "{c}");
         let wo = &c["wrench_observer"];
         for k in ["feet_ticks", "cop_ticks", "hand_ticks"] {
             assert!(u(wo, k) + 10 >= ticks, "{k}: {c}");

@@ -22,10 +22,7 @@ fn a_tick_at_home_gives_finite_torques_for_each_controller() {
     for kind in [ControllerKind::C0, ControllerKind::C1, ControllerKind::C2] {
         let mut r = rig(&config, kind);
         r.offer_push(fx);
-        let status = r
-            .core
-            .tick(&r.state, &r.window, None, &mut r.tau)
-            .expect("tick");
+        let status = r.tick(None).expect("tick");
         assert_eq!(status, upc::wbc::WbcStatus::Solved, "{kind:?}");
         assert!(
             r.tau.iter().all(|t| t.is_finite()) && r.tau.iter().any(|t| t.abs() > 0.1),
@@ -64,9 +61,7 @@ fn robot_gravity_is_the_whole_controllers() {
     let torque = |config: &Config| {
         let mut r = rig(config, ControllerKind::C1);
         assert_eq!(r.core.model.gravity.z, -config.robot.gravity);
-        r.core
-            .tick(&r.state, &r.window, None, &mut r.tau)
-            .expect("tick");
+        r.tick(None).expect("tick");
         r.tau.iter().map(|t| t * t).sum::<f64>().sqrt()
     };
     let ratio = torque(&moon) / torque(&earth);
@@ -130,14 +125,10 @@ fn bad_state_is_an_error_value() {
     let config = Config::embedded_default().expect("defaults");
     let mut r = rig(&config, ControllerKind::C1);
     r.state.v[7] = f64::NAN;
-    assert!(r.core.tick(&r.state, &r.window, None, &mut r.tau).is_err());
+    assert!(r.tick(None).is_err());
     r.state.v[7] = 0.0;
     r.state.nq = 12;
-    let e = r
-        .core
-        .tick(&r.state, &r.window, None, &mut r.tau)
-        .unwrap_err()
-        .to_string();
+    let e = r.tick(None).unwrap_err().to_string();
     assert!(e.contains("nq = 12"), "{e}");
 }
 
@@ -150,9 +141,7 @@ fn reset_latches_the_posture_of_a_new_session() {
     let mut a = rig(&config, ControllerKind::C1);
     for k in 0..5 {
         a.state.time = k as f64 * 0.001;
-        a.core
-            .tick(&a.state, &a.window, None, &mut a.tau)
-            .expect("first session");
+        a.tick(None).expect("first session");
     }
     // The second session: base turned by 0.3 rad about z, torso and arms moved.
     let mut second = a.state;
@@ -171,10 +160,8 @@ fn reset_latches_the_posture_of_a_new_session() {
     for k in 0..3 {
         a.state.time = k as f64 * 0.001;
         fresh.state.time = a.state.time;
-        let sa = a.core.tick(&a.state, &a.window, None, &mut a.tau);
-        let sf = fresh
-            .core
-            .tick(&fresh.state, &fresh.window, None, &mut fresh.tau);
+        let sa = a.tick(None);
+        let sf = fresh.tick(None);
         assert_eq!(sa.expect("reset core"), sf.expect("fresh core"));
         let d = a
             .tau
@@ -206,18 +193,26 @@ fn a_state_larger_than_a_message_is_an_error() {
         [0.0, 0.0],
     )
     .expect("core");
-    let window = upc::control::ForecastWindow::new(1.0, 1.0, 0.2, 300.0);
-    let mut tau = vec![0.0; nv - 6];
     let state = StateMsg {
         nq: nq as u32,
         nv: nv as u32,
         ..Default::default()
     };
-    let e = core
-        .tick(&state, &window, None, &mut tau)
+    // Read at the process's edge as the loop reads it: refused, never sliced beyond the message.
+    let mut sensed = upc::robot::RobotState::new(nq, nv);
+    let e = upc::control::contract::read_state(&state, 0, &mut sensed)
         .expect_err("a state beyond the message's capacity")
         .to_string();
     assert!(e.contains(&format!("nq = {nq}")), "{e}");
+    // And a robot state of other sizes than the model's is the tick's error value.
+    let window = upc::control::ForecastWindow::new(1.0, 1.0, 0.2, 300.0);
+    let mut tau = vec![0.0; nv - 6];
+    let small = upc::robot::RobotState::new(nq - 1, nv);
+    let e = core
+        .tick(&small, &window, None, &mut tau)
+        .expect_err("a state of other sizes")
+        .to_string();
+    assert!(e.contains(&format!("nq = {}", nq - 1)), "{e}");
 }
 
 /// The humanoid with a chain of extra joints on its last body: nv = MAX_DOF + 12 (more than a
@@ -292,9 +287,7 @@ fn c2_thread_hands_over_time_stamped_schedules_without_blocking() {
     let n = config.preview.horizon;
     let mut r = rig(&config, ControllerKind::C2);
     r.offer_push(-50.0);
-    r.core
-        .tick(&r.state, &r.window, None, &mut r.tau)
-        .expect("tick");
+    r.tick(None).expect("tick");
     let robot = Robot::embedded_default().expect("robot").reduced();
     let mut handoff = GainHandoff::spawn(&config, &robot).expect("thread");
     assert_eq!(
@@ -322,9 +315,7 @@ fn c2_thread_hands_over_time_stamped_schedules_without_blocking() {
     );
     assert!(handoff.alive());
     // The tick uses a fresh schedule's first gain.
-    r.core
-        .tick(&r.state, &r.window, Some(&s), &mut r.tau)
-        .expect("tick");
+    r.tick(Some(&s)).expect("tick");
     assert!((r.core.last.kp - s.schedule.kp[0]).abs() < 1e-9);
 }
 
@@ -337,7 +328,7 @@ fn a_fallen_robot_is_held_in_joint_damping_until_the_plant_restarts() {
     let config = Config::embedded_default().expect("defaults");
     let mut r = rig(&config, ControllerKind::C1);
     let standing = r.state.q[2];
-    let status = r.core.tick(&r.state, &r.window, None, &mut r.tau);
+    let status = r.tick(None);
     assert_eq!(status.expect("tick"), WbcStatus::Solved);
     let solves = r.core.wbc_counters().ticks;
     // Sunk by 40 % of the CoM height (the threshold is 25 %), moving.
@@ -353,7 +344,7 @@ fn a_fallen_robot_is_held_in_joint_damping_until_the_plant_restarts() {
         if k == 1 {
             r.state.q[2] = standing;
         }
-        let status = r.core.tick(&r.state, &r.window, None, &mut r.tau);
+        let status = r.tick(None);
         assert_eq!(
             status.expect("tick"),
             WbcStatus::Fallback(FallbackReason::Fallen)
@@ -363,14 +354,14 @@ fn a_fallen_robot_is_held_in_joint_damping_until_the_plant_restarts() {
         }
         assert!(r.core.last.fallen);
     }
-    assert_eq!((r.core.falls, r.core.fallen_ticks), (1, 3));
+    assert_eq!((r.core.info().falls, r.core.info().fallen_ticks), (1, 3));
     assert_eq!(r.core.wbc_counters().ticks, solves, "no QP while fallen");
     // A plant restart (a new session) stands it up again: balance control resumes.
     r.core.reset();
     r.state.v.iter_mut().for_each(|v| *v = 0.0);
-    let status = r.core.tick(&r.state, &r.window, None, &mut r.tau);
+    let status = r.tick(None);
     assert_eq!(status.expect("tick"), WbcStatus::Solved);
-    assert_eq!(r.core.falls, 1);
+    assert_eq!(r.core.info().falls, 1);
 }
 
 /// `controller.fall_drop = 0` turns the detector off: the same sunk state runs the QP.
@@ -379,14 +370,10 @@ fn the_fall_detector_can_be_turned_off() {
     let mut config = Config::embedded_default().expect("defaults");
     config.controller.fall_drop = 0.0;
     let mut r = rig(&config, ControllerKind::C1);
-    r.core
-        .tick(&r.state, &r.window, None, &mut r.tau)
-        .expect("tick");
+    r.tick(None).expect("tick");
     r.state.q[2] -= 0.4 * r.core.last.com[2];
-    r.core
-        .tick(&r.state, &r.window, None, &mut r.tau)
-        .expect("tick");
-    assert_eq!(r.core.falls, 0);
+    r.tick(None).expect("tick");
+    assert_eq!(r.core.info().falls, 0);
     assert!(!r.core.last.fallen);
 }
 
@@ -400,17 +387,13 @@ fn the_support_and_the_zmp_reference_follow_feet_that_creep() {
         let mut config = Config::embedded_default().expect("defaults");
         config.controller.support_follow = follow;
         let mut r = rig(&config, ControllerKind::C1);
-        r.core
-            .tick(&r.state, &r.window, None, &mut r.tau)
-            .expect("first tick");
+        r.tick(None).expect("first tick");
         let (ref0, sup0) = (r.core.last.zmp_ref, r.core.support().expect("latched"));
         r.state.q[1] += shift;
         // Five time constants of the low-pass: 1 − e⁻⁵ of the shift.
         for k in 1..=100 {
             r.state.time = k as f64 * 0.001;
-            r.core
-                .tick(&r.state, &r.window, None, &mut r.tau)
-                .expect("tick");
+            r.tick(None).expect("tick");
         }
         let moved = r.core.last.zmp_ref[1] - ref0[1];
         let sup = r.core.support().expect("support");

@@ -62,13 +62,11 @@ fn controller_tick_with_the_base_estimator_allocations() {
     let count = allocations(|| {
         assert_eq!(r.tick_frozen(5..25), 0);
     });
-    let e = r
-        .core
-        .part::<upc::control::base_estimation::BaseEstimation>()
-        .and_then(|p| p.counts())
-        .expect("the estimator ran");
-    eprintln!("with the estimator: {count} allocations in 20 ticks, {e:?}");
-    assert_eq!(e.ticks, 25);
+    let mut summary = serde_json::Map::new();
+    r.core.summarize(&mut summary);
+    let e = summary.get("base_estimation").expect("the estimator ran");
+    eprintln!("with the estimator: {count} allocations in 20 ticks, {e}");
+    assert_eq!(e["ticks"].as_u64(), Some(25));
     assert!(count <= 20, "{count} allocations in 20 ticks");
 }
 
@@ -91,12 +89,14 @@ fn controller_tick_with_the_wrench_observer_allocations() {
     let count = allocations(|| {
         assert_eq!(r.tick_frozen(5..25), 0);
     });
-    let wo = r
-        .core
-        .part::<upc::control::wrench_estimation::WrenchEstimation>()
-        .expect("the part")
-        .counts;
-    eprintln!("with the wrench observer: {count} allocations in 20 ticks, {wo:?}");
-    assert_eq!((wo.updates, wo.hand_ticks, wo.feet_ticks), (25, 25, 25));
+    let mut summary = serde_json::Map::new();
+    r.core.summarize(&mut summary);
+    let wo = &summary["wrench_observer"];
+    eprintln!("with the wrench observer: {count} allocations in 20 ticks, {wo}");
+    let n = |k: &str| wo[k].as_u64();
+    assert_eq!(
+        (n("updates"), n("hand_ticks"), n("feet_ticks")),
+        (Some(25), Some(25), Some(25))
+    );
     assert!(count <= 20, "{count} allocations in 20 ticks");
 }

@@ -28,7 +28,7 @@ fn on_exact_sensors_the_estimate_is_the_truth() {
             "--duration",
             "2",
             "--set",
-            "controller.estimator.mode=\"on\"",
+            "controller.base_estimation.mode=\"on\"",
         ],
     );
     let a = &e["base_estimate_error"];
@@ -50,7 +50,10 @@ fn on_realistic_sensors_the_estimate_meets_its_goals() {
     let a = &e["base_estimate_error"];
     assert!(f(a, "samples") >= 690.0);
     assert!(f(a, "position_rms") < 5e-3, "{a:#}");
-    assert_eq!(f(&e["controller_summary"]["estimator"], "imu_lost"), 0.0);
+    assert_eq!(
+        f(&e["controller_summary"]["base_estimation"], "imu_lost"),
+        0.0
+    );
 }
 
 /// The goals on `multiple_impacts` (base velocity RMS ≤ 2 cm/s, orientation RMS ≤
@@ -58,10 +61,10 @@ fn on_realistic_sensors_the_estimate_meets_its_goals() {
 fn assert_meets_goals(e: &Value) {
     let a = &e["base_estimate_error"];
     let c = &e["controller_summary"];
-    eprintln!("{a:#}\n{:#}", c["estimator"]);
+    eprintln!("{a:#}\n{:#}", c["base_estimation"]);
     assert!(f(a, "velocity_rms") <= 0.02, "{a:#}");
     assert!(f(a, "orientation_rms_deg") <= 0.5, "{a:#}");
-    assert_eq!(f(&c["estimator"], "divergences"), 0.0);
+    assert_eq!(f(&c["base_estimation"], "divergences"), 0.0);
     assert_eq!(f(c, "falls"), 0.0);
     assert!(f(c, "com_height_drop") < 5e-3, "{c:#}");
 }
@@ -89,7 +92,7 @@ fn standing_the_base_height_does_not_drift() {
     // The gyro's bias taken out: the drift goes with it.
     let out = scratch("estimation", "standing-gyro-bias");
     let mut args = standing.to_vec();
-    args.extend(["--set", "controller.estimator.gyro_bias_time=10"]);
+    args.extend(["--set", "controller.base_estimation.gyro_bias_time=10"]);
     let b = &run(&out, &args)["base_estimate_error"];
     eprintln!("{b:#}");
     assert!(f(b, "height_max") < 5e-3, "{b:#}");
@@ -122,7 +125,7 @@ fn an_attitude_filter_off_by_two_degrees_is_levelled_by_the_soles() {
         "--duration",
         "1",
         "--set",
-        "controller.estimator.tilt_time=0",
+        "controller.base_estimation.tilt_time=0",
     ]);
     let b = &run(&out, &args)["base_estimate_error"];
     assert!(f(b, "tilt_rms_deg") > 1.5, "{b:#}");
@@ -191,11 +194,14 @@ fn the_controller_sensing_flag_chooses_the_estimator() {
         let log = support::procs::log(&s, "controller");
         if estimates {
             // The estimator ran on every state the plant published, and no tick failed.
-            assert!(f(&c["estimator"], "ticks") >= steps - 1.0, "{steps}: {c:#}");
+            assert!(
+                f(&c["base_estimation"], "ticks") >= steps - 1.0,
+                "{steps}: {c:#}"
+            );
             assert_eq!(f(&c, "tick_errors"), 0.0, "{c:#}");
         } else {
             // Every state refused, tick by tick, saying why.
-            assert!(c["estimator"].is_null(), "{c:#}");
+            assert!(c["base_estimation"].is_null(), "{c:#}");
             assert!(f(&c, "tick_errors") >= steps - 1.0, "{steps}: {c:#}");
             assert!(log.contains("--sensing realistic"), "{log}");
         }

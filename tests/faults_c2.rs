@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use upc::config::{Config, ControllerKind, LoopMode};
 use upc::control::GainHandoff;
 use upc::control::gain_thread::{GainSnapshot, GainSolver, StampedSchedule};
-use upc::control::server::{ServerOptions, ServerSummary, run_server_with};
+use upc::control::server::{Extensions, ServerOptions, ServerSummary, run_server_with};
 use upc::preview::PreviewError;
 
 static SERIAL: Mutex<()> = Mutex::new(());
@@ -138,9 +138,7 @@ fn gain_thread_survives_a_panicking_search_and_serves_the_next_one() {
     logs();
     let config = c2_config(LoopMode::Lockstep);
     let mut r = support::humanoid::rig(&config, ControllerKind::C2);
-    r.core
-        .tick(&r.state, &r.window, None, &mut r.tau)
-        .expect("tick");
+    r.tick(None).expect("tick");
     let (kp, kd) = other_gains(&config);
     let calls = Arc::new(AtomicU32::new(0));
     let solver = Scripted {
@@ -275,7 +273,11 @@ fn run(
     };
     let robot = upc::robot::Robot::embedded_default().expect("robot");
     let stop = Arc::new(AtomicBool::new(false));
-    let summary = run_server_with(config, &robot, &opts, stop, Some(solver)).expect("run");
+    let extensions = Extensions {
+        c2_solver: Some(solver),
+        ..Extensions::default()
+    };
+    let summary = run_server_with(config, &robot, &opts, stop, extensions).expect("run");
     let text = std::fs::read_to_string(&csv).expect("csv");
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().expect("header").split(',').collect();
@@ -300,13 +302,13 @@ fn c2_panicking_in_a_run_leaves_c1_on_the_nominal_gains() {
     logs();
     let config = c2_config(LoopMode::Lockstep);
     let (s, rows) = run("panic", &config, 2.0, Box::new(Panics));
-    assert!(s.c2_panics >= 1, "{s:?}");
-    assert_eq!(s.c2_solves, 0, "{s:?}");
+    assert!(s.c2.c2_panics >= 1, "{s:?}");
+    assert_eq!(s.c2.c2_solves, 0, "{s:?}");
     // Past the horizon (1.5 s) with no schedule: counted once, C1 on nominal gains.
-    assert_eq!(s.c2_stale_schedules, 1, "{s:?}");
-    assert!(s.ticks >= 1990, "{s:?}");
-    assert_eq!(s.tick_errors, 0);
-    assert!(s.com_height_drop < 0.03, "{s:?}");
+    assert_eq!(s.events.c2_stale_schedules, 1, "{s:?}");
+    assert!(s.figures.ticks >= 1990, "{s:?}");
+    assert_eq!(s.events.tick_errors, 0);
+    assert!(s.figures.com_height_drop < 0.03, "{s:?}");
     assert!(rows.len() > 150);
     assert!(
         rows.iter().all(|(_, kp)| *kp == config.hand.kp),
@@ -339,10 +341,10 @@ fn c2_starved_past_the_horizon_falls_back_to_nominal_gains_and_recovers() {
         stalled: false,
     };
     let (s, rows) = run("starved", &config, 4.0, Box::new(solver));
-    assert_eq!(s.c2_stale_schedules, 1, "{s:?}");
-    assert_eq!(s.c2_panics, 0);
-    assert!(s.c2_solves >= 2, "{s:?}");
-    assert!(s.com_height_drop < 0.03, "{s:?}");
+    assert_eq!(s.events.c2_stale_schedules, 1, "{s:?}");
+    assert_eq!(s.c2.c2_panics, 0);
+    assert!(s.c2.c2_solves >= 2, "{s:?}");
+    assert!(s.figures.com_height_drop < 0.03, "{s:?}");
     let applied = |from: f64, to: f64, k: f64| {
         rows.iter()
             .filter(|(t, _)| *t > from && *t < to)

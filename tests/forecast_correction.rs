@@ -397,22 +397,22 @@ fn a_late_weak_forecast_of_a_short_impact_keeps_its_easing_beyond_the_edge() {
         extra: &[],
     };
     let j = run(&s, "late_weak", &case);
-    let fc = &j["forecast_correction"];
+    let (fc, guard) = (&j["forecast_correction"], &j["viability"]);
     eprintln!(
         "94 N, 0.3 s, κ 0.5, τ +150 ms: drop {:.1} mm, edge {:.3} s, weight ≥ {:.2}, easing believed {:.3} s",
         f(&j, "com_height_drop") * 1e3,
         f(&j, "time_at_support_edge"),
         f(fc, "weight_min"),
-        f(fc, "easing_believed_time")
+        f(guard, "easing_believed_time")
     );
     assert!(!fell(&j), "{j}");
-    assert!(f(fc, "easing_believed_time") > 0.0, "{fc}");
+    assert!(f(guard, "easing_believed_time") > 0.0, "{guard}");
     let text = std::fs::read_to_string(s.path("late_weak/c1/controller.csv")).expect("csv");
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().expect("header").split(',').collect();
     let col = |name: &str| header.iter().position(|h| *h == name).expect(name);
     let (believed, w, capture, heel) = (
-        col("corr_easing_believed_x"),
+        col("guard_easing_x"),
         col("corr_weight"),
         col("capture_x"),
         col("sup_x_min"),

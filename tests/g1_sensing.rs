@@ -91,7 +91,10 @@ fn a_g1_on_its_own_sensors_stands_with_c1_where_c0_falls_on_both_plants() {
             10 * u(&c1, "hand_force_modelled_ticks") >= 9 * ticks,
             "{plant}: {c1}"
         );
-        assert!(u(&c1["estimator"], "ticks") + 5 >= ticks, "{plant}: {c1}");
+        assert!(
+            u(&c1["base_estimation"], "ticks") + 5 >= ticks,
+            "{plant}: {c1}"
+        );
         assert_eq!(u(&c1, "falls"), 0, "{plant}: C1 fell: {c1}");
         assert!(f(&c1, "com_height_drop") < 0.01, "{plant}: {c1}");
         let c0 = run(&s, plant, "c0");
@@ -162,7 +165,7 @@ fn the_icub_like_on_joint_torques_stands_on_the_modelled_hand_force_where_the_es
 fn stuck_friction_cop_error(robot: &upc::robot::Robot, fraction: f64) -> f64 {
     use nalgebra::{DMatrix, DVector, Vector3};
     use rand::{Rng, SeedableRng};
-    use upc::control::wrench_estimation::WrenchObserverSettings;
+    use upc::control::wrench_observer::WrenchObserverSettings;
     use upc::dynamics::{
         Data, ReferenceFrame, crba, get_frame_jacobian, nonlinear_effects, update_frame_placements,
     };

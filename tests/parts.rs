@@ -1,18 +1,17 @@
-//! The controller's seam for parts (`upc::control::parts`, docs/architecture.md): a part is
+//! The controller's seam for parts (`upc::control::part`, docs/architecture.md): a part is
 //! run at its stage, reset with the core, and its columns and summary entries come with it; the
 //! parts' settings are checked at load, their defaults read from `config/default.toml`.
 
 mod support;
 
-use std::any::Any;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use support::humanoid::rig;
 use upc::col;
 use upc::config::{Config, ControllerKind};
-use upc::control::parts::{PIPELINE, Stage, TickFrame, TickInputs};
-use upc::control::{ControllerPart, TickError};
+use upc::control::pipeline::PIPELINE;
+use upc::control::{ControllerPart, Stage, TickError, TickFrame, TickInputs};
 use upc::record::Record;
 
 /// A part that adds a constant force on the CoM (as an observer would) and counts its calls.
@@ -34,9 +33,7 @@ impl ControllerPart for ConstantPush {
     }
     fn update(&mut self, _: Stage, _: &TickInputs, frame: &mut TickFrame) -> Result<(), TickError> {
         self.updates.fetch_add(1, Ordering::Relaxed);
-        frame.com_force = [self.force, 0.0];
-        frame.com_force_decay = Some(1.0);
-        Ok(())
+        frame.com_forces.add([self.force, 0.0], 1.0)
     }
     fn record(&self, out: &mut Record) {
         out.put(col!(fixed("push_x", 2).plot("push/x")), self.force);
@@ -46,9 +43,6 @@ impl ControllerPart for ConstantPush {
             "constant_push".into(),
             serde_json::json!({ "updates": self.updates.load(Ordering::Relaxed) }),
         );
-    }
-    fn as_any(&self) -> &dyn Any {
-        self
     }
 }
 
@@ -140,7 +134,7 @@ fn a_parts_bad_settings_are_refused_at_load_naming_the_key_and_layer() {
 
     let range = layers("controller.forecast_correction.window=-1.0");
     let config = range.build().expect("well-formed");
-    let e = upc::control::parts::check(&config, &range)
+    let e = upc::control::pipeline::check(&config, &range)
         .expect_err("out of range")
         .to_string();
     assert!(
@@ -149,7 +143,8 @@ fn a_parts_bad_settings_are_refused_at_load_naming_the_key_and_layer() {
     );
     let defaults = Config::default_layers().expect("layers");
     let config = defaults.build().expect("defaults");
-    upc::control::parts::check(&config, &defaults).expect("the defaults pass every part's check");
+    upc::control::pipeline::check(&config, &defaults)
+        .expect("the defaults pass every part's check");
 }
 
 /// A part's `Default` is its table of `config/default.toml`: the one home of its defaults.

@@ -432,7 +432,7 @@ fn a_push_felt_at_the_held_hand_is_the_held_paths_disturbance_at_rest() {
     h.f = push;
     hold_against(&mut h, &des);
     let on_path = Vector3::from(h.hp.disturbance()[n - 1]);
-    let d = upc::control::core::felt_direction(&e, &m_e).unwrap();
+    let d = upc::control::held_object::felt_direction(&e, &m_e).unwrap();
     assert!((e.dot(&d) - 1.0).abs() < 1e-12, "{d}");
     h.hp.set_held_path(None);
     h.f = d * e.dot(&push);
@@ -442,9 +442,9 @@ fn a_push_felt_at_the_held_hand_is_the_held_paths_disturbance_at_rest() {
     // The hinge's share is real here: the felt push leaves e by more than 5 N.
     assert!((felt - e * e.dot(&felt)).norm() > 5.0, "{felt}");
     // An isotropic stiffness pushes back along e itself: FC-0 again.
-    let d = upc::control::core::felt_direction(&e, &Matrix3::identity()).unwrap();
+    let d = upc::control::held_object::felt_direction(&e, &Matrix3::identity()).unwrap();
     assert!((d - e).norm() < 1e-12, "{d}");
-    assert!(upc::control::core::felt_direction(&e, &Matrix3::zeros()).is_none());
+    assert!(upc::control::held_object::felt_direction(&e, &Matrix3::zeros()).is_none());
 }
 
 #[test]

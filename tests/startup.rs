@@ -140,7 +140,7 @@ fn start_order_sensing(tag: &str, order: [&str; 3], gap: f64, sim_extra: &[&str]
     assert_eq!(u(&c, "tick_errors"), 0, "{c}");
     // On a robot's sensors the controller estimated the base all along, and never lost it.
     if sim_extra.contains(&"realistic") {
-        let e = &c["estimator"];
+        let e = &c["base_estimation"];
         assert!(u(e, "ticks") > 1000, "{c}");
         assert_eq!(u(e, "divergences"), 0, "{c}");
         assert_eq!(u(e, "imu_lost"), 0, "{c}");
@@ -165,7 +165,7 @@ fn start_order_sensing(tag: &str, order: [&str; 3], gap: f64, sim_extra: &[&str]
 }
 
 /// The plant publishes what a robot measures (no base, noisy sensors): the controller, as its
-/// unit starts it (`controller.estimator.mode = "auto"`), estimates the base from the plant's
+/// unit starts it (`controller.base_estimation.mode = "auto"`), estimates the base from the plant's
 /// first state, through the hold and the hand-over.
 ///
 /// Joining during the plant's start-up hold, the controller tares the wrist sensor right after

@@ -50,7 +50,7 @@ pub struct ControllerArgs {
     pub duration: Option<f64>,
     /// What the plant's states carry: `truth` takes the published base as measured and refuses
     /// a plant that does not measure it; `realistic` estimates the base from the sensor block
-    /// even when a base is published (overrides `controller.estimator.mode`, whose default
+    /// even when a base is published (overrides `controller.base_estimation.mode`, whose default
     /// `auto` follows the plant's `BASE_UNMEASURED` flag; docs/estimation.md).
     #[arg(long, value_enum)]
     pub sensing: Option<Sensing>,
@@ -99,7 +99,7 @@ pub fn run(args: ControllerArgs) -> CliResult {
             Sensing::Truth => "off",
             Sensing::Realistic => "on",
         };
-        extra.push(format!("controller.estimator.mode=\"{mode}\""));
+        extra.push(format!("controller.base_estimation.mode=\"{mode}\""));
     }
     let config = args.config.load(&robot, Some(&scenario), &extra)?;
     let opts = ServerOptions {
@@ -134,9 +134,9 @@ pub fn run(args: ControllerArgs) -> CliResult {
     tracing::info!(
         "controller stopped ({}): {} ticks, tick p50 {:.1} µs p99 {:.1} µs",
         summary.stopped_by,
-        summary.ticks,
-        summary.tick_p50_us,
-        summary.tick_p99_us
+        summary.figures.ticks,
+        summary.figures.tick_p50_us,
+        summary.figures.tick_p99_us
     );
     if let Some(p) = &args.summary {
         std::fs::write(p, serde_json::to_string_pretty(&summary)?)?;

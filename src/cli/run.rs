@@ -331,7 +331,7 @@ fn failure_of(e: &Entry) -> Option<String> {
             "the controller wrote no summary: {}",
             line("controller.log")
         )),
-        Some(s) if s.ticks == 0 => Some(format!(
+        Some(s) if s.figures.ticks == 0 => Some(format!(
             "the controller never controlled the robot (no tick); the simulator said: {}",
             line("sim.log")
         )),
@@ -533,7 +533,10 @@ fn run_one(
     };
     entry.failure = failure_of(&entry);
     // A run without a tick keeps no figures (its failure says so).
-    entry.controller_summary = entry.controller_summary.take().filter(|s| s.ticks > 0);
+    entry.controller_summary = entry
+        .controller_summary
+        .take()
+        .filter(|s| s.figures.ticks > 0);
     Ok(entry)
 }
 
@@ -1139,16 +1142,16 @@ fn print_table(entries: &[Entry]) {
             Some(s) => println!(
                 "{:<4} {:>11.1} {:>10.1} {:>11.3} {:>10.2} {:>10.2} {:>9.0} {:>9.0} {:>9.0} {:>8} {:>9.2} {:>8.1} {:>8.1}",
                 e.controller,
-                s.min_zmp_margin * 1e3,
+                s.figures.min_zmp_margin * 1e3,
                 e.true_cop_margin.map_or(f64::NAN, |m| m.min * 1e3),
-                s.time_at_support_edge,
-                s.hand_rms_error * 1e3,
-                s.hand_peak_error * 1e3,
-                s.tick_p50_us,
-                s.tick_p99_us,
-                s.tick_max_us,
-                s.deadline_misses,
-                s.c2_solve_mean_ms,
+                s.figures.time_at_support_edge,
+                s.figures.hand_rms_error * 1e3,
+                s.figures.hand_peak_error * 1e3,
+                s.figures.tick_p50_us,
+                s.figures.tick_p99_us,
+                s.figures.tick_max_us,
+                s.deadlines.deadline_misses,
+                s.figures.c2_solve_mean_ms,
                 e.sim_summary
                     .as_ref()
                     .and_then(|j| j["ipc_overhead_p99"].as_f64())

@@ -20,6 +20,9 @@ pub trait PartSettings: DeserializeOwned + Serialize {
     }
 }
 
+/// Parts' tables that were renamed (old, new), so that an old config is told what to write.
+const RENAMED: &[(&str, &str)] = &[("estimator", "base_estimation")];
+
 /// The `[controller]` tables that belong to parts, as TOML.
 #[derive(Debug, Clone, Default, serde::Deserialize)]
 #[serde(transparent)]
@@ -71,7 +74,11 @@ impl PartTables {
             let (Some(toml::Value::Table(known)), toml::Value::Table(given)) =
                 (defaults.get(name), value)
             else {
-                return Err(l.range_error(&key, "unknown key"));
+                let why = match RENAMED.iter().find(|(old, _)| old == name) {
+                    Some((_, new)) => format!("renamed: [controller.{new}]"),
+                    None => "unknown key".into(),
+                };
+                return Err(l.range_error(&key, why));
             };
             if let Some(k) = given.keys().find(|k| !known.contains_key(*k)) {
                 return Err(l.range_error(&format!("{key}.{k}"), "unknown key"));

@@ -486,7 +486,7 @@ pub struct ControllerConfig {
     /// Control ticks between two rerun records (and 10× that between plan records).
     pub log_every: usize,
     pub realtime: super::RealtimeSettings,
-    /// The parts' tables (`[controller.forecast_correction]`, `[controller.estimator]`, …), each
+    /// The parts' tables (`[controller.forecast_correction]`, `[controller.base_estimation]`, …), each
     /// read and checked by its part ([`super::PartSettings`], `crate::control::parts`).
     #[serde(flatten)]
     pub parts: super::PartTables,

@@ -1,12 +1,11 @@
 //! The floating-base estimator as a controller part (docs/estimation.md): when the plant does
-//! not measure the base (or `controller.estimator.mode = "on"`), the base of the tick's
+//! not measure the base (or `controller.base_estimation.mode = "on"`), the base of the tick's
 //! configuration and velocity is estimated from the IMU, the joints and the foot wrenches, and
 //! the measured centre of pressure is the foot wrenches' at the estimated soles.
 
-use std::any::Any;
-
-use super::core::TickError;
-use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
+use super::frame::TickFrame;
+use super::part::{BuildError, ControllerPart, PartKind, PartSetup};
+use super::tick::{Stage, TickError, TickInputs};
 use crate::col;
 use crate::estimation::{BaseEstimate, BaseEstimator, EstimatorMode, EstimatorSettings};
 use crate::record::Record;
@@ -18,25 +17,26 @@ pub struct BaseEstimation {
     ran: bool,
 }
 
-/// This part in `super::parts::PIPELINE`.
-pub const PART: PartEntry = PartEntry::new::<EstimatorSettings>(build);
+impl PartKind for BaseEstimation {
+    type Settings = EstimatorSettings;
 
-fn build(
-    s: &PartSetup,
-) -> Result<Box<dyn ControllerPart>, Box<dyn std::error::Error + Send + Sync>> {
-    let settings: EstimatorSettings = s.config.controller.parts.get()?;
-    Ok(Box::new(BaseEstimation {
-        estimator: BaseEstimator::new(
-            s.model,
-            s.contact_frames,
-            s.cart.mass * s.cart.gravity,
-            s.dt,
-            s.imu_frame,
-            settings,
-        ),
-        mode: settings.mode,
-        ran: false,
-    }))
+    fn build(
+        s: &PartSetup,
+        settings: EstimatorSettings,
+    ) -> Result<Box<dyn ControllerPart>, BuildError> {
+        Ok(Box::new(BaseEstimation {
+            estimator: BaseEstimator::new(
+                s.model,
+                s.contact_frames,
+                s.cart.mass * s.cart.gravity,
+                s.dt,
+                s.imu_frame,
+                settings,
+            ),
+            mode: settings.mode,
+            ran: false,
+        }))
+    }
 }
 
 impl BaseEstimation {
@@ -61,33 +61,37 @@ impl ControllerPart for BaseEstimation {
 
     fn update(
         &mut self,
-        _: Stage,
+        stage: Stage,
         inputs: &TickInputs,
         frame: &mut TickFrame,
     ) -> Result<(), TickError> {
-        let unmeasured = !inputs.sensed.base_measured;
+        let s = inputs.sensed;
+        let unmeasured = !s.base_measured;
         self.ran = match self.mode {
             EstimatorMode::On => true,
             EstimatorMode::Auto => unmeasured,
             EstimatorMode::Off if unmeasured => return Err(TickError::BaseUnmeasured),
             EstimatorMode::Off => false,
         };
-        frame.estimate_base = self.ran;
         if !self.ran {
             return Ok(());
         }
         // The joints are the measurement's; the base is what this part makes of them.
-        if !(frame.q.iter().skip(7))
-            .chain(frame.v.iter().skip(6))
+        if !(s.q.iter().skip(7))
+            .chain(s.v.iter().skip(6))
             .all(|x| x.is_finite())
         {
             return Err(TickError::NotFinite);
         }
-        let feet = frame.foot_wrenches;
-        self.estimator
-            .update(inputs.sensed, &feet, &mut frame.q, &mut frame.v)?;
+        let feet = *frame.foot_wrenches.or(&s.foot_wrenches);
+        let name = self.name();
+        let q = frame.q.write(name, stage)?;
+        q.copy_from(&s.q);
+        let v = frame.v.write(name, stage)?;
+        v.copy_from(&s.v);
+        self.estimator.update(s, &feet, q, v)?;
         if let Some(cop) = self.estimator.cop {
-            frame.cop = cop;
+            *frame.cop.write(name, stage)? = cop;
         }
         Ok(())
     }
@@ -142,11 +146,7 @@ impl ControllerPart for BaseEstimation {
 
     fn summarize(&self, out: &mut serde_json::Map<String, serde_json::Value>) {
         if let Some(c) = self.counts() {
-            out.insert("estimator".into(), serde_json::json!(c));
+            out.insert("base_estimation".into(), serde_json::json!(c));
         }
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
     }
 }

@@ -9,12 +9,11 @@
 //! s² + 2ζω s + ω² put both poles at the bandwidth ω (OB-2); its estimate enters the preview as
 //! M d̂ e^{−s/T_d} over the horizon, as the forecast correction's offset does.
 
-use std::any::Any;
-
 use serde::{Deserialize, Serialize};
 
-use super::core::TickError;
-use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
+use super::frame::TickFrame;
+use super::part::{BuildError, ControllerPart, PartKind, PartSetup};
+use super::tick::{Stage, TickError, TickInputs};
 use crate::col;
 use crate::config::ControllerKind;
 use crate::record::Record;
@@ -95,19 +94,20 @@ pub struct Observer {
     observer: Option<ComObserver>,
 }
 
-/// This part in `super::parts::PIPELINE`.
-pub const PART: PartEntry = PartEntry::new::<ComObserverSettings>(build);
+impl PartKind for Observer {
+    type Settings = ComObserverSettings;
 
-fn build(
-    s: &PartSetup,
-) -> Result<Box<dyn ControllerPart>, Box<dyn std::error::Error + Send + Sync>> {
-    let settings: ComObserverSettings = s.config.controller.parts.get()?;
-    let c = s.cart;
-    Ok(Box::new(Observer {
-        observer: settings
-            .enabled
-            .then(|| ComObserver::new(settings, c.mass, c.gravity, c.com_height, s.dt)),
-    }))
+    fn build(
+        s: &PartSetup,
+        settings: ComObserverSettings,
+    ) -> Result<Box<dyn ControllerPart>, BuildError> {
+        let c = s.cart;
+        Ok(Box::new(Observer {
+            observer: settings
+                .enabled
+                .then(|| ComObserver::new(settings, c.mass, c.gravity, c.com_height, s.dt)),
+        }))
+    }
 }
 
 impl ControllerPart for Observer {
@@ -129,7 +129,7 @@ impl ControllerPart for Observer {
     fn update(
         &mut self,
         _: Stage,
-        _inputs: &TickInputs,
+        inputs: &TickInputs,
         frame: &mut TickFrame,
     ) -> Result<(), TickError> {
         let Some(o) = self.observer.as_mut() else {
@@ -141,10 +141,10 @@ impl ControllerPart for Observer {
             frame.known_disturbance
         };
         let (com, vcom) = (frame.com, frame.com_vel);
-        o.update([com[0], com[1]], [vcom[0], vcom[1]], frame.cop, known);
-        frame.com_force = o.force();
-        frame.com_force_decay = Some((-frame.period / o.settings().decay).exp());
-        Ok(())
+        let cop = *frame.cop.or(&inputs.sensed.cop);
+        o.update([com[0], com[1]], [vcom[0], vcom[1]], cop, known);
+        let decay = (-frame.period / o.settings().decay).exp();
+        frame.com_forces.add(o.force(), decay)
     }
 
     fn record(&self, out: &mut Record) {
@@ -154,10 +154,6 @@ impl ControllerPart for Observer {
     }
 
     fn summarize(&self, _out: &mut serde_json::Map<String, serde_json::Value>) {}
-
-    fn as_any(&self) -> &dyn Any {
-        self
-    }
 }
 
 /// `[controller.com_observer]`.

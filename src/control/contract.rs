@@ -2,7 +2,7 @@
 //! checks it against the robot and copies it into a [`RobotState`]; the tick and its parts
 //! read only that.
 
-use super::core::TickError;
+use super::tick::TickError;
 use crate::channels::{
     MAX_DOF, SENSOR_FEET, SENSOR_HAND, SENSOR_IMU, SENSOR_JOINTS, STATE_FLAG_BASE_UNMEASURED,
     STATE_FLAG_HOLD, StateMsg,
@@ -12,10 +12,15 @@ use crate::robot::{RobotState, SensorStamps};
 // The contract carries each of the robot's contact points (its sole corners).
 const _: () = assert!(crate::channels::N_CONTACTS == crate::robot::N_CONTACTS);
 
-/// Fill `out` (sized for the robot) from `msg`. Refuses a message of other dimensions than the
-/// robot's, or announcing another robot than `robot_hash` (0 on either side: not checked).
-/// Finiteness is the tick's to judge (an unmeasured base is NaN until estimated).
+/// Fill `out` (sized for the robot) from `msg`. Its time, hold and task clock are read from
+/// any message; the measurement is refused from a message of other dimensions than the robot's,
+/// or announcing another robot than `robot_hash` (0 on either side: not checked), and `out`
+/// keeps the last one read. Finiteness is the tick's to judge (an unmeasured base is NaN until
+/// estimated).
 pub fn read_state(msg: &StateMsg, robot_hash: u64, out: &mut RobotState) -> Result<(), TickError> {
+    out.time = msg.time;
+    out.held = msg.flags & STATE_FLAG_HOLD != 0;
+    out.task_time = task_time(msg.time, msg.scenario_hash, msg.scenario_start);
     let (nq, nv) = (out.q.len(), out.v.len());
     // The message's arrays hold MAX_DOF values: a size beyond them is refused before any
     // slice by it (a model larger than the message would otherwise match it).
@@ -34,7 +39,6 @@ pub fn read_state(msg: &StateMsg, robot_hash: u64, out: &mut RobotState) -> Resu
             mine: robot_hash,
         });
     }
-    out.time = msg.time;
     out.q.as_mut_slice().copy_from_slice(&msg.q[..nq]);
     out.v.as_mut_slice().copy_from_slice(&msg.v[..nv]);
     out.base_measured = msg.flags & STATE_FLAG_BASE_UNMEASURED == 0;
@@ -53,8 +57,6 @@ pub fn read_state(msg: &StateMsg, robot_hash: u64, out: &mut RobotState) -> Resu
         feet: msg.stamps[SENSOR_FEET],
         hand: msg.stamps[SENSOR_HAND],
     };
-    out.held = msg.flags & STATE_FLAG_HOLD != 0;
-    out.task_time = task_time(msg.time, msg.scenario_hash, msg.scenario_start);
     Ok(())
 }
 

@@ -59,6 +59,19 @@ pub struct ForecastIntake {
 }
 
 impl ForecastIntake {
+    /// The summary's counts of the forecast windows taken.
+    pub fn counts(&self) -> super::summary::ForecastCounts {
+        let w = &self.window;
+        super::summary::ForecastCounts {
+            forecasts_accepted: w.accepted,
+            forecasts_rejected: w.rejected,
+            forecasts_rejected_by: w.rejections,
+            forecaster_restarts: w.restarts,
+            forecast_never_received: w.accepted == 0,
+            forecast_first_at: self.first_at,
+        }
+    }
+
     /// `wait`: the lockstep wait (`None` in real time) and, for a session's first window,
     /// `first_wait` (at least `wait`); `loss_after`: plant time without a valid window before the
     /// forecast counts as lost; `horizon`: the preview horizon (s).

@@ -164,6 +164,15 @@ pub struct GainHandoff {
 }
 
 impl GainHandoff {
+    /// The summary's counts of C2's searches.
+    pub fn counts(&self) -> super::summary::C2Counts {
+        super::summary::C2Counts {
+            c2_solves: self.stats.solves.load(Ordering::Relaxed),
+            c2_failures: self.stats.failures.load(Ordering::Relaxed),
+            c2_panics: self.stats.panics.load(Ordering::Relaxed),
+        }
+    }
+
     /// Start the worker thread with a gain search on `robot`'s reduced models configured from
     /// `config`.
     pub fn spawn(

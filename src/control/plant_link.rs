@@ -28,8 +28,9 @@ pub enum Verdict {
     Reanswer { step: u64 },
 }
 
-/// What the link counted over a run.
-#[derive(Clone, Copy, Debug, Default)]
+/// What the link counted over a run (`summary.json`'s keys by its fields).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct LinkCounts {
     /// Passes without a new state (real time) or with a repeated one.
     pub stale_states: u64,
@@ -39,7 +40,9 @@ pub struct LinkCounts {
     pub reconnects: u64,
     /// Longest wall time between two fresh states (s).
     pub longest_state_gap: f64,
-    /// Lockstep: answers sent again to a plant still sending the state they answer.
+    /// Lockstep: answers sent again to a plant still sending the state they answer (a lost
+    /// answer; 0 in a healthy run).
+    #[serde(rename = "lockstep_reanswers")]
     pub reanswers: u64,
 }
 

@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use super::summary::ServerSummary;
+use super::summary::RunFigures;
 use super::{StampedSchedule, TickRecord};
 use crate::realtime::LatencyHistogram;
 
@@ -85,7 +85,7 @@ impl RunMetrics {
         self.sim_time = rec.time;
         if let Some(sup) = support {
             let margin = (0..2)
-                .map(|a| (rec.zmp_meas[a] - sup[a][0]).min(sup[a][1] - rec.zmp_meas[a]))
+                .map(|a| (rec.cop[a] - sup[a][0]).min(sup[a][1] - rec.cop[a]))
                 .fold(f64::INFINITY, f64::min);
             self.min_zmp_margin = self.min_zmp_margin.min(margin);
             if margin < EDGE_BAND {
@@ -94,9 +94,8 @@ impl RunMetrics {
         }
         let z0 = *self.com_z0.get_or_insert(rec.com[2]);
         self.com_height_drop = self.com_height_drop.max(z0 - rec.com[2]);
-        let zerr = ((rec.zmp_meas[0] - rec.zmp_ref[0]).powi(2)
-            + (rec.zmp_meas[1] - rec.zmp_ref[1]).powi(2))
-        .sqrt();
+        let zerr =
+            ((rec.cop[0] - rec.zmp_ref[0]).powi(2) + (rec.cop[1] - rec.zmp_ref[1]).powi(2)).sqrt();
         self.max_zmp_error = self.max_zmp_error.max(zerr);
         self.hand_sq += rec.hand_err * rec.hand_err;
         self.hand_peak_error = self.hand_peak_error.max(rec.hand_err);
@@ -109,30 +108,42 @@ impl RunMetrics {
         out
     }
 
-    /// The summary's figures.
-    pub fn fill(&self, s: &mut ServerSummary) {
-        s.ticks = self.ticks;
-        s.ticks_since_reconnect = self.ticks_since_reconnect;
-        s.sim_time = self.sim_time;
-        s.tick_p50_us = self.hist.quantile(0.5) * 1e6;
-        s.tick_p99_us = self.hist.quantile(0.99) * 1e6;
-        s.tick_max_us = self.hist.max() * 1e6;
-        s.min_zmp_margin = if self.min_zmp_margin.is_finite() {
-            self.min_zmp_margin
-        } else {
-            0.0
+    /// The run's figures for the summary.
+    pub fn figures(&self) -> RunFigures {
+        let per_tick = |sum: f64| {
+            if self.ticks > 0 {
+                sum / self.ticks as f64
+            } else {
+                0.0
+            }
         };
-        s.time_at_support_edge = self.time_at_support_edge;
-        s.com_height_drop = self.com_height_drop;
-        s.max_zmp_error = self.max_zmp_error;
-        s.hand_peak_error = self.hand_peak_error;
-        if self.ticks > 0 {
-            s.hand_rms_error = (self.hand_sq / self.ticks as f64).sqrt();
-        }
-        s.c2_solve_max_ms = self.c2_solve_max_ms;
-        if self.c2_seen > 0 {
-            s.c2_solve_mean_ms = self.c2_solve_sum / self.c2_seen as f64 * 1e3;
-            s.c2_iterations_mean = self.c2_iter_sum / self.c2_seen as f64;
+        let c2_mean = |sum: f64| {
+            if self.c2_seen > 0 {
+                sum / self.c2_seen as f64
+            } else {
+                0.0
+            }
+        };
+        RunFigures {
+            ticks: self.ticks,
+            ticks_since_reconnect: self.ticks_since_reconnect,
+            sim_time: self.sim_time,
+            tick_p50_us: self.hist.quantile(0.5) * 1e6,
+            tick_p99_us: self.hist.quantile(0.99) * 1e6,
+            tick_max_us: self.hist.max() * 1e6,
+            min_zmp_margin: if self.min_zmp_margin.is_finite() {
+                self.min_zmp_margin
+            } else {
+                0.0
+            },
+            time_at_support_edge: self.time_at_support_edge,
+            com_height_drop: self.com_height_drop,
+            hand_rms_error: per_tick(self.hand_sq).sqrt(),
+            hand_peak_error: self.hand_peak_error,
+            max_zmp_error: self.max_zmp_error,
+            c2_solve_mean_ms: c2_mean(self.c2_solve_sum) * 1e3,
+            c2_solve_max_ms: self.c2_solve_max_ms,
+            c2_iterations_mean: c2_mean(self.c2_iter_sum),
         }
     }
 }
@@ -144,7 +155,7 @@ mod tests {
     fn rec(t: f64, zmp_x: f64, com_z: f64, hand_err: f64) -> TickRecord {
         TickRecord {
             time: t,
-            zmp_meas: [zmp_x, 0.0],
+            cop: [zmp_x, 0.0],
             zmp_ref: [0.0, 0.0],
             com: [0.0, 0.0, com_z],
             hand_err,
@@ -163,8 +174,7 @@ mod tests {
         m.tick(&rec(0.002, 0.0995, 0.49, 4.0), sup, us); // 0.5 mm from the edge
         m.restart();
         m.tick(&rec(0.003, 0.0, 0.40, 0.0), sup, us); // a new run's first height
-        let mut s = ServerSummary::default();
-        m.fill(&mut s);
+        let s = m.figures();
         assert_eq!((s.ticks, s.ticks_since_reconnect), (3, 1));
         assert!(
             (s.min_zmp_margin - 0.0005).abs() < 1e-12,

@@ -25,22 +25,24 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use super::contract::read_state;
 pub use super::forecast_correction::CorrectionSummary;
 use super::forecast_intake::ForecastIntake;
 use super::gain_thread::GainSolver;
 use super::logger::{ControlLogger, TickLog};
 use super::plant_link::{LinkTimeouts, PlantLink, Verdict};
 use super::run_metrics::RunMetrics;
+use super::summary::LoopEvents;
 pub use super::summary::ServerSummary;
-use super::{ControllerCore, ForecastWindow, GainHandoff, Ticker};
+use super::{ControllerCore, ControllerPart, ForecastWindow, GainHandoff, TickError, Ticker};
 use crate::channels::{
-    Bus, ChannelError, ForecastMsg, Listener, MAX_DOF, Notifier, Publisher, STATE_FLAG_HOLD,
-    ServiceKind, StateMsg, Subscriber, TORQUE_FLAG_FALLBACK, TorqueMsg,
+    Bus, ChannelError, ForecastMsg, Listener, MAX_DOF, Notifier, Publisher, ServiceKind, StateMsg,
+    Subscriber, TORQUE_FLAG_FALLBACK, TorqueMsg,
 };
 use crate::col;
 use crate::config::{Config, ControllerKind, LoopMode};
 use crate::record::{Column, Record};
-use crate::robot::{ReducedModel, Robot};
+use crate::robot::{ReducedModel, Robot, RobotState};
 use crate::wbc::{FallbackReason, WbcStatus, damping_torques};
 
 /// The phase lock's lead and step, as a fraction of the period: 1/8, well inside the grace
@@ -142,19 +144,29 @@ pub fn run_server(
     opts: &ServerOptions,
     stop: Arc<AtomicBool>,
 ) -> Result<ServerSummary, Box<dyn std::error::Error + Send + Sync>> {
-    run_server_with(config, robot, opts, stop, None)
+    run_server_with(config, robot, opts, stop, Extensions::default())
 }
 
-/// [`run_server`] with C2's gain search replaced by `c2_solver` (when the controller is C2):
-/// for tests that make C2 fail, panic or lag. Not reachable from the command line.
+/// What a program of its own adds to upc's controller, without editing upc (a lab's binary
+/// that calls [`run_server_with`]; `examples/lab_part.rs`).
+#[derive(Default)]
+pub struct Extensions {
+    /// Parts run after those of `super::pipeline::PIPELINE`, at their stages
+    /// ([`ControllerCore::add_part`]): they record and report as upc's do.
+    pub parts: Vec<Box<dyn ControllerPart>>,
+    /// C2's gain search replaced (when the controller is C2): tests make C2 fail, panic or lag.
+    pub c2_solver: Option<Box<dyn GainSolver>>,
+}
+
+/// [`run_server`] with `extensions`.
 pub fn run_server_with(
     config: &Config,
     robot: &Robot,
     opts: &ServerOptions,
     stop: Arc<AtomicBool>,
-    c2_solver: Option<Box<dyn GainSolver>>,
+    extensions: Extensions,
 ) -> Result<ServerSummary, Box<dyn std::error::Error + Send + Sync>> {
-    ControlLoop::open(config, robot, opts, c2_solver)?.run(&stop)
+    ControlLoop::open(config, robot, opts, extensions)?.run(&stop)
 }
 
 /// The loop's iceoryx2 ports to the plant.
@@ -181,14 +193,20 @@ struct ControlLoop<'a> {
     horizon_time: f64,
     ports: PlantPorts,
     core: ControllerCore,
+    /// The robot as the last state measured it (the contract read once, at this edge), and the
+    /// robot hash states must announce (0: not checked).
+    sensed: RobotState,
+    robot_hash: u64,
     intake: ForecastIntake,
     c2: Option<GainHandoff>,
     logger: Option<ControlLogger>,
     ticker: Option<Ticker>,
     link: PlantLink,
     metrics: RunMetrics,
-    /// The summary's event counters, filled as they happen; the rest at the end.
+    /// The run's identity in the summary (the counters are placed at the end), and the loop's
+    /// events, counted as they happen.
     s: ServerSummary,
+    events: LoopEvents,
     n_tau: usize,
     controller_id: u64,
     seq: u64,
@@ -219,7 +237,7 @@ impl<'a> ControlLoop<'a> {
         config: &'a Config,
         robot: &Robot,
         opts: &'a ServerOptions,
-        c2_solver: Option<Box<dyn GainSolver>>,
+        extensions: Extensions,
     ) -> Result<Self, Box<dyn std::error::Error + Send + Sync>> {
         let cc = &config.controller;
         let (kind, dt) = (cc.kind, 1.0 / cc.rate_hz);
@@ -245,7 +263,7 @@ impl<'a> ControlLoop<'a> {
         // One thread for faer (C2's normal equations): parallel reductions may sum in another
         // order from one run to the next, and on two cores rayon's workers compete with the loop.
         faer::set_global_parallelism(faer::Par::Seq);
-        let core = ControllerCore::new(
+        let mut core = ControllerCore::new(
             robot,
             config,
             kind,
@@ -253,16 +271,18 @@ impl<'a> ControlLoop<'a> {
             [cc.com_height_kp, cc.com_height_kd],
             opts.zmp_offset,
         )?
-        .with_robot_hash(opts.robot_hash.unwrap_or(0))
         .with_held_mass(opts.held_mass);
+        for part in extensions.parts {
+            core.add_part(part);
+        }
         let n_tau = core.model.nv - 6;
         let horizon_time = config.preview.horizon as f64 * config.preview.period;
         let free_dir = cc
             .forecast_on_free_direction
-            .then(|| super::core::free_direction(&opts.held_mass))
+            .then(|| super::held_object::free_direction(&opts.held_mass))
             .flatten();
         let intake = forecast_intake(config, &bus, robot_mass, horizon_time, free_dir)?;
-        let c2 = start_c2(config, &robot.reduced(), c2_solver)?;
+        let c2 = start_c2(config, &robot.reduced(), extensions.c2_solver)?;
         let logger = start_logger(config, opts, &core)?;
         let status_every = Duration::from_secs_f64(cc.status_every);
         Ok(ControlLoop {
@@ -271,6 +291,8 @@ impl<'a> ControlLoop<'a> {
             dt,
             horizon_time,
             ports,
+            sensed: RobotState::new(model.nq, model.nv),
+            robot_hash: opts.robot_hash.unwrap_or(0),
             core,
             intake,
             c2,
@@ -293,6 +315,7 @@ impl<'a> ControlLoop<'a> {
                 realtime: crate::realtime::apply(&cc.realtime),
                 ..Default::default()
             },
+            events: LoopEvents::default(),
             n_tau,
             controller_id: crate::channels::new_run_id(),
             seq: 0,
@@ -412,26 +435,26 @@ impl<'a> ControlLoop<'a> {
         Ok(())
     }
 
-    /// One control tick from `state`: inputs, the core, the torques out, the figures.
+    /// One control tick from `state`: read at this edge into the robot as measured, inputs, the
+    /// core, the torques out, the figures.
     fn control(&mut self, state: &StateMsg, stop: &AtomicBool) -> Result<(), ChannelError> {
         let tick_start = Instant::now();
-        let nv = (state.nv as usize).min(MAX_DOF);
-        for (i, qd) in self.last_qd[..self.n_tau].iter_mut().enumerate() {
-            *qd = state
-                .v
-                .get(6 + i)
-                .copied()
-                .filter(|v| v.is_finite() && 6 + i < nv)
-                .unwrap_or(0.0);
+        let read = read_state(state, self.robot_hash, &mut self.sensed);
+        if read.is_ok() {
+            // The joint rates of the last state read, for the damping of a silence or a fault.
+            let v = self.sensed.v.as_slice().get(6..).unwrap_or(&[]);
+            for (qd, v) in self.last_qd[..self.n_tau].iter_mut().zip(v) {
+                *qd = if v.is_finite() { *v } else { 0.0 };
+            }
         }
         let mut inputs = Inputs::default();
-        let accepted = self.take_forecast(state, stop, &mut inputs)?;
+        let accepted = self.take_forecast(stop, &mut inputs)?;
         self.check_scenarios(state, accepted);
-        if state.flags & STATE_FLAG_HOLD != 0 {
-            self.s.ticks_in_plant_hold += 1;
+        if self.sensed.held {
+            self.events.ticks_in_plant_hold += 1;
         }
         self.pick_up_c2(&mut inputs);
-        let flags = self.compute(state, &mut inputs);
+        let flags = self.compute(state.step, read, &mut inputs);
         self.publish(
             state,
             flags,
@@ -461,23 +484,22 @@ impl<'a> ControlLoop<'a> {
     /// time, waited for. Whether a window was accepted this tick.
     fn take_forecast(
         &mut self,
-        state: &StateMsg,
         stop: &AtomicBool,
         inputs: &mut Inputs,
     ) -> Result<bool, ChannelError> {
         let taken = self
             .intake
-            .take(state.time, || stop.load(Ordering::Relaxed));
+            .take(self.sensed.time, || stop.load(Ordering::Relaxed));
         let f = self.or_safe_torques(taken)?;
         if let Some(w) = f.waited {
-            self.s.forecast_waits += 1;
+            self.events.forecast_waits += 1;
             inputs.waited += w;
         }
-        self.s.forecast_wait_timeouts += u64::from(f.timed_out);
-        self.s.forecast_first_wait_expired |= f.gave_up_first;
+        self.events.forecast_wait_timeouts += u64::from(f.timed_out);
+        self.events.forecast_first_wait_expired |= f.gave_up_first;
         if f.lost {
-            self.s.forecast_lost = true;
-            self.s.forecast_losses += 1;
+            self.events.forecast_lost = true;
+            self.events.forecast_losses += 1;
         }
         if let Some(why) = f.not_reproducible {
             not_reproducible(&mut self.irreproducible, why);
@@ -502,7 +524,7 @@ impl<'a> ControlLoop<'a> {
                 && sc.plant_hash != 0
                 && mine != sc.plant_hash
             {
-                self.s.plant_scenario_mismatch = true;
+                self.events.plant_scenario_mismatch = true;
                 tracing::warn!(
                     "the plant plays `{}` (hash {:016x}), this controller was started for \
                      another scenario (hash {mine:016x}): its ZMP reference and config may not fit",
@@ -513,7 +535,7 @@ impl<'a> ControlLoop<'a> {
         }
         let fh = self.intake.window.scenario_hash();
         if accepted && fh != 0 && sc.plant_hash != 0 && fh != sc.plant_hash {
-            self.s.forecast_scenario_mismatches += 1;
+            self.events.forecast_scenario_mismatches += 1;
             if sc.warned_forecast != fh {
                 sc.warned_forecast = fh;
                 tracing::warn!(
@@ -521,7 +543,7 @@ impl<'a> ControlLoop<'a> {
                      (`{}`, {:016x}): {} such windows so far",
                     state.scenario_name(),
                     sc.plant_hash,
-                    self.s.forecast_scenario_mismatches
+                    self.events.forecast_scenario_mismatches
                 );
             }
         }
@@ -532,11 +554,11 @@ impl<'a> ControlLoop<'a> {
         let Some(h) = self.c2.as_mut() else { return };
         let r = h.take_for_tick();
         if let Some(w) = r.waited_for {
-            self.s.c2_waits += 1;
+            self.events.c2_waits += 1;
             inputs.waited += w;
         }
         if r.timed_out {
-            self.s.c2_wait_timeouts += 1;
+            self.events.c2_wait_timeouts += 1;
             tracing::warn!(
                 "C2 did not finish a search within {} s: its schedules apply when they come \
                  until it catches up",
@@ -546,18 +568,19 @@ impl<'a> ControlLoop<'a> {
         }
     }
 
-    /// The core's tick into `self.tau`, with C2's schedule unless older than the horizon (or
-    /// from before a restart); damping torques on a malformed state. The torques' flags.
-    fn compute(&mut self, state: &StateMsg, inputs: &mut Inputs) -> u32 {
-        let horizon = self.horizon_time;
+    /// The core's tick into `self.tau` on the robot as read (`read`: whether the state could
+    /// be), with C2's schedule unless older than the horizon (or from before a restart); damping
+    /// torques on a malformed state. The torques' flags.
+    fn compute(&mut self, step: u64, read: Result<(), TickError>, inputs: &mut Inputs) -> u32 {
+        let (horizon, time) = (self.horizon_time, self.sensed.time);
         let schedule = self
             .c2
             .as_ref()
             .map(|h| h.current())
-            .filter(|sch| sch.seq > 0 && (0.0..=horizon).contains(&(state.time - sch.time)));
-        let stale = self.c2.is_some() && schedule.is_none() && state.time > horizon;
+            .filter(|sch| sch.seq > 0 && (0.0..=horizon).contains(&(time - sch.time)));
+        let stale = self.c2.is_some() && schedule.is_none() && time > horizon;
         if stale && !self.schedule_was_stale {
-            self.s.c2_stale_schedules += 1;
+            self.events.c2_stale_schedules += 1;
             tracing::warn!("C2 schedule missing or older than the horizon: nominal gains");
         }
         self.schedule_was_stale = stale;
@@ -573,25 +596,28 @@ impl<'a> ControlLoop<'a> {
                 .set_felt_direction(self.core.felt_direction());
         }
         let tau = &mut self.tau[..self.n_tau];
-        let result = self.core.tick(state, &self.intake.window, schedule, tau);
+        let result = read.and_then(|()| {
+            self.core
+                .tick(&self.sensed, &self.intake.window, schedule, tau)
+        });
         match result {
             Ok(WbcStatus::Solved) => 0,
             Ok(WbcStatus::Fallback(FallbackReason::Fallen)) => TORQUE_FLAG_FALLBACK,
             Ok(_) => {
-                self.s.wbc_fallbacks += 1;
+                self.events.wbc_fallbacks += 1;
                 TORQUE_FLAG_FALLBACK
             }
             Err(e) => {
-                // Safe behaviour on a malformed state: joint damping toward rest.
-                self.s.tick_errors += 1;
-                if self.s.tick_errors.is_power_of_two() {
+                // Safe behaviour on a malformed state: joint damping toward rest, on the last
+                // finite rates read.
+                self.events.tick_errors += 1;
+                if self.events.tick_errors.is_power_of_two() {
                     tracing::warn!(
-                        "bad state at step {}: {e} ({} so far); damping torques",
-                        state.step,
-                        self.s.tick_errors
+                        "bad state at step {step}: {e} ({} so far); damping torques",
+                        self.events.tick_errors
                     );
                 }
-                let qd = state.v.get(6..).unwrap_or(&[]);
+                let qd = &self.last_qd[..self.n_tau];
                 let limits = self.core.torque_limits();
                 damping_torques(self.config.wbc.fallback_damping, qd, limits, tau);
                 TORQUE_FLAG_FALLBACK
@@ -645,7 +671,7 @@ impl<'a> ControlLoop<'a> {
         self.or_safe_torques(sent)?;
         let woken = self.ports.torque_events.notify();
         self.or_safe_torques(woken)?;
-        self.s.stale_ticks += 1;
+        self.events.stale_ticks += 1;
         Ok(())
     }
 
@@ -722,40 +748,23 @@ impl<'a> ControlLoop<'a> {
         })
     }
 
-    /// The summary of the run.
+    /// The summary of the run: each piece's counters as it reports them.
     fn finish(mut self, stopped_by: &str) -> ServerSummary {
         let mut s = std::mem::take(&mut self.s);
         s.stopped_by = stopped_by.into();
-        self.metrics.fill(&mut s);
-        let link = self.link.counts;
-        s.stale_states = link.stale_states;
-        s.stale_periods = link.stale_periods;
-        s.reconnects = link.reconnects;
-        s.longest_state_gap = link.longest_state_gap;
-        s.lockstep_reanswers = link.reanswers;
-        if let Some(t) = &self.ticker {
-            s.deadline_overruns = t.overruns;
-            s.deadline_misses = t.missed;
-        }
-        s.preview_fallbacks = self.core.preview_fallbacks;
-        s.hand_force_modelled_ticks = self.core.hand_force_modelled_ticks;
-        (s.falls, s.fallen_ticks) = (self.core.falls, self.core.fallen_ticks);
+        s.figures = self.metrics.figures();
+        s.deadlines = self.ticker.as_ref().map(Ticker::counts).unwrap_or_default();
+        s.link = self.link.counts;
+        s.events = self.events;
+        s.core = self.core.info();
+        s.wbc = self.core.wbc_counters();
+        s.forecasts = self.intake.counts();
+        s.c2 = self
+            .c2
+            .as_ref()
+            .map(GainHandoff::counts)
+            .unwrap_or_default();
         self.core.summarize(&mut s.parts);
-        let wc = self.core.wbc_counters();
-        s.wbc_torque_limited_ticks = wc.torque_limited;
-        s.wbc_limits_condensed_ticks = wc.limits_condensed;
-        s.wbc_condensation_failures = wc.condensation_failures;
-        s.wbc_active_set_ticks = wc.active_set;
-        s.wbc_cone_steps = wc.cone_steps;
-        s.wbc_cone_unsettled = wc.cone_unsettled;
-        s.wbc_limits_saturated_ticks = wc.limits_saturated;
-        let w = &self.intake.window;
-        s.forecasts_accepted = w.accepted;
-        s.forecast_never_received = w.accepted == 0;
-        s.forecast_first_at = self.intake.first_at;
-        s.forecasts_rejected = w.rejected;
-        s.forecasts_rejected_by = w.rejections;
-        s.forecaster_restarts = w.restarts;
         s.reproducible = self.irreproducible.is_none();
         s.reproducibility = self.irreproducible.unwrap_or_default().into();
         s.plant_scenario = format!(
@@ -763,11 +772,6 @@ impl<'a> ControlLoop<'a> {
             crate::channels::scenario_name(&self.scenario.plant_name),
             self.scenario.plant_hash
         );
-        if let Some(h) = &self.c2 {
-            s.c2_solves = h.stats.solves.load(Ordering::Relaxed);
-            s.c2_failures = h.stats.failures.load(Ordering::Relaxed);
-            s.c2_panics = h.stats.panics.load(Ordering::Relaxed);
-        }
         if let Some(l) = self.logger.take() {
             s.dropped_log_records = l.dropped.load(Ordering::Relaxed);
             l.finish();

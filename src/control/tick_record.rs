@@ -1,5 +1,5 @@
 //! What one tick of the controller core produced ([`TickRecord`]), and its columns of the
-//! tick's [`Record`] (the parts add theirs: `super::parts`).
+//! tick's [`Record`] (the parts add theirs: `super::part`).
 
 use crate::col;
 use crate::record::Record;
@@ -14,8 +14,10 @@ pub struct TickRecord {
     pub zmp_ref: [f64; 2],
     /// ZMP the preview predicts for the next preview step.
     pub zmp_pred: [f64; 2],
-    /// Measured ZMP: the state's, or the base estimator's from the foot wrenches when it runs.
-    pub zmp_meas: [f64; 2],
+    /// The centre of pressure the controller used (the ZMP on flat ground; the CSV's
+    /// `zmp_meas_*`): the state's, or a part's estimate (the base estimator's from the foot
+    /// wrenches, the wrench observer's) where one made it.
+    pub cop: [f64; 2],
     pub hand_pos: [f64; 3],
     pub hand_err: f64,
     pub kp: f64,
@@ -65,11 +67,11 @@ impl TickRecord {
         );
         out.put(
             col!(fixed("zmp_meas_x", 5).plot("zmp/measured_x")),
-            self.zmp_meas[0],
+            self.cop[0],
         );
         out.put(
             col!(fixed("zmp_meas_y", 5).plot("zmp/measured_y")),
-            self.zmp_meas[1],
+            self.cop[1],
         );
         out.put(col!(fixed("hand_err", 5).plot("hand/error")), self.hand_err);
         out.put(col!(fixed("kp", 2).plot("gains/kp")), self.kp);

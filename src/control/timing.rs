@@ -14,6 +14,14 @@ pub struct Ticker {
 }
 
 impl Ticker {
+    /// The summary's counts of overrun and missed deadlines.
+    pub fn counts(&self) -> super::summary::DeadlineCounts {
+        super::summary::DeadlineCounts {
+            deadline_overruns: self.overruns,
+            deadline_misses: self.missed,
+        }
+    }
+
     pub fn new(period: Duration) -> Self {
         Self {
             period,

@@ -29,17 +29,18 @@
 //! passes beyond it (over `band`): there the measured push cannot be held whatever the lean, and
 //! only its easing can save the robot (a short impact's peak, which an exact forecast's easing
 //! lets the robot ride out). For the same reason FC-5's hedge of an easing toward the
-//! measurement is lifted there ([`easing_believed`], FC-5b, applied by the correction).
+//! measurement is lifted there (FC-5b: [`easing_believed`], applied to the correction's blend by
+//! [`keep_easing`]). The capture point itself is VG-1's one home, [`CapturePoint`].
 //! Allocation-free.
-
-use std::any::Any;
 
 use serde::{Deserialize, Serialize};
 
-use super::core::TickError;
-use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
+use super::frame::{MeasuredPrediction, TickFrame};
+use super::part::{BuildError, ControllerPart, PartKind, PartSetup};
+use super::tick::{Stage, TickError, TickInputs};
 use crate::col;
 use crate::config::ControllerKind;
+use crate::preview::CapturePoint;
 use crate::record::Record;
 
 type V3 = [f64; 3];
@@ -53,6 +54,8 @@ pub struct ViabilityCounts {
     pub episodes: u64,
     /// Smallest s seen.
     pub min_scale: f64,
+    /// FC-5b: plant time (s) an easing of the measured push was kept from FC-5's hedge.
+    pub easing_believed_time: f64,
 }
 
 /// The push measured now (N), and over the horizon as the measurement alone predicts it (FC-5's
@@ -67,31 +70,6 @@ impl MeasuredPush<'_> {
     /// Measured now only (the horizon's hedge is the push now).
     pub fn now(now: V3) -> Self {
         Self { now, ahead: None }
-    }
-}
-
-/// The capture point of the cart-table under a constant force (VG-1), per horizontal axis.
-#[derive(Debug, Clone, Copy)]
-pub struct CapturePoint {
-    /// M ω² = M g / z_c (N/m) and 1/ω (s).
-    stiffness: f64,
-    inv_omega: f64,
-}
-
-impl CapturePoint {
-    /// For a cart-table of `mass` (kg) at `com_height` (m) under `gravity` (m/s²).
-    pub fn new(mass: f64, gravity: f64, com_height: f64) -> Self {
-        let omega2 = gravity / com_height;
-        Self {
-            stiffness: mass * omega2,
-            inv_omega: 1.0 / omega2.sqrt(),
-        }
-    }
-
-    /// ξ_m = x + ẋ/ω + F/(M ω²) on one axis (VG-1): where the ZMP must be for the robot to stop
-    /// under `push` (N) held as it is.
-    pub fn at(&self, com: f64, vcom: f64, push: f64) -> f64 {
-        com + vcom * self.inv_omega + push / self.stiffness
     }
 }
 
@@ -139,6 +117,35 @@ pub fn easing_believed(
     })
 }
 
+/// FC-5b on the horizon `f` that FC-5 blended as f_fc + (1 − w)(m − f_fc) (`w` the forecast's
+/// weight, `forecast_only` f_fc, `measured_only` m): on each horizontal axis, a sample where the
+/// forecast eases the push measured now (`push`) below the measurement's prediction, (f_fc − m)
+/// against the push, is blended with w + (1 − w) b instead, b of that axis in `believed`
+/// ([`easing_believed`]). Returns b on the axes where a sample was kept (0 elsewhere).
+pub fn keep_easing(
+    f: &mut [V3],
+    forecast_only: &[V3],
+    measured_only: &[V3],
+    push: V3,
+    w: f64,
+    believed: [f64; 2],
+) -> [f64; 2] {
+    let mut kept = [0.0; 2];
+    if !(w < 1.0) || believed == [0.0; 2] {
+        return kept;
+    }
+    for ((f, f_fc), m) in f.iter_mut().zip(forecast_only).zip(measured_only) {
+        for c in 0..2 {
+            if believed[c] > 0.0 && (f_fc[c] - m[c]) * push[c] < 0.0 {
+                let weight = w + (1.0 - w) * believed[c];
+                f[c] = f_fc[c] + (1.0 - weight) * (m[c] - f_fc[c]);
+                kept[c] = believed[c];
+            }
+        }
+    }
+    kept
+}
+
 pub struct ViabilityGuard {
     s: ViabilitySettings,
     capture: CapturePoint,
@@ -146,6 +153,8 @@ pub struct ViabilityGuard {
     /// The last tick's scales (x, y) and capture points (m).
     pub last_scale: [f64; 2],
     pub last_capture: [f64; 2],
+    /// FC-5b's b on the axes where the last tick kept an easing (0 elsewhere).
+    pub last_easing: [f64; 2],
     pub counts: ViabilityCounts,
 }
 
@@ -158,6 +167,7 @@ impl ViabilityGuard {
             fading: false,
             last_scale: [1.0; 2],
             last_capture: [0.0; 2],
+            last_easing: [0.0; 2],
             counts: ViabilityCounts {
                 min_scale: 1.0,
                 ..Default::default()
@@ -169,6 +179,36 @@ impl ViabilityGuard {
     pub fn reset(&mut self) {
         self.fading = false;
         self.last_scale = [1.0; 2];
+        self.last_easing = [0.0; 2];
+    }
+
+    /// FC-5b ([`keep_easing`]) on `horizon`, then VG-2 and VG-3 ([`Self::apply`]), from the
+    /// prediction of the part that produced the horizon, at plant time `t` after a control
+    /// period `dt`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn guard(
+        &mut self,
+        t: f64,
+        dt: f64,
+        com: [f64; 2],
+        vcom: [f64; 2],
+        support: [[f64; 2]; 2],
+        prediction: &MeasuredPrediction,
+        push: V3,
+        horizon: &mut [V3],
+    ) {
+        let p = prediction;
+        let b = easing_believed(&self.capture, com, vcom, support, push, self.s.band);
+        let (f_fc, m) = (&p.forecast_only, &p.measured_only);
+        self.last_easing = keep_easing(horizon, f_fc, m, push, p.weight, b);
+        if self.last_easing != [0.0; 2] {
+            self.counts.easing_believed_time += dt;
+        }
+        let measured = MeasuredPush {
+            now: push,
+            ahead: Some(m),
+        };
+        self.apply(t, com, vcom, support, measured, horizon);
     }
 
     /// Fades the unmeasured part of `horizon` (the hand force over the preview, N) by VG-2,
@@ -184,9 +224,27 @@ impl ViabilityGuard {
         push: MeasuredPush,
         horizon: &mut [V3],
     ) {
-        let (push_now, measured_only) = (push.now, push.ahead);
-        // Per axis, the scale of an unmeasured force toward −a (the robot leans toward +a, the
-        // + edge is at risk) and toward +a (the − edge).
+        let scales = self.scales(com, vcom, support, push.now);
+        let faded = scales.iter().flatten().flatten().any(|s| *s < 1.0);
+        let used = if faded {
+            self.fade(&scales, push, horizon)
+        } else {
+            [1.0; 2]
+        };
+        self.last_scale = used;
+        self.count(t, used, support);
+    }
+
+    /// Per axis, the scales of an unmeasured force toward −a (the robot leans toward +a, the +
+    /// edge is at risk) and toward +a (the − edge): VG-2's for a push to come, VG-3's for an
+    /// easing, as `[push, easing]`. The capture points are kept for the record.
+    fn scales(
+        &mut self,
+        com: [f64; 2],
+        vcom: [f64; 2],
+        support: [[f64; 2]; 2],
+        push_now: V3,
+    ) -> [[[f64; 2]; 2]; 2] {
         let mut scale = [[1.0; 2]; 2];
         let mut ease = [[1.0; 2]; 2];
         for a in 0..2 {
@@ -217,47 +275,60 @@ impl ViabilityGuard {
             };
             self.last_capture[a] = xi;
         }
+        [scale, ease]
+    }
+
+    /// VG-2 and VG-3 on each horizon sample with the axes' `[scale, ease]`; the smallest scale
+    /// used per axis.
+    fn fade(
+        &self,
+        [scale, ease]: &[[[f64; 2]; 2]; 2],
+        push: MeasuredPush,
+        horizon: &mut [V3],
+    ) -> [f64; 2] {
+        let (push_now, measured_only) = (push.now, push.ahead);
         let mut used = [1.0f64; 2];
-        let faded = scale.iter().chain(&ease).flatten().any(|s| *s < 1.0);
-        if faded {
-            for (i, f) in horizon.iter_mut().enumerate() {
-                let reference = measured_only.and_then(|m| m.get(i));
-                for a in 0..2 {
-                    // The forecast's departure from the push measured now: a push to come (the
-                    // forecast beyond it along its own direction, all of it where nothing or
-                    // the opposite is measured; VG-2) or the measured push easing (VG-3) —
-                    // guarded only below what the measurement alone predicts (what C1 would
-                    // preview without a forecaster), and faded toward that.
-                    let now = push_now[a].abs();
-                    let u = if now > 0.0 { push_now[a] / now } else { 0.0 };
-                    let along = f[a] * u;
-                    let (easing, base) = if along > 0.0 && along < now {
-                        let floor = reference.map_or(now, |m| (m[a] * u).min(now));
-                        if along >= floor {
-                            continue;
-                        }
-                        (true, floor * u)
-                    } else if along > 0.0 {
-                        (false, push_now[a])
-                    } else {
-                        (false, 0.0)
-                    };
-                    let extra = f[a] - base;
-                    if extra == 0.0 || (easing && self.s.ease_margin < 0.0) {
+        for (i, f) in horizon.iter_mut().enumerate() {
+            let reference = measured_only.and_then(|m| m.get(i));
+            for a in 0..2 {
+                // The forecast's departure from the push measured now: a push to come (the
+                // forecast beyond it along its own direction, all of it where nothing or the
+                // opposite is measured; VG-2) or the measured push easing (VG-3) — guarded only
+                // below what the measurement alone predicts (what C1 would preview without a
+                // forecaster), and faded toward that.
+                let now = push_now[a].abs();
+                let u = if now > 0.0 { push_now[a] / now } else { 0.0 };
+                let along = f[a] * u;
+                let (easing, base) = if along > 0.0 && along < now {
+                    let floor = reference.map_or(now, |m| (m[a] * u).min(now));
+                    if along >= floor {
                         continue;
                     }
-                    let s = match (easing, extra < 0.0) {
-                        (false, true) => scale[a][0],
-                        (false, false) => scale[a][1],
-                        (true, true) => ease[a][0],
-                        (true, false) => ease[a][1],
-                    };
-                    used[a] = used[a].min(s);
-                    f[a] = base + s * extra;
+                    (true, floor * u)
+                } else if along > 0.0 {
+                    (false, push_now[a])
+                } else {
+                    (false, 0.0)
+                };
+                let extra = f[a] - base;
+                if extra == 0.0 || (easing && self.s.ease_margin < 0.0) {
+                    continue;
                 }
+                let s = match (easing, extra < 0.0) {
+                    (false, true) => scale[a][0],
+                    (false, false) => scale[a][1],
+                    (true, true) => ease[a][0],
+                    (true, false) => ease[a][1],
+                };
+                used[a] = used[a].min(s);
+                f[a] = base + s * extra;
             }
         }
-        self.last_scale = used;
+        used
+    }
+
+    /// The counters of a tick that used `used`, and a line when an episode starts.
+    fn count(&mut self, t: f64, used: [f64; 2], support: [[f64; 2]; 2]) {
         let faded = used.iter().any(|s| *s < 1.0);
         if faded {
             self.counts.faded_ticks += 1;
@@ -282,26 +353,28 @@ impl ViabilityGuard {
     }
 }
 
-/// The capture-point guard as a controller part: on with the forecast correction (C1, C2),
-/// whose measured push it needs; inactive otherwise.
+/// The capture-point guard as a controller part (C1, C2): it guards the horizon a part
+/// produced with a measured push (the forecast correction's); inactive otherwise.
 pub struct Guard {
     guard: Option<ViabilityGuard>,
+    /// Whether it ever guarded a horizon (its columns are neutral and its summary absent until).
+    ran: bool,
 }
 
-/// This part in `super::parts::PIPELINE`.
-pub const PART: PartEntry = PartEntry::new::<ViabilitySettings>(build);
+impl PartKind for Guard {
+    type Settings = ViabilitySettings;
 
-fn build(
-    s: &PartSetup,
-) -> Result<Box<dyn ControllerPart>, Box<dyn std::error::Error + Send + Sync>> {
-    let settings: ViabilitySettings = s.config.controller.parts.get()?;
-    let correction: super::forecast_correction::CorrectionSettings =
-        s.config.controller.parts.get()?;
-    let on = settings.enabled && correction.enabled && s.kind != ControllerKind::C0;
-    let c = s.cart;
-    Ok(Box::new(Guard {
-        guard: on.then(|| ViabilityGuard::new(settings, c.mass, c.gravity, c.com_height)),
-    }))
+    fn build(
+        s: &PartSetup,
+        settings: ViabilitySettings,
+    ) -> Result<Box<dyn ControllerPart>, BuildError> {
+        let on = settings.enabled && s.kind != ControllerKind::C0;
+        let c = s.cart;
+        Ok(Box::new(Guard {
+            guard: on.then(|| ViabilityGuard::new(settings, c.mass, c.gravity, c.com_height)),
+            ran: false,
+        }))
+    }
 }
 
 impl ControllerPart for Guard {
@@ -325,26 +398,25 @@ impl ControllerPart for Guard {
         _inputs: &TickInputs,
         frame: &mut TickFrame,
     ) -> Result<(), TickError> {
-        if let (Some(g), Some(push)) = (self.guard.as_mut(), frame.measured_push) {
-            let (com, vcom) = (frame.com, frame.com_vel);
-            g.apply(
-                frame.t,
-                [com[0], com[1]],
-                [vcom[0], vcom[1]],
-                frame.support,
-                MeasuredPush {
-                    now: push,
-                    ahead: Some(&frame.f_measured_only),
-                },
-                &mut frame.f_ext,
-            );
-        }
+        let Some(g) = self.guard.as_mut() else {
+            return Ok(());
+        };
+        let (t, dt, support) = (frame.t, frame.dt, frame.support);
+        let (com, vcom) = (frame.com, frame.com_vel);
+        let hand = frame.hand_mut();
+        let (Some(push), Some(horizon)) = (hand.prediction.push, hand.horizon.refine()) else {
+            return Ok(());
+        };
+        self.ran = true;
+        let (com, vcom) = ([com[0], com[1]], [vcom[0], vcom[1]]);
+        g.guard(t, dt, com, vcom, support, &hand.prediction, push, horizon);
         Ok(())
     }
 
     fn record(&self, out: &mut Record) {
-        let (scale, capture) = self.guard.as_ref().map_or(([1.0; 2], [f64::NAN; 2]), |g| {
-            (g.last_scale, g.last_capture)
+        let g = self.guard.as_ref().filter(|_| self.ran);
+        let (scale, capture, easing) = g.map_or(([1.0; 2], [f64::NAN; 2], [0.0; 2]), |g| {
+            (g.last_scale, g.last_capture, g.last_easing)
         });
         out.put(
             col!(fixed("guard_x", 3).plot("viability/scale_x")),
@@ -359,16 +431,17 @@ impl ControllerPart for Guard {
             capture[0],
         );
         out.put(col!(fixed("capture_y", 5)), capture[1]);
+        out.put(
+            col!(fixed("guard_easing_x", 3).plot("viability/easing_believed_x")),
+            easing[0],
+        );
+        out.put(col!(fixed("guard_easing_y", 3)), easing[1]);
     }
 
     fn summarize(&self, out: &mut serde_json::Map<String, serde_json::Value>) {
-        if let Some(g) = &self.guard {
+        if let Some(g) = self.guard.as_ref().filter(|_| self.ran) {
             out.insert("viability".into(), serde_json::json!(g.counts));
         }
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
     }
 }
 
@@ -510,7 +583,7 @@ mod tests {
         let mut h = vec![[-60.0, 0.0, 0.0], [-20.0, 0.0, 0.0], [30.0, 0.0, 0.0]];
         let push = [-40.0, 0.0, 0.0];
         // ξ_m = −0.06 m: com − 40 / (M ω²) = −0.06.
-        let com = -0.06 + 40.0 / g.capture.stiffness;
+        let com = -0.06 + 40.0 / g.capture.stiffness();
         at_rest(&mut g, 0.0, com, push, &mut h);
         assert!((g.last_capture[0] + 0.06).abs() < 1e-12);
         assert_eq!(
@@ -526,7 +599,7 @@ mod tests {
         );
         assert_eq!(h[2][0], 0.0, "a push to come along +x: faded to none");
         let mut h = vec![[-60.0, 0.0, 0.0], [-20.0, 0.0, 0.0]];
-        let com = 0.06 + 40.0 / g.capture.stiffness;
+        let com = 0.06 + 40.0 / g.capture.stiffness();
         at_rest(&mut g, 0.001, com, push, &mut h);
         assert_eq!(h[0][0], -40.0, "more push toward the front edge: faded");
         assert_eq!(h[1][0], -20.0, "its easing, away from the rear edge: kept");
@@ -534,7 +607,7 @@ mod tests {
         // is believed again, fully once ξ_m is `band` beyond it.
         for (beyond, s) in [(0.05, 0.5), (0.1, 1.0), (0.3, 1.0)] {
             let mut h = vec![[-20.0, 0.0, 0.0]];
-            let com = -0.07 - beyond * 0.07 + 40.0 / g.capture.stiffness;
+            let com = -0.07 - beyond * 0.07 + 40.0 / g.capture.stiffness();
             at_rest(&mut g, 0.002, com, push, &mut h);
             assert!(
                 (h[0][0] - (-40.0 + s * 20.0)).abs() < 1e-9,
@@ -553,7 +626,7 @@ mod tests {
             0.5,
         );
         let mut h = vec![[-20.0, 0.0, 0.0]];
-        let com = -0.069 + 40.0 / g.capture.stiffness;
+        let com = -0.069 + 40.0 / g.capture.stiffness();
         at_rest(&mut g, 0.0, com, push, &mut h);
         assert_eq!(h[0][0], -20.0);
         assert_eq!(g.counts.faded_ticks, 0);
@@ -567,7 +640,7 @@ mod tests {
         let mut g = guard();
         let push = [-40.0, 0.0, 0.0];
         // ξ_m 1 mm inside the rear edge: the easing fully faded (s = 0).
-        let com = -0.069 + 40.0 / g.capture.stiffness;
+        let com = -0.069 + 40.0 / g.capture.stiffness();
         let measured_only = [[-30.0, 0.0, 0.0], [-30.0, 0.0, 0.0], [-50.0, 0.0, 0.0]];
         let mut h = vec![[-35.0, 0.0, 0.0], [-20.0, 0.0, 0.0], [-20.0, 0.0, 0.0]];
         g.apply(
@@ -644,7 +717,7 @@ mod tests {
         let d = s.margin + 0.5 * s.band;
         let xi = 0.07 - d * 0.07;
         let mut h = vec![[-50.0, 0.0, 0.0]; 3];
-        let com = xi + 10.0 / g.capture.stiffness;
+        let com = xi + 10.0 / g.capture.stiffness();
         at_rest(&mut g, 0.0, com, [-10.0, 0.0, 0.0], &mut h);
         assert!((g.last_scale[0] - 0.5).abs() < 1e-9, "{:?}", g.last_scale);
         assert!((h[0][0] + 30.0).abs() < 1e-9, "{:?}", h[0]);

@@ -14,12 +14,11 @@
 //! (a held weight, a push the forecast missed): it is refused, counted, and nothing is removed.
 //! What the tare cannot remove is the sensor's drift after it (and its noise).
 
-use std::any::Any;
-
 use serde::{Deserialize, Serialize};
 
-use super::core::TickError;
-use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
+use super::frame::TickFrame;
+use super::part::{BuildError, ControllerPart, PartKind, PartSetup};
+use super::tick::{Stage, TickError, TickInputs};
 use crate::record::Record;
 
 /// Ticks count toward the tare only while the forecast's force is below this (N)...
@@ -151,13 +150,15 @@ impl WristTare {
     }
 }
 
-/// This part in `super::parts::PIPELINE`.
-pub const PART: PartEntry = PartEntry::new::<WristTareSettings>(build);
+impl PartKind for WristTare {
+    type Settings = WristTareSettings;
 
-fn build(
-    s: &PartSetup,
-) -> Result<Box<dyn ControllerPart>, Box<dyn std::error::Error + Send + Sync>> {
-    Ok(Box::new(WristTare::new(s.config.controller.parts.get()?)))
+    fn build(
+        _: &PartSetup,
+        settings: WristTareSettings,
+    ) -> Result<Box<dyn ControllerPart>, BuildError> {
+        Ok(Box::new(WristTare::new(settings)))
+    }
 }
 
 impl ControllerPart for WristTare {
@@ -173,7 +174,7 @@ impl ControllerPart for WristTare {
         WristTare::reset(self);
     }
 
-    /// The measured hand force less the offset, and whether it may be fed back.
+    /// The offset removed from the hand force, and whether the force may be fed back.
     fn update(
         &mut self,
         _: Stage,
@@ -182,17 +183,22 @@ impl ControllerPart for WristTare {
     ) -> Result<(), TickError> {
         let before = self.state;
         let sensed = inputs.sensed;
-        frame.hand_force = self.apply(
+        let (t, dt) = (frame.t, frame.dt);
+        let hand = frame.hand_mut();
+        self.apply(
             sensed.task_time,
-            frame.hand_force,
-            inputs.forecast.at(frame.t),
-            nalgebra::Vector3::from(frame.hand_vel).norm(),
+            hand.force_used(&sensed.hand_force),
+            inputs.forecast.at(t),
+            nalgebra::Vector3::from(hand.vel).norm(),
             sensed.held,
-            frame.dt,
+            dt,
         );
-        frame.hand_force_trusted = self.trusted();
+        for k in 0..3 {
+            hand.offset[k] += self.offset[k];
+        }
+        hand.vouch(self.trusted());
         if self.state != before {
-            self.log_transition(frame.t);
+            self.log_transition(t);
         }
         Ok(())
     }
@@ -205,10 +211,6 @@ impl ControllerPart for WristTare {
             "wrist_tare_refusals".into(),
             serde_json::json!(self.refusals),
         );
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
     }
 }
 

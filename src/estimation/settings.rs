@@ -1,9 +1,9 @@
-//! `[controller.estimator]`: when the base estimator runs and its noise model
+//! `[controller.base_estimation]`: when the base estimator runs and its noise model
 //! (docs/estimation.md).
 
 use serde::{Deserialize, Serialize};
 
-/// When the base estimator runs (`controller.estimator.mode`).
+/// When the base estimator runs (`controller.base_estimation.mode`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum EstimatorMode {
@@ -15,7 +15,7 @@ pub enum EstimatorMode {
     Off,
 }
 
-/// `[controller.estimator]`: the floating-base estimator (docs/estimation.md).
+/// `[controller.base_estimation]`: the floating-base estimator (docs/estimation.md).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct EstimatorSettings {
@@ -55,7 +55,7 @@ impl Default for EstimatorSettings {
 }
 
 impl crate::config::PartSettings for EstimatorSettings {
-    const TABLE: &'static str = "estimator";
+    const TABLE: &'static str = "base_estimation";
 
     fn check(&self) -> Result<(), (&'static str, String)> {
         for (key, v) in [

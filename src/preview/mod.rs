@@ -7,12 +7,14 @@
 //! - [`Riccati`]: the same finite-horizon LQ problem by backward recursion, O(N).
 //! - [`ZmpPreview`]: C0 and C1, x and y, with a preallocated workspace.
 //! - [`HandPreviewer`]: hand impedance over the horizon and the equivalent CoM disturbance (eq. 24–25).
+//! - [`CapturePoint`]: the cart-table's capture point under a constant force (VG-1).
 //! - [`gain_search`]: C2, gains as decision variables (eq. 26).
 //! - [`constrained`]: the optional ZMP-bounded C1 (Wieber 2006) as a QP.
 //!
 //! What these models take from the robot (mass, CoM height, support, M_e) is the robot's:
 //! [`crate::robot::ReducedModel`], from [`crate::robot::Robot::reduced`].
 
+mod capture_point;
 mod cart_table;
 pub mod constrained;
 pub mod dense;
@@ -23,6 +25,7 @@ mod hand;
 mod riccati;
 mod zmp_preview;
 
+pub use capture_point::CapturePoint;
 pub use cart_table::CartTable;
 pub use disturbance::Disturbance;
 pub use error::PreviewError;

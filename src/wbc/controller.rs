@@ -258,14 +258,26 @@ fn frame_ids(
 
 /// The whole-body torque controller. See the module documentation for the problem.
 pub struct WholeBodyController {
+    /// The problem's shape, decided once from the model and the config.
+    shape: Shape,
+    /// Refilled every tick: the tasks' targets and Jacobians, the QP's matrices, the solvers.
+    work: Workspace,
+    /// What carries from one tick to the next (a plant session's; [`Self::reset`]).
+    state: Carried,
+    /// The last tick's torques, accelerations and contact forces.
+    out: Outputs,
+    /// Counters, and the last warning's tick.
+    info: Info,
+}
+
+/// The problem's shape: the settings, the layout of its variables and rows, the frames and
+/// joints it is written on. Fixed after construction.
+struct Shape {
     p: Params,
     settings: DefaultSettings<f64>,
     nq: usize,
     /// Where the full problem's variables and rows are (from the task list, decided once).
     layout: Layout,
-    /// The tasks, their weights, Jacobians and targets (targets set each tick).
-    tasks: TaskList,
-    // Model-derived.
     corner_ids: [usize; N_CONTACTS],
     foot_ids: [usize; 2],
     /// The dofs that move each sole (its ancestors' velocity indices): the only columns where
@@ -278,7 +290,14 @@ pub struct WholeBodyController {
     tau_max: DVector<f64>,
     /// Configuration index of each actuated dof.
     q_index: Vec<usize>,
-    // Per-tick workspace.
+    /// P's pattern (diagonal).
+    p_pattern: Pattern,
+}
+
+/// Per-tick workspace, preallocated.
+struct Workspace {
+    /// The tasks, their weights, Jacobians and targets (targets set each tick).
+    tasks: TaskList,
     jtmp: DMatrix<f64>,
     jc: DMatrix<f64>,
     jfeet: DMatrix<f64>,
@@ -287,7 +306,6 @@ pub struct WholeBodyController {
     qd: Vec<f64>,
     ad: DMatrix<f64>,
     bd: Vec<f64>,
-    p_pattern: Pattern,
     p_val: Vec<f64>,
     /// The full QP, and the same QP without the torque rows (tried first, see `solve_qp`).
     full: QpInstance,
@@ -302,6 +320,10 @@ pub struct WholeBodyController {
     /// τ the outputs then read: `CondensedQp::limited_torques`).
     x: Vec<f64>,
     x_from_condensed: bool,
+}
+
+/// What one tick leaves the next.
+struct Carried {
     /// The last tick's optimum had a torque limit active (condensed formulation: see `solve`).
     limits_active: bool,
     /// The posture reference (length nq), meaningful when `posture_set`: stored by
@@ -309,11 +331,19 @@ pub struct WholeBodyController {
     /// construction or [`WholeBodyController::reset`]. Preallocated: latching copies.
     posture_ref: DVector<f64>,
     posture_set: bool,
-    // Outputs.
-    tau: DVector<f64>,
+    /// The last QP torque, for the fallback.
     last_tau: DVector<f64>,
+}
+
+/// The last tick's results.
+struct Outputs {
+    tau: DVector<f64>,
     ddq: DVector<f64>,
     forces: [Vector3<f64>; N_CONTACTS],
+}
+
+/// What the controller counted.
+struct Info {
     counters: WbcCounters,
     last_warn_tick: Option<u64>,
 }
@@ -355,19 +385,8 @@ impl WholeBodyController {
         let (full, relaxed) = full_problems(&layout, a_pattern, limited.len());
         let settings = clarabel_settings(config);
         let condensed = CondensedQp::new(nv, model.total_mass() * model.gravity.norm());
-        let mut wbc = Self {
-            p: Params::of(config),
-            settings,
-            nq: model.nq,
-            layout,
+        let work = Workspace {
             tasks,
-            corner_ids,
-            foot_ids,
-            foot_dofs: foot_ids.map(|f| (0..nv).filter(|&d| moves_frame(model, d, f)).collect()),
-            hand_id,
-            limited,
-            tau_max,
-            q_index,
             jtmp: DMatrix::zeros(6, nv),
             jc: DMatrix::zeros(3 * N_CONTACTS, nv),
             jfeet: DMatrix::zeros(12, nv),
@@ -377,7 +396,6 @@ impl WholeBodyController {
             ad: DMatrix::zeros(layout.n_rows, layout.nz),
             bd: vec![0.0; layout.n_rows],
             p_val: vec![0.0; p_pattern.nnz()],
-            p_pattern,
             full,
             relaxed,
             condensed,
@@ -385,18 +403,42 @@ impl WholeBodyController {
             lin: vec![0.0; nv],
             b_feet: [0.0; 12],
             x: vec![0.0; layout.nz],
-            limits_active: false,
             x_from_condensed: false,
-            posture_ref: model.neutral(),
-            posture_set: false,
-            tau: DVector::zeros(na),
-            last_tau: DVector::zeros(na),
-            ddq: DVector::zeros(nv),
-            forces: [Vector3::zeros(); N_CONTACTS],
-            counters: WbcCounters::default(),
-            last_warn_tick: None,
         };
-        if wbc.p.reuse_solver {
+        let mut wbc = Self {
+            shape: Shape {
+                p: Params::of(config),
+                settings,
+                nq: model.nq,
+                layout,
+                corner_ids,
+                foot_ids,
+                foot_dofs: foot_ids
+                    .map(|f| (0..nv).filter(|&d| moves_frame(model, d, f)).collect()),
+                hand_id,
+                limited,
+                tau_max,
+                q_index,
+                p_pattern,
+            },
+            work,
+            state: Carried {
+                limits_active: false,
+                posture_ref: model.neutral(),
+                posture_set: false,
+                last_tau: DVector::zeros(na),
+            },
+            out: Outputs {
+                tau: DVector::zeros(na),
+                ddq: DVector::zeros(nv),
+                forces: [Vector3::zeros(); N_CONTACTS],
+            },
+            info: Info {
+                counters: WbcCounters::default(),
+                last_warn_tick: None,
+            },
+        };
+        if wbc.shape.p.reuse_solver {
             wbc.prepare_at_construction(model);
         }
         Ok(wbc)
@@ -436,25 +478,25 @@ impl WholeBodyController {
         data: &mut Data,
         q: &DVector<f64>,
     ) -> Result<(), WbcError> {
-        if model.nv != self.layout.nv || model.nq != self.nq {
+        if model.nv != self.shape.layout.nv || model.nq != self.shape.nq {
             return Err(WbcError::Dynamics(DynamicsError::DimensionMismatch {
                 what: "model (not the controller's)",
-                expected: self.layout.nv,
+                expected: self.shape.layout.nv,
                 got: model.nv,
             }));
         }
         forward_kinematics(model, data, q)?;
-        let hand = data.o_m_f[self.hand_id].trans;
-        let v = DVector::zeros(self.layout.nv);
+        let hand = data.o_m_f[self.shape.hand_id].trans;
+        let v = DVector::zeros(self.shape.layout.nv);
         let posture = q.clone();
         let cmd = WbcCommand {
             hand_pos_des: hand,
             posture_ref: Some(&posture),
             ..WbcCommand::default()
         };
-        let saved = self.counters;
+        let saved = self.info.counters;
         self.drop_solvers();
-        let condensed = self.p.formulation == WbcFormulation::Condensed;
+        let condensed = self.shape.p.formulation == WbcFormulation::Condensed;
         let mut results = Vec::new();
         for path in [Path::Condensed, Path::Relaxed, Path::Full] {
             if path == Path::Condensed && !condensed {
@@ -466,45 +508,42 @@ impl WholeBodyController {
             let r = self.try_solve(model, data, q, &v, &cmd, Some(path), &mut t, &mut it);
             results.push((path, r));
         }
-        self.counters = WbcCounters {
-            solver_builds: self.counters.solver_builds,
+        self.info.counters = WbcCounters {
+            solver_builds: self.info.counters.solver_builds,
             ..saved
         };
-        self.limits_active = false;
-        self.tau.fill(0.0);
-        self.ddq.fill(0.0);
-        self.forces = [Vector3::zeros(); N_CONTACTS];
-        let built = (!condensed || self.condensed.has_solver())
-            && self.relaxed.as_ref().is_none_or(|r| r.solver.is_some())
-            && self.full.solver.is_some();
-        if built || !self.p.reuse_solver {
+        self.state.limits_active = false;
+        self.out.tau.fill(0.0);
+        self.out.ddq.fill(0.0);
+        self.out.forces = [Vector3::zeros(); N_CONTACTS];
+        let built = (!condensed || self.work.condensed.has_solver())
+            && self
+                .work
+                .relaxed
+                .as_ref()
+                .is_none_or(|r| r.solver.is_some())
+            && self.work.full.solver.is_some();
+        if built || !self.shape.p.reuse_solver {
             Ok(())
         } else {
             Err(WbcError::Solver(format!(
                 "could not build every solver at this posture (condensed {}, screening {}, \
                  full {}; solves: {results:?})",
-                self.condensed.has_solver(),
-                self.relaxed.as_ref().is_none_or(|r| r.solver.is_some()),
-                self.full.solver.is_some()
+                self.work.condensed.has_solver(),
+                self.work
+                    .relaxed
+                    .as_ref()
+                    .is_none_or(|r| r.solver.is_some()),
+                self.work.full.solver.is_some()
             )))
         }
-    }
-
-    /// Adjusts clarabel's settings (tuning, benchmarks). Takes effect at the next tick, which
-    /// builds a new solver (allocating: call [`Self::prepare`] after it to build them before
-    /// the loop); presolve and zero dropping stay off (the in-place updates need them off).
-    pub fn tune_solver(&mut self, f: impl FnOnce(&mut DefaultSettings<f64>)) {
-        f(&mut self.settings);
-        self.settings.presolve_enable = false;
-        self.settings.input_sparse_dropzeros = false;
-        self.drop_solvers();
     }
 
     /// From now on every tick builds its condensed QP as clarabel would receive it (without
     /// the torque limits), for [`Self::condensed_instance`]; the cone solve alone does not need
     /// it. Offline use: each tick's limits' active set then starts from none.
     pub fn record_condensed_instances(&mut self) {
-        self.condensed.record();
+        self.work.condensed.record();
     }
 
     /// The condensed QP of the last tick that formed one, as clarabel receives it (allocates:
@@ -512,44 +551,45 @@ impl WholeBodyController {
     /// [`Self::record_condensed_instances`], else only those clarabel solved. `None` with the
     /// full formulation.
     pub fn condensed_instance(&self) -> Option<CondensedInstance> {
-        (self.p.formulation == WbcFormulation::Condensed).then(|| self.condensed.instance())
+        (self.shape.p.formulation == WbcFormulation::Condensed)
+            .then(|| self.work.condensed.instance())
     }
 
     /// Counters of ticks, solves and fallbacks since construction.
     pub fn counters(&self) -> WbcCounters {
-        self.counters
+        self.info.counters
     }
 
     /// Frame ids of the 8 contact points (order of [`WbcOutput::contact_forces`]).
     pub fn contact_frames(&self) -> [usize; N_CONTACTS] {
-        self.corner_ids
+        self.shape.corner_ids
     }
 
     /// Contact forces of the last tick (QP or fallback), as in [`WbcOutput::contact_forces`].
     pub fn last_contact_forces(&self) -> &[Vector3<f64>; N_CONTACTS] {
-        &self.forces
+        &self.out.forces
     }
 
     /// Frame ids of the two soles and of the hand.
     pub fn foot_frames(&self) -> [usize; 2] {
-        self.foot_ids
+        self.shape.foot_ids
     }
     pub fn hand_frame(&self) -> usize {
-        self.hand_id
+        self.shape.hand_id
     }
 
     /// Effort limit used for each actuated dof (N·m; ∞ where the URDF gives none).
     pub fn torque_limits(&self) -> &DVector<f64> {
-        &self.tau_max
+        &self.shape.tau_max
     }
 
     /// Sizes of the QP: (variables, constraint rows, nnz(P), nnz(A)).
     pub fn problem_size(&self) -> (usize, usize, usize, usize) {
         (
-            self.layout.nz,
-            self.layout.n_rows,
-            self.p_pattern.nnz(),
-            self.full.pattern.nnz(),
+            self.shape.layout.nz,
+            self.shape.layout.n_rows,
+            self.shape.p_pattern.nnz(),
+            self.work.full.pattern.nnz(),
         )
     }
 
@@ -561,20 +601,16 @@ impl WholeBodyController {
         q_ref: &DVector<f64>,
     ) -> Result<(), WbcError> {
         model.check_q(q_ref)?;
-        if model.nq != self.nq {
+        if model.nq != self.shape.nq {
             return Err(WbcError::Dynamics(DynamicsError::DimensionMismatch {
                 what: "model (not the controller's)",
-                expected: self.nq,
+                expected: self.shape.nq,
                 got: model.nq,
             }));
         }
-        self.posture_ref.copy_from(q_ref);
-        self.posture_set = true;
+        self.state.posture_ref.copy_from(q_ref);
+        self.state.posture_set = true;
         Ok(())
-    }
-
-    pub fn posture_reference(&self) -> Option<&DVector<f64>> {
-        self.posture_set.then_some(&self.posture_ref)
     }
 
     /// Forgets every reference and the state carried from tick to tick, so that the next tick
@@ -584,10 +620,10 @@ impl WholeBodyController {
     /// new plant session (a restarted simulator, whose robot may start from another posture).
     /// The solvers and counters are kept. Allocation-free.
     pub fn reset(&mut self) {
-        self.posture_set = false;
-        self.limits_active = false;
-        self.condensed.forget();
-        self.last_tau.fill(0.0);
+        self.state.posture_set = false;
+        self.state.limits_active = false;
+        self.work.condensed.forget();
+        self.state.last_tau.fill(0.0);
     }
 
     /// One control tick: assemble and solve the QP at `(q, v)` for `cmd`. Never panics and never
@@ -602,7 +638,7 @@ impl WholeBodyController {
         cmd: &WbcCommand,
     ) -> WbcOutput<'_> {
         let t0 = Instant::now();
-        self.counters.ticks += 1;
+        self.info.counters.ticks += 1;
         let mut solve_time = Duration::ZERO;
         let mut iterations = 0;
         let status = match self.try_solve(
@@ -616,15 +652,15 @@ impl WholeBodyController {
             &mut iterations,
         ) {
             Ok(almost) => {
-                self.counters.solved += 1;
-                self.counters.almost_solved += u64::from(almost);
-                self.counters.consecutive_fallbacks = 0;
-                self.last_tau.copy_from(&self.tau);
+                self.info.counters.solved += 1;
+                self.info.counters.almost_solved += u64::from(almost);
+                self.info.counters.consecutive_fallbacks = 0;
+                self.state.last_tau.copy_from(&self.out.tau);
                 WbcStatus::Solved
             }
             Err(reason) => {
-                self.counters.fallbacks += 1;
-                self.counters.consecutive_fallbacks += 1;
+                self.info.counters.fallbacks += 1;
+                self.info.counters.consecutive_fallbacks += 1;
                 // The solvers are kept (no rebuild, no allocation in the loop): every tick
                 // overwrites their data and clarabel restarts from its own initial point, so
                 // only the equilibration of `prepare` carries over. A solver is dropped (and
@@ -636,9 +672,9 @@ impl WholeBodyController {
             }
         };
         WbcOutput {
-            tau: &self.tau,
-            ddq: &self.ddq,
-            contact_forces: self.forces,
+            tau: &self.out.tau,
+            ddq: &self.out.ddq,
+            contact_forces: self.out.forces,
             status,
             tick_time: t0.elapsed(),
             solve_time,
@@ -647,16 +683,17 @@ impl WholeBodyController {
     }
 
     fn warn(&mut self, reason: FallbackReason) {
-        let t = self.counters.ticks;
+        let t = self.info.counters.ticks;
         if self
+            .info
             .last_warn_tick
             .is_none_or(|last| t - last >= WARN_EVERY_TICKS)
         {
-            self.last_warn_tick = Some(t);
+            self.info.last_warn_tick = Some(t);
             tracing::warn!(
                 ?reason,
-                fallbacks = self.counters.fallbacks,
-                consecutive = self.counters.consecutive_fallbacks,
+                fallbacks = self.info.counters.fallbacks,
+                consecutive = self.info.counters.consecutive_fallbacks,
                 ticks = t,
                 "whole-body QP fell back to gravity compensation (warnings limited to one per {WARN_EVERY_TICKS} ticks)"
             );
@@ -681,7 +718,7 @@ impl WholeBodyController {
         let pose = self.dynamics(model, data, q, v, cmd)?;
         self.set_targets(q, v, cmd, &pose)?;
         let finite = |s: &[f64]| s.iter().all(|x| x.is_finite());
-        if !(finite(&self.diag) && finite(&self.lin) && finite(&self.b_feet)) {
+        if !(finite(&self.work.diag) && finite(&self.work.lin) && finite(&self.work.b_feet)) {
             return Err(FallbackReason::NonFiniteProblem);
         }
         let almost = match self.solve_path(&data.m, &pose.feet, forced, solve_time, iterations) {
@@ -690,40 +727,41 @@ impl WholeBodyController {
             // drives saturate whatever is commanded, so command the optimum without the limits,
             // clamped below, rather than gravity compensation.
             Err(reason @ FallbackReason::Solver(status))
-                if forced.is_none() && infeasible(status) && !self.limited.is_empty() =>
+                if forced.is_none() && infeasible(status) && !self.shape.limited.is_empty() =>
             {
                 let a = self
                     .solve_unlimited(&data.m, &pose.feet, solve_time, iterations)
                     .ok_or(reason)?;
-                self.counters.limits_saturated += 1;
+                self.info.counters.limits_saturated += 1;
                 a
             }
             other => other?,
         };
 
         // ---- Outputs: q̈, f, τ = M_a q̈ + h_a − J_c,aᵀ f. ----
-        let (m, x, nv) = (&data.m, &self.x, self.layout.nv);
-        self.ddq.copy_from_slice(&x[..nv]);
+        let (m, x, nv) = (&data.m, &self.work.x, self.shape.layout.nv);
+        self.out.ddq.copy_from_slice(&x[..nv]);
         for c in 0..N_CONTACTS {
-            self.forces[c] = Vector3::new(x[nv + 3 * c], x[nv + 3 * c + 1], x[nv + 3 * c + 2]);
+            self.out.forces[c] = Vector3::new(x[nv + 3 * c], x[nv + 3 * c + 1], x[nv + 3 * c + 2]);
         }
         // The limited dofs' τ as the condensed solve's active set left them, when x is its.
         let known = self
+            .work
             .condensed
             .limited_torques()
-            .filter(|_| self.x_from_condensed);
+            .filter(|_| self.work.x_from_condensed);
         for a in 0..nv - 6 {
             // A limit held at its bound gives τ on it within rounding, and the condensed check
             // lets the others exceed theirs by 1e-9 relative (`condensed.rs`): the drives get
             // the limit itself, never a hair above it.
-            let lim = self.tau_max[a];
+            let lim = self.shape.tau_max[a];
             let t = match known {
                 Some(t) if lim.is_finite() => t[6 + a],
-                _ => torque(m, &self.h, &self.jc, x, 6 + a),
+                _ => torque(m, &self.work.h, &self.work.jc, x, 6 + a),
             };
-            self.tau[a] = t.clamp(-lim, lim);
+            self.out.tau[a] = t.clamp(-lim, lim);
         }
-        if !finite(self.tau.as_slice()) {
+        if !finite(self.out.tau.as_slice()) {
             return Err(FallbackReason::NonFiniteSolution);
         }
         Ok(almost)
@@ -737,7 +775,7 @@ impl WholeBodyController {
         cmd: &WbcCommand,
     ) -> Result<(), FallbackReason> {
         use FallbackReason::InvalidInput;
-        if model.nv != self.layout.nv || model.nq != self.nq {
+        if model.nv != self.shape.layout.nv || model.nq != self.shape.nq {
             return Err(InvalidInput);
         }
         let cmd_finite = [
@@ -774,25 +812,25 @@ impl WholeBodyController {
         use FallbackReason::InvalidInput;
         // CRBA checks q and leaves the joint Jacobians.
         crba(model, data, q).map_err(|_| InvalidInput)?;
-        if !self.posture_set && cmd.posture_ref.is_none() {
+        if !self.state.posture_set && cmd.posture_ref.is_none() {
             // First tick after construction or a reset: latch (a copy, no allocation).
-            self.posture_ref.copy_from(q);
-            self.posture_set = true;
+            self.state.posture_ref.copy_from(q);
+            self.state.posture_set = true;
         }
         update_frame_placements(model, data);
         self.build_jacobians(model, data);
         let pose = Pose {
             feet: [
-                data.o_m_f[self.foot_ids[0]].rot,
-                data.o_m_f[self.foot_ids[1]].rot,
+                data.o_m_f[self.shape.foot_ids[0]].rot,
+                data.o_m_f[self.shape.foot_ids[1]].rot,
             ],
-            hand: data.o_m_f[self.hand_id].trans,
+            hand: data.o_m_f[self.shape.hand_id].trans,
             root: data.o_m_i[0].rot,
         };
         jacobian_center_of_mass(model, data, q).map_err(|_| InvalidInput)?;
         // Drifts J̇ v of the soles and of every point task: one forward pass.
-        drift_pass(model, data, q, v, self.foot_ids[0]).map_err(|_| InvalidInput)?;
-        for t in &mut self.tasks.points {
+        drift_pass(model, data, q, v, self.shape.foot_ids[0]).map_err(|_| InvalidInput)?;
+        for t in &mut self.work.tasks.points {
             let drift = match t.point {
                 Point::Com => {
                     t.jac.copy_from(&data.jcom);
@@ -802,27 +840,27 @@ impl WholeBodyController {
             };
             t.target = -drift;
         }
-        let nv = self.layout.nv;
+        let nv = self.shape.layout.nv;
         for foot in 0..2 {
-            let drift = frame_drift_from_pass(model, data, self.foot_ids[foot]).to_vector();
+            let drift = frame_drift_from_pass(model, data, self.shape.foot_ids[foot]).to_vector();
             // Soles at rest: J_s q̈ = −J̇_s v − k J_s v.
             for i in 0..6 {
                 let jr = 6 * foot + i;
                 // Over the dofs that move the sole: its Jacobian is zero on the others.
-                let jv: f64 = self.foot_dofs[foot]
+                let jv: f64 = self.shape.foot_dofs[foot]
                     .iter()
-                    .map(|&c| self.jfeet[(jr, c)] * v[c])
+                    .map(|&c| self.work.jfeet[(jr, c)] * v[c])
                     .sum();
-                self.b_feet[jr] = -drift[i] - self.p.contact_damping * jv;
+                self.work.b_feet[jr] = -drift[i] - self.shape.p.contact_damping * jv;
             }
         }
         // Bias h(q, v) last: RNEA overwrites data.v / data.a but not data.m.
         nonlinear_effects(model, data, q, v).map_err(|_| InvalidInput)?;
-        self.h.copy_from(&data.tau);
+        self.work.h.copy_from(&data.tau);
         // A known hand force acts like a bias: M q̈ + (h − J_hᵀ F) = Sᵀτ + J_cᵀ f.
-        let jh = &self.tasks.points[HAND].jac;
+        let jh = &self.work.tasks.points[HAND].jac;
         for c in 0..nv {
-            self.h[c] -= (0..3).map(|k| jh[(k, c)] * cmd.hand_force[k]).sum::<f64>();
+            self.work.h[c] -= (0..3).map(|k| jh[(k, c)] * cmd.hand_force[k]).sum::<f64>();
         }
         Ok(pose)
     }
@@ -836,8 +874,8 @@ impl WholeBodyController {
         cmd: &WbcCommand,
         pose: &Pose,
     ) -> Result<(), FallbackReason> {
-        let p = &self.p;
-        let tasks = &mut self.tasks;
+        let p = &self.shape.p;
+        let tasks = &mut self.work.tasks;
         // CoM: the preview's acceleration. Hand, eq. (17): ẍ_cmd = K_p (x_des − x)
         // + K_d (ẋ_des − ẋ) + ẍ_des at the hand frame's origin; its task is eq. (18).
         tasks.points[COM].target += cmd.com_acc;
@@ -850,7 +888,7 @@ impl WholeBodyController {
         // R ω̇_b) towards α = K_p log(R_ref Rᵀ) − K_d ω; in body axes the target is Rᵀ α.
         let q_ref = cmd
             .posture_ref
-            .or(self.posture_set.then_some(&self.posture_ref))
+            .or(self.state.posture_set.then_some(&self.state.posture_ref))
             .ok_or(FallbackReason::InvalidInput)?;
         let quat = UnitQuaternion::from_quaternion(Quaternion::new(
             q_ref[6], q_ref[3], q_ref[4], q_ref[5],
@@ -865,10 +903,10 @@ impl WholeBodyController {
             .copy_from_slice(target_b.as_slice());
         // Posture PD on the joints.
         let posture = &mut tasks.joints[POSTURE].target;
-        for (a, &qi) in self.q_index.iter().enumerate() {
+        for (a, &qi) in self.shape.q_index.iter().enumerate() {
             posture[a] = p.posture_kp * (q_ref[qi] - q[qi]) - p.posture_kd * v[6 + a];
         }
-        tasks.diagonal(&mut self.diag, &mut self.lin);
+        tasks.diagonal(&mut self.work.diag, &mut self.work.lin);
         if tasks.is_finite() {
             Ok(())
         } else {
@@ -876,7 +914,7 @@ impl WholeBodyController {
         }
     }
 
-    /// Solves the tick's problem into `self.x`: the condensed problem (the cone solve holding
+    /// Solves the tick's problem into `self.work.x`: the condensed problem (the cone solve holding
     /// the active torque limits, or clarabel without them), unless the last tick had a torque
     /// limit active and only clarabel would solve it — a robot at its limits (pushed hard,
     /// falling) stays there for a while, and that screening solve would be wasted. When the
@@ -891,14 +929,14 @@ impl WholeBodyController {
         iterations: &mut u32,
     ) -> Result<bool, FallbackReason> {
         let finite = |s: &[f64]| s.iter().all(|x| x.is_finite());
-        self.x_from_condensed = false;
+        self.work.x_from_condensed = false;
         let use_condensed = match forced {
             Some(path) => path == Path::Condensed,
             // With the cone solve the screening costs the condensation and a few Newton steps
             // (tens of µs) against about 1 ms for the full problem: always worth trying.
             None => {
-                self.p.formulation == WbcFormulation::Condensed
-                    && (self.p.active_set || !self.limits_active)
+                self.shape.p.formulation == WbcFormulation::Condensed
+                    && (self.shape.p.active_set || !self.state.limits_active)
             }
         };
         // Screen with the full problem without its torque rows first: after a condensed
@@ -906,19 +944,19 @@ impl WholeBodyController {
         let mut screen = match forced {
             _ if use_condensed => true,
             Some(path) => path == Path::Relaxed,
-            None => self.p.formulation == WbcFormulation::Full,
+            None => self.shape.p.formulation == WbcFormulation::Full,
         };
         if use_condensed {
             // A forced path builds clarabel's solver (`prepare`): no shortcut then.
-            let active_set = self.p.active_set && forced.is_none();
+            let active_set = self.shape.p.active_set && forced.is_none();
             match self.solve_condensed(m, foot_rot, true, active_set, solve_time, iterations) {
                 Ok(solved) => {
-                    let x = self.condensed.x();
+                    let x = self.work.condensed.x();
                     if finite(x) {
-                        self.x[..x.len()].copy_from_slice(x);
-                        self.x_from_condensed = true;
-                        self.limits_active = solved.limits;
-                        self.counters.torque_limited += u64::from(solved.limits);
+                        self.work.x[..x.len()].copy_from_slice(x);
+                        self.work.x_from_condensed = true;
+                        self.state.limits_active = solved.limits;
+                        self.info.counters.torque_limited += u64::from(solved.limits);
                         return Ok(solved.almost);
                     }
                     screen = false;
@@ -928,14 +966,14 @@ impl WholeBodyController {
                 Err(CondensedError::Limits) => screen = false,
                 // H or S not positive definite (e.g. a singular leg): the full problem, whose
                 // interior-point KKT system is regularised, decides this tick.
-                Err(CondensedError::Factorisation) => self.counters.condensation_failures += 1,
+                Err(CondensedError::Factorisation) => self.info.counters.condensation_failures += 1,
                 Err(CondensedError::Solver(r)) => return Err(r),
             }
         }
         let almost = self.solve_full(m, foot_rot, screen, solve_time, iterations)?;
         // A limit counts as active within 0.1 % of it.
-        self.limits_active = self.limited.iter().any(|&(dof, tmax)| {
-            torque(m, &self.h, &self.jc, &self.x, dof).abs() >= (1.0 - 1e-3) * tmax
+        self.state.limits_active = self.shape.limited.iter().any(|&(dof, tmax)| {
+            torque(m, &self.work.h, &self.work.jc, &self.work.x, dof).abs() >= (1.0 - 1e-3) * tmax
         });
         Ok(almost)
     }
@@ -950,16 +988,16 @@ impl WholeBodyController {
         solve_time: &mut Duration,
         iterations: &mut u32,
     ) -> Option<bool> {
-        let active_set = self.p.active_set;
+        let active_set = self.shape.p.active_set;
         let solved = self
             .solve_condensed(m, foot_rot, false, active_set, solve_time, iterations)
             .ok()?;
-        let x = self.condensed.x();
+        let x = self.work.condensed.x();
         if !x.iter().all(|v| v.is_finite()) {
             return None;
         }
-        self.x[..x.len()].copy_from_slice(x);
-        self.limits_active = true;
+        self.work.x[..x.len()].copy_from_slice(x);
+        self.state.limits_active = true;
         Some(solved.almost)
     }
 
@@ -975,24 +1013,24 @@ impl WholeBodyController {
     ) -> Result<Condensed, CondensedError> {
         let pb = Problem {
             m,
-            h: &self.h,
-            jc: &self.jc,
-            jfeet: &self.jfeet,
-            b_feet: &self.b_feet,
-            diag: &self.diag,
-            lin: &self.lin,
-            tasks: &self.tasks.points,
-            w_force: self.p.w_reg_force,
-            friction: self.p.friction,
+            h: &self.work.h,
+            jc: &self.work.jc,
+            jfeet: &self.work.jfeet,
+            b_feet: &self.work.b_feet,
+            diag: &self.work.diag,
+            lin: &self.work.lin,
+            tasks: &self.work.tasks.points,
+            w_force: self.shape.p.w_reg_force,
+            friction: self.shape.p.friction,
             foot_rot: *foot_rot,
-            limited: if limits { &self.limited } else { &[] },
+            limited: if limits { &self.shape.limited } else { &[] },
             active_set,
         };
-        self.condensed.solve(
+        self.work.condensed.solve(
             &pb,
-            &self.settings,
-            self.p.reuse_solver,
-            &mut self.counters,
+            &self.shape.settings,
+            self.shape.p.reuse_solver,
+            &mut self.info.counters,
             iterations,
             solve_time,
         )
@@ -1000,7 +1038,7 @@ impl WholeBodyController {
 
     /// The full problem (the reference formulation): assembles the dense P, q, A, b over
     /// `z = [q̈, f, e_com, e_hand]` and solves it, first without the torque rows when `screen`.
-    /// `Ok(almost_solved)` leaves z in `self.x`.
+    /// `Ok(almost_solved)` leaves z in `self.work.x`.
     #[allow(clippy::too_many_arguments)]
     fn solve_full(
         &mut self,
@@ -1020,27 +1058,27 @@ impl WholeBodyController {
         m: &DMatrix<f64>,
         foot_rot: &[Matrix3<f64>; 2],
     ) -> Result<(), FallbackReason> {
-        let l = self.layout;
+        let l = self.shape.layout;
         let nv = l.nv;
-        self.pd.fill(0.0);
-        self.qd.fill(0.0);
+        self.work.pd.fill(0.0);
+        self.work.qd.fill(0.0);
         for d in 0..nv {
-            self.pd[(d, d)] = self.diag[d];
-            self.qd[d] = self.lin[d];
+            self.work.pd[(d, d)] = self.work.diag[d];
+            self.work.qd[d] = self.work.lin[d];
         }
         for d in l.force0..l.residual0 {
-            self.pd[(d, d)] = self.p.w_reg_force;
+            self.work.pd[(d, d)] = self.shape.p.w_reg_force;
         }
         // Point tasks: weights on their residual variables (rows below).
-        for (t, task) in self.tasks.points.iter().enumerate() {
+        for (t, task) in self.work.tasks.points.iter().enumerate() {
             for k in 0..3 {
                 let e = l.residual(t, k);
-                self.pd[(e, e)] = task.weight;
+                self.work.pd[(e, e)] = task.weight;
             }
         }
 
         // ---- Constraints A z + s = b, s ∈ K. ----
-        let ad = &mut self.ad;
+        let ad = &mut self.work.ad;
         ad.fill(0.0);
         // Floating-base EoM rows: M_u q̈ − J_c,uᵀ f = −h_u.
         for r in 0..6 {
@@ -1048,31 +1086,31 @@ impl WholeBodyController {
                 ad[(r, c)] = m[(r, c)];
             }
             for k in 0..3 * N_CONTACTS {
-                ad[(r, nv + k)] = -self.jc[(k, r)];
+                ad[(r, nv + k)] = -self.work.jc[(k, r)];
             }
-            self.bd[r] = -self.h[r];
+            self.work.bd[r] = -self.work.h[r];
         }
         // Soles at rest: J_s q̈ = b_s.
         for jr in 0..12 {
             let row = l.row_feet + jr;
             for c in 0..nv {
-                ad[(row, c)] = self.jfeet[(jr, c)];
+                ad[(row, c)] = self.work.jfeet[(jr, c)];
             }
-            self.bd[row] = self.b_feet[jr];
+            self.work.bd[row] = self.work.b_feet[jr];
         }
         // Point tasks' residuals: J q̈ − e = a* − J̇ v.
-        for (t, task) in self.tasks.points.iter().enumerate() {
+        for (t, task) in self.work.tasks.points.iter().enumerate() {
             for k in 0..3 {
                 let row = l.row_task + 3 * t + k;
                 for c in 0..nv {
                     ad[(row, c)] = task.jac[(k, c)];
                 }
                 ad[(row, l.residual(t, k))] = -1.0;
-                self.bd[row] = task.target[k];
+                self.work.bd[row] = task.target[k];
             }
         }
         // Torque limits: ±(M_a q̈ + h_a − J_c,aᵀ f) ≤ τ_max.
-        for (k, &(dof, tmax)) in self.limited.iter().enumerate() {
+        for (k, &(dof, tmax)) in self.shape.limited.iter().enumerate() {
             let row = l.row_tau + 2 * k;
             for c in 0..nv {
                 let x = m[(dof, c)];
@@ -1080,40 +1118,42 @@ impl WholeBodyController {
                 ad[(row + 1, c)] = -x;
             }
             for j in 0..3 * N_CONTACTS {
-                let x = self.jc[(j, dof)];
+                let x = self.work.jc[(j, dof)];
                 ad[(row, nv + j)] = -x;
                 ad[(row + 1, nv + j)] = x;
             }
-            self.bd[row] = tmax - self.h[dof];
-            self.bd[row + 1] = tmax + self.h[dof];
+            self.work.bd[row] = tmax - self.work.h[dof];
+            self.work.bd[row + 1] = tmax + self.work.h[dof];
         }
         // Friction cones: s = (μ nᵀf, t₁ᵀf, t₂ᵀf) ∈ SOC(3), b = 0.
         for c in 0..N_CONTACTS {
             let rot = &foot_rot[c / 4];
             let row = l.row_soc + 3 * c;
             for a in 0..3 {
-                ad[(row, nv + 3 * c + a)] = -self.p.friction * rot[(a, 2)];
+                ad[(row, nv + 3 * c + a)] = -self.shape.p.friction * rot[(a, 2)];
                 ad[(row + 1, nv + 3 * c + a)] = -rot[(a, 0)];
                 ad[(row + 2, nv + 3 * c + a)] = -rot[(a, 1)];
             }
-            self.bd[row] = 0.0;
-            self.bd[row + 1] = 0.0;
-            self.bd[row + 2] = 0.0;
+            self.work.bd[row] = 0.0;
+            self.work.bd[row + 1] = 0.0;
+            self.work.bd[row + 2] = 0.0;
         }
 
-        self.p_pattern.gather(&self.pd, &mut self.p_val);
+        self.shape
+            .p_pattern
+            .gather(&self.work.pd, &mut self.work.p_val);
         let finite = |s: &[f64]| s.iter().all(|x| x.is_finite());
-        if !(finite(&self.p_val)
-            && finite(&self.qd)
-            && finite(self.ad.as_slice())
-            && finite(&self.bd))
+        if !(finite(&self.work.p_val)
+            && finite(&self.work.qd)
+            && finite(self.work.ad.as_slice())
+            && finite(&self.work.bd))
         {
             return Err(FallbackReason::NonFiniteProblem);
         }
         Ok(())
     }
 
-    /// Solves the assembled full problem into `self.x`, first without its torque rows when
+    /// Solves the assembled full problem into `self.work.x`, first without its torque rows when
     /// `screen`.
     fn run_full(
         &mut self,
@@ -1123,67 +1163,67 @@ impl WholeBodyController {
         iterations: &mut u32,
     ) -> Result<bool, FallbackReason> {
         let finite = |s: &[f64]| s.iter().all(|x| x.is_finite());
-        let nz = self.layout.nz;
+        let nz = self.shape.layout.nz;
         // ---- Constraint screening: the QP without the torque rows is much cheaper
         // (its KKT factor is far sparser); when its optimum satisfies every torque limit it is
         // also the optimum of the full QP (dropping inactive constraints does not move the
         // optimum of a convex problem). Otherwise the full QP is solved. ----
         let mut almost = false;
         let mut accepted = false;
-        if let Some(relaxed) = self.relaxed.as_mut().filter(|_| screen) {
+        if let Some(relaxed) = self.work.relaxed.as_mut().filter(|_| screen) {
             let run = relaxed.run(
-                &self.p_pattern,
-                &self.p_val,
-                &self.qd,
-                &self.ad,
-                &self.bd,
-                &self.settings,
-                self.p.reuse_solver,
-                &mut self.counters,
+                &self.shape.p_pattern,
+                &self.work.p_val,
+                &self.work.qd,
+                &self.work.ad,
+                &self.work.bd,
+                &self.shape.settings,
+                self.shape.p.reuse_solver,
+                &mut self.info.counters,
             );
             *iterations += relaxed.iterations();
             *solve_time += relaxed.solve_time();
             if let Ok(a) = run {
                 let x = relaxed.x();
-                let within = self.limited.iter().all(|&(dof, tmax)| {
-                    let t = torque(m, &self.h, &self.jc, x, dof);
+                let within = self.shape.limited.iter().all(|&(dof, tmax)| {
+                    let t = torque(m, &self.work.h, &self.work.jc, x, dof);
                     t.abs() <= tmax
                 });
                 if within && x.len() == nz && finite(x) {
-                    self.x.copy_from_slice(x);
+                    self.work.x.copy_from_slice(x);
                     almost = a;
                     accepted = true;
                 }
             }
         }
         if !accepted {
-            self.counters.torque_limited += u64::from(self.relaxed.is_some());
-            let run = self.full.run(
-                &self.p_pattern,
-                &self.p_val,
-                &self.qd,
-                &self.ad,
-                &self.bd,
-                &self.settings,
-                self.p.reuse_solver,
-                &mut self.counters,
+            self.info.counters.torque_limited += u64::from(self.work.relaxed.is_some());
+            let run = self.work.full.run(
+                &self.shape.p_pattern,
+                &self.work.p_val,
+                &self.work.qd,
+                &self.work.ad,
+                &self.work.bd,
+                &self.shape.settings,
+                self.shape.p.reuse_solver,
+                &mut self.info.counters,
             );
-            *iterations += self.full.iterations();
-            *solve_time += self.full.solve_time();
+            *iterations += self.work.full.iterations();
+            *solve_time += self.work.full.solve_time();
             almost = run?;
-            let x = self.full.x();
+            let x = self.work.full.x();
             if x.len() != nz || !finite(x) {
                 return Err(FallbackReason::NonFiniteSolution);
             }
-            self.x.copy_from_slice(x);
+            self.work.x.copy_from_slice(x);
         }
         Ok(almost)
     }
 
     fn drop_solvers(&mut self) {
-        self.condensed.drop_solver();
-        self.full.solver = None;
-        if let Some(r) = self.relaxed.as_mut() {
+        self.work.condensed.drop_solver();
+        self.work.full.solver = None;
+        if let Some(r) = self.work.relaxed.as_mut() {
             r.solver = None;
         }
     }
@@ -1192,35 +1232,42 @@ impl WholeBodyController {
     /// rows), from `data.j` and `data.o_m_f`.
     fn build_jacobians(&mut self, model: &Model, data: &Data) {
         let lwa = ReferenceFrame::LocalWorldAligned;
-        for (k, &id) in self.foot_ids.iter().enumerate() {
+        for (k, &id) in self.shape.foot_ids.iter().enumerate() {
             // Frame ids and sizes were checked at construction: this cannot fail.
-            let _ = get_frame_jacobian(model, data, id, lwa, &mut self.jtmp);
-            self.jfeet.rows_mut(6 * k, 6).copy_from(&self.jtmp);
+            let _ = get_frame_jacobian(model, data, id, lwa, &mut self.work.jtmp);
+            self.work
+                .jfeet
+                .rows_mut(6 * k, 6)
+                .copy_from(&self.work.jtmp);
         }
-        for (c, &id) in self.corner_ids.iter().enumerate() {
+        for (c, &id) in self.shape.corner_ids.iter().enumerate() {
             let k = c / 4;
-            if model.frames[id].parent != model.frames[self.foot_ids[k]].parent {
-                let _ = get_frame_jacobian(model, data, id, lwa, &mut self.jtmp);
-                self.jc.rows_mut(3 * c, 3).copy_from(&self.jtmp.rows(0, 3));
+            if model.frames[id].parent != model.frames[self.shape.foot_ids[k]].parent {
+                let _ = get_frame_jacobian(model, data, id, lwa, &mut self.work.jtmp);
+                self.work
+                    .jc
+                    .rows_mut(3 * c, 3)
+                    .copy_from(&self.work.jtmp.rows(0, 3));
                 continue;
             }
             // On the sole's body: v_corner = v_sole + ω × r, r from the sole to the corner
             // (world axes), one cross product per column instead of a walk up the leg; only on
             // the dofs that move the sole (the others' columns stay the zeros they were made).
-            let r = data.o_m_f[id].trans - data.o_m_f[self.foot_ids[k]].trans;
-            for &col in &self.foot_dofs[k] {
-                let j = self.jfeet.column(col);
+            let r = data.o_m_f[id].trans - data.o_m_f[self.shape.foot_ids[k]].trans;
+            for &col in &self.shape.foot_dofs[k] {
+                let j = self.work.jfeet.column(col);
                 let v = Vector3::new(j[6 * k], j[6 * k + 1], j[6 * k + 2]);
                 let w = Vector3::new(j[6 * k + 3], j[6 * k + 4], j[6 * k + 5]);
-                self.jc
+                self.work
+                    .jc
                     .fixed_view_mut::<3, 1>(3 * c, col)
                     .copy_from(&(v + w.cross(&r)));
             }
         }
-        for t in &mut self.tasks.points {
+        for t in &mut self.work.tasks.points {
             if let Point::Frame(id) = t.point {
-                let _ = get_frame_jacobian(model, data, id, lwa, &mut self.jtmp);
-                t.jac.copy_from(&self.jtmp.rows(0, 3));
+                let _ = get_frame_jacobian(model, data, id, lwa, &mut self.work.jtmp);
+                t.jac.copy_from(&self.work.jtmp.rows(0, 3));
             }
         }
     }
@@ -1240,10 +1287,10 @@ impl WholeBodyController {
         v: &DVector<f64>,
     ) -> Result<&DVector<f64>, WbcError> {
         model.check_v("v", v)?;
-        if model.nv != self.layout.nv {
+        if model.nv != self.shape.layout.nv {
             return Err(WbcError::Dynamics(DynamicsError::DimensionMismatch {
                 what: "model (not the controller's)",
-                expected: self.layout.nv,
+                expected: self.shape.layout.nv,
                 got: model.nv,
             }));
         }
@@ -1257,7 +1304,7 @@ impl WholeBodyController {
             for s in 0..6 {
                 let mut x = 0.0;
                 for j in 0..3 * N_CONTACTS {
-                    x += self.jc[(j, r)] * self.jc[(j, s)];
+                    x += self.work.jc[(j, r)] * self.work.jc[(j, s)];
                 }
                 aat[(r, s)] = x;
             }
@@ -1271,22 +1318,22 @@ impl WholeBodyController {
             )))?;
         let mut f = [0.0; 3 * N_CONTACTS];
         for (j, fj) in f.iter_mut().enumerate() {
-            *fj = (0..6).map(|r| self.jc[(j, r)] * y[r]).sum();
+            *fj = (0..6).map(|r| self.work.jc[(j, r)] * y[r]).sum();
         }
-        for a in 0..self.layout.nv - 6 {
+        for a in 0..self.shape.layout.nv - 6 {
             let d = 6 + a;
-            let mut t = g[d] - self.p.fallback_damping * v[d];
+            let mut t = g[d] - self.shape.p.fallback_damping * v[d];
             for (j, fj) in f.iter().enumerate() {
-                t -= self.jc[(j, d)] * fj;
+                t -= self.work.jc[(j, d)] * fj;
             }
-            let lim = self.tau_max[a];
-            self.tau[a] = t.clamp(-lim, lim);
+            let lim = self.shape.tau_max[a];
+            self.out.tau[a] = t.clamp(-lim, lim);
         }
         for c in 0..N_CONTACTS {
-            self.forces[c] = Vector3::new(f[3 * c], f[3 * c + 1], f[3 * c + 2]);
+            self.out.forces[c] = Vector3::new(f[3 * c], f[3 * c + 1], f[3 * c + 2]);
         }
-        self.ddq.fill(0.0);
-        Ok(&self.tau)
+        self.out.ddq.fill(0.0);
+        Ok(&self.out.tau)
     }
 
     /// Fallback for a failed tick: [`Self::fallback_torque`], or, if even that cannot be
@@ -1299,15 +1346,15 @@ impl WholeBodyController {
         v: &DVector<f64>,
     ) {
         let ok = self.fallback_torque(model, data, q, v).is_ok()
-            && self.tau.iter().all(|t| t.is_finite());
+            && self.out.tau.iter().all(|t| t.is_finite());
         if !ok {
-            if self.last_tau.iter().all(|t| t.is_finite()) {
-                self.tau.copy_from(&self.last_tau);
+            if self.state.last_tau.iter().all(|t| t.is_finite()) {
+                self.out.tau.copy_from(&self.state.last_tau);
             } else {
-                self.tau.fill(0.0);
+                self.out.tau.fill(0.0);
             }
-            self.ddq.fill(0.0);
-            self.forces = [Vector3::zeros(); N_CONTACTS];
+            self.out.ddq.fill(0.0);
+            self.out.forces = [Vector3::zeros(); N_CONTACTS];
         }
     }
 }
@@ -1361,8 +1408,7 @@ fn clarabel_settings(config: &WbcConfig) -> DefaultSettings<f64> {
         direct_kkt_solver: true,
         direct_solve_method: "qdldl".to_string(),
         // Iterative refinement of the KKT solves costs ≈ 35 % of the tick here and the
-        // tests' accuracy checks (EoM residual, limits, cones) hold without it;
-        // `tune_solver` re-enables it.
+        // tests' accuracy checks (EoM residual, limits, cones) hold without it.
         iterative_refinement_enable: false,
         ..DefaultSettings::default()
     }

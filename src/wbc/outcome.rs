@@ -33,8 +33,9 @@ pub enum WbcStatus {
     Fallback(FallbackReason),
 }
 
-/// Counters since construction.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// Counters since construction (`summary.json`'s `wbc`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct WbcCounters {
     pub ticks: u64,
     /// Ticks whose QP was solved (including reduced-accuracy solutions).

@@ -2,14 +2,18 @@
 
 use upc::channels::{ForecastMsg, StateMsg};
 use upc::config::{Config, ControllerKind};
-use upc::control::{ControllerCore, ForecastWindow};
-use upc::robot::Robot;
+use upc::control::contract::read_state;
+use upc::control::{ControllerCore, ForecastWindow, StampedSchedule, TickError};
+use upc::robot::{Robot, RobotState};
+use upc::wbc::WbcStatus;
 
-/// A controller core with the humanoid standing at home, its state message, an empty forecast
-/// window and a torque buffer.
+/// A controller core with the humanoid standing at home, its state message (read into the
+/// robot as measured at each tick, as the loop does), an empty forecast window and a torque
+/// buffer.
 pub struct Rig {
     pub core: ControllerCore,
     pub state: StateMsg,
+    pub sensed: RobotState,
     pub window: ForecastWindow,
     pub tau: Vec<f64>,
 }
@@ -33,12 +37,21 @@ pub fn rig_of(robot: &Robot, config: &Config, kind: ControllerKind) -> Rig {
     Rig {
         core,
         state,
+        sensed: RobotState::new(model.nq, model.nv),
         window: ForecastWindow::new(1.0, 1.0, 0.2, 300.0),
         tau,
     }
 }
 
 impl Rig {
+    /// One tick of the core on the state message, read as the loop reads it (no robot hash
+    /// checked), with C2's schedule `c2`.
+    pub fn tick(&mut self, c2: Option<&StampedSchedule>) -> Result<WbcStatus, TickError> {
+        read_state(&self.state, 0, &mut self.sensed)?;
+        self.core
+            .tick(&self.sensed, &self.window, c2, &mut self.tau)
+    }
+
     /// Offers [`push_forecast`]`(0, fx)` at t = 0.
     pub fn offer_push(&mut self, fx: f64) {
         self.window
@@ -71,11 +84,7 @@ impl Rig {
         for k in ticks {
             self.state.time = k as f64 * 0.001;
             self.state.stamps = [self.state.time; 4];
-            errors += usize::from(
-                self.core
-                    .tick(&self.state, &self.window, None, &mut self.tau)
-                    .is_err(),
-            );
+            errors += usize::from(self.tick(None).is_err());
         }
         errors
     }

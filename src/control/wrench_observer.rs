@@ -8,12 +8,11 @@
 //! [`Stage::Measure`], on the base as estimated, the observer updates and its estimates replace
 //! what the robot does not measure (in `auto`), before the wrist tare and every later part.
 
-use std::any::Any;
-
 use serde::{Deserialize, Serialize};
 
-use super::core::TickError;
-use super::parts::{ControllerPart, PartEntry, PartSetup, Stage, TickFrame, TickInputs};
+use super::frame::{EstimatedForce, TickFrame};
+use super::part::{BuildError, ControllerPart, PartKind, PartSetup};
+use super::tick::{Stage, TickError, TickInputs};
 use crate::col;
 use crate::estimation::wrench_observer::{
     ContactWrenches, DriveFriction, WrenchObserver, WrenchObserverGains,
@@ -102,35 +101,36 @@ impl crate::config::PartSettings for WrenchObserverSettings {
     }
 }
 
-/// This part in `super::parts::PIPELINE`.
-pub const PART: PartEntry = PartEntry::new::<WrenchObserverSettings>(build);
+impl PartKind for WrenchObserverPart {
+    type Settings = WrenchObserverSettings;
 
-fn build(
-    s: &PartSetup,
-) -> Result<Box<dyn ControllerPart>, Box<dyn std::error::Error + Send + Sync>> {
-    let settings: WrenchObserverSettings = s.config.controller.parts.get()?;
-    let hand = s.model.frame_id(&s.robot.frames().hand)?;
-    let gains = WrenchObserverGains {
-        gain: settings.gain,
-        velocity_noise: settings.velocity_noise,
-        torque_noise: settings.torque_noise,
-        torque_noise_fraction: settings.torque_noise_fraction,
-        filter_gain: settings.filter_gain,
-        hand_bandwidth: settings.hand_bandwidth,
-        hand_lead: settings.hand_lead,
-        friction: DriveFriction {
-            coulomb: settings.friction_coulomb,
-            velocity: settings.friction_velocity,
-            viscous: settings.friction_viscous,
-        },
-    };
-    Ok(Box::new(WrenchEstimation {
-        observer: WrenchObserver::new(s.model, s.contact_frames, hand, gains),
-        mode: settings.mode,
-        counts: WrenchCounts::default(),
-        last_time: None,
-        observed: false,
-    }))
+    fn build(
+        s: &PartSetup,
+        settings: WrenchObserverSettings,
+    ) -> Result<Box<dyn ControllerPart>, BuildError> {
+        let hand = s.model.frame_id(&s.robot.frames().hand)?;
+        let gains = WrenchObserverGains {
+            gain: settings.gain,
+            velocity_noise: settings.velocity_noise,
+            torque_noise: settings.torque_noise,
+            torque_noise_fraction: settings.torque_noise_fraction,
+            filter_gain: settings.filter_gain,
+            hand_bandwidth: settings.hand_bandwidth,
+            hand_lead: settings.hand_lead,
+            friction: DriveFriction {
+                coulomb: settings.friction_coulomb,
+                velocity: settings.friction_velocity,
+                viscous: settings.friction_viscous,
+            },
+        };
+        Ok(Box::new(WrenchObserverPart {
+            observer: WrenchObserver::new(s.model, s.contact_frames, hand, gains),
+            mode: settings.mode,
+            counts: WrenchCounts::default(),
+            last_time: None,
+            observed: false,
+        }))
+    }
 }
 
 /// What the observer stands in for this tick.
@@ -155,7 +155,8 @@ pub struct WrenchCounts {
     pub failures: u64,
 }
 
-pub struct WrenchEstimation {
+/// The observer as a controller part.
+pub struct WrenchObserverPart {
     observer: WrenchObserver,
     mode: WrenchMode,
     pub counts: WrenchCounts,
@@ -164,7 +165,7 @@ pub struct WrenchEstimation {
     observed: bool,
 }
 
-impl WrenchEstimation {
+impl WrenchObserverPart {
     /// The last estimate.
     pub fn estimate(&self) -> &ContactWrenches {
         &self.observer.last
@@ -182,7 +183,8 @@ impl WrenchEstimation {
     /// WO on this tick's configuration and velocity (the base estimated), on the measured
     /// joint torques, or the commanded ones where the robot measures none.
     fn observe(&mut self, inputs: &TickInputs, frame: &TickFrame) {
-        let measured = &inputs.sensed.joint_torques;
+        let s = inputs.sensed;
+        let measured = &s.joint_torques;
         let torques = measured.as_slice().get(6..).unwrap_or(&[]);
         let tau = if !torques.is_empty() && torques.iter().all(|x| x.is_finite()) {
             torques
@@ -192,7 +194,10 @@ impl WrenchEstimation {
         };
         let dt = self.last_time.map_or(0.0, |t0| frame.t - t0);
         self.last_time = Some(frame.t);
-        match self.observer.update(&frame.q, &frame.v, tau, dt) {
+        match self
+            .observer
+            .update(frame.q.or(&s.q), frame.v.or(&s.v), tau, dt)
+        {
             Ok(_) => self.counts.updates += 1,
             Err(e) => {
                 self.counts.failures += 1;
@@ -204,7 +209,7 @@ impl WrenchEstimation {
     }
 }
 
-impl ControllerPart for WrenchEstimation {
+impl ControllerPart for WrenchObserverPart {
     fn name(&self) -> &'static str {
         "wrench_observer"
     }
@@ -234,7 +239,7 @@ impl ControllerPart for WrenchEstimation {
             Stage::Estimate => {
                 // The last tick's feet, for the base estimator's stance and CoP.
                 if self.replaces(feet_measured) {
-                    frame.foot_wrenches = self.observer.last.feet;
+                    *frame.foot_wrenches.write(self.name(), stage)? = self.observer.last.feet;
                 }
             }
             _ => {
@@ -248,19 +253,20 @@ impl ControllerPart for WrenchEstimation {
                     return Ok(()); // the robot measures them all: nothing to stand in for
                 }
                 self.observe(inputs, frame);
-                let w = self.observer.last;
+                let (w, name) = (self.observer.last, self.name());
                 if e.feet {
-                    frame.foot_wrenches = w.feet;
+                    *frame.foot_wrenches.write(name, stage)? = w.feet;
                     self.counts.feet_ticks += 1;
                 }
                 if let (true, Some(cop)) = (e.cop, w.cop) {
-                    frame.cop = cop;
+                    *frame.cop.write(name, stage)? = cop;
                     self.counts.cop_ticks += 1;
                 }
                 if e.hand {
-                    frame.hand_force = w.hand;
-                    frame.hand_force_lag = self.observer.hand_lag();
-                    frame.hand_force_estimated = true;
+                    *frame.hand_mut().force.write(name, stage)? = EstimatedForce {
+                        force: w.hand,
+                        lag: self.observer.hand_lag(),
+                    };
                     self.counts.hand_ticks += 1;
                 }
             }
@@ -300,9 +306,5 @@ impl ControllerPart for WrenchEstimation {
         if self.counts.updates + self.counts.failures > 0 {
             out.insert("wrench_observer".into(), serde_json::json!(self.counts));
         }
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
     }
 }
