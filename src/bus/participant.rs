@@ -36,10 +36,9 @@ use crate::channels::{
     Bus, ChannelError, N_CONTACTS, STATE_FLAG_BASE_UNMEASURED, STATE_FLAG_DAMPING, STATE_FLAG_HOLD,
     ServiceKind, StateMsg, TORQUE_FLAG_FALLBACK, TorqueMsg,
 };
+use crate::plant::feet::fill_foot_wrenches;
+use crate::plant::{CommandGate, CommandOrigin, CommandStats, PlantInfo};
 use crate::realtime::LatencyHistogram;
-use crate::sim::command::{CommandGate, CommandOrigin, CommandStats};
-use crate::sim::process::PlantInfo;
-use crate::sim::sensors::{ImuMount, Sensing, Sensors, SensorsConfig};
 
 /// Errors that end a run.
 #[derive(Debug, thiserror::Error)]
@@ -67,8 +66,12 @@ pub enum BusError {
 pub struct BusOptions {
     pub bus: BusConfig,
     pub robot: Arc<crate::robot::Robot>,
-    /// The scenario the plant plays (its name goes out with every state).
-    pub sim: crate::sim::SimConfig,
+    /// The scenario the robot is pushed with (`sim.scenario`): its name, content hash and
+    /// force factor go out with every state.
+    pub scenario: String,
+    /// `sim.mode = "lockstep"`: the scenario is announced as playing from the first state;
+    /// in real time it starts when the lab's sample says it did.
+    pub lockstep: bool,
     /// iceoryx2 prefix and node name of upc's contract.
     pub prefix: String,
     pub node_name: String,
@@ -242,7 +245,6 @@ struct Session<'a> {
     desc: &'a crate::robot::Robot,
     robot: Robot,
     info: PlantInfo,
-    sensors: Sensors,
     gate: CommandGate,
     /// The controller's last valid torques, and when they came.
     tau: DVector<f64>,
@@ -297,7 +299,7 @@ pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError>
     // scales its forecast and the controller checks the hash by them.
     let scenario = opts
         .robot
-        .scenario(&opts.sim.scenario)
+        .scenario(&opts.scenario)
         .map_err(|e| BusError::Setup(e.to_string()))?;
     let contract = Bus::open(&opts.prefix, &opts.node_name)?;
     let ep = Endpoints {
@@ -319,12 +321,7 @@ pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError>
         *q = f64::from(m.q);
     }
     let model = &opts.robot.model;
-    // The sensor block as measured on truth: the robot's own measurements replace it.
-    let truth = SensorsConfig {
-        sensing: Sensing::Truth,
-        ..opts.sim.sensors
-    };
-    let info = PlantInfo::start(&opts.sim, &scenario, opts.robot.hash);
+    let info = PlantInfo::start(&opts.scenario, &scenario, opts.robot.hash, opts.lockstep);
     let mut session = Session {
         cfg,
         desc: &opts.robot,
@@ -336,11 +333,6 @@ pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError>
             state,
             lab: None,
         },
-        sensors: Sensors::new(
-            &truth,
-            -model.gravity.z,
-            opts.robot.imu_frame.map(|f| ImuMount::new(model, f)),
-        ),
         gate: CommandGate::for_session(info.session),
         info,
         tau: DVector::zeros(model.nv - 6),
@@ -492,7 +484,6 @@ impl Session<'_> {
             self.desc,
             &self.info,
             (self.step, t),
-            &mut self.sensors,
             &mut self.points,
         );
         let msg = &self.msg;
@@ -890,7 +881,6 @@ fn fill(
     desc: &crate::robot::Robot,
     info: &PlantInfo,
     (step, t): (u64, f64),
-    sensors: &mut Sensors,
     points: &mut [[f64; 3]; N_CONTACTS],
 ) {
     let model = &desc.model;
@@ -905,7 +895,7 @@ fn fill(
         m.v[v] = f64::from(s.dq);
         m.joint_torques[v] = f64::from(s.tau_est);
     }
-    let mut flags = info.flags;
+    info.announce(m);
     match &robot.lab {
         Some(l) => {
             m.q[..7].copy_from_slice(&l.base_pose);
@@ -918,7 +908,7 @@ fn fill(
             m.door_velocity = l.door_velocity;
             // A lab without motion capture: the estimator's base.
             if !l.has_base() {
-                flags |= STATE_FLAG_BASE_UNMEASURED;
+                m.flags |= STATE_FLAG_BASE_UNMEASURED;
             }
         }
         None => {
@@ -926,19 +916,11 @@ fn fill(
             m.v[..6].fill(f64::NAN);
             m.contact_forces = [[f64::NAN; 3]; N_CONTACTS];
             m.hand_force = [f64::NAN; 3];
-            flags |= STATE_FLAG_BASE_UNMEASURED;
+            m.flags |= STATE_FLAG_BASE_UNMEASURED;
         }
     }
-    m.session = info.session;
-    m.scenario_hash = info.scenario_hash;
-    m.scenario_start = info.scenario_start;
-    m.flags = flags;
-    m.force_scale = info.force_scale;
-    m.robot_hash = info.robot_hash;
-    m.set_scenario_name(&info.scenario);
-    // The foot wrenches from the sole forces (the contract's sensor block), then the robot's
-    // own IMU over the modelled one.
-    sensors.apply(m, 1e-3, points);
+    // The sensor block: the foot wrenches from the sole forces, the robot's own IMU.
+    fill_foot_wrenches(m, points);
     let imu = &robot.state.imu_state;
     let [w, x, y, z] = imu.quaternion.map(f64::from);
     m.imu_orientation = [x, y, z, w];

@@ -83,10 +83,11 @@ pub fn run_cli(args: BusArgs) -> CliResult {
     let opts = BusOptions {
         bus: args.settings.load()?,
         robot: std::sync::Arc::new(args.plant.robot.load()?),
-        prefix: sim.process.prefix.clone(),
+        lockstep: sim.mode == upc::sim::Mode::Lockstep,
+        scenario: sim.scenario,
+        prefix: sim.process.prefix,
         node_name: format!("upc-bus-{}", std::process::id()),
         duration: sim.duration,
-        sim,
     };
     let stop = stop_flag();
     let s = run(&opts, &stop)?;

@@ -300,7 +300,7 @@ pub fn run_cli(args: SimArgs) -> CliResult {
 /// `upc sim --bus unitree`: the plant speaking as the robot on its bus, in real time.
 fn bus_robot(args: &SimArgs, mut config: SimConfig, engine: Engine) -> CliResult {
     config.mode = upc::sim::Mode::Realtime;
-    let opts = upc::bus::sim_robot::SimRobotOptions {
+    let opts = upc::sim::bus_robot::SimRobotOptions {
         rrd: args.rrd.clone(),
         recording_id: args.recording_id.clone(),
         bus: args.bus_settings.load()?,
@@ -308,7 +308,7 @@ fn bus_robot(args: &SimArgs, mut config: SimConfig, engine: Engine) -> CliResult
         sim: config,
         engine,
     };
-    let s = upc::bus::sim_robot::run(&opts, &stop_flag())?;
+    let s = upc::sim::bus_robot::run(&opts, &stop_flag())?;
     if let Some(p) = &args.summary {
         std::fs::write(p, serde_json::to_string_pretty(&s)?)?;
     }
