@@ -177,6 +177,24 @@ struct Robot {
     lab: Option<LabState>,
 }
 
+impl Robot {
+    /// The robot as its first valid state finds it: that state's positions are the hold's.
+    fn at_first(map: MotorMap, state: LowState) -> Self {
+        let mut start_q = [0.0; MOTOR_SLOTS];
+        for (q, m) in start_q.iter_mut().zip(&state.motor_state) {
+            *q = f64::from(m.q);
+        }
+        Self {
+            leg: legs(&map),
+            map,
+            start_q,
+            tick0: state.tick,
+            state,
+            lab: None,
+        }
+    }
+}
+
 /// The poll period of the wait for the controller's answer: what it adds to an answer at most.
 const ANSWER_POLL: Duration = Duration::from_micros(50);
 
@@ -239,6 +257,20 @@ struct Endpoints {
     torque_event: crate::channels::Listener,
 }
 
+impl Endpoints {
+    /// The robot's `bus` with upc's contract under `prefix`, as node `node_name`.
+    fn open(bus: RobotBus, prefix: &str, node_name: &str) -> Result<Self, BusError> {
+        let contract = Bus::open(prefix, node_name)?;
+        Ok(Self {
+            bus,
+            state_out: contract.publisher()?,
+            torques: contract.subscriber()?,
+            state_event: contract.notifier(ServiceKind::State)?,
+            torque_event: contract.listener(ServiceKind::Torques)?,
+        })
+    }
+}
+
 /// What the loop keeps between states.
 struct Session<'a> {
     cfg: &'a BusConfig,
@@ -283,32 +315,12 @@ pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError>
         ..Default::default()
     };
     let mut bus = RobotBus::open(cfg.network(), |dp| refuse_other_controllers(dp, cfg, stop))?;
-    // The first valid state: nothing is commanded before it.
-    let first = Instant::now() + Duration::from_secs_f64(cfg.first_state_timeout);
-    let state = loop {
-        if stop.load(Ordering::Relaxed) {
-            return Ok(summary);
-        }
-        match bus.states.wait(first)? {
-            None => return Err(BusError::NoRobot(cfg.first_state_timeout)),
-            Some(s) if valid(&s, cfg.bad_crc, &mut summary) => break s,
-            Some(_) => {}
-        }
+    // Nothing is commanded before the first valid state.
+    let Some(state) = first_state(&mut bus, cfg, stop, &mut summary)? else {
+        return Ok(summary);
     };
-    // The forces this robot is pushed with, as every plant announces them: the forecaster
-    // scales its forecast and the controller checks the hash by them.
-    let scenario = opts
-        .robot
-        .scenario(&opts.scenario)
-        .map_err(|e| BusError::Setup(e.to_string()))?;
-    let contract = Bus::open(&opts.prefix, &opts.node_name)?;
-    let ep = Endpoints {
-        bus,
-        state_out: contract.publisher()?,
-        torques: contract.subscriber()?,
-        state_event: contract.notifier(ServiceKind::State)?,
-        torque_event: contract.listener(ServiceKind::Torques)?,
-    };
+    let info = announcement(opts)?;
+    let mut ep = Endpoints::open(bus, &opts.prefix, &opts.node_name)?;
     tracing::info!(
         "on the bus: robot `{}` on domain {} via {}; contract prefix `{}`",
         opts.robot.name(),
@@ -316,50 +328,10 @@ pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError>
         cfg.interface,
         opts.prefix
     );
-    let mut start_q = [0.0; MOTOR_SLOTS];
-    for (q, m) in start_q.iter_mut().zip(&state.motor_state) {
-        *q = f64::from(m.q);
-    }
-    let model = &opts.robot.model;
-    let info = PlantInfo::start(&opts.scenario, &scenario, opts.robot.hash, opts.lockstep);
-    let mut session = Session {
-        cfg,
-        desc: &opts.robot,
-        robot: Robot {
-            leg: legs(&map),
-            map,
-            start_q,
-            tick0: state.tick,
-            state,
-            lab: None,
-        },
-        gate: CommandGate::for_session(info.session),
-        info,
-        tau: DVector::zeros(model.nv - 6),
-        last_command: None,
-        drive: Drive::Hold,
-        since: 0.0,
-        resumable: false,
-        msg: Box::default(),
-        points: [[0.0; 3]; N_CONTACTS],
-        tick0: 0,
-        step: 0,
-        received: Instant::now(),
-        adapter: LatencyHistogram::new(),
-        round_trip: LatencyHistogram::new(),
-        summary,
-    };
-    session.tick0 = session.robot.tick0;
+    let mut session = Session::new(cfg, &opts.robot, Robot::at_first(map, state), info, summary);
     let (cpu0, wall0) = (cpu_time(), Instant::now());
-    let mut ep = ep;
     let result = session.run(&mut ep, opts.duration, stop);
-    // Leave the robot damped, not under the last torques: written for a few of a G1's state
-    // periods, since one sample written just before the participant goes can be lost with it
-    // (a CI run's robot kept the hold as its last command) and the drives keep the last.
-    for _ in 0..FINAL_DAMPING {
-        let _ = ep.bus.commands.write(session.command(Drive::Damping, 0.0));
-        std::thread::sleep(SILENT_REPEAT);
-    }
+    session.leave_damped(&ep);
     let mut s = session.finish(&ep);
     s.wall_time = wall0.elapsed().as_secs_f64();
     s.cpu_share = (cpu_time() - cpu0) / s.wall_time.max(1e-9);
@@ -372,6 +344,43 @@ pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError>
         Err(e) => Err(e),
         Ok(()) => Ok(s),
     }
+}
+
+/// The robot's first valid state (`None`: stopped before it came), refusals counted; none
+/// within `bus.first_state_timeout` is an error.
+fn first_state(
+    bus: &mut RobotBus,
+    cfg: &BusConfig,
+    stop: &AtomicBool,
+    summary: &mut BusSummary,
+) -> Result<Option<LowState>, BusError> {
+    let first = Instant::now() + Duration::from_secs_f64(cfg.first_state_timeout);
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return Ok(None);
+        }
+        match bus.states.wait(first)? {
+            None => return Err(BusError::NoRobot(cfg.first_state_timeout)),
+            Some(s) if valid(&s, cfg.bad_crc, summary) => return Ok(Some(s)),
+            Some(_) => {}
+        }
+    }
+}
+
+/// The plant run's announcement: the forces this robot is pushed with, as every plant
+/// announces them (the forecaster scales its forecast and the controller checks the hash by
+/// them).
+fn announcement(opts: &BusOptions) -> Result<PlantInfo, BusError> {
+    let scenario = opts
+        .robot
+        .scenario(&opts.scenario)
+        .map_err(|e| BusError::Setup(e.to_string()))?;
+    Ok(PlantInfo::start(
+        &opts.scenario,
+        &scenario,
+        opts.robot.hash,
+        opts.lockstep,
+    ))
 }
 
 /// Watch `rt/lowcmd` for `bus.discovery` before writing to it: a writer there is another
@@ -392,7 +401,47 @@ fn refuse_other_controllers(
     }
 }
 
-impl Session<'_> {
+impl<'a> Session<'a> {
+    /// The loop's state at the robot's first state: the drives hold, no controller yet.
+    fn new(
+        cfg: &'a BusConfig,
+        desc: &'a crate::robot::Robot,
+        robot: Robot,
+        info: PlantInfo,
+        summary: BusSummary,
+    ) -> Self {
+        Self {
+            cfg,
+            desc,
+            tick0: robot.tick0,
+            robot,
+            gate: CommandGate::for_session(info.session),
+            info,
+            tau: DVector::zeros(desc.model.nv - 6),
+            last_command: None,
+            drive: Drive::Hold,
+            since: 0.0,
+            resumable: false,
+            msg: Box::default(),
+            points: [[0.0; 3]; N_CONTACTS],
+            step: 0,
+            received: Instant::now(),
+            adapter: LatencyHistogram::new(),
+            round_trip: LatencyHistogram::new(),
+            summary,
+        }
+    }
+
+    /// Leaves the robot damped, not under the last torques: written for a few of a G1's state
+    /// periods, since one sample written just before the participant goes can be lost with it
+    /// (a CI run's robot kept the hold as its last command) and the drives keep the last.
+    fn leave_damped(&mut self, ep: &Endpoints) {
+        for _ in 0..FINAL_DAMPING {
+            let _ = ep.bus.commands.write(self.command(Drive::Damping, 0.0));
+            std::thread::sleep(SILENT_REPEAT);
+        }
+    }
+
     /// One pass per robot state until the duration, a stop or the robot's silence.
     fn run(
         &mut self,
