@@ -8,6 +8,7 @@ use upc::sim::{Engine, SimConfig};
 
 use super::CliResult;
 use super::argv::{Argv, ToArgv, fields};
+use super::bus_settings::{BusChoice, BusSettingsArgs};
 use super::common::RobotArg;
 use upc::sim::sensors::Sensing;
 
@@ -110,9 +111,9 @@ pub struct SimArgs {
     /// Speak as the robot does on its own bus instead of upc's contract (a G1 on Unitree's DDS
     /// topics, for `upc bus`; real time; docs/bus.md).
     #[arg(long, value_enum)]
-    pub bus: Option<super::bus::BusChoice>,
+    pub bus: Option<BusChoice>,
     #[command(flatten)]
-    pub bus_settings: super::bus::BusSettingsArgs,
+    pub bus_settings: BusSettingsArgs,
 }
 
 impl ToArgv for PlantArgs {
