@@ -11,6 +11,8 @@
 //! - [`forecast`]: the reference force forecaster process.
 //! - [`robot`]: robot descriptions: URDF, feet, hand, home posture, and what follows from them.
 //! - [`sim`]: the simulator process (humanoid on the ground, door on a spherical joint).
+//! - [`plant`]: the contract's plant side, shared by the simulator and a robot's bus (the
+//!   command gate, the plant run's announcement, the foot wrenches of the sensor block).
 //! - [`control`]: the control server's loop pieces (tick, its parts, C2 thread, logger, loop).
 //! - [`estimation`]: the floating base from the IMU, the joints and the foot wrenches.
 //! - [`capability`]: the largest push each controller withstands, swept (`upc capability`).
@@ -39,6 +41,7 @@ pub mod estimation;
 pub mod forecast;
 pub mod logging;
 pub mod offline;
+pub mod plant;
 pub mod preview;
 pub mod realtime;
 pub mod record;

@@ -8,8 +8,9 @@ use std::sync::atomic::AtomicBool;
 
 use support::pd_driver::{drive, state_bits};
 use upc::channels::{MAX_DOF, StateMsg};
+use upc::plant::{CommandGate, CommandOrigin, Rejection, validate_command};
+use upc::sim::SimConfig;
 use upc::sim::process::{RunOptions, RunSummary, run};
-use upc::sim::{CommandGate, CommandOrigin, Rejection, SimConfig, validate_command};
 
 #[test]
 fn commands_with_wrong_length_nan_or_old_seq_are_rejected() {

@@ -36,10 +36,9 @@ use crate::channels::{
     Bus, ChannelError, N_CONTACTS, STATE_FLAG_BASE_UNMEASURED, STATE_FLAG_DAMPING, STATE_FLAG_HOLD,
     ServiceKind, StateMsg, TORQUE_FLAG_FALLBACK, TorqueMsg,
 };
+use crate::plant::feet::fill_foot_wrenches;
+use crate::plant::{CommandGate, CommandOrigin, CommandStats, PlantInfo};
 use crate::realtime::LatencyHistogram;
-use crate::sim::command::{CommandGate, CommandOrigin, CommandStats};
-use crate::sim::process::PlantInfo;
-use crate::sim::sensors::{ImuMount, Sensing, Sensors, SensorsConfig};
 
 /// Errors that end a run.
 #[derive(Debug, thiserror::Error)]
@@ -67,8 +66,12 @@ pub enum BusError {
 pub struct BusOptions {
     pub bus: BusConfig,
     pub robot: Arc<crate::robot::Robot>,
-    /// The scenario the plant plays (its name goes out with every state).
-    pub sim: crate::sim::SimConfig,
+    /// The scenario the robot is pushed with (`sim.scenario`): its name, content hash and
+    /// force factor go out with every state.
+    pub scenario: String,
+    /// `sim.mode = "lockstep"`: the scenario is announced as playing from the first state;
+    /// in real time it starts when the lab's sample says it did.
+    pub lockstep: bool,
     /// iceoryx2 prefix and node name of upc's contract.
     pub prefix: String,
     pub node_name: String,
@@ -174,6 +177,24 @@ struct Robot {
     lab: Option<LabState>,
 }
 
+impl Robot {
+    /// The robot as its first valid state finds it: that state's positions are the hold's.
+    fn at_first(map: MotorMap, state: LowState) -> Self {
+        let mut start_q = [0.0; MOTOR_SLOTS];
+        for (q, m) in start_q.iter_mut().zip(&state.motor_state) {
+            *q = f64::from(m.q);
+        }
+        Self {
+            leg: legs(&map),
+            map,
+            start_q,
+            tick0: state.tick,
+            state,
+            lab: None,
+        }
+    }
+}
+
 /// The poll period of the wait for the controller's answer: what it adds to an answer at most.
 const ANSWER_POLL: Duration = Duration::from_micros(50);
 
@@ -236,13 +257,26 @@ struct Endpoints {
     torque_event: crate::channels::Listener,
 }
 
+impl Endpoints {
+    /// The robot's `bus` with upc's contract under `prefix`, as node `node_name`.
+    fn open(bus: RobotBus, prefix: &str, node_name: &str) -> Result<Self, BusError> {
+        let contract = Bus::open(prefix, node_name)?;
+        Ok(Self {
+            bus,
+            state_out: contract.publisher()?,
+            torques: contract.subscriber()?,
+            state_event: contract.notifier(ServiceKind::State)?,
+            torque_event: contract.listener(ServiceKind::Torques)?,
+        })
+    }
+}
+
 /// What the loop keeps between states.
 struct Session<'a> {
     cfg: &'a BusConfig,
     desc: &'a crate::robot::Robot,
     robot: Robot,
     info: PlantInfo,
-    sensors: Sensors,
     gate: CommandGate,
     /// The controller's last valid torques, and when they came.
     tau: DVector<f64>,
@@ -281,32 +315,12 @@ pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError>
         ..Default::default()
     };
     let mut bus = RobotBus::open(cfg.network(), |dp| refuse_other_controllers(dp, cfg, stop))?;
-    // The first valid state: nothing is commanded before it.
-    let first = Instant::now() + Duration::from_secs_f64(cfg.first_state_timeout);
-    let state = loop {
-        if stop.load(Ordering::Relaxed) {
-            return Ok(summary);
-        }
-        match bus.states.wait(first)? {
-            None => return Err(BusError::NoRobot(cfg.first_state_timeout)),
-            Some(s) if valid(&s, cfg.bad_crc, &mut summary) => break s,
-            Some(_) => {}
-        }
+    // Nothing is commanded before the first valid state.
+    let Some(state) = first_state(&mut bus, cfg, stop, &mut summary)? else {
+        return Ok(summary);
     };
-    // The forces this robot is pushed with, as every plant announces them: the forecaster
-    // scales its forecast and the controller checks the hash by them.
-    let scenario = opts
-        .robot
-        .scenario(&opts.sim.scenario)
-        .map_err(|e| BusError::Setup(e.to_string()))?;
-    let contract = Bus::open(&opts.prefix, &opts.node_name)?;
-    let ep = Endpoints {
-        bus,
-        state_out: contract.publisher()?,
-        torques: contract.subscriber()?,
-        state_event: contract.notifier(ServiceKind::State)?,
-        torque_event: contract.listener(ServiceKind::Torques)?,
-    };
+    let info = announcement(opts)?;
+    let mut ep = Endpoints::open(bus, &opts.prefix, &opts.node_name)?;
     tracing::info!(
         "on the bus: robot `{}` on domain {} via {}; contract prefix `{}`",
         opts.robot.name(),
@@ -314,60 +328,10 @@ pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError>
         cfg.interface,
         opts.prefix
     );
-    let mut start_q = [0.0; MOTOR_SLOTS];
-    for (q, m) in start_q.iter_mut().zip(&state.motor_state) {
-        *q = f64::from(m.q);
-    }
-    let model = &opts.robot.model;
-    // The sensor block as measured on truth: the robot's own measurements replace it.
-    let truth = SensorsConfig {
-        sensing: Sensing::Truth,
-        ..opts.sim.sensors
-    };
-    let info = PlantInfo::start(&opts.sim, &scenario, opts.robot.hash);
-    let mut session = Session {
-        cfg,
-        desc: &opts.robot,
-        robot: Robot {
-            leg: legs(&map),
-            map,
-            start_q,
-            tick0: state.tick,
-            state,
-            lab: None,
-        },
-        sensors: Sensors::new(
-            &truth,
-            -model.gravity.z,
-            opts.robot.imu_frame.map(|f| ImuMount::new(model, f)),
-        ),
-        gate: CommandGate::for_session(info.session),
-        info,
-        tau: DVector::zeros(model.nv - 6),
-        last_command: None,
-        drive: Drive::Hold,
-        since: 0.0,
-        resumable: false,
-        msg: Box::default(),
-        points: [[0.0; 3]; N_CONTACTS],
-        tick0: 0,
-        step: 0,
-        received: Instant::now(),
-        adapter: LatencyHistogram::new(),
-        round_trip: LatencyHistogram::new(),
-        summary,
-    };
-    session.tick0 = session.robot.tick0;
+    let mut session = Session::new(cfg, &opts.robot, Robot::at_first(map, state), info, summary);
     let (cpu0, wall0) = (cpu_time(), Instant::now());
-    let mut ep = ep;
     let result = session.run(&mut ep, opts.duration, stop);
-    // Leave the robot damped, not under the last torques: written for a few of a G1's state
-    // periods, since one sample written just before the participant goes can be lost with it
-    // (a CI run's robot kept the hold as its last command) and the drives keep the last.
-    for _ in 0..FINAL_DAMPING {
-        let _ = ep.bus.commands.write(session.command(Drive::Damping, 0.0));
-        std::thread::sleep(SILENT_REPEAT);
-    }
+    session.leave_damped(&ep);
     let mut s = session.finish(&ep);
     s.wall_time = wall0.elapsed().as_secs_f64();
     s.cpu_share = (cpu_time() - cpu0) / s.wall_time.max(1e-9);
@@ -380,6 +344,43 @@ pub fn run(opts: &BusOptions, stop: &AtomicBool) -> Result<BusSummary, BusError>
         Err(e) => Err(e),
         Ok(()) => Ok(s),
     }
+}
+
+/// The robot's first valid state (`None`: stopped before it came), refusals counted; none
+/// within `bus.first_state_timeout` is an error.
+fn first_state(
+    bus: &mut RobotBus,
+    cfg: &BusConfig,
+    stop: &AtomicBool,
+    summary: &mut BusSummary,
+) -> Result<Option<LowState>, BusError> {
+    let first = Instant::now() + Duration::from_secs_f64(cfg.first_state_timeout);
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return Ok(None);
+        }
+        match bus.states.wait(first)? {
+            None => return Err(BusError::NoRobot(cfg.first_state_timeout)),
+            Some(s) if valid(&s, cfg.bad_crc, summary) => return Ok(Some(s)),
+            Some(_) => {}
+        }
+    }
+}
+
+/// The plant run's announcement: the forces this robot is pushed with, as every plant
+/// announces them (the forecaster scales its forecast and the controller checks the hash by
+/// them).
+fn announcement(opts: &BusOptions) -> Result<PlantInfo, BusError> {
+    let scenario = opts
+        .robot
+        .scenario(&opts.scenario)
+        .map_err(|e| BusError::Setup(e.to_string()))?;
+    Ok(PlantInfo::start(
+        &opts.scenario,
+        &scenario,
+        opts.robot.hash,
+        opts.lockstep,
+    ))
 }
 
 /// Watch `rt/lowcmd` for `bus.discovery` before writing to it: a writer there is another
@@ -400,7 +401,47 @@ fn refuse_other_controllers(
     }
 }
 
-impl Session<'_> {
+impl<'a> Session<'a> {
+    /// The loop's state at the robot's first state: the drives hold, no controller yet.
+    fn new(
+        cfg: &'a BusConfig,
+        desc: &'a crate::robot::Robot,
+        robot: Robot,
+        info: PlantInfo,
+        summary: BusSummary,
+    ) -> Self {
+        Self {
+            cfg,
+            desc,
+            tick0: robot.tick0,
+            robot,
+            gate: CommandGate::for_session(info.session),
+            info,
+            tau: DVector::zeros(desc.model.nv - 6),
+            last_command: None,
+            drive: Drive::Hold,
+            since: 0.0,
+            resumable: false,
+            msg: Box::default(),
+            points: [[0.0; 3]; N_CONTACTS],
+            step: 0,
+            received: Instant::now(),
+            adapter: LatencyHistogram::new(),
+            round_trip: LatencyHistogram::new(),
+            summary,
+        }
+    }
+
+    /// Leaves the robot damped, not under the last torques: written for a few of a G1's state
+    /// periods, since one sample written just before the participant goes can be lost with it
+    /// (a CI run's robot kept the hold as its last command) and the drives keep the last.
+    fn leave_damped(&mut self, ep: &Endpoints) {
+        for _ in 0..FINAL_DAMPING {
+            let _ = ep.bus.commands.write(self.command(Drive::Damping, 0.0));
+            std::thread::sleep(SILENT_REPEAT);
+        }
+    }
+
     /// One pass per robot state until the duration, a stop or the robot's silence.
     fn run(
         &mut self,
@@ -492,7 +533,6 @@ impl Session<'_> {
             self.desc,
             &self.info,
             (self.step, t),
-            &mut self.sensors,
             &mut self.points,
         );
         let msg = &self.msg;
@@ -890,7 +930,6 @@ fn fill(
     desc: &crate::robot::Robot,
     info: &PlantInfo,
     (step, t): (u64, f64),
-    sensors: &mut Sensors,
     points: &mut [[f64; 3]; N_CONTACTS],
 ) {
     let model = &desc.model;
@@ -905,7 +944,7 @@ fn fill(
         m.v[v] = f64::from(s.dq);
         m.joint_torques[v] = f64::from(s.tau_est);
     }
-    let mut flags = info.flags;
+    info.announce(m);
     match &robot.lab {
         Some(l) => {
             m.q[..7].copy_from_slice(&l.base_pose);
@@ -918,7 +957,7 @@ fn fill(
             m.door_velocity = l.door_velocity;
             // A lab without motion capture: the estimator's base.
             if !l.has_base() {
-                flags |= STATE_FLAG_BASE_UNMEASURED;
+                m.flags |= STATE_FLAG_BASE_UNMEASURED;
             }
         }
         None => {
@@ -926,19 +965,11 @@ fn fill(
             m.v[..6].fill(f64::NAN);
             m.contact_forces = [[f64::NAN; 3]; N_CONTACTS];
             m.hand_force = [f64::NAN; 3];
-            flags |= STATE_FLAG_BASE_UNMEASURED;
+            m.flags |= STATE_FLAG_BASE_UNMEASURED;
         }
     }
-    m.session = info.session;
-    m.scenario_hash = info.scenario_hash;
-    m.scenario_start = info.scenario_start;
-    m.flags = flags;
-    m.force_scale = info.force_scale;
-    m.robot_hash = info.robot_hash;
-    m.set_scenario_name(&info.scenario);
-    // The foot wrenches from the sole forces (the contract's sensor block), then the robot's
-    // own IMU over the modelled one.
-    sensors.apply(m, 1e-3, points);
+    // The sensor block: the foot wrenches from the sole forces, the robot's own IMU.
+    fill_foot_wrenches(m, points);
     let imu = &robot.state.imu_state;
     let [w, x, y, z] = imu.quaternion.map(f64::from);
     m.imu_orientation = [x, y, z, w];

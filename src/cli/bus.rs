@@ -3,47 +3,13 @@
 
 use std::path::PathBuf;
 
-use upc::bus::BusConfig;
 use upc::bus::participant::{BusOptions, run};
 use upc::shutdown::stop_flag;
 
 use super::CliResult;
 use super::argv::{Argv, ToArgv, fields};
+pub use super::bus_settings::{BusChoice, BusSettingsArgs};
 use super::sim::PlantArgs;
-
-/// The bus a robot speaks.
-#[derive(Clone, Copy, PartialEq, Eq, Debug, clap::ValueEnum)]
-pub enum BusChoice {
-    /// Unitree's low-level DDS interface (`rt/lowstate`, `rt/lowcmd`; G1).
-    Unitree,
-}
-
-/// The bus's settings on a command line (`upc bus`, `upc sim --bus`).
-#[derive(clap::Args, Debug, Clone, Default)]
-pub struct BusSettingsArgs {
-    /// Extra bus config files (layout of config/bus.toml) over the embedded defaults, in order.
-    #[arg(long = "bus-config")]
-    pub bus_configs: Vec<PathBuf>,
-    /// Override a bus key, e.g. --bus-set bus.domain=0 (applied last, in order).
-    #[arg(long = "bus-set", value_name = "KEY=VALUE")]
-    pub bus_sets: Vec<String>,
-}
-
-impl BusSettingsArgs {
-    pub fn load(&self) -> Result<BusConfig, upc::config::ConfigError> {
-        BusConfig::load(&self.bus_configs, &self.bus_sets)
-    }
-}
-
-impl ToArgv for BusSettingsArgs {
-    fn write(&self, w: &mut Argv) {
-        let BusSettingsArgs {
-            bus_configs,
-            bus_sets,
-        } = self;
-        fields!(w; many bus_configs, many bus_sets);
-    }
-}
 
 /// Drive a robot on its own bus: a participant that is the plant on upc's contract (start `upc
 /// controller --realtime` and a forecaster beside it, as with `upc sim`) and the low-level
@@ -83,10 +49,11 @@ pub fn run_cli(args: BusArgs) -> CliResult {
     let opts = BusOptions {
         bus: args.settings.load()?,
         robot: std::sync::Arc::new(args.plant.robot.load()?),
-        prefix: sim.process.prefix.clone(),
+        lockstep: sim.mode == upc::sim::Mode::Lockstep,
+        scenario: sim.scenario,
+        prefix: sim.process.prefix,
         node_name: format!("upc-bus-{}", std::process::id()),
         duration: sim.duration,
-        sim,
     };
     let stop = stop_flag();
     let s = run(&opts, &stop)?;

@@ -3,6 +3,7 @@
 pub mod argv;
 pub mod bridge;
 pub mod bus;
+pub mod bus_settings;
 pub mod capability;
 pub mod cell;
 pub mod child;

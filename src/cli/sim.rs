@@ -8,6 +8,7 @@ use upc::sim::{Engine, SimConfig};
 
 use super::CliResult;
 use super::argv::{Argv, ToArgv, fields};
+use super::bus_settings::{BusChoice, BusSettingsArgs};
 use super::common::RobotArg;
 use upc::sim::sensors::Sensing;
 
@@ -110,9 +111,9 @@ pub struct SimArgs {
     /// Speak as the robot does on its own bus instead of upc's contract (a G1 on Unitree's DDS
     /// topics, for `upc bus`; real time; docs/bus.md).
     #[arg(long, value_enum)]
-    pub bus: Option<super::bus::BusChoice>,
+    pub bus: Option<BusChoice>,
     #[command(flatten)]
-    pub bus_settings: super::bus::BusSettingsArgs,
+    pub bus_settings: BusSettingsArgs,
 }
 
 impl ToArgv for PlantArgs {
@@ -300,7 +301,7 @@ pub fn run_cli(args: SimArgs) -> CliResult {
 /// `upc sim --bus unitree`: the plant speaking as the robot on its bus, in real time.
 fn bus_robot(args: &SimArgs, mut config: SimConfig, engine: Engine) -> CliResult {
     config.mode = upc::sim::Mode::Realtime;
-    let opts = upc::bus::sim_robot::SimRobotOptions {
+    let opts = upc::sim::bus_robot::SimRobotOptions {
         rrd: args.rrd.clone(),
         recording_id: args.recording_id.clone(),
         bus: args.bus_settings.load()?,
@@ -308,7 +309,7 @@ fn bus_robot(args: &SimArgs, mut config: SimConfig, engine: Engine) -> CliResult
         sim: config,
         engine,
     };
-    let s = upc::bus::sim_robot::run(&opts, &stop_flag())?;
+    let s = upc::sim::bus_robot::run(&opts, &stop_flag())?;
     if let Some(p) = &args.summary {
         std::fs::write(p, serde_json::to_string_pretty(&s)?)?;
     }

@@ -3,9 +3,12 @@
 //! and exchanged with the controller over iceoryx2 (`crate::channels`).
 //!
 //! - [`process`]: the plant runtime (lockstep / real-time loops, state and ground truth out,
-//!   torques in), written once over [`physics::Physics`]; [`command`]: validation of torque
-//!   commands; [`hold`]: the supervisor (hold, hand-over, damping) and the command clock;
-//!   [`record`]: the rerun `.rrd` of the ground truth; [`config`]: `config/sim.toml`.
+//!   torques in), written once over [`physics::Physics`]; the torque commands are judged by
+//!   the contract's plant side ([`crate::plant`]); [`hold`]: the supervisor (hold, hand-over,
+//!   damping) and the command clock; [`record`]: the rerun `.rrd` of the ground truth;
+//!   [`config`]: `config/sim.toml`.
+//! - [`bus_robot`]: the same plants speaking as a Unitree G1 on its own DDS bus (`upc sim --bus
+//!   unitree`, for `upc bus`), with the bus's wire types ([`crate::bus`]).
 //! - upc's engine: [`world`], the physics, no IPC ([`World::step`]); [`contact`]: the
 //!   constraint solver (Coulomb cones, spherical joint, joint limits; projected Gauss–Seidel);
 //!   [`factor`]: the tree-sparse `LᵀDL` factorisation of the mass matrix; [`scene`]: the default
@@ -13,7 +16,7 @@
 //! - MuJoCo's engine: [`mujoco`], the scene generated from the same robot and its plant through
 //!   MuJoCo's C library.
 
-pub mod command;
+pub mod bus_robot;
 pub mod config;
 pub mod contact;
 pub mod factor;
@@ -27,7 +30,6 @@ pub mod scene;
 pub mod sensors;
 pub mod world;
 
-pub use command::{CommandGate, CommandOrigin, CommandStats, Rejection, validate_command};
 pub use config::{HoldConfig, HoldKind, Mode, Push, SimConfig};
 pub use hold::{HoldStats, Phase, Supervisor};
 pub use physics::{Engine, Physics, SimError, StepReport};

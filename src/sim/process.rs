@@ -36,7 +36,6 @@ use crate::channels::{
     STATE_FLAG_LOCKSTEP, ServiceKind, StateMsg, TORQUE_FLAG_FALLBACK, TorqueMsg,
 };
 
-use super::command::{CommandGate, CommandOrigin, CommandStats};
 use super::config::{Mode, Push, SimConfig};
 use super::hold::{CommandClock, HoldStats, Phase, Supervisor};
 use super::physics::{Engine, Physics, SimError, StepReport};
@@ -44,6 +43,7 @@ use super::record::{Recorder, RecorderStats};
 use super::robot_sensing::RobotSensing;
 use super::scene::{DoorDrive, default_scene};
 use super::sensors::{FootSensing, ImuMount, Sensing, SensorCounts, Sensors, SensorsConfig};
+use crate::plant::{CommandGate, CommandOrigin, CommandStats, PlantInfo};
 use crate::robot::{FootSensors, Robot};
 
 /// Errors that end a run.
@@ -123,21 +123,6 @@ pub struct RunSummary {
     pub error: Option<String>,
 }
 
-/// What a state says about the plant besides the world: the run's session, the scenario it
-/// plays, its flags.
-#[derive(Debug, Clone)]
-pub struct PlantInfo {
-    pub session: u64,
-    pub scenario_hash: u64,
-    pub scenario: String,
-    /// Plant time of the scenario's time 0 (negative: not started).
-    pub scenario_start: f64,
-    pub flags: u32,
-    /// The scenario's force factor for the robot, and the robot's content hash.
-    pub force_scale: f64,
-    pub robot_hash: u64,
-}
-
 /// Fills a [`StateMsg`] from the physics (allocation-free).
 pub fn fill_state(
     m: &mut StateMsg,
@@ -160,13 +145,7 @@ pub fn fill_state(
     m.door_angle = w.door_angle();
     m.door_velocity = w.door_velocity();
     m.hand_force = hand_force;
-    m.session = info.session;
-    m.scenario_hash = info.scenario_hash;
-    m.scenario_start = info.scenario_start;
-    m.flags = info.flags;
-    m.force_scale = info.force_scale;
-    m.robot_hash = info.robot_hash;
-    m.set_scenario_name(&info.scenario);
+    info.announce(m);
 }
 
 struct Endpoints {
@@ -275,7 +254,8 @@ fn run_plant<P: Physics>(
         version,
     } = plant;
     check_setup(opts, &world)?;
-    let info = PlantInfo::start(cfg, &scenario, opts.robot.hash);
+    let lockstep = cfg.mode == Mode::Lockstep;
+    let info = PlantInfo::start(&cfg.scenario, &scenario, opts.robot.hash, lockstep);
     log_start(opts, &world, &version, &scenario, &info);
     let bus = Bus::open(&cfg.process.prefix, &opts.node_name)?;
     let ep = Endpoints {
@@ -353,28 +333,6 @@ fn check_setup(opts: &RunOptions, world: &impl Physics) -> Result<(), ProcessErr
         ));
     }
     Ok(())
-}
-
-impl PlantInfo {
-    /// A new plant run of `scenario` for the robot of content hash `robot_hash`.
-    pub fn start(cfg: &SimConfig, scenario: &crate::scenario::Scenario, robot_hash: u64) -> Self {
-        PlantInfo {
-            session: crate::channels::new_run_id(),
-            scenario_hash: scenario.content_hash(),
-            scenario: cfg.scenario.clone(),
-            // Lockstep plays the scenario from 0; real time once a controller drives the robot.
-            scenario_start: match cfg.mode {
-                Mode::Lockstep => 0.0,
-                Mode::Realtime => -1.0,
-            },
-            flags: match cfg.mode {
-                Mode::Lockstep => STATE_FLAG_LOCKSTEP,
-                Mode::Realtime => STATE_FLAG_HOLD,
-            },
-            force_scale: scenario.force_scale,
-            robot_hash,
-        }
-    }
 }
 
 fn log_start(

@@ -3,7 +3,7 @@
 //! motor torque estimates, the IMU at its mounting; nothing else) and applies `rt/lowcmd` as the
 //! drives do, τ = tau + kp (q − q_meas) + kd (dq − dq_meas) clamped to the effort limits, at
 //! every physics step with the latest command. What a G1 does not measure (base, sole and hand
-//! forces) goes out on upc's own lab topic only ([`super::lab`]).
+//! forces) goes out on upc's own lab topic only ([`crate::bus::lab`]).
 //!
 //! On `--sensing realistic` the robot measures what its description's `[sensors]` says, through
 //! the sensor models (encoders, IMU, the drives' torque estimates of MT-1 in `tau_est`), and the
@@ -22,25 +22,29 @@ use std::time::{Duration, Instant};
 
 use nalgebra::DVector;
 
-use super::config::BusConfig;
-use super::dds::{DdsError, Inbox, Outbox, participant};
-use super::lab::{LAB_STATE_TOPIC, LabState};
-use super::motors::{MotorMap, Slot};
-use super::unitree_hg::{LOW_CMD_TOPIC, LOW_STATE_TOPIC, LowCmd, LowState};
-use crate::channels::{N_CONTACTS, StateMsg};
-use crate::sim::hold::Supervisor;
-use crate::sim::physics::{Engine, Physics};
-use crate::sim::process::{
-    Plant, PlantInfo, PlantUser, ProcessError, apply_scenario, build_plant, fill_state, push_frame,
+use super::config::{Mode, SimConfig};
+use super::hold::Supervisor;
+use super::physics::{Engine, Physics, StepReport};
+use super::process::{
+    Plant, PlantUser, ProcessError, apply_scenario, build_plant, fill_state, push_frame,
     put_applied_torques, sensors_of,
 };
-use crate::sim::robot_sensing::RobotSensing;
-use crate::sim::sensors::{ImuMount, Sensing, Sensors};
+use super::record::Recorder;
+use super::robot_sensing::RobotSensing;
+use super::scene::DoorDrive;
+use super::sensors::{ImuMount, Sensing, Sensors};
+use crate::bus::BusConfig;
+use crate::bus::dds::{DdsError, Inbox, Outbox, participant};
+use crate::bus::lab::{LAB_STATE_TOPIC, LabState};
+use crate::bus::motors::{MotorMap, Slot};
+use crate::bus::unitree_hg::{LOW_CMD_TOPIC, LOW_STATE_TOPIC, LowCmd, LowState};
+use crate::channels::{N_CONTACTS, StateMsg};
+use crate::plant::PlantInfo;
 
 /// What the simulated robot runs.
 #[derive(Debug, Clone)]
 pub struct SimRobotOptions {
-    pub sim: crate::sim::SimConfig,
+    pub sim: SimConfig,
     /// Write the ground truth to this `.rrd`, with this recording id.
     pub rrd: Option<std::path::PathBuf>,
     pub recording_id: Option<String>,
@@ -167,7 +171,7 @@ fn run_on_bus<P: Physics>(
 struct BusRobot<'a, P> {
     opts: &'a SimRobotOptions,
     world: P,
-    drive: crate::sim::DoorDrive,
+    drive: DoorDrive,
     map: MotorMap,
     states: Outbox<LowState>,
     labs: Outbox<LabState>,
@@ -188,9 +192,9 @@ struct BusRobot<'a, P> {
     latest: Option<(LowCmd, f64)>,
     msg: Box<StateMsg>,
     points: [[f64; 3]; N_CONTACTS],
-    rep: crate::sim::StepReport,
+    rep: StepReport,
     damping: bool,
-    recorder: Option<crate::sim::record::Recorder>,
+    recorder: Option<Recorder>,
     summary: SimRobotSummary,
 }
 
@@ -237,7 +241,7 @@ impl<'a, P: Physics> BusRobot<'a, P> {
         let recorder = match &opts.rrd {
             Some(path) => Some(
                 crate::realtime::in_background(|| {
-                    crate::sim::record::Recorder::spawn(
+                    Recorder::spawn(
                         path,
                         opts.recording_id.as_deref(),
                         None,
@@ -262,7 +266,12 @@ impl<'a, P: Physics> BusRobot<'a, P> {
                 ..Default::default()
             },
             rep: *world.last_report(),
-            info: PlantInfo::start(cfg, &scenario, opts.robot.hash),
+            info: PlantInfo::start(
+                &cfg.scenario,
+                &scenario,
+                opts.robot.hash,
+                cfg.mode == Mode::Lockstep,
+            ),
             states: Outbox::new(dp, LOW_STATE_TOPIC).map_err(dds)?,
             labs: Outbox::new(dp, LAB_STATE_TOPIC).map_err(dds)?,
             commands: Inbox::new(dp, LOW_CMD_TOPIC).map_err(dds)?,
@@ -463,7 +472,7 @@ fn low_state(m: &StateMsg, map: &MotorMap, mode_machine: u8, t: f64) -> LowState
 /// What the lab measures at this state.
 fn lab_state(
     m: &StateMsg,
-    rep: &crate::sim::StepReport,
+    rep: &StepReport,
     world: &impl Physics,
     summary: &SimRobotSummary,
 ) -> LabState {
