@@ -90,6 +90,67 @@ fn an_added_part_runs_records_reports_and_resets_with_the_core() {
     assert_eq!(resets.load(Ordering::Relaxed), 1);
 }
 
+/// A part that estimates the centre of pressure (as a lab's own observer would).
+struct CopGuess(&'static str);
+
+impl ControllerPart for CopGuess {
+    fn name(&self) -> &'static str {
+        self.0
+    }
+    fn stages(&self) -> &'static [Stage] {
+        &[Stage::Disturbance]
+    }
+    fn reset(&mut self) {}
+    fn update(&mut self, s: Stage, _: &TickInputs, frame: &mut TickFrame) -> Result<(), TickError> {
+        *frame.cop.write(self.0, s)? = [0.0, 0.0];
+        Ok(())
+    }
+    fn record(&self, _: &mut Record) {}
+    fn summarize(&self, _: &mut serde_json::Map<String, serde_json::Value>) {}
+}
+
+/// The frame's slots combine as they say: two parts' forces on the CoM add up to one part's
+/// of their sum, and a second part estimating a quantity another estimated at the same stage
+/// is refused, the error naming both.
+#[test]
+fn forces_from_two_parts_add_up_and_one_quantity_has_one_estimate_per_stage() {
+    let config = Config::embedded_default().expect("defaults");
+    let push = |f: f64| {
+        Box::new(ConstantPush {
+            force: f,
+            updates: Arc::new(AtomicU64::new(0)),
+            resets: Arc::new(AtomicU64::new(0)),
+        })
+    };
+    let mut one = rig(&config, ControllerKind::C0);
+    one.core.add_part(push(-60.0));
+    let mut two = rig(&config, ControllerKind::C0);
+    two.core.add_part(push(-20.0));
+    two.core.add_part(push(-40.0));
+    assert_eq!(one.tick_frozen(0..10), 0);
+    assert_eq!(two.tick_frozen(0..10), 0);
+    let (a, b) = (one.core.last.com_acc_cmd[0], two.core.last.com_acc_cmd[0]);
+    assert!(
+        (a - b).abs() < 1e-9 && a > 1e-3,
+        "one part {a}, two parts {b}"
+    );
+
+    let mut r = rig(&config, ControllerKind::C1);
+    r.core.add_part(Box::new(CopGuess("first_guess")));
+    assert_eq!(r.tick_frozen(0..2), 0, "one estimate per stage is fine");
+    r.core.add_part(Box::new(CopGuess("second_guess")));
+    let e = r
+        .tick(None)
+        .expect_err("two estimates at one stage")
+        .to_string();
+    assert!(
+        e.contains("`second_guess`")
+            && e.contains("`first_guess`")
+            && e.contains("centre of pressure"),
+        "{e}"
+    );
+}
+
 /// The record's columns have unique names (the CSV's header), and every part of the pipeline
 /// is built for every controller.
 #[test]
@@ -131,6 +192,13 @@ fn a_parts_bad_settings_are_refused_at_load_naming_the_key_and_layer() {
     let stray = layers("controller.no_such_part.enabled=true");
     let e = stray.build().expect_err("unknown table").to_string();
     assert!(e.contains("controller.no_such_part"), "{e}");
+    // A renamed part's old table says what it is called now.
+    let old = layers("controller.estimator.mode=\"on\"");
+    let e = old.build().expect_err("renamed table").to_string();
+    assert!(
+        e.contains("controller.estimator") && e.contains("[controller.base_estimation]"),
+        "{e}"
+    );
 
     let range = layers("controller.forecast_correction.window=-1.0");
     let config = range.build().expect("well-formed");
