@@ -165,7 +165,7 @@ fn the_icub_like_on_joint_torques_stands_on_the_modelled_hand_force_where_the_es
 fn stuck_friction_cop_error(robot: &upc::robot::Robot, fraction: f64) -> f64 {
     use nalgebra::{DMatrix, DVector, Vector3};
     use rand::{Rng, SeedableRng};
-    use upc::control::wrench_observer::WrenchObserverSettings;
+    use upc::control::parts::wrench_observer::WrenchObserverSettings;
     use upc::dynamics::{
         Data, ReferenceFrame, crba, get_frame_jacobian, nonlinear_effects, update_frame_placements,
     };

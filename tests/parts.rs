@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use support::humanoid::rig;
 use upc::col;
 use upc::config::{Config, ControllerKind};
-use upc::control::pipeline::PIPELINE;
+use upc::control::parts::PIPELINE;
 use upc::control::{ControllerPart, Stage, TickError, TickFrame, TickInputs};
 use upc::record::Record;
 
@@ -202,7 +202,7 @@ fn a_parts_bad_settings_are_refused_at_load_naming_the_key_and_layer() {
 
     let range = layers("controller.forecast_correction.window=-1.0");
     let config = range.build().expect("well-formed");
-    let e = upc::control::pipeline::check(&config, &range)
+    let e = upc::control::parts::check(&config, &range)
         .expect_err("out of range")
         .to_string();
     assert!(
@@ -211,7 +211,7 @@ fn a_parts_bad_settings_are_refused_at_load_naming_the_key_and_layer() {
     );
     let defaults = Config::default_layers().expect("layers");
     let config = defaults.build().expect("defaults");
-    upc::control::pipeline::check(&config, &defaults)
+    upc::control::parts::check(&config, &defaults)
         .expect("the defaults pass every part's check");
 }
 

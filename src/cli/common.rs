@@ -42,7 +42,7 @@ impl ConfigArgs {
             layers.push_override(s)?;
         }
         let config = layers.build()?;
-        upc::control::pipeline::check(&config, &layers)?;
+        upc::control::parts::check(&config, &layers)?;
         Ok(config)
     }
 }

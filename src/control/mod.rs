@@ -5,14 +5,14 @@
 //! - the tick's types: [`tick`] (stages, inputs, errors), [`frame`] (the shared quantities and
 //!   how writers combine), [`part`] (the parts' seam), [`tick_record`] (what a tick produced);
 //!   [`held_object`] (what the hand holds, and what follows from it);
-//! - the parts, each from its own settings: [`wrench_observer`] (the feet's wrenches, the CoP
-//!   and the hand force from the joint torques, for a robot without force sensors),
-//!   [`base_estimation`] (the floating base from the IMU, joints and foot wrenches),
-//!   [`wrist_tare`] (the wrist sensor's offset), [`forecast_correction`] (the forecast
-//!   corrected by the measured hand force), [`viability`] (the capture-point guard on the
-//!   forecast's unmeasured part), [`com_observer`] (the push on the CoM nothing forecasts);
-//! - [`pipeline`]: the parts upc runs, in order; [`core`]: one tick without IPC
-//!   ([`ControllerCore`]), running the pipeline's parts by stage;
+//! - [`parts`]: the parts upc runs ([`parts::PIPELINE`], in order), each in its file and built
+//!   from its own settings: `wrench_observer` (the feet's wrenches, the CoP and the hand force
+//!   from the joint torques, for a robot without force sensors), `base_estimation` (the floating
+//!   base from the IMU, joints and foot wrenches), `wrist_tare` (the wrist sensor's offset),
+//!   `forecast_correction` (the forecast corrected by the measured hand force), `viability` (the
+//!   capture-point guard on the forecast's unmeasured part), `com_observer` (the push on the CoM
+//!   nothing forecasts);
+//! - [`core`]: one tick without IPC ([`ControllerCore`]), running the parts by stage;
 //! - the process: [`contract`] (the one reader of the state message, into a
 //!   [`crate::robot::RobotState`]), [`forecast_window`] and [`forecast_intake`] (the forecast,
 //!   validated), [`gain_thread`] (C2 in a lower-priority thread behind wait-free triple
@@ -24,11 +24,8 @@
 //! The records the parts and the core log are [`crate::record`]'s (name, format and value
 //! together); the latency histogram and the real-time setup are [`crate::realtime`]'s.
 
-pub mod base_estimation;
-pub mod com_observer;
 pub mod contract;
 pub mod core;
-pub mod forecast_correction;
 pub mod forecast_intake;
 pub mod forecast_window;
 pub mod frame;
@@ -36,7 +33,7 @@ pub mod gain_thread;
 pub mod held_object;
 pub mod logger;
 pub mod part;
-pub mod pipeline;
+pub mod parts;
 pub mod plant_link;
 pub mod run_metrics;
 pub mod server;
@@ -44,13 +41,10 @@ pub mod summary;
 pub mod tick;
 pub mod tick_record;
 pub mod timing;
-pub mod viability;
-pub mod wrench_observer;
-pub mod wrist_tare;
 
-pub use com_observer::{ComObserver, ComObserverSettings};
+pub use parts::com_observer::{ComObserver, ComObserverSettings};
 pub use core::ControllerCore;
-pub use forecast_correction::{
+pub use parts::forecast_correction::{
     CorrectionCounts, CorrectionEstimate, CorrectionSettings, ForecastCorrector,
 };
 pub use forecast_window::{ForecastRejection, ForecastWindow};

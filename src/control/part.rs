@@ -4,7 +4,7 @@
 //! the tick's shared quantities ([`TickFrame`]), the values it records ([`Record`]) and its
 //! `summary.json` entries. It is built from its own settings (a [`PartSettings`] type, its table
 //! `[controller.<name>]`) and the controller's context ([`PartSetup`]), never the whole config.
-//! The parts upc runs are listed in `super::pipeline::PIPELINE`.
+//! The parts upc runs are listed in `super::parts::PIPELINE`.
 
 use super::frame::TickFrame;
 use super::tick::{Stage, TickError, TickInputs};

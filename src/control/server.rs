@@ -26,7 +26,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use super::contract::read_state;
-pub use super::forecast_correction::CorrectionSummary;
+pub use super::parts::forecast_correction::CorrectionSummary;
 use super::forecast_intake::ForecastIntake;
 use super::gain_thread::GainSolver;
 use super::logger::{ControlLogger, TickLog};
@@ -151,7 +151,7 @@ pub fn run_server(
 /// that calls [`run_server_with`]; `examples/lab_part.rs`).
 #[derive(Default)]
 pub struct Extensions {
-    /// Parts run after those of `super::pipeline::PIPELINE`, at their stages
+    /// Parts run after those of `super::parts::PIPELINE`, at their stages
     /// ([`ControllerCore::add_part`]): they record and report as upc's do.
     pub parts: Vec<Box<dyn ControllerPart>>,
     /// C2's gain search replaced (when the controller is C2): tests make C2 fail, panic or lag.

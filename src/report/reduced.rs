@@ -30,7 +30,7 @@ impl ConfigLayers {
             layers.push_override(s)?;
         }
         let config = layers.build()?;
-        crate::control::pipeline::check(&config, &layers)?;
+        crate::control::parts::check(&config, &layers)?;
         Ok(config)
     }
 }

@@ -16,7 +16,7 @@
 //!   The feet midpoint and the support then follow the sole corners through a low-pass
 //!   (`controller.support_follow`), so that creeping feet do not leave the reference behind.
 //! - What the robot measures arrives as a [`RobotState`] (read from the contract at the
-//!   process's edge, `super::contract`); the controller's parts (`super::pipeline`) refine it
+//!   process's edge, `super::contract`); the controller's parts (`super::parts`) refine it
 //!   into the tick's frame (`super::frame`): the core runs them by stage and knows none by type.
 //!
 //! The core's pieces: its settings, its state between ticks, its workspace and its counters
@@ -34,7 +34,7 @@ use super::gain_thread::{GainSnapshot, StampedSchedule};
 use super::held_object::{HeldObject, believed_felt_direction, felt_direction};
 use super::logger::PlanLog;
 use super::part::{BuildError, ControllerPart, PartSetup};
-use super::pipeline;
+use super::parts as pipeline;
 use super::summary::CoreInfo;
 use super::tick::{Stage, TickError, TickInputs};
 use crate::config::{Config, ControllerKind, HandForceSource};
@@ -124,7 +124,7 @@ struct CoreWorkspace {
 impl ControllerCore {
     /// The controller of `robot`: its model (whole-body dynamics), its reduced models
     /// ([`Robot::reduced`]: the preview's cart-table), its frames and the parts of
-    /// `super::pipeline::PIPELINE`, each from its own table of `config`.
+    /// `super::parts::PIPELINE`, each from its own table of `config`.
     pub fn new(
         robot: &Robot,
         config: &Config,
@@ -292,7 +292,7 @@ impl ControllerCore {
         }
     }
 
-    /// Add a part after those of `super::pipeline::PIPELINE` (a lab's own observer, without
+    /// Add a part after those of `super::parts::PIPELINE` (a lab's own observer, without
     /// editing upc: `super::server::run_server_with`): it runs at its stage after theirs, and
     /// records and reports as they do.
     pub fn add_part(&mut self, part: Box<dyn ControllerPart>) {

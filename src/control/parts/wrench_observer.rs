@@ -10,9 +10,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::frame::{EstimatedForce, TickFrame};
-use super::part::{BuildError, ControllerPart, PartKind, PartSetup};
-use super::tick::{Stage, TickError, TickInputs};
+use crate::control::frame::{EstimatedForce, TickFrame};
+use crate::control::part::{BuildError, ControllerPart, PartKind, PartSetup};
+use crate::control::tick::{Stage, TickError, TickInputs};
 use crate::col;
 use crate::estimation::wrench_observer::{
     ContactWrenches, DriveFriction, WrenchObserver, WrenchObserverGains,

@@ -16,9 +16,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::frame::TickFrame;
-use super::part::{BuildError, ControllerPart, PartKind, PartSetup};
-use super::tick::{Stage, TickError, TickInputs};
+use crate::control::frame::TickFrame;
+use crate::control::part::{BuildError, ControllerPart, PartKind, PartSetup};
+use crate::control::tick::{Stage, TickError, TickInputs};
 use crate::record::Record;
 
 /// Ticks count toward the tare only while the forecast's force is below this (N)...
@@ -283,7 +283,7 @@ impl crate::config::PartSettings for WristTareSettings {
 
 #[cfg(test)]
 mod tests {
-    use super::super::contract::task_time;
+    use crate::control::contract::task_time;
     use super::*;
 
     fn tare(duration: f64) -> WristTare {

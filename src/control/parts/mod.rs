@@ -1,12 +1,18 @@
 //! The parts upc's controller runs ([`PIPELINE`]), in the order the tick runs them within
 //! each stage; reset, records and the summary come from the same list. A new part: its file
-//! (implementing `super::part::ControllerPart` and `PartKind`) and one line here.
+//! here (implementing `super::part::ControllerPart` and `PartKind`), its `mod` and `PIPELINE`
+//! lines here, and its table in `config/default.toml`.
+
+pub mod base_estimation;
+pub mod com_observer;
+pub mod forecast_correction;
+pub mod viability;
+pub mod wrench_observer;
+pub mod wrist_tare;
 
 use super::frame::TickFrame;
 use super::part::{BuildError, ControllerPart, PartEntry, PartSetup};
 use super::tick::{Stage, TickError, TickInputs};
-use super::{base_estimation, com_observer, forecast_correction, viability};
-use super::{wrench_observer, wrist_tare};
 use crate::config::{Config, ConfigError, Layers, PartTables};
 
 /// The controller's parts, in the order the tick runs them within each stage.

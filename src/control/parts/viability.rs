@@ -35,9 +35,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::frame::{MeasuredPrediction, TickFrame};
-use super::part::{BuildError, ControllerPart, PartKind, PartSetup};
-use super::tick::{Stage, TickError, TickInputs};
+use crate::control::frame::{MeasuredPrediction, TickFrame};
+use crate::control::part::{BuildError, ControllerPart, PartKind, PartSetup};
+use crate::control::tick::{Stage, TickError, TickInputs};
 use crate::col;
 use crate::config::ControllerKind;
 use crate::preview::CapturePoint;

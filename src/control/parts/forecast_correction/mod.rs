@@ -58,7 +58,7 @@ mod track_record;
 pub use part::{Correction, CorrectionSummary};
 pub use settings::CorrectionSettings;
 
-use super::forecast_window::ForecastWindow;
+use crate::control::forecast_window::ForecastWindow;
 
 /// The correction's current estimate, for logs and the summary.
 #[derive(Debug, Clone, Copy, PartialEq)]

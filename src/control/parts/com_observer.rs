@@ -11,9 +11,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::frame::TickFrame;
-use super::part::{BuildError, ControllerPart, PartKind, PartSetup};
-use super::tick::{Stage, TickError, TickInputs};
+use crate::control::frame::TickFrame;
+use crate::control::part::{BuildError, ControllerPart, PartKind, PartSetup};
+use crate::control::tick::{Stage, TickError, TickInputs};
 use crate::col;
 use crate::config::ControllerKind;
 use crate::record::Record;
