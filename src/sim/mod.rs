@@ -5,7 +5,8 @@
 //! - [`process`]: the plant runtime (lockstep / real-time loops, state and ground truth out,
 //!   torques in), written once over [`physics::Physics`]; [`command`]: validation of torque
 //!   commands; [`hold`]: the supervisor (hold, hand-over, damping) and the command clock;
-//!   [`record`]: the rerun `.rrd` of the ground truth; [`config`]: `config/sim.toml`.
+//!   [`record`]: the rerun `.rrd` of the ground truth; [`truth_csv`]: its CSV (`sim.csv`);
+//!   [`config`]: `config/sim.toml`.
 //! - upc's engine: [`world`], the physics, no IPC ([`World::step`]); [`contact`]: the
 //!   constraint solver (Coulomb cones, spherical joint, joint limits; projected Gauss–Seidel);
 //!   [`factor`]: the tree-sparse `LᵀDL` factorisation of the mass matrix; [`scene`]: the default
@@ -25,6 +26,7 @@ pub mod record;
 pub mod robot_sensing;
 pub mod scene;
 pub mod sensors;
+pub mod truth_csv;
 pub mod world;
 
 pub use command::{CommandGate, CommandOrigin, CommandStats, Rejection, validate_command};

@@ -44,6 +44,7 @@ use super::record::{Recorder, RecorderStats};
 use super::robot_sensing::RobotSensing;
 use super::scene::{DoorDrive, default_scene};
 use super::sensors::{FootSensing, ImuMount, Sensing, SensorCounts, Sensors, SensorsConfig};
+use super::truth_csv::{truth_record, write_header, write_truth};
 use crate::robot::{FootSensors, Robot};
 
 /// Errors that end a run.
@@ -287,7 +288,7 @@ fn run_plant<P: Physics>(
         torque_event: bus.listener(ServiceKind::Torques)?,
     };
     let mut recorder = start_recorder(opts, &world)?;
-    let mut looper = Looper::new(opts, &world, info, &carrying, open_truth_csv(opts)?)?;
+    let mut looper = Looper::new(opts, &world, info, &carrying, open_truth_csv(opts, &world)?)?;
     // State 0 before any step (an engine that settles the robot first reports its forces).
     let first = *world.last_report();
     if let Some(z) = first.zmp {
@@ -433,9 +434,11 @@ fn start_recorder(
         .map_err(|e| ProcessError::Setup(format!("rerun recording {}: {e}", path.display())))
 }
 
-/// The lockstep ground-truth CSV, its header written, if asked for.
+/// The lockstep ground-truth CSV, its header written (the columns of `world`'s truth record),
+/// if asked for.
 fn open_truth_csv(
     opts: &RunOptions,
+    world: &impl Physics,
 ) -> Result<Option<std::io::BufWriter<std::fs::File>>, ProcessError> {
     let Some(p) = &opts.truth_csv else {
         return Ok(None);
@@ -443,8 +446,8 @@ fn open_truth_csv(
     let file = std::fs::File::create(p)
         .map_err(|e| ProcessError::Setup(format!("ground-truth CSV {}: {e}", p.display())))?;
     let mut w = std::io::BufWriter::new(file);
-    use std::io::Write;
-    writeln!(w, "{TRUTH_CSV_HEADER}")
+    let columns = truth_record(world, world.last_report(), [0.0; 2], [0.0; 3]);
+    write_header(&mut w, &columns)
         .map_err(|e| ProcessError::Setup(format!("ground-truth CSV: {e}")))?;
     Ok(Some(w))
 }
@@ -499,9 +502,6 @@ struct Run<'a> {
     total: u64,
     stop: &'a AtomicBool,
 }
-
-/// Columns of the lockstep ground-truth CSV (`--truth-csv`).
-pub const TRUTH_CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_x,zmp_y,hand_fx,hand_fy,hand_fz,door_angle,door_torque,loop_error,max_penetration,max_slip_speed,solver_iterations,base_x,base_y,base_z,base_vx,base_vy,base_vz,base_roll,base_pitch,base_yaw,lfoot_x,lfoot_y,rfoot_x,rfoot_y,lfoot_fz,rfoot_fz";
 
 struct Looper {
     tau: DVector<f64>,
@@ -572,69 +572,6 @@ fn log_transition(from: Phase, to: Phase, t: f64, cfg: &SimConfig) {
             cfg.process.safe_damping
         ),
     }
-}
-
-fn write_truth(
-    w: &mut impl std::io::Write,
-    world: &impl Physics,
-    rep: &StepReport,
-    zmp: [f64; 2],
-    hand: [f64; 3],
-) -> std::io::Result<()> {
-    // The floating base: position, linear velocity (world) and roll-pitch-yaw, for the base
-    // estimator's error (`upc run`).
-    let (q, v) = (world.q(), world.v());
-    let r = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
-        q[6], q[3], q[4], q[5],
-    ));
-    let vel = r * nalgebra::Vector3::new(v[0], v[1], v[2]);
-    let (roll, pitch, yaw) = r.euler_angles();
-    // Each foot's contact points' centroid (x, y): where the feet are, to see them creep.
-    let mut feet = [[0.0; 2]; 2];
-    for (k, p) in world.contact_points().iter().take(N_CONTACTS).enumerate() {
-        let f = &mut feet[k / 4];
-        (f[0], f[1]) = (f[0] + p.x / 4.0, f[1] + p.y / 4.0);
-    }
-    // Each foot's load (N): its corners' normal forces, for the wrench observer's error.
-    let mut load = [0.0; 2];
-    for (k, f) in world.contact_forces().iter().take(N_CONTACTS).enumerate() {
-        load[k / 4] += f.z;
-    }
-    writeln!(
-        w,
-        "{:.4},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{:.4},{:.4},{:.6},{:.4},{:.3e},{:.3e},{:.3e},{},\
-         {:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.3},{:.3}",
-        world.time(),
-        rep.com[0],
-        rep.com[1],
-        rep.com[2],
-        zmp[0],
-        zmp[1],
-        hand[0],
-        hand[1],
-        hand[2],
-        world.door_angle(),
-        rep.door_torque,
-        rep.loop_error,
-        rep.max_penetration,
-        rep.max_slip_speed,
-        rep.solver_iterations,
-        q[0],
-        q[1],
-        q[2],
-        vel.x,
-        vel.y,
-        vel.z,
-        roll,
-        pitch,
-        yaw,
-        feet[0][0],
-        feet[0][1],
-        feet[1][0],
-        feet[1][1],
-        load[0],
-        load[1],
-    )
 }
 
 impl Looper {
