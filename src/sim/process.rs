@@ -41,9 +41,8 @@ use super::config::{Mode, Push, SimConfig};
 use super::hold::{CommandClock, HoldStats, Phase, Supervisor};
 use super::physics::{Engine, Physics, SimError, StepReport};
 use super::record::{Recorder, RecorderStats};
-use super::robot_sensing::RobotSensing;
 use super::scene::{DoorDrive, default_scene};
-use super::sensors::{FootSensing, ImuMount, Sensing, SensorCounts, Sensors, SensorsConfig};
+use super::sensors::{FootSensing, ImuMount, RobotSensors, SensorCounts, Sensors, SensorsConfig};
 use super::truth_csv::{truth_record, write_header, write_truth};
 use crate::robot::{FootSensors, Robot};
 
@@ -523,10 +522,9 @@ struct Looper {
     /// `sim.push = "hand"`: the robot frame the scenario's force is applied at.
     push_frame: Option<usize>,
     /// The sensor block of the published state and the models it passes through (on
-    /// `realistic`), and the sole corners' positions for them (scratch).
+    /// `realistic`: the robot's sensors, what it lacks, its torque estimates), and the sole
+    /// corners' positions for them (scratch).
     sensors: Sensors,
-    /// What the robot measures (its description's `[sensors]`) and its torque estimates.
-    robot_sensing: RobotSensing,
     points: [[f64; 3]; N_CONTACTS],
     /// The plant's step (s).
     dt: f64,
@@ -535,7 +533,7 @@ struct Looper {
 }
 
 /// The torques `tau` applied over the step (actuated joints) into the state's `joint_torques`,
-/// the base's NaN: what the drives' torque sensing reads, before [`RobotSensing::apply`].
+/// the base's NaN: what the drives' torque sensing reads ([`Sensors::apply`]).
 pub(crate) fn put_applied_torques(m: &mut StateMsg, tau: &[f64]) {
     m.joint_torques.fill(f64::NAN);
     let base = m.nv as usize - tau.len();
@@ -548,7 +546,7 @@ pub(crate) fn sensors_of(cfg: &SimConfig, robot: &Robot) -> SensorsConfig {
     match robot.description.sensors.feet {
         Some(FootSensors::Corners) => s.feet = FootSensing::Corners,
         Some(FootSensors::SixAxis) => s.feet = FootSensing::SixAxis,
-        // No foot sensor: the corners' models run and `RobotSensing` publishes NaN.
+        // No foot sensor: the corners' models run and NaN is published for them.
         Some(FootSensors::None) | None => {}
     }
     s
@@ -609,17 +607,14 @@ impl Looper {
             last_reject_log: None,
             record_every: (cfg.record_period / cfg.dt).round().max(1.0) as u64,
             push_frame: push_frame(cfg, robot)?,
-            sensors: Sensors::new(
+            sensors: Sensors::with_robot(
                 &sensors_of(cfg, robot),
                 -world.robot().gravity.z,
                 robot.imu_frame.map(|f| ImuMount::new(&robot.model, f)),
-            ),
-            robot_sensing: RobotSensing::new(
-                robot.description.sensors,
-                cfg.sensors.sensing == Sensing::Realistic,
-                cfg.sensors.motor_torques,
-                world.robot().effort_limits(),
-                cfg.sensors.seed,
+                RobotSensors {
+                    spec: robot.description.sensors,
+                    effort: world.robot().effort_limits(),
+                },
             ),
             points: [[0.0; 3]; N_CONTACTS],
             dt: cfg.dt,
@@ -662,7 +657,7 @@ impl Looper {
             max_slip_speed: self.max_slip,
             max_loop_error: self.max_loop,
             sensing: cfg.sensors.sensing.name().into(),
-            sensor_counts: self.sensors.realistic().then_some(self.sensors.counts),
+            sensor_counts: self.sensors.realistic().then(|| self.sensors.counts()),
             recorder,
             ipc_overhead_p50: self.ipc.quantile(0.5),
             ipc_overhead_p99: self.ipc.quantile(0.99),
@@ -758,13 +753,12 @@ impl Looper {
             *p = [c.x, c.y, c.z];
         }
         let (sensors, points, dt) = (&mut self.sensors, &self.points, self.dt);
-        let (last, tau, robot_sensing) = (&mut self.last_state, &self.tau, &mut self.robot_sensing);
+        let (last, tau) = (&mut self.last_state, &self.tau);
         ep.state.send_with(|m| {
             fill_state(m, world, info, zmp, hand);
-            robot_sensing.take_truth(m);
-            sensors.apply(m, dt, points);
+            // The torques applied over the step: what the drives' estimates read (MT-1).
             put_applied_torques(m, tau.as_slice());
-            robot_sensing.apply(m);
+            sensors.apply(m, dt, points);
             **last = *m;
         })?;
         let stats = self.gate.stats;
