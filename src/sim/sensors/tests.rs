@@ -422,6 +422,9 @@ fn a_mounted_imu_reads_its_own_frame() {
     assert_eq!(s.counts().get("imu_mount_failures"), Some(1));
 }
 
+/// A setting to spoil, the key and the message that name it.
+type Invalid = (fn(&mut SensorsConfig), &'static str, &'static str);
+
 /// A setting out of range is named by its key.
 #[test]
 fn an_invalid_setting_is_named() {
@@ -436,7 +439,7 @@ fn an_invalid_setting_is_named() {
     c.soles.latency = MAX_LATENCY + 1;
     assert_eq!(c.invalid().unwrap().0, "soles.latency");
     // Each model's own keys and messages, as the configuration's errors say them.
-    let cases: [(fn(&mut SensorsConfig), &str, &str); 5] = [
+    let cases: [Invalid; 5] = [
         (
             |c| c.encoders.bits = 40,
             "encoders.bits",
