@@ -6,7 +6,7 @@
 //!   torques in), written once over [`physics::Physics`]; the torque commands are judged by
 //!   the contract's plant side ([`crate::plant`]); [`hold`]: the supervisor (hold, hand-over,
 //!   damping) and the command clock; [`record`]: the rerun `.rrd` of the ground truth;
-//!   [`config`]: `config/sim.toml`.
+//!   [`truth_csv`]: its CSV (`sim.csv`); [`config`]: `config/sim.toml`.
 //! - [`bus_robot`]: the same plants speaking as a Unitree G1 on its own DDS bus (`upc sim --bus
 //!   unitree`, for `upc bus`), with the bus's wire types ([`crate::bus`]).
 //! - upc's engine: [`world`], the physics, no IPC ([`World::step`]); [`contact`]: the
@@ -28,6 +28,7 @@ pub mod record;
 pub mod robot_sensing;
 pub mod scene;
 pub mod sensors;
+pub mod truth_csv;
 pub mod world;
 
 pub use config::{HoldConfig, HoldKind, Mode, Push, SimConfig};

@@ -6,8 +6,8 @@
 //! quaternion x y z w, joints; `v` = base linear and angular velocity in the base frame, joint
 //! rates; contact forces in the robot description's contact order, ground on robot, world frame.
 //!
-//! The engines' shared types live here with the trait ([`SimError`], [`StepReport`]), so an
-//! engine's file depends on this one and never on another engine's.
+//! What the engines share lives here with the trait ([`SimError`], [`StepReport`], [`rebase`]),
+//! so an engine's file depends on this one and never on another engine's.
 
 use nalgebra::{DVector, Vector3};
 
@@ -112,4 +112,14 @@ pub trait Physics {
     fn robot_frame_placements(&mut self) -> &[SE3];
     /// World placements of every door frame at the current state.
     fn door_frame_placements(&mut self) -> Option<&[SE3]>;
+}
+
+/// Places a fixed-base model's root at `base` (its joints and frames on the world).
+pub(crate) fn rebase(model: &mut Model, base: &SE3) {
+    for j in model.joints.iter_mut().filter(|j| j.parent.is_none()) {
+        j.placement = base.compose(&j.placement);
+    }
+    for f in model.frames.iter_mut().filter(|f| f.parent.is_none()) {
+        f.placement = base.compose(&f.placement);
+    }
 }

@@ -40,9 +40,9 @@ use super::config::{Mode, Push, SimConfig};
 use super::hold::{CommandClock, HoldStats, Phase, Supervisor};
 use super::physics::{Engine, Physics, SimError, StepReport};
 use super::record::{Recorder, RecorderStats};
-use super::robot_sensing::RobotSensing;
 use super::scene::{DoorDrive, default_scene};
-use super::sensors::{FootSensing, ImuMount, Sensing, SensorCounts, Sensors, SensorsConfig};
+use super::sensors::{FootSensing, ImuMount, RobotSensors, SensorCounts, Sensors, SensorsConfig};
+use super::truth_csv::{truth_record, write_header, write_truth};
 use crate::plant::{CommandGate, CommandOrigin, CommandStats, PlantInfo};
 use crate::robot::{FootSensors, Robot};
 
@@ -267,7 +267,7 @@ fn run_plant<P: Physics>(
         torque_event: bus.listener(ServiceKind::Torques)?,
     };
     let mut recorder = start_recorder(opts, &world)?;
-    let mut looper = Looper::new(opts, &world, info, &carrying, open_truth_csv(opts)?)?;
+    let mut looper = Looper::new(opts, &world, info, &carrying, open_truth_csv(opts, &world)?)?;
     // State 0 before any step (an engine that settles the robot first reports its forces).
     let first = *world.last_report();
     if let Some(z) = first.zmp {
@@ -391,9 +391,11 @@ fn start_recorder(
         .map_err(|e| ProcessError::Setup(format!("rerun recording {}: {e}", path.display())))
 }
 
-/// The lockstep ground-truth CSV, its header written, if asked for.
+/// The lockstep ground-truth CSV, its header written (the columns of `world`'s truth record),
+/// if asked for.
 fn open_truth_csv(
     opts: &RunOptions,
+    world: &impl Physics,
 ) -> Result<Option<std::io::BufWriter<std::fs::File>>, ProcessError> {
     let Some(p) = &opts.truth_csv else {
         return Ok(None);
@@ -401,8 +403,8 @@ fn open_truth_csv(
     let file = std::fs::File::create(p)
         .map_err(|e| ProcessError::Setup(format!("ground-truth CSV {}: {e}", p.display())))?;
     let mut w = std::io::BufWriter::new(file);
-    use std::io::Write;
-    writeln!(w, "{TRUTH_CSV_HEADER}")
+    let columns = truth_record(world, world.last_report(), [0.0; 2], [0.0; 3]);
+    write_header(&mut w, &columns)
         .map_err(|e| ProcessError::Setup(format!("ground-truth CSV: {e}")))?;
     Ok(Some(w))
 }
@@ -458,9 +460,6 @@ struct Run<'a> {
     stop: &'a AtomicBool,
 }
 
-/// Columns of the lockstep ground-truth CSV (`--truth-csv`).
-pub const TRUTH_CSV_HEADER: &str = "t,com_x,com_y,com_z,zmp_x,zmp_y,hand_fx,hand_fy,hand_fz,door_angle,door_torque,loop_error,max_penetration,max_slip_speed,solver_iterations,base_x,base_y,base_z,base_vx,base_vy,base_vz,base_roll,base_pitch,base_yaw,lfoot_x,lfoot_y,rfoot_x,rfoot_y,lfoot_fz,rfoot_fz";
-
 struct Looper {
     tau: DVector<f64>,
     gate: CommandGate,
@@ -481,10 +480,9 @@ struct Looper {
     /// `sim.push = "hand"`: the robot frame the scenario's force is applied at.
     push_frame: Option<usize>,
     /// The sensor block of the published state and the models it passes through (on
-    /// `realistic`), and the sole corners' positions for them (scratch).
+    /// `realistic`: the robot's sensors, what it lacks, its torque estimates), and the sole
+    /// corners' positions for them (scratch).
     sensors: Sensors,
-    /// What the robot measures (its description's `[sensors]`) and its torque estimates.
-    robot_sensing: RobotSensing,
     points: [[f64; 3]; N_CONTACTS],
     /// The plant's step (s).
     dt: f64,
@@ -493,7 +491,7 @@ struct Looper {
 }
 
 /// The torques `tau` applied over the step (actuated joints) into the state's `joint_torques`,
-/// the base's NaN: what the drives' torque sensing reads, before [`RobotSensing::apply`].
+/// the base's NaN: what the drives' torque sensing reads ([`Sensors::apply`]).
 pub(crate) fn put_applied_torques(m: &mut StateMsg, tau: &[f64]) {
     m.joint_torques.fill(f64::NAN);
     let base = m.nv as usize - tau.len();
@@ -506,7 +504,7 @@ pub(crate) fn sensors_of(cfg: &SimConfig, robot: &Robot) -> SensorsConfig {
     match robot.description.sensors.feet {
         Some(FootSensors::Corners) => s.feet = FootSensing::Corners,
         Some(FootSensors::SixAxis) => s.feet = FootSensing::SixAxis,
-        // No foot sensor: the corners' models run and `RobotSensing` publishes NaN.
+        // No foot sensor: the corners' models run and NaN is published for them.
         Some(FootSensors::None) | None => {}
     }
     s
@@ -530,69 +528,6 @@ fn log_transition(from: Phase, to: Phase, t: f64, cfg: &SimConfig) {
             cfg.process.safe_damping
         ),
     }
-}
-
-fn write_truth(
-    w: &mut impl std::io::Write,
-    world: &impl Physics,
-    rep: &StepReport,
-    zmp: [f64; 2],
-    hand: [f64; 3],
-) -> std::io::Result<()> {
-    // The floating base: position, linear velocity (world) and roll-pitch-yaw, for the base
-    // estimator's error (`upc run`).
-    let (q, v) = (world.q(), world.v());
-    let r = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
-        q[6], q[3], q[4], q[5],
-    ));
-    let vel = r * nalgebra::Vector3::new(v[0], v[1], v[2]);
-    let (roll, pitch, yaw) = r.euler_angles();
-    // Each foot's contact points' centroid (x, y): where the feet are, to see them creep.
-    let mut feet = [[0.0; 2]; 2];
-    for (k, p) in world.contact_points().iter().take(N_CONTACTS).enumerate() {
-        let f = &mut feet[k / 4];
-        (f[0], f[1]) = (f[0] + p.x / 4.0, f[1] + p.y / 4.0);
-    }
-    // Each foot's load (N): its corners' normal forces, for the wrench observer's error.
-    let mut load = [0.0; 2];
-    for (k, f) in world.contact_forces().iter().take(N_CONTACTS).enumerate() {
-        load[k / 4] += f.z;
-    }
-    writeln!(
-        w,
-        "{:.4},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{:.4},{:.4},{:.6},{:.4},{:.3e},{:.3e},{:.3e},{},\
-         {:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.3},{:.3}",
-        world.time(),
-        rep.com[0],
-        rep.com[1],
-        rep.com[2],
-        zmp[0],
-        zmp[1],
-        hand[0],
-        hand[1],
-        hand[2],
-        world.door_angle(),
-        rep.door_torque,
-        rep.loop_error,
-        rep.max_penetration,
-        rep.max_slip_speed,
-        rep.solver_iterations,
-        q[0],
-        q[1],
-        q[2],
-        vel.x,
-        vel.y,
-        vel.z,
-        roll,
-        pitch,
-        yaw,
-        feet[0][0],
-        feet[0][1],
-        feet[1][0],
-        feet[1][1],
-        load[0],
-        load[1],
-    )
 }
 
 impl Looper {
@@ -630,17 +565,14 @@ impl Looper {
             last_reject_log: None,
             record_every: (cfg.record_period / cfg.dt).round().max(1.0) as u64,
             push_frame: push_frame(cfg, robot)?,
-            sensors: Sensors::new(
+            sensors: Sensors::with_robot(
                 &sensors_of(cfg, robot),
                 -world.robot().gravity.z,
                 robot.imu_frame.map(|f| ImuMount::new(&robot.model, f)),
-            ),
-            robot_sensing: RobotSensing::new(
-                robot.description.sensors,
-                cfg.sensors.sensing == Sensing::Realistic,
-                cfg.sensors.motor_torques,
-                world.robot().effort_limits(),
-                cfg.sensors.seed,
+                RobotSensors {
+                    spec: robot.description.sensors,
+                    effort: world.robot().effort_limits(),
+                },
             ),
             points: [[0.0; 3]; N_CONTACTS],
             dt: cfg.dt,
@@ -683,7 +615,7 @@ impl Looper {
             max_slip_speed: self.max_slip,
             max_loop_error: self.max_loop,
             sensing: cfg.sensors.sensing.name().into(),
-            sensor_counts: self.sensors.realistic().then_some(self.sensors.counts),
+            sensor_counts: self.sensors.realistic().then(|| self.sensors.counts()),
             recorder,
             ipc_overhead_p50: self.ipc.quantile(0.5),
             ipc_overhead_p99: self.ipc.quantile(0.99),
@@ -779,13 +711,12 @@ impl Looper {
             *p = [c.x, c.y, c.z];
         }
         let (sensors, points, dt) = (&mut self.sensors, &self.points, self.dt);
-        let (last, tau, robot_sensing) = (&mut self.last_state, &self.tau, &mut self.robot_sensing);
+        let (last, tau) = (&mut self.last_state, &self.tau);
         ep.state.send_with(|m| {
             fill_state(m, world, info, zmp, hand);
-            robot_sensing.take_truth(m);
-            sensors.apply(m, dt, points);
+            // The torques applied over the step: what the drives' estimates read (MT-1).
             put_applied_torques(m, tau.as_slice());
-            robot_sensing.apply(m);
+            sensors.apply(m, dt, points);
             **last = *m;
         })?;
         let stats = self.gate.stats;

@@ -51,15 +51,6 @@ impl DoorDrive {
             .dot(&self.axis)
     }
 
-    /// [`Self::torque`] at `k·dt`, k = 0 … n−1 (bit for bit), in one pass over the profile.
-    pub fn torques_sampled(&self, dt: f64, n: usize) -> Vec<f64> {
-        self.profile
-            .sampled(dt, n)
-            .into_iter()
-            .map(|f| self.torque_of(f))
-            .collect()
-    }
-
     /// The scenario's hand force at `t` (N, world): what the door pushes with, if held still.
     pub fn hand_force(&self, t: f64) -> [f64; 3] {
         self.profile.at(t)

@@ -51,7 +51,7 @@ use crate::dynamics::{
 use super::config::SimConfig;
 use super::contact::{BlockKind, ConstraintSystem, SolverSettings};
 use super::factor::LtdlFactor;
-use super::physics::{Physics, SimError, StepReport};
+use super::physics::{Physics, SimError, StepReport, rebase};
 
 /// Fixed-point passes of the midpoint evaluation of `h` after the predictor (module doc: one
 /// pass is the explicit midpoint rule, which slowly gains energy; two lose a little).
@@ -179,16 +179,6 @@ pub struct DoorSpec {
     pub hand_frame: String,
 }
 
-/// Places a fixed-base model's root at `base` (its joints and frames on the world).
-pub(crate) fn rebase(model: &mut Model, base: &SE3) {
-    for j in model.joints.iter_mut().filter(|j| j.parent.is_none()) {
-        j.placement = base.compose(&j.placement);
-    }
-    for f in model.frames.iter_mut().filter(|f| f.parent.is_none()) {
-        f.placement = base.compose(&f.placement);
-    }
-}
-
 /// Everything a [`World`] is built from.
 #[derive(Clone, Debug)]
 pub struct WorldSpec {
@@ -273,7 +263,6 @@ pub struct World {
     ground: Plane,
     tangents: (Vector3<f64>, Vector3<f64>),
     params: PhysicsParams,
-    floating: bool,
     n_act: usize,
     effort: Vec<f64>,
     damping: DVector<f64>,
@@ -473,7 +462,6 @@ impl World {
             tangents: ground.tangents(),
             ground,
             params,
-            floating,
             n_act,
             effort,
             damping,
@@ -963,31 +951,6 @@ impl World {
         }
     }
 
-    /// Sets the robot state (and zeroes the warm start). The door keeps its state.
-    pub fn set_state(&mut self, q: &DVector<f64>, v: &DVector<f64>) -> Result<(), SimError> {
-        self.robot.check_q(q)?;
-        self.robot.check_v("v", v)?;
-        self.q.copy_from(q);
-        self.v.copy_from(v);
-        self.warm.fill(0.0);
-        self.refresh_points();
-        Ok(())
-    }
-
-    /// Sets the door's state (angle, rate for a 1-DoF door).
-    pub fn set_door_state(&mut self, q: &DVector<f64>, v: &DVector<f64>) -> Result<(), SimError> {
-        let d = self
-            .door
-            .as_mut()
-            .ok_or_else(|| SimError::Scene("no door".into()))?;
-        d.model.check_q(q)?;
-        d.model.check_v("door v", v)?;
-        d.q.copy_from(q);
-        d.v.copy_from(v);
-        self.refresh_points();
-        Ok(())
-    }
-
     pub fn robot(&self) -> &Model {
         &self.robot
     }
@@ -1012,9 +975,6 @@ impl World {
     /// Number of torques [`World::step`] expects (nv − 6 with a floating base, nv otherwise).
     pub fn n_actuated(&self) -> usize {
         self.n_act
-    }
-    pub fn is_floating(&self) -> bool {
-        self.floating
     }
     /// The last step's report (that of the initial state before the first step).
     pub fn last_report(&self) -> &StepReport {

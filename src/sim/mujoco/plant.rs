@@ -19,8 +19,7 @@ use crate::channels::N_CONTACTS;
 use crate::dynamics::kinematics::{placements_unchecked, update_frame_placements};
 use crate::dynamics::{Data, Model, PressureLoad, SE3, center_of_pressure};
 use crate::robot::Robot;
-use crate::sim::physics::{Physics, SimError, StepReport};
-use crate::sim::world::rebase;
+use crate::sim::physics::{Physics, SimError, StepReport, rebase};
 
 /// Simulated time the robot settles onto its soft contacts before a run starts (s).
 pub const SETTLE_TIME: f64 = 0.5;

@@ -3,7 +3,7 @@
 
 use rand_chacha::ChaCha8Rng;
 
-use super::model::{SensorCounts, SensorModel, Truth};
+use super::model::{SensorModel, Truth};
 use crate::channels::{STATE_FLAG_BASE_UNMEASURED, StateMsg};
 
 /// Without `mocap`, writes NaN into the base's `q[..7]` and `v[..6]` and sets
@@ -12,23 +12,22 @@ pub(super) struct UnmeasuredBase {
     mocap: bool,
 }
 
-impl SensorModel for UnmeasuredBase {
-    /// `sim.sensors.mocap`.
-    type Settings = bool;
+impl UnmeasuredBase {
+    /// `mocap`: `sim.sensors.mocap`.
+    pub(super) fn new(mocap: bool) -> Self {
+        Self { mocap }
+    }
+}
 
-    fn new(mocap: &bool) -> Self {
-        Self { mocap: *mocap }
+impl SensorModel for UnmeasuredBase {
+    /// A flag: nothing to check.
+    fn invalid(&self) -> Option<(String, String)> {
+        None
     }
 
     fn reset(&mut self, _rng: &mut ChaCha8Rng) {}
 
-    fn apply(
-        &mut self,
-        _truth: &Truth,
-        m: &mut StateMsg,
-        _rng: &mut ChaCha8Rng,
-        _counts: &mut SensorCounts,
-    ) {
+    fn apply(&mut self, _truth: &Truth, m: &mut StateMsg, _rng: &mut ChaCha8Rng) {
         if !self.mocap {
             m.q[..7].fill(f64::NAN);
             m.v[..6].fill(f64::NAN);

@@ -25,12 +25,62 @@ pub struct ForceSensorConfig {
     pub dropout: f64,
 }
 
+impl ForceSensorConfig {
+    /// The first invalid field of the sensor keyed `name`, as (key under `sim.sensors`,
+    /// message).
+    pub(super) fn invalid(&self, name: &str) -> Option<(String, String)> {
+        let sizes = [
+            ("noise", self.noise),
+            ("bias", self.bias),
+            ("drift", self.drift),
+            ("resolution", self.resolution),
+        ];
+        invalid_channel(name, &sizes, self.dropout, self.latency)
+    }
+}
+
+/// Longest latency modelled (steps).
+pub const MAX_LATENCY: usize = 64;
+
+/// The first invalid setting of the sensor keyed `name`, as (key under `sim.sensors`,
+/// message): a size (key, value) below 0, a dropout probability outside [0, 1), a latency
+/// over [`MAX_LATENCY`].
+pub(super) fn invalid_channel(
+    name: &str,
+    sizes: &[(&str, f64)],
+    dropout: f64,
+    latency: usize,
+) -> Option<(String, String)> {
+    if let Some(invalid) = invalid_sizes(name, sizes) {
+        return Some(invalid);
+    }
+    if !(0.0..1.0).contains(&dropout) {
+        return Some((
+            format!("{name}.dropout"),
+            format!("must be in [0, 1), got {dropout}"),
+        ));
+    }
+    if latency > MAX_LATENCY {
+        return Some((
+            format!("{name}.latency"),
+            format!("at most {MAX_LATENCY} steps, got {latency}"),
+        ));
+    }
+    None
+}
+
+/// The first of the sizes (key, value) of the sensor keyed `name` that is not finite and ≥ 0.
+pub(super) fn invalid_sizes(name: &str, sizes: &[(&str, f64)]) -> Option<(String, String)> {
+    let (key, v) = sizes.iter().find(|(_, v)| !(v.is_finite() && *v >= 0.0))?;
+    Some((format!("{name}.{key}"), format!("must be ≥ 0, got {v}")))
+}
+
 /// A delay line of the last `latency + 1` samples of N values, each with its plant step, and
 /// the sample last published: what a fieldbus does to a sensor's samples (late, sometimes lost).
 /// The latency counts plant steps whatever the rate the samples are taken at (a plant
 /// publishing every second step reads the newest sample at least `latency` steps old).
 #[derive(Debug, Clone)]
-pub(crate) struct Transport<const N: usize> {
+pub(super) struct Transport<const N: usize> {
     line: Vec<(u64, [f64; N])>,
     /// Where the newest sample is, and how many the line holds.
     head: usize,
@@ -41,7 +91,10 @@ pub(crate) struct Transport<const N: usize> {
 }
 
 impl<const N: usize> Transport<N> {
-    pub(crate) fn new(latency: usize) -> Self {
+    /// A line of `latency` steps (at most [`MAX_LATENCY`]: a longer one is an invalid setting,
+    /// refused before a run).
+    pub(super) fn new(latency: usize) -> Self {
+        let latency = latency.min(MAX_LATENCY);
         Self {
             line: vec![(0, [0.0; N]); latency + 1],
             head: latency,
@@ -53,7 +106,7 @@ impl<const N: usize> Transport<N> {
     }
 
     /// Empty, as before the first sample (in place: no allocation).
-    pub(crate) fn reset(&mut self) {
+    pub(super) fn reset(&mut self) {
         self.head = self.line.len() - 1;
         self.filled = 0;
         self.last = [0.0; N];
@@ -62,7 +115,7 @@ impl<const N: usize> Transport<N> {
 
     /// Writes step `step`'s sample `x`, replaces it with the one published at that step, and
     /// returns whether the sample was lost (`u`: a uniform draw, lost when below `dropout`).
-    pub(crate) fn pass(&mut self, step: u64, x: &mut [f64; N], u: f64, dropout: f64) -> bool {
+    pub(super) fn pass(&mut self, step: u64, x: &mut [f64; N], u: f64, dropout: f64) -> bool {
         let len = self.line.len();
         self.head = (self.head + 1) % len;
         self.line[self.head] = (step, *x);

@@ -4,7 +4,8 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::Deserialize;
 
-use super::model::{SensorCounts, SensorModel, Truth};
+use super::channel::invalid_sizes;
+use super::model::{SensorModel, Truth};
 use crate::channels::{MAX_DOF, SENSOR_JOINTS, StateMsg};
 
 /// The joint encoders' model (the base's six coordinates are not joints).
@@ -23,25 +24,30 @@ pub(super) struct JointEncoders {
     settings: EncoderConfig,
 }
 
-impl SensorModel for JointEncoders {
-    type Settings = EncoderConfig;
-
-    fn new(settings: &EncoderConfig) -> Self {
+impl JointEncoders {
+    pub(super) fn new(settings: &EncoderConfig) -> Self {
         Self {
             settings: *settings,
         }
+    }
+}
+
+impl SensorModel for JointEncoders {
+    fn invalid(&self) -> Option<(String, String)> {
+        let s = &self.settings;
+        if s.bits > 32 {
+            return Some((
+                "encoders.bits".into(),
+                format!("at most 32, got {}", s.bits),
+            ));
+        }
+        invalid_sizes("encoders", &[("velocity_noise", s.velocity_noise)])
     }
 
     /// Nothing drawn: encoders have no constant error here.
     fn reset(&mut self, _rng: &mut ChaCha8Rng) {}
 
-    fn apply(
-        &mut self,
-        truth: &Truth,
-        m: &mut StateMsg,
-        rng: &mut ChaCha8Rng,
-        _counts: &mut SensorCounts,
-    ) {
+    fn apply(&mut self, truth: &Truth, m: &mut StateMsg, rng: &mut ChaCha8Rng) {
         let s = &self.settings;
         let (nq, nv) = (m.nq as usize, m.nv as usize);
         let q_step = if s.bits > 0 {

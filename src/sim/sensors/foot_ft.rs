@@ -7,9 +7,9 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::Deserialize;
 
-use super::channel::{Transport, signed_bias};
+use super::channel::{Transport, invalid_channel, signed_bias};
 use super::feet::{fill_foot_wrenches, sole};
-use super::model::{SensorCounts, SensorModel, Truth};
+use super::model::{SensorModel, Stream, Truth};
 use crate::channels::{N_CONTACTS, SENSOR_FEET, StateMsg};
 use crate::dynamics::{PressureLoad, center_of_pressure};
 
@@ -33,27 +33,54 @@ pub struct WrenchSensorConfig {
     pub dropout: f64,
 }
 
-/// Writes `foot_wrenches` (each foot's true wrench in its sole's frame, through noise, biases
-/// and their drift, resolution, latency, dropouts), `contact_forces` (NaN: no corner is
-/// measured), `zmp` (the measured wrenches' centre of pressure; where the feet carry less than
-/// [`FEET_LOADED`] the plant's stays) and `stamps[SENSOR_FEET]`; counts `foot_ft_dropouts`.
-/// Draws twelve normals and one uniform per foot a step; six normals per foot at reset, from
-/// the stream the runtime gives it.
+/// When the feet are measured by these sensors (`feet = "six_axis"`), writes `foot_wrenches`
+/// (each foot's true wrench in its sole's frame, through noise, biases and their drift,
+/// resolution, latency, dropouts), `contact_forces` (NaN: no corner is measured), `zmp` (the
+/// measured wrenches' centre of pressure; where the feet carry less than [`FEET_LOADED`] the
+/// plant's stays) and `stamps[SENSOR_FEET]`; counts `foot_ft_dropouts`.
+/// Draws twelve normals and one uniform per foot a step; six normals per foot at reset, however
+/// the feet are measured, from a stream of their own ([`Stream::FeetBiases`]: the corner and
+/// IMU draws of every seed stay what they were before these sensors existed).
 pub(super) struct FootForceTorque {
     settings: WrenchSensorConfig,
+    /// The feet are measured by these sensors.
+    measured: bool,
     feet: [WrenchChannel; 2],
     stamp: f64,
+    dropouts: u64,
+}
+
+impl FootForceTorque {
+    /// The feet's sensors with `settings`; `measured`: the feet are measured by them.
+    pub(super) fn new(settings: &WrenchSensorConfig, measured: bool) -> Self {
+        Self {
+            settings: *settings,
+            measured,
+            feet: [0; 2].map(|_| WrenchChannel::new(settings)),
+            stamp: 0.0,
+            dropouts: 0,
+        }
+    }
 }
 
 impl SensorModel for FootForceTorque {
-    type Settings = WrenchSensorConfig;
+    fn invalid(&self) -> Option<(String, String)> {
+        let w = &self.settings;
+        let sizes = [
+            ("noise", w.noise),
+            ("bias", w.bias),
+            ("drift", w.drift),
+            ("resolution", w.resolution),
+            ("moment_noise", w.moment_noise),
+            ("moment_bias", w.moment_bias),
+            ("moment_drift", w.moment_drift),
+            ("moment_resolution", w.moment_resolution),
+        ];
+        invalid_channel("foot_ft", &sizes, w.dropout, w.latency)
+    }
 
-    fn new(settings: &WrenchSensorConfig) -> Self {
-        Self {
-            settings: *settings,
-            feet: [0; 2].map(|_| WrenchChannel::new(settings)),
-            stamp: 0.0,
-        }
+    fn reset_stream(&self) -> Stream {
+        Stream::FeetBiases
     }
 
     fn reset(&mut self, rng: &mut ChaCha8Rng) {
@@ -61,15 +88,13 @@ impl SensorModel for FootForceTorque {
             foot.reset(&self.settings, rng);
         }
         self.stamp = 0.0;
+        self.dropouts = 0;
     }
 
-    fn apply(
-        &mut self,
-        truth: &Truth,
-        m: &mut StateMsg,
-        rng: &mut ChaCha8Rng,
-        counts: &mut SensorCounts,
-    ) {
+    fn apply(&mut self, truth: &Truth, m: &mut StateMsg, rng: &mut ChaCha8Rng) {
+        if !self.measured {
+            return;
+        }
         let s = &self.settings;
         fill_foot_wrenches(m, truth.contact_points);
         let mut lost = 0;
@@ -78,7 +103,7 @@ impl SensorModel for FootForceTorque {
                 lost += 1;
             }
         }
-        counts.foot_ft_dropouts += lost;
+        self.dropouts += lost;
         if lost < 2 {
             self.stamp = truth.stamp(s.latency);
         }
@@ -88,6 +113,10 @@ impl SensorModel for FootForceTorque {
         if let Some(cop) = wrenches_cop(&m.foot_wrenches, truth.contact_points) {
             m.zmp = cop;
         }
+    }
+
+    fn counts(&self, report: &mut dyn FnMut(&'static str, u64)) {
+        report("foot_ft_dropouts", self.dropouts);
     }
 }
 

@@ -9,8 +9,8 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::Deserialize;
 
-use super::channel::{Transport, signed_bias};
-use super::model::{SensorCounts, SensorModel, Truth};
+use super::channel::{Transport, invalid_channel, signed_bias};
+use super::model::{SensorModel, Truth};
 use crate::channels::{MAX_DOF, SENSOR_IMU, StateMsg};
 use crate::dynamics::{Data, Model, ReferenceFrame, forward_kinematics_velocity, frame_velocity};
 
@@ -56,12 +56,11 @@ pub(super) struct Imu {
     stamp: f64,
     /// The plant step of the last sample: the biases walk over the time since.
     last_step: Option<u64>,
+    dropouts: u64,
 }
 
-impl SensorModel for Imu {
-    type Settings = ImuConfig;
-
-    fn new(settings: &ImuConfig) -> Self {
+impl Imu {
+    pub(super) fn new(settings: &ImuConfig) -> Self {
         Self {
             settings: *settings,
             gyro_bias: [0.0; 3],
@@ -71,7 +70,26 @@ impl SensorModel for Imu {
             transport: Transport::new(settings.latency),
             stamp: 0.0,
             last_step: None,
+            dropouts: 0,
         }
+    }
+}
+
+impl SensorModel for Imu {
+    fn invalid(&self) -> Option<(String, String)> {
+        let i = &self.settings;
+        let sizes = [
+            ("gyro_noise_density", i.gyro_noise_density),
+            ("gyro_bias", i.gyro_bias),
+            ("gyro_bias_drift", i.gyro_bias_drift),
+            ("accel_noise_density", i.accel_noise_density),
+            ("accel_bias", i.accel_bias),
+            ("accel_bias_drift", i.accel_bias_drift),
+            ("tilt_error", i.tilt_error),
+            ("orientation_noise", i.orientation_noise),
+            ("yaw_drift", i.yaw_drift),
+        ];
+        invalid_channel("imu", &sizes, i.dropout, i.latency)
     }
 
     fn reset(&mut self, rng: &mut ChaCha8Rng) {
@@ -84,23 +102,22 @@ impl SensorModel for Imu {
         self.transport.reset();
         self.stamp = 0.0;
         self.last_step = None;
+        self.dropouts = 0;
     }
 
-    fn apply(
-        &mut self,
-        truth: &Truth,
-        m: &mut StateMsg,
-        rng: &mut ChaCha8Rng,
-        counts: &mut SensorCounts,
-    ) {
+    fn apply(&mut self, truth: &Truth, m: &mut StateMsg, rng: &mut ChaCha8Rng) {
         let mut x = truth.imu;
         if self.measure(truth.step, truth.dt, rng, &mut x) {
-            counts.imu_dropouts += 1;
+            self.dropouts += 1;
         } else {
             self.stamp = truth.stamp(self.settings.latency);
         }
         publish_imu(m, &x);
         m.stamps[SENSOR_IMU] = self.stamp;
+    }
+
+    fn counts(&self, report: &mut dyn FnMut(&'static str, u64)) {
+        report("imu_dropouts", self.dropouts);
     }
 }
 
@@ -151,13 +168,15 @@ pub(super) fn publish_imu(m: &mut StateMsg, x: &[f64; 10]) {
 }
 
 /// The IMU's true sample from the plant's state: where it sits (the base or a mount), and its
-/// point's velocity over successive states for the accelerometer. Counts
-/// `imu_mount_failures`.
+/// point's velocity over successive states for the accelerometer.
 pub(super) struct ImuTruth {
     gravity: f64,
     /// The IMU's place when not on the base.
     mount: Option<ImuMount>,
     specific_force: SpecificForce,
+    /// Samples of a mounted IMU whose frame could not be placed in the state (it does not fit
+    /// the model, or its kinematics failed): published as NaN, which the estimator refuses.
+    pub(super) mount_failures: u64,
 }
 
 impl ImuTruth {
@@ -167,22 +186,24 @@ impl ImuTruth {
             gravity,
             mount,
             specific_force: SpecificForce::default(),
+            mount_failures: 0,
         }
     }
 
-    /// No state seen yet (the first accelerometer sample reads gravity alone).
+    /// No state seen yet (the first accelerometer sample reads gravity alone), no failure.
     pub(super) fn reset(&mut self) {
         self.specific_force = SpecificForce::default();
+        self.mount_failures = 0;
     }
 
     /// The true IMU sample: orientation xyzw, angular velocity and specific force in the IMU's
     /// frame (the base's, or the mount's), from the true state `m`.
-    pub(super) fn sample(&mut self, m: &StateMsg, dt: f64, counts: &mut SensorCounts) -> [f64; 10] {
+    pub(super) fn sample(&mut self, m: &StateMsg, dt: f64) -> [f64; 10] {
         let g = Vector3::new(0.0, 0.0, self.gravity);
         if let Some(mount) = self.mount.as_mut() {
             // Not the base's reading instead: an IMU read at the wrong place is a wrong sensor.
             let Some((r, omega, vel)) = mount.place(m) else {
-                counts.imu_mount_failures += 1;
+                self.mount_failures += 1;
                 return [f64::NAN; 10];
             };
             let a = self.specific_force.update(m.step, dt, vel);

@@ -15,40 +15,47 @@
 //! - [`imu`]: an IMU on the base or where the robot's description mounts it (gyro and
 //!   accelerometer with noise densities, biases and bias drift; the orientation of its own
 //!   attitude filter with a tilt error and a drifting yaw);
-//! - [`base`]: unless `mocap`, the floating base is not published: a robot does not measure it.
+//! - [`base`]: unless `mocap`, the floating base is not published: a robot does not measure it;
+//! - what the robot's description's `[sensors]` says it has ([`Sensors::with_robot`]): each
+//!   drive's torque estimate ([`drives`], MT-1), and NaN for the groups it lacks ([`missing`]);
+//!   [`robot`] declares them, and runs them as a step of their own ([`RobotSensing`]).
 //!
-//! The engines give the truth; [`Sensors`], the runtime, applies the declared models in turn.
-//! The shared pieces: [`model`] (the seam: the trait, the truth a model reads, the counters),
-//! [`channel`] (bias signs, the fieldbus's latency and dropouts, the three-axis force channel)
-//! and [`feet`] (the soles' geometry and corner wrenches).
+//! The engines give the truth; [`Sensors`], the runtime, holds the declared models as one list
+//! ([`declared`]) and applies, resets, checks and counts them by going through it: a new kind of
+//! sensor is its file and one entry there. The shared pieces: [`model`] (the seam: the trait, the
+//! truth a model reads, the generators, the counters), [`channel`] (bias signs, the fieldbus's
+//! latency and dropouts, the three-axis force channel) and [`feet`] (the soles' geometry and
+//! corner wrenches).
 //!
 //! The sensor block (IMU, foot wrenches, sample times) is filled from the truth on `truth` too,
 //! so an estimator can run on exact sensors.
 //!
-//! Reproducible: one seeded generator per plant run, drawn in a fixed order every step (the
-//! declared order), so a lockstep rerun publishes the same bytes. Allocation-free after
-//! [`Sensors::new`].
+//! Reproducible: one seed per plant run, its streams ([`model::Stream`]) drawn in a fixed order
+//! every step (the declared order), so a lockstep rerun publishes the same bytes.
+//! Allocation-free after [`Sensors::new`].
 
 mod base;
 mod channel;
+mod drives;
 mod encoders;
 mod feet;
 mod foot_ft;
 mod imu;
+mod missing;
 mod model;
+mod robot;
 mod soles;
 mod wrist;
 
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use serde::Deserialize;
-
-pub use channel::ForceSensorConfig;
-pub(crate) use channel::Transport;
+pub use channel::{ForceSensorConfig, MAX_LATENCY};
+pub use drives::{MAX_DELAY, MotorTorqueConfig};
 pub use encoders::EncoderConfig;
 pub use foot_ft::WrenchSensorConfig;
 pub use imu::{ImuConfig, ImuMount};
 pub use model::SensorCounts;
+pub use robot::{RobotSensing, RobotSensors};
+
+use serde::Deserialize;
 
 use crate::channels::StateMsg;
 
@@ -56,7 +63,8 @@ use base::UnmeasuredBase;
 use encoders::JointEncoders;
 use foot_ft::FootForceTorque;
 use imu::{Imu, ImuTruth, publish_imu};
-use model::{SensorModel, Truth};
+use model::{Model, Streams, Truth};
+use robot::robot_models;
 use soles::SoleCorners;
 use wrist::WristForce;
 
@@ -112,171 +120,112 @@ pub struct SensorsConfig {
     pub soles: ForceSensorConfig,
     /// Each foot's six-axis sensor (`feet = "six_axis"`), in the sole's frame.
     pub foot_ft: WrenchSensorConfig,
-    /// Each drive's torque estimate, for a robot that has them (`super::robot_sensing`).
-    pub motor_torques: super::robot_sensing::MotorTorqueConfig,
+    /// Each drive's torque estimate, for a robot that has them ([`drives`]).
+    pub motor_torques: MotorTorqueConfig,
 }
 
 impl SensorsConfig {
-    /// The first invalid field, as (key under `sim.sensors`, message).
+    /// The first invalid field, as (key under `sim.sensors`, message): each declared model
+    /// checks its own, in the declared order.
     pub fn invalid(&self) -> Option<(String, String)> {
-        let force = |s: &ForceSensorConfig| {
-            [
-                ("noise", s.noise),
-                ("bias", s.bias),
-                ("drift", s.drift),
-                ("resolution", s.resolution),
-            ]
-        };
-        let (w, i) = (&self.foot_ft, &self.imu);
-        let channels: [Channel; 4] = [
-            (
-                "wrist",
-                &force(&self.wrist),
-                self.wrist.dropout,
-                self.wrist.latency,
-            ),
-            (
-                "soles",
-                &force(&self.soles),
-                self.soles.dropout,
-                self.soles.latency,
-            ),
-            (
-                "foot_ft",
-                &[
-                    ("noise", w.noise),
-                    ("bias", w.bias),
-                    ("drift", w.drift),
-                    ("resolution", w.resolution),
-                    ("moment_noise", w.moment_noise),
-                    ("moment_bias", w.moment_bias),
-                    ("moment_drift", w.moment_drift),
-                    ("moment_resolution", w.moment_resolution),
-                ],
-                w.dropout,
-                w.latency,
-            ),
-            (
-                "imu",
-                &[
-                    ("gyro_noise_density", i.gyro_noise_density),
-                    ("gyro_bias", i.gyro_bias),
-                    ("gyro_bias_drift", i.gyro_bias_drift),
-                    ("accel_noise_density", i.accel_noise_density),
-                    ("accel_bias", i.accel_bias),
-                    ("accel_bias_drift", i.accel_bias_drift),
-                    ("tilt_error", i.tilt_error),
-                    ("orientation_noise", i.orientation_noise),
-                    ("yaw_drift", i.yaw_drift),
-                ],
-                i.dropout,
-                i.latency,
-            ),
-        ];
-        for (name, sizes, dropout, latency) in channels {
-            if let Some((key, v)) = sizes.iter().find(|(_, v)| !(v.is_finite() && *v >= 0.0)) {
-                return Some((format!("{name}.{key}"), format!("must be ≥ 0, got {v}")));
-            }
-            if !(0.0..1.0).contains(&dropout) {
-                return Some((
-                    format!("{name}.dropout"),
-                    format!("must be in [0, 1), got {dropout}"),
-                ));
-            }
-            if latency > MAX_LATENCY {
-                return Some((
-                    format!("{name}.latency"),
-                    format!("at most {MAX_LATENCY} steps, got {latency}"),
-                ));
-            }
-        }
-        if let Some((key, why)) = self.motor_torques.invalid() {
-            return Some((format!("motor_torques.{key}"), why));
-        }
-        let e = &self.encoders;
-        if e.bits > 32 {
-            return Some((
-                "encoders.bits".into(),
-                format!("at most 32, got {}", e.bits),
-            ));
-        }
-        if !(e.velocity_noise.is_finite() && e.velocity_noise >= 0.0) {
-            return Some((
-                "encoders.velocity_noise".into(),
-                format!("must be ≥ 0, got {}", e.velocity_noise),
-            ));
-        }
-        None
+        declared(self, None).iter().find_map(|m| m.invalid())
     }
 }
 
-/// A sensor's settings for [`SensorsConfig::invalid`]: its name, its sizes that must be ≥ 0,
-/// its dropout and its latency.
-type Channel<'a> = (&'a str, &'a [(&'a str, f64)], f64, usize);
+/// The sensor models of a run with `cfg`, of `robot` if given (without: no torque estimate
+/// modelled, nothing masked), in the order they draw from the main stream: the order must not
+/// change, or a seed's runs stop publishing the same bytes. Models on a stream of their own
+/// ([`model::Stream`]) may go anywhere.
+fn declared(cfg: &SensorsConfig, robot: Option<RobotSensors>) -> Vec<Model> {
+    let [drives, missing] = robot_models(&cfg.motor_torques, robot);
+    vec![
+        Box::new(JointEncoders::new(&cfg.encoders)),
+        Box::new(WristForce::new(&cfg.wrist)),
+        Box::new(SoleCorners::new(
+            &cfg.soles,
+            cfg.feet == FootSensing::Corners,
+        )),
+        Box::new(FootForceTorque::new(
+            &cfg.foot_ft,
+            cfg.feet == FootSensing::SixAxis,
+        )),
+        Box::new(Imu::new(&cfg.imu)),
+        Box::new(UnmeasuredBase::new(cfg.mocap)),
+        // What the robot has, last: they read the torques applied, and mask what came before.
+        drives,
+        missing,
+    ]
+}
 
-/// Longest latency modelled (steps).
-pub const MAX_LATENCY: usize = 64;
-
-/// The sensors of one plant run: the models declared below (the sensor block alone on
-/// `truth`).
+/// The sensors of one plant run: the declared models (the sensor block alone on `truth`).
 pub struct Sensors {
-    cfg: SensorsConfig,
+    seed: u64,
     /// The models are on (`realistic`).
-    models: bool,
-    rng: ChaCha8Rng,
+    realistic: bool,
+    streams: Streams,
     imu_truth: ImuTruth,
-    encoders: JointEncoders,
-    wrist: WristForce,
-    soles: SoleCorners,
-    foot_ft: FootForceTorque,
-    imu: Imu,
-    base: UnmeasuredBase,
-    pub counts: SensorCounts,
+    models: Vec<Model>,
 }
 
 impl Sensors {
-    /// The sensors of a plant with gravity `gravity` (m/s²), its IMU on the base or at `mount`.
+    /// The sensors of a plant with gravity `gravity` (m/s²), its IMU on the base or at `mount`;
+    /// no robot's torque estimates or missing sensors ([`Sensors::with_robot`]).
     pub fn new(cfg: &SensorsConfig, gravity: f64, mount: Option<ImuMount>) -> Self {
+        Self::build(cfg, gravity, mount, None)
+    }
+
+    /// [`Sensors::new`] for `robot`: its drives' torque estimates (MT-1) and NaN for the groups
+    /// it lacks, on `realistic`. The state given to [`Sensors::apply`] holds the torques
+    /// applied over the step in `joint_torques`.
+    pub fn with_robot(
+        cfg: &SensorsConfig,
+        gravity: f64,
+        mount: Option<ImuMount>,
+        robot: RobotSensors,
+    ) -> Self {
+        Self::build(cfg, gravity, mount, Some(robot))
+    }
+
+    fn build(
+        cfg: &SensorsConfig,
+        gravity: f64,
+        mount: Option<ImuMount>,
+        robot: Option<RobotSensors>,
+    ) -> Self {
         let mut sensors = Self {
-            cfg: *cfg,
-            models: cfg.sensing == Sensing::Realistic,
-            rng: ChaCha8Rng::seed_from_u64(cfg.seed),
+            seed: cfg.seed,
+            realistic: cfg.sensing == Sensing::Realistic,
+            streams: Streams::new(cfg.seed),
             imu_truth: ImuTruth::new(gravity, mount),
-            encoders: JointEncoders::new(&cfg.encoders),
-            wrist: WristForce::new(&cfg.wrist),
-            soles: SoleCorners::new(&cfg.soles),
-            foot_ft: FootForceTorque::new(&cfg.foot_ft),
-            imu: Imu::new(&cfg.imu),
-            base: UnmeasuredBase::new(&cfg.mocap),
-            counts: SensorCounts::default(),
+            models: declared(cfg, robot),
         };
         sensors.reset();
         sensors
     }
 
-    /// The start of the run: the generator seeded, every model's constant errors drawn.
+    /// The start of the run: the generators seeded, every model's constant errors drawn (in the
+    /// declared order), the counters zero.
     fn reset(&mut self) {
-        let rng = &mut self.rng;
-        *rng = ChaCha8Rng::seed_from_u64(self.cfg.seed);
+        self.streams = Streams::new(self.seed);
         self.imu_truth.reset();
-        // In the order the seed's draws have always gone: the corners' biases are drawn however
-        // the feet are measured, so the IMU's do not depend on it.
-        self.encoders.reset(rng);
-        self.wrist.reset(rng);
-        self.soles.reset(rng);
-        self.imu.reset(rng);
-        self.base.reset(rng);
-        // The six-axis feet's biases come from a stream of their own: the corner and IMU draws
-        // of every seed stay what they were before these sensors existed.
-        let mut feet_rng = ChaCha8Rng::seed_from_u64(self.cfg.seed);
-        feet_rng.set_stream(1);
-        self.foot_ft.reset(&mut feet_rng);
-        self.counts = SensorCounts::default();
+        for model in &mut self.models {
+            model.reset(self.streams.get(model.reset_stream()));
+        }
     }
 
     /// Whether the models are on.
     pub fn realistic(&self) -> bool {
-        self.models
+        self.realistic
+    }
+
+    /// The counters of the run so far, by name (for the plant's summary).
+    pub fn counts(&self) -> SensorCounts {
+        let mut counts = SensorCounts::default();
+        for model in &self.models {
+            model.counts(&mut |name, n| counts.push(name, n));
+        }
+        counts.push("imu_mount_failures", self.imu_truth.mount_failures);
+        counts
     }
 
     /// Fills the sensor block of the true state in `m` and, on `realistic`, turns the state into
@@ -288,24 +237,18 @@ impl Sensors {
             time: m.time,
             dt,
             contact_points,
-            imu: self.imu_truth.sample(m, dt, &mut self.counts),
+            imu: self.imu_truth.sample(m, dt),
+            velocity: m.v,
         };
-        if !self.models {
+        if !self.realistic {
             publish_imu(m, &truth.imu);
             feet::fill_foot_wrenches(m, contact_points);
             m.stamps = [truth.time; 4];
             return;
         }
-        let (t, rng, counts) = (&truth, &mut self.rng, &mut self.counts);
-        // The declared sensors, in the order they draw from the generator.
-        self.encoders.apply(t, m, rng, counts);
-        self.wrist.apply(t, m, rng, counts);
-        match self.cfg.feet {
-            FootSensing::Corners => self.soles.apply(t, m, rng, counts),
-            FootSensing::SixAxis => self.foot_ft.apply(t, m, rng, counts),
+        for model in &mut self.models {
+            model.apply(&truth, m, self.streams.get(model.stream()));
         }
-        self.imu.apply(t, m, rng, counts);
-        self.base.apply(t, m, rng, counts);
     }
 }
 

@@ -6,31 +6,43 @@ use rand_chacha::ChaCha8Rng;
 
 use super::channel::{ForceChannel, ForceSensorConfig};
 use super::feet::fill_foot_wrenches;
-use super::model::{SensorCounts, SensorModel, Truth};
+use super::model::{SensorModel, Truth};
 use crate::channels::{N_CONTACTS, SENSOR_FEET, StateMsg};
 use crate::dynamics::{PressureLoad, center_of_pressure};
 
-/// Writes `contact_forces` (each corner a three-axis force sensor: noise, bias and drift,
-/// resolution, latency, dropouts), `foot_wrenches` (the measured corners' sums, in the soles'
-/// frames), `zmp` (the measured forces' centre of pressure, as the robot computes it; where
-/// they carry no weight the plant's stays) and `stamps[SENSOR_FEET]` (the newest corner's
-/// sample); counts `sole_dropouts`. Draws six normals and one uniform per corner a step, three
-/// normals per corner at reset.
+/// When the feet are measured at the corners (`feet = "corners"`), writes `contact_forces`
+/// (each corner a three-axis force sensor: noise, bias and drift, resolution, latency,
+/// dropouts), `foot_wrenches` (the measured corners' sums, in the soles' frames), `zmp` (the
+/// measured forces' centre of pressure, as the robot computes it; where they carry no weight
+/// the plant's stays) and `stamps[SENSOR_FEET]` (the newest corner's sample); counts
+/// `sole_dropouts`. Draws six normals and one uniform per corner a step, three normals per
+/// corner at reset however the feet are measured (the IMU's draws after them do not depend on
+/// it).
 pub(super) struct SoleCorners {
     settings: ForceSensorConfig,
+    /// The feet are measured at the corners.
+    measured: bool,
     corners: [ForceChannel; N_CONTACTS],
     stamp: f64,
+    dropouts: u64,
+}
+
+impl SoleCorners {
+    /// The corners' sensors with `settings`; `measured`: the feet are measured at them.
+    pub(super) fn new(settings: &ForceSensorConfig, measured: bool) -> Self {
+        Self {
+            settings: *settings,
+            measured,
+            corners: std::array::from_fn(|_| ForceChannel::new(settings)),
+            stamp: 0.0,
+            dropouts: 0,
+        }
+    }
 }
 
 impl SensorModel for SoleCorners {
-    type Settings = ForceSensorConfig;
-
-    fn new(settings: &ForceSensorConfig) -> Self {
-        Self {
-            settings: *settings,
-            corners: std::array::from_fn(|_| ForceChannel::new(settings)),
-            stamp: 0.0,
-        }
+    fn invalid(&self) -> Option<(String, String)> {
+        self.settings.invalid("soles")
     }
 
     fn reset(&mut self, rng: &mut ChaCha8Rng) {
@@ -38,15 +50,13 @@ impl SensorModel for SoleCorners {
             corner.reset(&self.settings, rng);
         }
         self.stamp = 0.0;
+        self.dropouts = 0;
     }
 
-    fn apply(
-        &mut self,
-        truth: &Truth,
-        m: &mut StateMsg,
-        rng: &mut ChaCha8Rng,
-        counts: &mut SensorCounts,
-    ) {
+    fn apply(&mut self, truth: &Truth, m: &mut StateMsg, rng: &mut ChaCha8Rng) {
+        if !self.measured {
+            return;
+        }
         let s = &self.settings;
         let mut lost = 0;
         for (ch, f) in self.corners.iter_mut().zip(m.contact_forces.iter_mut()) {
@@ -54,7 +64,7 @@ impl SensorModel for SoleCorners {
                 lost += 1;
             }
         }
-        counts.sole_dropouts += lost;
+        self.dropouts += lost;
         // The feet's stamp is the newest sample's: a corner lost holds its previous one.
         if lost < N_CONTACTS as u64 {
             self.stamp = truth.stamp(s.latency);
@@ -64,6 +74,10 @@ impl SensorModel for SoleCorners {
         if let Some(cop) = corners_cop(&m.contact_forces, truth.contact_points) {
             m.zmp = cop;
         }
+    }
+
+    fn counts(&self, report: &mut dyn FnMut(&'static str, u64)) {
+        report("sole_dropouts", self.dropouts);
     }
 }
 

@@ -53,7 +53,7 @@ fn cfg() -> SensorsConfig {
             latency: 0,
             dropout: 0.0,
         },
-        motor_torques: crate::sim::robot_sensing::MotorTorqueConfig {
+        motor_torques: MotorTorqueConfig {
             noise: 0.0,
             friction: 0.0,
             friction_velocity: 0.05,
@@ -179,7 +179,7 @@ fn dropouts_hold_and_a_seed_reproduces() {
             s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
             out.push(m.hand_force[0].to_bits());
         }
-        (out, s.counts.wrist_dropouts)
+        (out, s.counts().get("wrist_dropouts").unwrap())
     };
     let (a, lost) = run(&c);
     assert!((300..500).contains(&lost), "{lost} of 2000 lost at p = 0.2");
@@ -383,7 +383,7 @@ fn a_six_axis_foot_sensor_measures_the_wrench() {
         "{:?}",
         m.zmp
     );
-    assert_eq!(s.counts.foot_ft_dropouts, 0);
+    assert_eq!(s.counts().get("foot_ft_dropouts"), Some(0));
 }
 
 /// An IMU in the head of the embedded robot at home, its torso pitched by 0.2 rad (neck
@@ -419,8 +419,11 @@ fn a_mounted_imu_reads_its_own_frame() {
     (m.nq, m.nv) = (model.nq as u32 - 1, model.nv as u32);
     s.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
     assert!(m.imu_orientation.iter().all(|x| x.is_nan()));
-    assert_eq!(s.counts.imu_mount_failures, 1);
+    assert_eq!(s.counts().get("imu_mount_failures"), Some(1));
 }
+
+/// A setting to spoil, the key and the message that name it.
+type Invalid = (fn(&mut SensorsConfig), &'static str, &'static str);
 
 /// A setting out of range is named by its key.
 #[test]
@@ -435,6 +438,39 @@ fn an_invalid_setting_is_named() {
     let mut c = cfg();
     c.soles.latency = MAX_LATENCY + 1;
     assert_eq!(c.invalid().unwrap().0, "soles.latency");
+    // Each model's own keys and messages, as the configuration's errors say them.
+    let cases: [Invalid; 5] = [
+        (
+            |c| c.encoders.bits = 40,
+            "encoders.bits",
+            "at most 32, got 40",
+        ),
+        (
+            |c| c.wrist.noise = -0.5,
+            "wrist.noise",
+            "must be ≥ 0, got -0.5",
+        ),
+        (
+            |c| c.motor_torques.friction_velocity = 0.0,
+            "motor_torques.friction_velocity",
+            "must be > 0, got 0",
+        ),
+        (
+            |c| c.motor_torques.latency = MAX_DELAY + 1,
+            "motor_torques.latency",
+            "at most 8 steps, got 9",
+        ),
+        (
+            |c| c.imu.latency = 65,
+            "imu.latency",
+            "at most 64 steps, got 65",
+        ),
+    ];
+    for (set, key, message) in cases {
+        let mut c = cfg();
+        set(&mut c);
+        assert_eq!(c.invalid(), Some((key.into(), message.into())));
+    }
 }
 
 /// A robot does not measure its base: without `mocap` the base is NaN and the flag says so;
@@ -484,5 +520,99 @@ fn the_gyro_bias_walks_over_time_not_samples() {
             (s - 0.01).abs() < 0.0015,
             "every step {one}, every second {two}"
         );
+    }
+}
+
+/// The counters, each model's by name, in the summary's keys and order (`sim.json`'s
+/// `sensor_counts`): wrist, corners, six-axis feet and IMU dropouts, mounted IMU failures.
+#[test]
+fn the_counters_keep_their_names() {
+    let mut c = cfg();
+    (c.wrist.dropout, c.soles.dropout, c.imu.dropout) = (0.5, 0.5, 0.5);
+    let mut s = Sensors::new(&c, 9.81, None);
+    for k in 0..100 {
+        s.apply(&mut state(k, [0.0; 3]), 1e-3, &[[0.0; 3]; N_CONTACTS]);
+    }
+    let counts = s.counts();
+    let names: Vec<_> = counts.names().collect();
+    assert_eq!(
+        names,
+        [
+            "wrist_dropouts",
+            "sole_dropouts",
+            "foot_ft_dropouts",
+            "imu_dropouts",
+            "imu_mount_failures"
+        ]
+    );
+    let json = serde_json::to_value(&counts).unwrap();
+    assert_eq!(json.as_object().unwrap().len(), 5);
+    // Every sample but the first may be lost; each corner is a sensor.
+    for (name, samples) in [
+        ("wrist_dropouts", 99),
+        ("sole_dropouts", 99 * N_CONTACTS as u64),
+        ("imu_dropouts", 99),
+    ] {
+        let n = json[name].as_u64().unwrap();
+        let share = n as f64 / samples as f64;
+        assert!(
+            (0.35..0.65).contains(&share),
+            "{name}: {n} of {samples} at p = 0.5"
+        );
+        assert_eq!(counts.get(name), Some(n));
+    }
+    assert_eq!(json["foot_ft_dropouts"], 0);
+}
+
+/// A robot's torque estimates and missing sensors in the declared list read what they read as
+/// a step of their own after the applied torques (the bus plant's form): the same state, bit
+/// for bit, seed for seed.
+#[test]
+fn the_robot_s_models_in_the_list_are_the_separate_step() {
+    use crate::robot::{FootSensors, SensorSpec};
+    let mut c = cfg();
+    c.motor_torques = MotorTorqueConfig {
+        noise: 0.01,
+        friction: 0.02,
+        viscous: 0.1,
+        latency: 2,
+        ..c.motor_torques
+    };
+    let spec = SensorSpec {
+        feet: Some(FootSensors::None),
+        wrist: false,
+        joint_torques: true,
+    };
+    let effort = vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 30.0, 50.0, 20.0];
+    let robot = RobotSensors {
+        spec,
+        effort: effort.clone(),
+    };
+    let mut listed = Sensors::with_robot(&c, 9.81, None, robot);
+    let mut sensors = Sensors::new(&c, 9.81, None);
+    let mut step = RobotSensing::new(spec, true, c.motor_torques, effort, c.seed);
+    for k in 0..50 {
+        let mut m = state(k, [1.0, 2.0, 3.0]);
+        m.v[6..9].copy_from_slice(&[0.3, -0.2, 1.0]);
+        let tau = [k as f64, -2.0, 0.5];
+        let mut a = m.clone();
+        crate::sim::process::put_applied_torques(&mut a, &tau);
+        listed.apply(&mut a, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+        step.take_truth(&m);
+        sensors.apply(&mut m, 1e-3, &[[0.0; 3]; N_CONTACTS]);
+        crate::sim::process::put_applied_torques(&mut m, &tau);
+        step.apply(&mut m);
+        let bits = |m: &StateMsg| {
+            let mut b: Vec<u64> = m.joint_torques.iter().map(|x| x.to_bits()).collect();
+            b.extend(
+                m.v.iter()
+                    .chain(&m.hand_force)
+                    .chain(&m.zmp)
+                    .map(|x| x.to_bits()),
+            );
+            b
+        };
+        assert_eq!(bits(&a), bits(&m), "step {k}");
+        assert!(a.joint_torques[6].is_finite() && a.hand_force[0].is_nan());
     }
 }
