@@ -130,6 +130,28 @@ impl Record {
         self.iter().map(|(c, _)| c).collect()
     }
 
+    /// The CSV header these columns make: their names, comma-separated, and a newline.
+    pub fn write_csv_header(&self, w: &mut impl std::io::Write) -> std::io::Result<()> {
+        for (k, (c, _)) in self.iter().enumerate() {
+            if k > 0 {
+                w.write_all(b",")?;
+            }
+            w.write_all(c.name.as_bytes())?;
+        }
+        writeln!(w)
+    }
+
+    /// The CSV row of these values: each in its column's format, comma-separated, and a newline.
+    pub fn write_csv_row(&self, w: &mut impl std::io::Write) -> std::io::Result<()> {
+        for (k, (c, v)) in self.iter().enumerate() {
+            if k > 0 {
+                w.write_all(b",")?;
+            }
+            c.write(w, v)?;
+        }
+        writeln!(w)
+    }
+
     /// The value of the column named `name` (tests, summaries).
     pub fn get(&self, name: &str) -> Option<f64> {
         self.iter().find(|(c, _)| c.name == name).map(|(_, v)| v)

@@ -211,8 +211,7 @@ fn a_parts_bad_settings_are_refused_at_load_naming_the_key_and_layer() {
     );
     let defaults = Config::default_layers().expect("layers");
     let config = defaults.build().expect("defaults");
-    upc::control::parts::check(&config, &defaults)
-        .expect("the defaults pass every part's check");
+    upc::control::parts::check(&config, &defaults).expect("the defaults pass every part's check");
 }
 
 /// A part's `Default` is its table of `config/default.toml`: the one home of its defaults.

@@ -108,7 +108,7 @@ impl ControlLogger {
                                 .map(|(c, _)| c.name)
                                 .eq(columns.iter().map(|c| c.name));
                             if fits {
-                                let _ = write_csv(w, &t.record);
+                                let _ = t.record.write_csv_row(w);
                             } else {
                                 misfits.fetch_add(1, Ordering::Relaxed);
                             }
@@ -187,16 +187,6 @@ impl Drop for ControlLogger {
 }
 
 /// One CSV row: each value in its column's format.
-fn write_csv(w: &mut impl Write, r: &Record) -> std::io::Result<()> {
-    for (k, (c, v)) in r.iter().enumerate() {
-        if k > 0 {
-            w.write_all(b",")?;
-        }
-        c.write(w, v)?;
-    }
-    writeln!(w)
-}
-
 fn send_blueprint(rec: &rerun::RecordingStream) {
     let blueprint = Blueprint::new(Horizontal::new([
         Spatial3DView::new("3D").with_origin("/").into(),

@@ -42,15 +42,15 @@ pub mod tick;
 pub mod tick_record;
 pub mod timing;
 
-pub use parts::com_observer::{ComObserver, ComObserverSettings};
 pub use core::ControllerCore;
-pub use parts::forecast_correction::{
-    CorrectionCounts, CorrectionEstimate, CorrectionSettings, ForecastCorrector,
-};
 pub use forecast_window::{ForecastRejection, ForecastWindow};
 pub use frame::TickFrame;
 pub use gain_thread::{GainHandoff, GainSnapshot, StampedSchedule};
 pub use part::{ControllerPart, PartKind, PartSetup};
+pub use parts::com_observer::{ComObserver, ComObserverSettings};
+pub use parts::forecast_correction::{
+    CorrectionCounts, CorrectionEstimate, CorrectionSettings, ForecastCorrector,
+};
 pub use summary::CoreInfo;
 pub use tick::{Stage, TickError, TickInputs};
 pub use tick_record::TickRecord;

@@ -26,10 +26,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use super::contract::read_state;
-pub use super::parts::forecast_correction::CorrectionSummary;
 use super::forecast_intake::ForecastIntake;
 use super::gain_thread::GainSolver;
 use super::logger::{ControlLogger, TickLog};
+pub use super::parts::forecast_correction::CorrectionSummary;
 use super::plant_link::{LinkTimeouts, PlantLink, Verdict};
 use super::run_metrics::RunMetrics;
 use super::summary::LoopEvents;

@@ -30,9 +30,8 @@ use super::process::{
     put_applied_torques, sensors_of,
 };
 use super::record::Recorder;
-use super::robot_sensing::RobotSensing;
 use super::scene::DoorDrive;
-use super::sensors::{ImuMount, Sensing, Sensors};
+use super::sensors::{ImuMount, RobotSensors, Sensors};
 use crate::bus::BusConfig;
 use crate::bus::dds::{DdsError, Inbox, Outbox, participant};
 use crate::bus::lab::{LAB_STATE_TOPIC, LabState};
@@ -180,7 +179,6 @@ struct BusRobot<'a, P> {
     harness: Supervisor,
     sensors: Sensors,
     /// What the robot measures and its drives' torque estimates (on `realistic`).
-    robot_sensing: RobotSensing,
     info: PlantInfo,
     push_frame: Option<usize>,
     /// Publish a state every this many physics steps.
@@ -222,20 +220,16 @@ impl<'a, P: Physics> BusRobot<'a, P> {
             cfg.process.safe_damping,
             cfg.dt,
         )?;
-        let realistic = cfg.sensors.sensing == Sensing::Realistic;
-        let robot_sensing = RobotSensing::new(
-            opts.robot.description.sensors,
-            realistic,
-            cfg.sensors.motor_torques,
-            world.robot().effort_limits(),
-            cfg.sensors.seed,
-        );
-        let sensors = Sensors::new(
+        let sensors = Sensors::with_robot(
             &sensors_of(cfg, &opts.robot),
             -world.robot().gravity.z,
             opts.robot
                 .imu_frame
                 .map(|f| ImuMount::new(&opts.robot.model, f)),
+            RobotSensors {
+                spec: opts.robot.description.sensors,
+                effort: world.robot().effort_limits(),
+            },
         );
         let push_frame = push_frame(cfg, &opts.robot)?;
         let recorder = match &opts.rrd {
@@ -281,7 +275,6 @@ impl<'a, P: Physics> BusRobot<'a, P> {
             map,
             harness,
             sensors,
-            robot_sensing,
             push_frame,
             every,
             tau: DVector::zeros(n),
@@ -326,12 +319,10 @@ impl<'a, P: Physics> BusRobot<'a, P> {
         // The models' step is the plant's (their latencies and the accelerometer's difference
         // count plant steps); they are sampled every `every` of them.
         let dt = self.opts.sim.dt;
-        self.robot_sensing.take_truth(&self.msg);
-        self.sensors.apply(&mut self.msg, dt, &self.points);
         // The torques applied over the last step: what the drives' estimates read (MT-1 on
         // `realistic`).
         put_applied_torques(&mut self.msg, &self.applied);
-        self.robot_sensing.apply(&mut self.msg);
+        self.sensors.apply(&mut self.msg, dt, &self.points);
         let state = low_state(&self.msg, &self.map, bus.sim.mode_machine, t);
         self.states.write(state).map_err(dds)?;
         self.summary.states += 1;

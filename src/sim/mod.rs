@@ -25,7 +25,6 @@ pub mod mujoco;
 pub mod physics;
 pub mod process;
 pub mod record;
-pub mod robot_sensing;
 pub mod scene;
 pub mod sensors;
 pub mod truth_csv;

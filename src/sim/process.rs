@@ -42,7 +42,7 @@ use super::physics::{Engine, Physics, SimError, StepReport};
 use super::record::{Recorder, RecorderStats};
 use super::scene::{DoorDrive, default_scene};
 use super::sensors::{FootSensing, ImuMount, RobotSensors, SensorCounts, Sensors, SensorsConfig};
-use super::truth_csv::{truth_record, write_header, write_truth};
+use super::truth_csv::{truth_record, write_truth};
 use crate::plant::{CommandGate, CommandOrigin, CommandStats, PlantInfo};
 use crate::robot::{FootSensors, Robot};
 
@@ -404,7 +404,8 @@ fn open_truth_csv(
         .map_err(|e| ProcessError::Setup(format!("ground-truth CSV {}: {e}", p.display())))?;
     let mut w = std::io::BufWriter::new(file);
     let columns = truth_record(world, world.last_report(), [0.0; 2], [0.0; 3]);
-    write_header(&mut w, &columns)
+    columns
+        .write_csv_header(&mut w)
         .map_err(|e| ProcessError::Setup(format!("ground-truth CSV: {e}")))?;
     Ok(Some(w))
 }

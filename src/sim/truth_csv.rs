@@ -81,29 +81,6 @@ fn put_feet(r: &mut Record, world: &impl Physics) {
     r.put(col!(fixed("lfoot_fz", 3)), load[0]);
     r.put(col!(fixed("rfoot_fz", 3)), load[1]);
 }
-
-/// The header: the record's column names.
-pub fn write_header(w: &mut impl Write, r: &Record) -> std::io::Result<()> {
-    for (k, (c, _)) in r.iter().enumerate() {
-        if k > 0 {
-            w.write_all(b",")?;
-        }
-        w.write_all(c.name.as_bytes())?;
-    }
-    writeln!(w)
-}
-
-/// One row: each value in its column's format.
-pub fn write_row(w: &mut impl Write, r: &Record) -> std::io::Result<()> {
-    for (k, (c, v)) in r.iter().enumerate() {
-        if k > 0 {
-            w.write_all(b",")?;
-        }
-        c.write(w, v)?;
-    }
-    writeln!(w)
-}
-
 /// The row of the ground truth after the step `rep` of `world` ([`truth_record`]), with ZMP
 /// `zmp` and hand force `hand`.
 pub fn write_truth(
@@ -113,7 +90,7 @@ pub fn write_truth(
     zmp: [f64; 2],
     hand: [f64; 3],
 ) -> std::io::Result<()> {
-    write_row(w, &truth_record(world, rep, zmp, hand))
+    truth_record(world, rep, zmp, hand).write_csv_row(w)
 }
 
 #[cfg(test)]
@@ -135,7 +112,7 @@ mod tests {
         };
         let r = truth_record(&world, &rep, [0.01, 0.02], [1.0, -2.0, 3.0]);
         let mut header = Vec::new();
-        write_header(&mut header, &r).unwrap();
+        r.write_csv_header(&mut header).unwrap();
         assert_eq!(
             String::from_utf8(header).unwrap(),
             "t,com_x,com_y,com_z,zmp_x,zmp_y,hand_fx,hand_fy,hand_fz,door_angle,door_torque,\
@@ -144,7 +121,7 @@ mod tests {
              rfoot_y,lfoot_fz,rfoot_fz\n"
         );
         let mut row = Vec::new();
-        write_row(&mut row, &r).unwrap();
+        r.write_csv_row(&mut row).unwrap();
         let row = String::from_utf8(row).unwrap();
         let cells: Vec<&str> = row.trim_end().split(',').collect();
         assert_eq!(cells.len(), 30, "{row}");

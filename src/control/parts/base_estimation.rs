@@ -3,10 +3,10 @@
 //! configuration and velocity is estimated from the IMU, the joints and the foot wrenches, and
 //! the measured centre of pressure is the foot wrenches' at the estimated soles.
 
+use crate::col;
 use crate::control::frame::TickFrame;
 use crate::control::part::{BuildError, ControllerPart, PartKind, PartSetup};
 use crate::control::tick::{Stage, TickError, TickInputs};
-use crate::col;
 use crate::estimation::{BaseEstimate, BaseEstimator, EstimatorMode, EstimatorSettings};
 use crate::record::Record;
 

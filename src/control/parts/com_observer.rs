@@ -11,11 +11,11 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::col;
+use crate::config::ControllerKind;
 use crate::control::frame::TickFrame;
 use crate::control::part::{BuildError, ControllerPart, PartKind, PartSetup};
 use crate::control::tick::{Stage, TickError, TickInputs};
-use crate::col;
-use crate::config::ControllerKind;
 use crate::record::Record;
 
 /// The observer's state, both horizontal axes.

@@ -35,11 +35,11 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::col;
+use crate::config::ControllerKind;
 use crate::control::frame::{MeasuredPrediction, TickFrame};
 use crate::control::part::{BuildError, ControllerPart, PartKind, PartSetup};
 use crate::control::tick::{Stage, TickError, TickInputs};
-use crate::col;
-use crate::config::ControllerKind;
 use crate::preview::CapturePoint;
 use crate::record::Record;
 
@@ -446,7 +446,7 @@ impl ControllerPart for Guard {
 }
 
 /// `[controller.viability]`: the capture-point guard on unconfirmed forecasts
-/// (`control::viability`).
+/// (`control::parts::viability`).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct ViabilitySettings {

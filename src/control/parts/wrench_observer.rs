@@ -10,10 +10,10 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::col;
 use crate::control::frame::{EstimatedForce, TickFrame};
 use crate::control::part::{BuildError, ControllerPart, PartKind, PartSetup};
 use crate::control::tick::{Stage, TickError, TickInputs};
-use crate::col;
 use crate::estimation::wrench_observer::{
     ContactWrenches, DriveFriction, WrenchObserver, WrenchObserverGains,
 };

@@ -244,7 +244,7 @@ fn norm(v: [f64; 3]) -> f64 {
 }
 
 /// `[controller.wrist_tare]`: the wrist sensor's offset, taken while the hand is unloaded
-/// (`control::wrist_tare`).
+/// (`control::parts::wrist_tare`).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct WristTareSettings {
@@ -283,8 +283,8 @@ impl crate::config::PartSettings for WristTareSettings {
 
 #[cfg(test)]
 mod tests {
-    use crate::control::contract::task_time;
     use super::*;
+    use crate::control::contract::task_time;
 
     fn tare(duration: f64) -> WristTare {
         WristTare::new(WristTareSettings {

@@ -8,10 +8,10 @@ use rand_distr::{Distribution, StandardNormal};
 use serde::Deserialize;
 
 use super::channel::{Transport, invalid_channel, signed_bias};
-use super::feet::{fill_foot_wrenches, sole};
 use super::model::{SensorModel, Stream, Truth};
 use crate::channels::{N_CONTACTS, SENSOR_FEET, StateMsg};
 use crate::dynamics::{PressureLoad, center_of_pressure};
+use crate::plant::feet::{fill_foot_wrenches, sole};
 
 /// One six-axis force/torque sensor's model (per axis; forces in N, moments in N m).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]

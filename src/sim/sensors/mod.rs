@@ -18,14 +18,14 @@
 //! - [`base`]: unless `mocap`, the floating base is not published: a robot does not measure it;
 //! - what the robot's description's `[sensors]` says it has ([`Sensors::with_robot`]): each
 //!   drive's torque estimate ([`drives`], MT-1), and NaN for the groups it lacks ([`missing`]);
-//!   [`robot`] declares them, and runs them as a step of their own ([`RobotSensing`]).
+//!   [`robot`] declares them.
 //!
 //! The engines give the truth; [`Sensors`], the runtime, holds the declared models as one list
 //! ([`declared`]) and applies, resets, checks and counts them by going through it: a new kind of
 //! sensor is its file and one entry there. The shared pieces: [`model`] (the seam: the trait, the
 //! truth a model reads, the generators, the counters), [`channel`] (bias signs, the fieldbus's
-//! latency and dropouts, the three-axis force channel) and [`feet`] (the soles' geometry and
-//! corner wrenches).
+//! latency and dropouts, the three-axis force channel) and, below the plant, the soles' geometry
+//! and corner wrenches ([`crate::plant::feet`]).
 //!
 //! The sensor block (IMU, foot wrenches, sample times) is filled from the truth on `truth` too,
 //! so an estimator can run on exact sensors.
@@ -38,7 +38,6 @@ mod base;
 mod channel;
 mod drives;
 mod encoders;
-mod feet;
 mod foot_ft;
 mod imu;
 mod missing;
@@ -53,7 +52,9 @@ pub use encoders::EncoderConfig;
 pub use foot_ft::WrenchSensorConfig;
 pub use imu::{ImuConfig, ImuMount};
 pub use model::SensorCounts;
-pub use robot::{RobotSensing, RobotSensors};
+#[cfg(test)]
+use robot::RobotSensing;
+pub use robot::RobotSensors;
 
 use serde::Deserialize;
 
@@ -242,7 +243,7 @@ impl Sensors {
         };
         if !self.realistic {
             publish_imu(m, &truth.imu);
-            feet::fill_foot_wrenches(m, contact_points);
+            crate::plant::feet::fill_foot_wrenches(m, contact_points);
             m.stamps = [truth.time; 4];
             return;
         }

@@ -1,12 +1,14 @@
 //! What a robot has beyond `[sim.sensors]`: its drives' torque estimates ([`super::drives`],
 //! MT-1) and NaN for the groups it lacks ([`super::missing`]). Declared at the end of the
-//! runtime's list ([`super::Sensors::with_robot`]), and as a step of their own after the
-//! applied torques ([`RobotSensing`]: the form the bus plant, `crate::bus::sim_robot`, calls),
-//! with the same draws.
+//! runtime's list ([`super::Sensors::with_robot`]); for the tests, also as a step of their own
+//! after the applied torques (`RobotSensing`), with the same draws.
 
 use super::drives::{DriveTorques, MotorTorqueConfig};
 use super::missing::MissingSensors;
-use super::model::{Model, Streams, Truth};
+use super::model::Model;
+#[cfg(test)]
+use super::model::{Streams, Truth};
+#[cfg(test)]
 use crate::channels::{MAX_DOF, StateMsg};
 use crate::robot::SensorSpec;
 
@@ -36,7 +38,9 @@ pub(super) fn robot_models(
     ]
 }
 
-/// What the robot measures and its drives' torque estimates, on `realistic` sensing.
+/// What the robot measures and its drives' torque estimates, on `realistic` sensing (the tests'
+/// form: MT-1 alone, and the list's equivalence).
+#[cfg(test)]
 pub struct RobotSensing {
     realistic: bool,
     streams: Streams,
@@ -45,6 +49,7 @@ pub struct RobotSensing {
     velocity: [f64; MAX_DOF],
 }
 
+#[cfg(test)]
 impl RobotSensing {
     /// For a robot measuring `spec`, on `realistic` sensing or not, whose velocity coordinates
     /// have the effort limits `effort`; `seed`: the run's.

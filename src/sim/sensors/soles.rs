@@ -5,10 +5,10 @@ use nalgebra::Vector3;
 use rand_chacha::ChaCha8Rng;
 
 use super::channel::{ForceChannel, ForceSensorConfig};
-use super::feet::fill_foot_wrenches;
 use super::model::{SensorModel, Truth};
 use crate::channels::{N_CONTACTS, SENSOR_FEET, StateMsg};
 use crate::dynamics::{PressureLoad, center_of_pressure};
+use crate::plant::feet::fill_foot_wrenches;
 
 /// When the feet are measured at the corners (`feet = "corners"`), writes `contact_forces`
 /// (each corner a three-axis force sensor: noise, bias and drift, resolution, latency,

@@ -2,11 +2,11 @@
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
-use super::feet::fill_foot_wrenches;
 use super::*;
 use crate::channels::{
     N_CONTACTS, SENSOR_HAND, SENSOR_IMU, SENSOR_JOINTS, STATE_FLAG_BASE_UNMEASURED,
 };
+use crate::plant::feet::fill_foot_wrenches;
 
 fn cfg() -> SensorsConfig {
     let force = ForceSensorConfig {

@@ -587,7 +587,7 @@ fn a_forecast_of_the_wrong_shape_loses_its_weight_and_regains_it() {
 /// believed, is the blend. The guard's [`keep_easing`] applies it to what [`fill`] leaves.
 #[test]
 fn an_easing_is_kept_from_the_hedge_as_far_as_it_is_believed() {
-    use crate::control::viability::keep_easing;
+    use crate::control::parts::viability::keep_easing;
     let mut corr = ForecastCorrector::new(CorrectionSettings::default(), 0.005, 1e-3, 300.0);
     let mut fc = Forecaster::new();
     fc.tick(0, 0.0, |s| [if s < 0.1 { -120.0 } else { 0.0 }, 0.0, 0.0]);
