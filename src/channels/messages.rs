@@ -237,3 +237,20 @@ macro_rules! zeroed_default {
     )*};
 }
 zeroed_default!(StateMsg, TorqueMsg, ForecastMsg, GroundTruthMsg);
+
+// The forecast windows' rule of the contract: which window is the forecaster's word at a time
+// (its `period`), read alike by the forecaster and the controller.
+
+/// Index of the forecast window that covers simulated time `t` when windows start every
+/// `period` at 0, period, 2·period, …: the forecaster publishes window k at t0 = k·period once
+/// the plant's time reaches it, and a lockstep controller at time `t` waits for window
+/// `window_index(t)`. The 1e-6 absorbs the rounding of a time accumulated in steps.
+pub fn window_index(t: f64, period: f64) -> i64 {
+    (t / period + 1e-6).floor() as i64
+}
+
+/// Whether a window starting at `t0` and promising `period` is the forecaster's word at `t`
+/// (`t` in [t0, t0 + period), with the tolerance of [`window_index`]).
+pub fn window_covers(t0: f64, period: f64, t: f64) -> bool {
+    window_index(t - t0, period) < 1
+}

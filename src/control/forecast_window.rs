@@ -198,9 +198,9 @@ impl ForecastWindow {
     }
 
     /// Whether the window is its forecaster's word at `t`: it promised a period and `t` lies
-    /// within it (see [`crate::forecast::window_covers`]). False without a promise.
+    /// within it (see [`crate::channels::window_covers`]). False without a promise.
     pub fn promised_at(&self, t: f64) -> bool {
-        self.len > 0 && self.period > 0.0 && crate::forecast::window_covers(self.t0, self.period, t)
+        self.len > 0 && self.period > 0.0 && crate::channels::window_covers(self.t0, self.period, t)
     }
 
     /// Whether the window came with a period promise (`ForecastMsg::period` > 0).

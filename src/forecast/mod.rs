@@ -10,7 +10,9 @@ mod shape;
 
 pub use shape::ForecastShape;
 
-use crate::channels::{Bus, ChannelError, ForecastMsg, MAX_FORECAST, ServiceKind, StateMsg};
+use crate::channels::{
+    Bus, ChannelError, ForecastMsg, MAX_FORECAST, ServiceKind, StateMsg, window_index,
+};
 use crate::scenario::{ForceProfile, Scenario};
 
 /// How the forecaster samples and paces its windows.
@@ -52,20 +54,6 @@ impl ForecastSettings {
     pub fn samples(&self) -> usize {
         ((self.window / self.dt).ceil() as usize).clamp(1, MAX_FORECAST)
     }
-}
-
-/// Index of the forecast window that covers simulated time `t` when windows start every
-/// `period` at 0, period, 2·period, …: the forecaster publishes window k at t0 = k·period once
-/// the plant's time reaches it, and a lockstep controller at time `t` waits for window
-/// `window_index(t)`. The 1e-6 absorbs the rounding of a time accumulated in steps.
-pub fn window_index(t: f64, period: f64) -> i64 {
-    (t / period + 1e-6).floor() as i64
-}
-
-/// Whether a window starting at `t0` and promising `period` is the forecaster's word at `t`
-/// (`t` in [t0, t0 + period), with the tolerance of [`window_index`]).
-pub fn window_covers(t0: f64, period: f64, t: f64) -> bool {
-    window_index(t - t0, period) < 1
 }
 
 /// Fill `msg` with the window starting at plant time `t0` of `profile` played from plant time
@@ -117,7 +105,7 @@ struct Current {
 
 /// Publish windows until `stop` is raised, the state stream passes `until`, or IPC fails.
 /// Paced by the plant's time: window k starts at k·period and is published as soon as a state
-/// at or past that time is seen (see [`window_index`]), so its content is a function of the
+/// at or past that time is seen (see [`crate::channels::window_index`]), so its content is a function of the
 /// simulated time only. A new plant run (its session changes) gets a window at once.
 pub fn run(
     bus: &Bus,
