@@ -191,15 +191,15 @@ struct Entry {
     bridge_summary: Option<serde_json::Value>,
     /// The base estimate against the plant's truth (lockstep runs whose base was estimated).
     #[serde(skip_serializing_if = "Option::is_none")]
-    base_estimate_error: Option<upc::estimation::BaseAccuracy>,
+    base_estimate_error: Option<upc::report::BaseAccuracy>,
     /// The hand force, foot loads and CoP the controller had against the plant's truth
     /// (lockstep runs).
     #[serde(skip_serializing_if = "Option::is_none")]
-    wrench_estimate_error: Option<upc::estimation::WrenchAccuracy>,
+    wrench_estimate_error: Option<upc::report::WrenchAccuracy>,
     /// The plant's true CoP against the support the controller had (lockstep runs): the
     /// controller's `min_zmp_margin` is its measured CoP's.
     #[serde(skip_serializing_if = "Option::is_none")]
-    true_cop_margin: Option<upc::estimation::TrueMargin>,
+    true_cop_margin: Option<upc::report::TrueMargin>,
 }
 
 pub fn run(mut args: RunArgs) -> CliResult {
@@ -518,15 +518,15 @@ fn run_one(
         controller_exit,
         failure: None,
         bridge_summary: read("bridge.json").and_then(|t| serde_json::from_str(&t).ok()),
-        base_estimate_error: upc::estimation::base_accuracy(
+        base_estimate_error: upc::report::base_accuracy(
             &dir.join("controller.csv"),
             &dir.join("sim.csv"),
         ),
-        wrench_estimate_error: upc::estimation::wrench_accuracy(
+        wrench_estimate_error: upc::report::wrench_accuracy(
             &dir.join("controller.csv"),
             &dir.join("sim.csv"),
         ),
-        true_cop_margin: upc::estimation::true_margin(
+        true_cop_margin: upc::report::true_margin(
             &dir.join("controller.csv"),
             &dir.join("sim.csv"),
         ),
@@ -1183,7 +1183,7 @@ fn print_table(entries: &[Entry]) {
         // The wrenches, where the controller did not have them exactly (an observer, or
         // force sensors with their errors).
         if let Some(w) = e.wrench_estimate_error.as_ref().filter(|w| {
-            w.hand_source == upc::estimation::HandSource::Observer
+            w.hand_source == upc::report::HandSource::Observer
                 || w.hand_x_push.rms > 1e-3
                 || w.cop_x_standing.rms > 1e-5
         }) {

@@ -5,13 +5,23 @@
 //! - [`series`]: time series behind one trait, from `controller.csv` or the reduced loop;
 //! - [`figures`]: SVG and PNG figures (plotters);
 //! - [`rundir`]: reading a run directory; [`reduced`]: the reduced-model runs;
-//! - [`markdown`]: the report's text.
+//! - [`markdown`]: the report's text;
+//! - [`csv`]: the one reader of the runs' CSV logs.
+//!
+//! And the after-run analysis of a lockstep run's two logs (`controller.csv` against the
+//! plant's truth in `sim.csv`), which `upc run` writes to `run.json`: the base estimate's error
+//! ([`base_accuracy`]), the contact and hand wrenches' ([`wrench_accuracy`]) and the true
+//! centre of pressure's margin ([`true_margin`]).
 
+mod base_accuracy;
+pub mod csv;
 pub mod figures;
 pub mod markdown;
 pub mod reduced;
 pub mod rundir;
 pub mod series;
+mod true_margin;
+mod wrench_accuracy;
 
 use std::fmt::Write;
 use std::path::PathBuf;
@@ -20,9 +30,12 @@ use crate::config::ConfigError;
 use crate::preview::PreviewError;
 use crate::robot::Robot;
 use crate::scenario::Scenario;
+pub use base_accuracy::{BaseAccuracy, base_accuracy};
 pub use reduced::ConfigLayers;
 use rundir::RunDir;
 use series::{Series, SeriesSource};
+pub use true_margin::{TrueMargin, true_margin};
+pub use wrench_accuracy::{ErrorStats, HandSource, WrenchAccuracy, wrench_accuracy};
 
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {
