@@ -273,20 +273,9 @@ pub fn draft(package: Option<&str>, path: &Path, name: &str) -> Result<Draft, Ro
         Some(p) => packages::package_root(p).map_err(urdf_err)?.join(path),
         None => path.to_path_buf(),
     };
-    let text =
-        std::fs::read_to_string(&file).map_err(|e| urdf_err(format!("{}: {e}", file.display())))?;
-    let mut urdf = crate::dynamics::parse_urdf(&text)?;
     let urdf_dir = file.parent();
     let mut notes = Vec::new();
-    let root_rpy = upright_turn(&urdf, urdf_dir)?;
-    if let Some(rpy) = root_rpy {
-        turn_root(&mut urdf, rpy)?;
-        notes.push(format!(
-            "the URDF's z axis is not up at the zero posture: its root link is turned by \
-             [urdf] root_rpy = {}, which stands its feet under it",
-            list3(rpy)
-        ));
-    }
+    let (urdf, root_rpy) = read_upright(&file, urdf_err, &mut notes)?;
     let tree = Tree::new(&urdf).map_err(urdf_err)?;
     let model = Model::from_urdf_robot_locked(&urdf, BaseJoint::Floating, &HashMap::new())?;
     let pose = Pose::zero(&model)?;
@@ -295,90 +284,202 @@ pub fn draft(package: Option<&str>, path: &Path, name: &str) -> Result<Draft, Ro
     // The robot's frame in the base's: x its front (the toes), y its left.
     let axes = robot_axes(&forward);
     let to_robot = axes.transpose();
-    let [a, b] = feet_found;
-    let (left, right) = if (to_robot * a.centroid).y > 0.0 {
-        (a, b)
-    } else {
-        (b, a)
-    };
+    let [left, right] = left_and_right(feet_found, &to_robot);
     let feet = [
         sole_for(&left, "left", &tree, &pose, &axes, &mut notes)?,
         sole_for(&right, "right", &tree, &pose, &axes, &mut notes)?,
     ];
+    let arms = Arms::find(&urdf, &tree, &pose, &to_robot, [&left, &right], &mut notes)?;
+    let mut locked = finger_joints(&urdf, &tree, &model, &arms, &mut notes);
+    let reduced = lock_inert_joints(&urdf, &model, &mut locked, &mut notes)?;
+    let armature = massless_joints(&reduced, &locked, &mut notes);
+    let inertia_floor = point_masses(&reduced, &mut notes);
+    let imu = imu_frame(&model, &tree);
+    let (crouch, hand_target) = stance(&tree, &pose, &to_robot, [&left, &right], &arms)?;
+    Ok(Draft {
+        name: name.to_owned(),
+        package: package.map(str::to_owned),
+        path: if package.is_some() {
+            path.to_path_buf()
+        } else {
+            std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf())
+        },
+        feet,
+        hand: arms.hand,
+        chain_root: arms.chain_root,
+        imu,
+        locked,
+        crouch,
+        hand_target,
+        inertia_floor,
+        root_rpy,
+        armature,
+        notes,
+    })
+}
 
-    // The arms: the upper body is what the legs are not.
-    let pelvis = tree.common(&left.link, &right.link).to_owned();
-    let mut legs = Vec::new();
-    for f in [&left, &right] {
-        let up = tree.ancestors(&f.link);
-        if let Some(k) = up.iter().position(|l| *l == pelvis)
-            && k > 0
-        {
-            legs.extend(tree.subtree(up[k - 1]));
-        }
+/// The URDF in `file`, its root link turned upright when its z is not up (the turn, as
+/// `[urdf] root_rpy`, and a note).
+fn read_upright(
+    file: &Path,
+    urdf_err: impl Fn(String) -> RobotError,
+    notes: &mut Vec<String>,
+) -> Result<(urdf_rs::Robot, Option<[f64; 3]>), RobotError> {
+    let text =
+        std::fs::read_to_string(file).map_err(|e| urdf_err(format!("{}: {e}", file.display())))?;
+    let mut urdf = crate::dynamics::parse_urdf(&text)?;
+    let root_rpy = upright_turn(&urdf, file.parent())?;
+    if let Some(rpy) = root_rpy {
+        turn_root(&mut urdf, rpy)?;
+        notes.push(format!(
+            "the URDF's z axis is not up at the zero posture: its root link is turned by \
+             [urdf] root_rpy = {}, which stands its feet under it",
+            list3(rpy)
+        ));
     }
-    let root_at = pose.link(&tree.root)?.trans;
-    let arm_tip = |side: f64| -> Result<Option<String>, RobotError> {
-        let mut best: Option<(usize, f64, String)> = None;
-        for l in &urdf.links {
-            if legs.contains(&l.name) {
-                continue;
-            }
-            let y = (to_robot * (pose.link(&l.name)?.trans - root_at)).y * side;
-            if y < 0.02 {
-                continue;
-            }
-            let d = tree.depth(&l.name);
-            if best
-                .as_ref()
-                .is_none_or(|(bd, by, _)| d > *bd || (d == *bd && y > *by))
+    Ok((urdf, root_rpy))
+}
+
+/// The two feet as the robot's left and right (`to_robot`: the base's frame to the robot's).
+fn left_and_right(feet: [FootFound; 2], to_robot: &Matrix3<f64>) -> [FootFound; 2] {
+    let [a, b] = feet;
+    if (to_robot * a.centroid).y > 0.0 {
+        [a, b]
+    } else {
+        [b, a]
+    }
+}
+
+/// The arms found on the upper body: the right one's hand and the chain both share.
+struct Arms {
+    /// The link both arms share (the pelvis when there is one arm).
+    chain_root: String,
+    /// Where each arm's chain branches into fingers: the right's, the left's.
+    right_palm: String,
+    left_palm: Option<String>,
+    /// The right hand's frame.
+    hand: String,
+}
+
+impl Arms {
+    /// The arms: the upper body is what the legs (below `feet`) are not; on each side the arm
+    /// is the chain that goes deepest.
+    fn find(
+        urdf: &urdf_rs::Robot,
+        tree: &Tree,
+        pose: &Pose,
+        to_robot: &Matrix3<f64>,
+        feet: [&FootFound; 2],
+        notes: &mut Vec<String>,
+    ) -> Result<Arms, RobotError> {
+        let [left, right] = feet;
+        let pelvis = tree.common(&left.link, &right.link).to_owned();
+        let mut legs = Vec::new();
+        for f in feet {
+            let up = tree.ancestors(&f.link);
+            if let Some(k) = up.iter().position(|l| *l == pelvis)
+                && k > 0
             {
-                best = Some((d, y, l.name.clone()));
+                legs.extend(tree.subtree(up[k - 1]));
             }
         }
-        Ok(best.map(|b| b.2))
-    };
-    let right_tip = arm_tip(-1.0)?.ok_or_else(|| {
-        RobotError::Feet(
-            "no right arm found (no link right of the base above the legs): write [hand] \
-             by hand"
-                .into(),
-        )
-    })?;
-    let left_tip = arm_tip(1.0)?;
-    let chain_root = match &left_tip {
-        Some(l) => tree.common(&right_tip, l).to_owned(),
-        None => {
-            notes.push("no left arm found: the arm's chain starts at the pelvis".into());
-            pelvis.clone()
-        }
-    };
-    let right_palm = palm(&tree, &chain_root, &right_tip);
-    let hand = hand_frame(&tree, &right_palm);
-    let mut locked: Vec<(String, f64)> = Vec::new();
-    let mut palms = vec![right_palm.clone()];
-    if let Some(l) = &left_tip {
-        palms.push(palm(&tree, &chain_root, l));
+        let arm_tip = |side: f64| arm_tip(urdf, tree, pose, to_robot, &legs, side);
+        let right_tip = arm_tip(-1.0)?.ok_or_else(|| {
+            RobotError::Feet(
+                "no right arm found (no link right of the base above the legs): write [hand] \
+                 by hand"
+                    .into(),
+            )
+        })?;
+        let left_tip = arm_tip(1.0)?;
+        let chain_root = match &left_tip {
+            Some(l) => tree.common(&right_tip, l).to_owned(),
+            None => {
+                notes.push("no left arm found: the arm's chain starts at the pelvis".into());
+                pelvis.clone()
+            }
+        };
+        let right_palm = palm(tree, &chain_root, &right_tip);
+        let hand = hand_frame(tree, &right_palm);
+        let left_palm = left_tip.map(|l| palm(tree, &chain_root, &l));
+        Ok(Arms {
+            chain_root,
+            right_palm,
+            left_palm,
+            hand,
+        })
     }
-    let mut fingers = 0;
-    for p in &palms {
+}
+
+/// The end of the arm on the robot's left (`side` 1) or right (−1): of the links off the
+/// `legs` at least 2 cm to that side of the base, the deepest (then the furthest out).
+fn arm_tip(
+    urdf: &urdf_rs::Robot,
+    tree: &Tree,
+    pose: &Pose,
+    to_robot: &Matrix3<f64>,
+    legs: &[String],
+    side: f64,
+) -> Result<Option<String>, RobotError> {
+    let root_at = pose.link(&tree.root)?.trans;
+    let mut best: Option<(usize, f64, String)> = None;
+    for l in &urdf.links {
+        if legs.contains(&l.name) {
+            continue;
+        }
+        let y = (to_robot * (pose.link(&l.name)?.trans - root_at)).y * side;
+        if y < 0.02 {
+            continue;
+        }
+        let d = tree.depth(&l.name);
+        if best
+            .as_ref()
+            .is_none_or(|(bd, by, _)| d > *bd || (d == *bd && y > *by))
+        {
+            best = Some((d, y, l.name.clone()));
+        }
+    }
+    Ok(best.map(|b| b.2))
+}
+
+/// The joints below the hands (fingers), locked at [`lock_value`] (a note says how many).
+fn finger_joints(
+    urdf: &urdf_rs::Robot,
+    tree: &Tree,
+    model: &Model,
+    arms: &Arms,
+    notes: &mut Vec<String>,
+) -> Vec<(String, f64)> {
+    let mut locked: Vec<(String, f64)> = Vec::new();
+    let palms = std::iter::once(&arms.right_palm).chain(&arms.left_palm);
+    for p in palms {
         for l in tree.subtree(p).iter().skip(1) {
             if let Some((_, true)) = tree.parent.get(l)
                 && let Some(j) = urdf.joints.iter().find(|j| &j.child.link == l)
             {
-                locked.push((j.name.clone(), lock_value(&model, &j.name)));
-                fingers += 1;
+                locked.push((j.name.clone(), lock_value(model, &j.name)));
             }
         }
     }
-    if fingers > 0 {
+    if !locked.is_empty() {
         notes.push(format!(
-            "{fingers} joints below the hands (fingers) are locked: the door is held by the hand"
+            "{} joints below the hands (fingers) are locked: the door is held by the hand",
+            locked.len()
         ));
     }
-    // Joints that still move no mass (M singular): locked too.
+    locked
+}
+
+/// The joints that still move no mass with `locked` locked (M singular): locked too. Returns
+/// the model with all of them locked.
+fn lock_inert_joints(
+    urdf: &urdf_rs::Robot,
+    model: &Model,
+    locked: &mut Vec<(String, f64)>,
+    notes: &mut Vec<String>,
+) -> Result<Model, RobotError> {
     let names: HashMap<String, f64> = locked.iter().cloned().collect();
-    let reduced = Model::from_urdf_robot_locked(&urdf, BaseJoint::Floating, &names)?;
+    let reduced = Model::from_urdf_robot_locked(urdf, BaseJoint::Floating, &names)?;
     let inert: Vec<String> = reduced
         .inert_joints()
         .into_iter()
@@ -391,14 +492,21 @@ pub fn draft(package: Option<&str>, path: &Path, name: &str) -> Result<Draft, Ro
             inert.join(", ")
         ));
         for n in inert {
-            let v = lock_value(&model, &n);
+            let v = lock_value(model, &n);
             locked.push((n, v));
         }
     }
+    Ok(reduced)
+}
 
-    // Joints whose body has no mass (a ball joint split into one-axis joints through massless
-    // links): a rotor's inertia keeps M invertible where two of their axes align (gimbal lock,
-    // which a falling robot reaches).
+/// Joints whose body has no mass (a ball joint split into one-axis joints through massless
+/// links), given [`ARMATURE`]: a rotor's inertia keeps M invertible where two of their axes
+/// align (gimbal lock, which a falling robot reaches).
+fn massless_joints(
+    reduced: &Model,
+    locked: &[(String, f64)],
+    notes: &mut Vec<String>,
+) -> Vec<String> {
     let armature: Vec<String> = reduced
         .joints
         .iter()
@@ -414,8 +522,11 @@ pub fn draft(package: Option<&str>, path: &Path, name: &str) -> Result<Draft, Ro
             armature.len()
         ));
     }
+    armature
+}
 
-    // Point masses (MuJoCo refuses them): a floor on their moments.
+/// Point masses (MuJoCo refuses them): `inertia_floor` on their moments, when there are any.
+fn point_masses(reduced: &Model, notes: &mut Vec<String>) -> Option<f64> {
     let points: Vec<String> = reduced
         .joints
         .iter()
@@ -428,7 +539,7 @@ pub fn draft(package: Option<&str>, path: &Path, name: &str) -> Result<Draft, Ro
         })
         .map(|j| j.body.clone())
         .collect();
-    let inertia_floor = (!points.is_empty()).then(|| {
+    (!points.is_empty()).then(|| {
         notes.push(format!(
             "{} links are point masses (no rotational inertia: {}): inertia_floor gives them \
              {INERTIA_FLOOR:e} kg·m² about each axis",
@@ -436,24 +547,37 @@ pub fn draft(package: Option<&str>, path: &Path, name: &str) -> Result<Draft, Ro
             points.join(", ")
         ));
         INERTIA_FLOOR
-    });
+    })
+}
 
-    let imu = model
+/// The IMU: a frame named `*imu*`, the nearest the base.
+fn imu_frame(model: &Model, tree: &Tree) -> Option<String> {
+    model
         .frames
         .iter()
         .filter(|f| f.name.to_ascii_lowercase().contains("imu"))
         .min_by_key(|f| f.parent.map_or(0, |j| tree.depth(&model.joints[j].body)))
-        .map(|f| f.name.clone());
+        .map(|f| f.name.clone())
+}
 
-    // The stance: the base lower by CROUCH of its height, the hand forward of its shoulder.
+/// The stance: the base lower by [`CROUCH`] of its height (the crouch, m), the hand forward
+/// and down of its shoulder (its target from the feet's centre on the ground).
+fn stance(
+    tree: &Tree,
+    pose: &Pose,
+    to_robot: &Matrix3<f64>,
+    [left, right]: [&FootFound; 2],
+    arms: &Arms,
+) -> Result<(f64, [f64; 3]), RobotError> {
+    let root_at = pose.link(&tree.root)?.trans;
     let ground = left.lowest.min(right.lowest);
     let base_height = root_at.z - ground;
     let centre = (left.centroid + right.centroid) / 2.0;
-    let shoulder = first_moving(&tree, &chain_root, &right_palm)
+    let shoulder = first_moving(tree, &arms.chain_root, &arms.right_palm)
         .map(|l| pose.link(l).map(|p| p.trans))
         .transpose()?
         .unwrap_or(root_at);
-    let arm = (pose.link(&hand)?.trans - shoulder).norm();
+    let arm = (pose.link(&arms.hand)?.trans - shoulder).norm();
     let s = to_robot * (shoulder - centre);
     let crouch = round3(CROUCH * base_height);
     let hand_target = [
@@ -461,28 +585,7 @@ pub fn draft(package: Option<&str>, path: &Path, name: &str) -> Result<Draft, Ro
         round3(s.y - HAND_OUT * arm),
         round3(shoulder.z - ground - crouch - HAND_DOWN * arm),
     ];
-
-    let draft = Draft {
-        name: name.to_owned(),
-        package: package.map(str::to_owned),
-        path: if package.is_some() {
-            path.to_path_buf()
-        } else {
-            std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf())
-        },
-        feet,
-        hand,
-        chain_root,
-        imu,
-        locked,
-        crouch,
-        hand_target,
-        inertia_floor,
-        root_rpy,
-        armature,
-        notes,
-    };
-    Ok(draft)
+    Ok((crouch, hand_target))
 }
 
 /// Loads a draft as `upc run` would (solving its stance): its text with the solved posture as
@@ -545,18 +648,70 @@ fn find_feet(
     pose: &Pose,
     notes: &mut Vec<String>,
 ) -> Result<([FootFound; 2], Vector3<f64>), RobotError> {
-    let root = pose.link(&tree.root)?;
-    let base_rot = root.rot;
-    // Links below the base with geometry upc reads: (link, lowest z).
-    let candidates = |visual: bool| -> Result<Vec<(String, f64)>, RobotError> {
+    let mut search = FootSearch {
+        urdf,
+        urdf_dir,
+        tree,
+        pose,
+        visual: false,
+        found: Vec::new(),
+    };
+    search.found = search.candidates()?;
+    let two_legs = |found: &[(String, f64)]| {
+        found
+            .iter()
+            .any(|a| found.iter().any(|b| tree.apart(&a.0, &b.0)))
+    };
+    if !two_legs(&search.found) {
+        // No collision geometry on the legs (a URDF made for drawing): the visual's.
+        search.visual = true;
+        search.found = search.candidates()?;
+        notes.push(
+            "the legs have no collision geometry: the feet and their contacts come from the \
+             visual meshes (listed as points below)"
+                .into(),
+        );
+    }
+    let a = search.pick(None)?;
+    let b = search.pick(Some(&a.link))?;
+    if (a.lowest - b.lowest).abs() > 0.02 {
+        return Err(RobotError::Feet(format!(
+            "the feet found ({}, {}) are {:.0} mm apart in height at the zero posture: not a \
+             robot standing straight there; write [feet] by hand",
+            a.link,
+            b.link,
+            (a.lowest - b.lowest).abs() * 1e3
+        )));
+    }
+    let forward = facing(pose, [&a, &b], notes)?;
+    Ok(([a, b], forward))
+}
+
+/// The search for the feet among the links below the base.
+struct FootSearch<'a> {
+    urdf: &'a urdf_rs::Robot,
+    urdf_dir: Option<&'a Path>,
+    tree: &'a Tree,
+    pose: &'a Pose<'a>,
+    /// Whether the geometry read is the visual one (the collision one otherwise).
+    visual: bool,
+    /// The candidates: (link, lowest z).
+    found: Vec<(String, f64)>,
+}
+
+impl FootSearch<'_> {
+    /// Links below the base with geometry upc reads: (link, lowest z).
+    fn candidates(&self) -> Result<Vec<(String, f64)>, RobotError> {
+        let root = self.pose.link(&self.tree.root)?;
         let mut found = Vec::new();
-        for l in &urdf.links {
-            let at = pose.link(&l.name)?;
+        for l in &self.urdf.links {
+            let at = self.pose.link(&l.name)?;
             if at.trans.z >= root.trans.z {
                 continue;
             }
             // A link whose geometry cannot be read is not a foot upc can stand on.
-            let Ok(c) = feet::geometry_points(urdf, urdf_dir, &l.name, visual) else {
+            let Ok(c) = feet::geometry_points(self.urdf, self.urdf_dir, &l.name, self.visual)
+            else {
                 continue;
             };
             let lowest = c
@@ -568,27 +723,14 @@ fn find_feet(
             found.push((l.name.clone(), lowest));
         }
         Ok(found)
-    };
-    let mut visual = false;
-    let mut found = candidates(false)?;
-    let two_legs = |found: &[(String, f64)]| {
-        found
-            .iter()
-            .any(|a| found.iter().any(|b| tree.apart(&a.0, &b.0)))
-    };
-    if !two_legs(&found) {
-        // No collision geometry on the legs (a URDF made for drawing): the visual's.
-        visual = true;
-        found = candidates(true)?;
-        notes.push(
-            "the legs have no collision geometry: the feet and their contacts come from the \
-             visual meshes (listed as points below)"
-                .into(),
-        );
     }
-    let pick = |other: Option<&str>| -> Result<FootFound, RobotError> {
-        // The other foot is on another leg: no moving joint in common.
-        let side: Vec<&(String, f64)> = found
+
+    /// The foot: of the candidates reaching within [`ON_GROUND`] of the lowest (on another
+    /// leg than `other`, no moving joint in common, when given), the shallowest in the tree.
+    fn pick(&self, other: Option<&str>) -> Result<FootFound, RobotError> {
+        let (tree, pose) = (self.tree, self.pose);
+        let side: Vec<&(String, f64)> = self
+            .found
             .iter()
             .filter(|f| other.is_none_or(|o| tree.apart(&f.0, o)))
             .collect();
@@ -610,8 +752,10 @@ fn find_feet(
                     other.map_or(String::new(), |o| format!(" on another leg than `{o}`"))
                 ))
             })?;
+        let root = pose.link(&tree.root)?;
+        let base_rot = root.rot;
         let at = pose.link(&link)?;
-        let c = feet::geometry_points(urdf, urdf_dir, &link, visual)?;
+        let c = feet::geometry_points(self.urdf, self.urdf_dir, &link, self.visual)?;
         // The support in the base's axes about the link's origin.
         let to_base = SE3::new(base_rot.transpose() * at.rot, Vector3::zeros());
         let support = feet::lowest_four(&c, &to_base, &link)?;
@@ -623,26 +767,23 @@ fn find_feet(
             ankle,
             centroid: origin + centroid_rel,
             lowest: low,
-            geometry: visual.then_some(c),
+            geometry: self.visual.then_some(c),
             link,
         })
-    };
-    let a = pick(None)?;
-    let b = pick(Some(&a.link))?;
-    if (a.lowest - b.lowest).abs() > 0.02 {
-        return Err(RobotError::Feet(format!(
-            "the feet found ({}, {}) are {:.0} mm apart in height at the zero posture: not a \
-             robot standing straight there; write [feet] by hand",
-            a.link,
-            b.link,
-            (a.lowest - b.lowest).abs() * 1e3
-        )));
     }
-    // The knees bend backward; failing a knee, the toes: the support reaches further ahead of
-    // the ankle than behind it.
+}
+
+/// The way the robot faces (a horizontal unit vector in the base's frame): where the knees
+/// bend backward from; failing a knee, the toes: the support reaches further ahead of the
+/// ankle than behind it (a note says so).
+fn facing(
+    pose: &Pose,
+    [a, b]: [&FootFound; 2],
+    notes: &mut Vec<String>,
+) -> Result<Vector3<f64>, RobotError> {
     let knees = [knee_forward(pose, &a.link)?, knee_forward(pose, &b.link)?];
     let ahead = (a.centroid.x - a.ankle.x) + (b.centroid.x - b.ankle.x);
-    let forward = match knees {
+    Ok(match knees {
         [Some(x), Some(y)] if x.dot(&y) > 0.9 => (x + y).normalize(),
         _ => {
             let sign = if ahead < 0.0 { -1.0 } else { 1.0 };
@@ -655,8 +796,7 @@ fn find_feet(
             ));
             Vector3::x() * sign
         }
-    };
-    Ok(([a, b], forward))
+    })
 }
 
 /// The turns [`upright_turn`] tries: the root link's x, −x, y, −y or z pointing down.
@@ -936,6 +1076,19 @@ impl Draft {
     /// The description as TOML, commented, with `home` as its `[home]` table.
     pub fn to_toml(&self, home: &BTreeMap<String, f64>) -> String {
         let mut s = String::new();
+        self.write_header(&mut s);
+        self.write_urdf(&mut s);
+        for (side, f) in ["left", "right"].iter().zip(&self.feet) {
+            write_foot(&mut s, side, f);
+        }
+        self.write_hand_and_imu(&mut s);
+        self.write_locked_and_armature(&mut s);
+        self.write_stance_and_home(&mut s, home);
+        s
+    }
+
+    /// The comments (the notes), the name, the description, `inertia_floor`.
+    fn write_header(&self, s: &mut String) {
         let _ = writeln!(
             s,
             "# Drafted by `upc robot init` from the URDF alone (README, \"Bring your robot\").\n\
@@ -953,6 +1106,10 @@ impl Draft {
         if let Some(f) = self.inertia_floor {
             let _ = writeln!(s, "inertia_floor = {f:e}");
         }
+    }
+
+    /// `[urdf]`: the file, and the root link's turn.
+    fn write_urdf(&self, s: &mut String) {
         let _ = writeln!(s, "\n[urdf]");
         if let Some(p) = &self.package {
             let _ = writeln!(s, "package = {p:?}");
@@ -965,47 +1122,10 @@ impl Draft {
             );
             let _ = writeln!(s, "root_rpy = {}", list3(rpy));
         }
-        for (side, f) in ["left", "right"].iter().zip(&self.feet) {
-            let contacts = if f.corner_frames {
-                "the URDF's corner frames"
-            } else if f.contacts.is_some() {
-                "its visual mesh's lowest face's corners"
-            } else {
-                "its collision geometry's lowest face's corners"
-            };
-            let _ = writeln!(
-                s,
-                "\n# The link reaching lowest on this leg; contacts: {contacts}.\n[feet.{side}]"
-            );
-            let _ = writeln!(s, "frame = {:?}", f.frame);
-            let _ = writeln!(s, "link = {:?}", f.link);
-            match (f.xyz, f.rpy) {
-                (Some(xyz), Some(rpy)) => {
-                    let _ = writeln!(
-                        s,
-                        "origin = {{ xyz = {}, rpy = {} }}",
-                        list3(xyz),
-                        list3(rpy)
-                    );
-                }
-                (None, Some(rpy)) => {
-                    let _ = writeln!(s, "origin = {{ rpy = {} }}", list3(rpy));
-                }
-                _ => {}
-            }
-            match &f.contacts {
-                Some(c) => {
-                    let list: Vec<String> = c.iter().map(|p| list3(*p)).collect();
-                    let _ = writeln!(s, "contacts = [{}]", list.join(", "));
-                }
-                None if f.corner_frames => {
-                    let _ = writeln!(s, "contacts = \"frames\"");
-                }
-                None => {
-                    let _ = writeln!(s, "contacts = \"collision\"");
-                }
-            }
-        }
+    }
+
+    /// `[hand]`, and `[imu]` (or why there is none).
+    fn write_hand_and_imu(&self, s: &mut String) {
         let _ = writeln!(
             s,
             "\n# The right arm's end (where it branches into fingers); its chain from the link \
@@ -1023,6 +1143,10 @@ impl Draft {
                 );
             }
         }
+    }
+
+    /// `[locked]` and `[armature]`, when they list any joint.
+    fn write_locked_and_armature(&self, s: &mut String) {
         if !self.locked.is_empty() {
             let names: Vec<String> = self.locked.iter().map(|(n, _)| format!("{n:?}")).collect();
             let _ = writeln!(
@@ -1042,6 +1166,10 @@ impl Draft {
                 let _ = writeln!(s, "{j:?} = {ARMATURE}");
             }
         }
+    }
+
+    /// `[stance]`, and `[home]`: `home` with the locked joints at their value.
+    fn write_stance_and_home(&self, s: &mut String, home: &BTreeMap<String, f64>) {
         let _ = writeln!(
             s,
             "\n# The standing posture, solved at every load from [home] (soles flat, CoM over \
@@ -1064,6 +1192,48 @@ impl Draft {
         for (k, v) in table {
             let _ = writeln!(s, "{k} = {:.6}", v);
         }
-        s
+    }
+}
+
+/// `[feet.<side>]`: the link, the sole frame, its contacts.
+fn write_foot(s: &mut String, side: &str, f: &DraftFoot) {
+    let contacts = if f.corner_frames {
+        "the URDF's corner frames"
+    } else if f.contacts.is_some() {
+        "its visual mesh's lowest face's corners"
+    } else {
+        "its collision geometry's lowest face's corners"
+    };
+    let _ = writeln!(
+        s,
+        "\n# The link reaching lowest on this leg; contacts: {contacts}.\n[feet.{side}]"
+    );
+    let _ = writeln!(s, "frame = {:?}", f.frame);
+    let _ = writeln!(s, "link = {:?}", f.link);
+    match (f.xyz, f.rpy) {
+        (Some(xyz), Some(rpy)) => {
+            let _ = writeln!(
+                s,
+                "origin = {{ xyz = {}, rpy = {} }}",
+                list3(xyz),
+                list3(rpy)
+            );
+        }
+        (None, Some(rpy)) => {
+            let _ = writeln!(s, "origin = {{ rpy = {} }}", list3(rpy));
+        }
+        _ => {}
+    }
+    match &f.contacts {
+        Some(c) => {
+            let list: Vec<String> = c.iter().map(|p| list3(*p)).collect();
+            let _ = writeln!(s, "contacts = [{}]", list.join(", "));
+        }
+        None if f.corner_frames => {
+            let _ = writeln!(s, "contacts = \"frames\"");
+        }
+        None => {
+            let _ = writeln!(s, "contacts = \"collision\"");
+        }
     }
 }
