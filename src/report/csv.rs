@@ -50,10 +50,10 @@ impl Columns {
             }
             (None, Reading::Lenient) => Vec::new(),
         };
-        if let Reading::Strict { required } = reading {
-            if let Some(name) = required.iter().find(|n| !header.contains(n)) {
-                return Err(bad(1, format!("no `{name}` column in the header")));
-            }
+        if let Reading::Strict { required } = reading
+            && let Some(name) = required.iter().find(|n| !header.contains(n))
+        {
+            return Err(bad(1, format!("no `{name}` column in the header")));
         }
         let mut cols: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
         for (i, line) in lines {
