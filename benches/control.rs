@@ -50,9 +50,9 @@ fn bench(c: &mut Criterion) {
     // Every force sensor replaced by the wrench observer (docs/estimation.md, WO): what a
     // robot without them pays per tick.
     let mut wrenches = config.clone();
-    let mut wo: upc::control::wrench_estimation::WrenchObserverSettings =
+    let mut wo: upc::control::parts::wrench_observer::WrenchObserverSettings =
         parts.get().expect("defaults");
-    wo.mode = upc::control::wrench_estimation::WrenchMode::On;
+    wo.mode = upc::control::parts::wrench_observer::WrenchMode::On;
     wrenches.controller.parts.set(&wo).expect("settings");
     let weight = upc::robot::Robot::embedded_default()
         .expect("robot")

@@ -133,10 +133,59 @@ struct Intake {
     rate_limited: AtomicU64,
 }
 
+/// The inbound side while it runs: the Zenoh subscriber feeding the thread's queue, and the
+/// thread.
+type InboundSide = (
+    zenoh::pubsub::Subscriber<()>,
+    std::thread::JoinHandle<Result<InboundStats, BridgeError>>,
+);
+
 /// Run the bridge until `stop` is raised or a channel fails.
 pub fn run(cfg: &BridgeConfig, stop: Arc<AtomicBool>) -> Result<BridgeSummary, BridgeError> {
     let start = Instant::now();
     let posture = cfg.posture().map_err(BridgeError::Zenoh)?;
+    let session = open_session(cfg, posture)?;
+    let intake = Arc::new(Intake::new(cfg));
+    let inbound = if cfg.forecast_in {
+        Some(start_inbound(cfg, &session, &intake, &stop)?)
+    } else {
+        None
+    };
+    let outbound = start_outbound(cfg, &session, &stop)?;
+
+    let mut summary = BridgeSummary {
+        key_prefix: cfg.key_prefix.clone(),
+        prefix: cfg.prefix.clone(),
+        mode: cfg.mode.name().into(),
+        decimation: cfg.decimation,
+        security: posture.name().into(),
+        insecure: posture == Posture::Insecure,
+        forecasters: cfg.security.forecasters.clone(),
+        viewers: cfg.security.viewers.clone(),
+        ..Default::default()
+    };
+    let out = outbound.join().map_err(|_| BridgeError::Panicked);
+    // Whatever ended the outbound side ends the bridge.
+    stop.store(true, Ordering::Relaxed);
+    let inb = inbound.map(|(subscriber, thread)| {
+        let r = thread.join().map_err(|_| BridgeError::Panicked);
+        drop(subscriber);
+        r
+    });
+    summary.add_outbound(&out??);
+    if let Some(inb) = inb {
+        summary.add_inbound(&inb??);
+    }
+    summary.add_intake(&intake);
+    let _ = session.close().wait();
+    summary.wall_seconds = start.elapsed().as_secs_f64();
+    summary.cpu_seconds = process_cpu_seconds();
+    summary.cpu_percent = 100.0 * summary.cpu_seconds / summary.wall_seconds.max(1e-9);
+    Ok(summary)
+}
+
+/// The Zenoh session of `cfg`, opened (and what it is, logged).
+fn open_session(cfg: &BridgeConfig, posture: Posture) -> Result<zenoh::Session, BridgeError> {
     let session = zenoh::open(cfg.zenoh().map_err(BridgeError::Zenoh)?)
         .wait()
         .map_err(|e| BridgeError::Open {
@@ -161,119 +210,119 @@ pub fn run(cfg: &BridgeConfig, stop: Arc<AtomicBool>) -> Result<BridgeSummary, B
             cfg.listen
         );
     }
-    let intake = Arc::new(Intake {
-        keys_prefix: cfg.key_prefix.clone(),
-        gate: Mutex::new(ForecastGate::new(
-            cfg.forecast_rate_hz,
-            cfg.forecast_burst,
-            Duration::from_secs_f64(cfg.source_takeover),
-        )),
-        received: AtomicU64::new(0),
-        dropped: AtomicU64::new(0),
-        second_source: AtomicU64::new(0),
-        rate_limited: AtomicU64::new(0),
-    });
+    Ok(session)
+}
 
-    let inbound = if cfg.forecast_in {
-        let (tx, rx) = std::sync::mpsc::sync_channel::<Inbound>(cfg.inbound_queue);
-        let subscriber = {
-            let intake = Arc::clone(&intake);
-            let keys = Keys {
-                prefix: &cfg.key_prefix,
-            };
-            session
-                .declare_subscriber(keys.forecasts())
-                .callback(move |sample| {
-                    on_forecast(
-                        &tx,
-                        &intake,
-                        sample.key_expr().as_str(),
-                        sample.payload().to_bytes(),
-                    )
-                })
-                .wait()
-                .map_err(|e| BridgeError::Zenoh(format!("subscribe to forecasts: {e}")))?
-        };
-        let prefix = cfg.prefix.clone();
-        let stop = Arc::clone(&stop);
-        let thread = std::thread::Builder::new()
-            .name("bridge-in".into())
-            .spawn(move || forward_forecasts(&prefix, &rx, &stop))
-            .map_err(|e| BridgeError::Spawn {
-                what: "inbound",
-                detail: e.to_string(),
-            })?;
-        Some((subscriber, thread))
-    } else {
-        None
-    };
-
-    let outbound = {
-        let session = session.clone();
-        let cfg = cfg.clone();
-        let stop = Arc::clone(&stop);
-        std::thread::Builder::new()
-            .name("bridge-out".into())
-            .spawn(move || forward_outbound(&cfg, &session, &stop))
-            .map_err(|e| BridgeError::Spawn {
-                what: "outbound",
-                detail: e.to_string(),
-            })?
-    };
-
-    let mut summary = BridgeSummary {
-        key_prefix: cfg.key_prefix.clone(),
-        prefix: cfg.prefix.clone(),
-        mode: cfg.mode.name().into(),
-        decimation: cfg.decimation,
-        security: posture.name().into(),
-        insecure: posture == Posture::Insecure,
-        forecasters: cfg.security.forecasters.clone(),
-        viewers: cfg.security.viewers.clone(),
-        ..Default::default()
-    };
-    let out = outbound.join().map_err(|_| BridgeError::Panicked);
-    // Whatever ended the outbound side ends the bridge.
-    stop.store(true, Ordering::Relaxed);
-    let inb = inbound.map(|(subscriber, thread)| {
-        let r = thread.join().map_err(|_| BridgeError::Panicked);
-        drop(subscriber);
-        r
-    });
-    let out = out??;
-    summary.states_out = out.states;
-    summary.ground_truth_out = out.truth;
-    summary.torques_out = out.torques;
-    summary.put_errors = out.put_errors;
-    summary.peers_max = out.peers_max;
-    summary.peer_losses = out.peer_losses;
-    if let Some(inb) = inb {
-        let inb = inb??;
-        summary.forecasts_forwarded = inb.forwarded;
-        summary.forecasts_refused_by = inb.refused_by.clone();
-        summary.forecasts_refused = inb.refused();
-        let l = &inb.forward;
-        summary.forward_p50_us = l.quantile(0.5) * 1e6;
-        summary.forward_p99_us = l.quantile(0.99) * 1e6;
-        summary.forward_max_us = l.max() * 1e6;
+impl Intake {
+    /// Nothing counted yet; the gate as `cfg` sets it.
+    fn new(cfg: &BridgeConfig) -> Intake {
+        Intake {
+            keys_prefix: cfg.key_prefix.clone(),
+            gate: Mutex::new(ForecastGate::new(
+                cfg.forecast_rate_hz,
+                cfg.forecast_burst,
+                Duration::from_secs_f64(cfg.source_takeover),
+            )),
+            received: AtomicU64::new(0),
+            dropped: AtomicU64::new(0),
+            second_source: AtomicU64::new(0),
+            rate_limited: AtomicU64::new(0),
+        }
     }
-    summary.forecasts_received = intake.received.load(Ordering::Relaxed);
-    summary.forecasts_dropped = intake.dropped.load(Ordering::Relaxed);
-    summary.forecasts_second_source = intake.second_source.load(Ordering::Relaxed);
-    summary.forecasts_rate_limited = intake.rate_limited.load(Ordering::Relaxed);
-    {
+}
+
+/// The inbound side: Zenoh's forecasts into a bounded queue ([`on_forecast`]), and the thread
+/// that publishes them on iceoryx2 ([`forward_forecasts`]).
+fn start_inbound(
+    cfg: &BridgeConfig,
+    session: &zenoh::Session,
+    intake: &Arc<Intake>,
+    stop: &Arc<AtomicBool>,
+) -> Result<InboundSide, BridgeError> {
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Inbound>(cfg.inbound_queue);
+    let subscriber = {
+        let intake = Arc::clone(intake);
+        let keys = Keys {
+            prefix: &cfg.key_prefix,
+        };
+        session
+            .declare_subscriber(keys.forecasts())
+            .callback(move |sample| {
+                on_forecast(
+                    &tx,
+                    &intake,
+                    sample.key_expr().as_str(),
+                    sample.payload().to_bytes(),
+                )
+            })
+            .wait()
+            .map_err(|e| BridgeError::Zenoh(format!("subscribe to forecasts: {e}")))?
+    };
+    let prefix = cfg.prefix.clone();
+    let stop = Arc::clone(stop);
+    let thread = std::thread::Builder::new()
+        .name("bridge-in".into())
+        .spawn(move || forward_forecasts(&prefix, &rx, &stop))
+        .map_err(|e| BridgeError::Spawn {
+            what: "inbound",
+            detail: e.to_string(),
+        })?;
+    Ok((subscriber, thread))
+}
+
+/// The outbound side's thread ([`forward_outbound`]).
+fn start_outbound(
+    cfg: &BridgeConfig,
+    session: &zenoh::Session,
+    stop: &Arc<AtomicBool>,
+) -> Result<std::thread::JoinHandle<Result<OutboundStats, BridgeError>>, BridgeError> {
+    let session = session.clone();
+    let cfg = cfg.clone();
+    let stop = Arc::clone(stop);
+    std::thread::Builder::new()
+        .name("bridge-out".into())
+        .spawn(move || forward_outbound(&cfg, &session, &stop))
+        .map_err(|e| BridgeError::Spawn {
+            what: "outbound",
+            detail: e.to_string(),
+        })
+}
+
+impl BridgeSummary {
+    /// What the outbound thread put.
+    fn add_outbound(&mut self, out: &OutboundStats) {
+        self.states_out = out.states;
+        self.ground_truth_out = out.truth;
+        self.torques_out = out.torques;
+        self.put_errors = out.put_errors;
+        self.peers_max = out.peers_max;
+        self.peer_losses = out.peer_losses;
+    }
+
+    /// What the inbound thread forwarded or refused, and how fast.
+    fn add_inbound(&mut self, inb: &InboundStats) {
+        self.forecasts_forwarded = inb.forwarded;
+        self.forecasts_refused_by = inb.refused_by.clone();
+        self.forecasts_refused = inb.refused();
+        let l = &inb.forward;
+        self.forward_p50_us = l.quantile(0.5) * 1e6;
+        self.forward_p99_us = l.quantile(0.99) * 1e6;
+        self.forward_max_us = l.max() * 1e6;
+    }
+
+    /// What the Zenoh callback counted, and the forecast source the gate took last.
+    fn add_intake(&mut self, intake: &Intake) {
+        self.forecasts_received = intake.received.load(Ordering::Relaxed);
+        self.forecasts_dropped = intake.dropped.load(Ordering::Relaxed);
+        self.forecasts_second_source = intake.second_source.load(Ordering::Relaxed);
+        self.forecasts_rate_limited = intake.rate_limited.load(Ordering::Relaxed);
         let g = intake
             .gate
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
-        summary.forecast_sources_taken = g.sources_taken;
-        summary.forecast_source = g.source().unwrap_or_default().to_owned();
+        self.forecast_sources_taken = g.sources_taken;
+        self.forecast_source = g.source().unwrap_or_default().to_owned();
     }
-    let _ = session.close().wait();
-    summary.wall_seconds = start.elapsed().as_secs_f64();
-    summary.cpu_seconds = process_cpu_seconds();
-    summary.cpu_percent = 100.0 * summary.cpu_seconds / summary.wall_seconds.max(1e-9);
-    Ok(summary)
 }
 
 /// Zenoh's callback: past the gate (one source, the rate), queue the payload for the inbound

@@ -1,7 +1,7 @@
 //! `upc capability`: how hard the robot can be pushed. For each controller, impact duration
 //! and direction, the largest single impact survived, by bisection over the amplitude
 //! (`upc::capability`), on the reduced models (in-process) and on the full simulation (each
-//! cell a bisection of `upc run`s, run by the sweep engine: `--jobs` at a time here, or on Ray).
+//! cell a bisection of `upc run`s, run by the sweep runner: `--jobs` at a time here, or on Ray).
 //! Writes `capability.md`, `.csv`, `.json` and one figure per model and direction.
 
 use std::path::{Path, PathBuf};
@@ -12,11 +12,11 @@ use upc::capability::{Capability, Criteria, Direction, Variant, search, survives
 use upc::report::figures::{Figure, Line, Panel, write_figure};
 use upc::report::series::{Quantity, Series, SeriesSource};
 
-use super::CliResult;
 use super::cell::{CellArgs, Outcome};
 use super::common::CaseSetup;
-use super::engine::{Engine, EngineArgs, EngineKind, pool};
 use super::sim::PlantChoice;
+use super::sweep_runner::{RunnerArgs, RunnerKind, SweepRunner, pool};
+use super::{BoxError, CliResult};
 
 #[derive(Clone, Copy, PartialEq, Eq, Debug, clap::ValueEnum)]
 pub enum Models {
@@ -59,7 +59,7 @@ pub struct CapabilityArgs {
     #[arg(long, default_value_t = Criteria::default().max_com_drop)]
     pub com_drop: f64,
     #[command(flatten)]
-    pub engine: EngineArgs,
+    pub runner: RunnerArgs,
     /// Full simulation's plant.
     #[arg(long, value_enum, default_value = "upc")]
     pub plant: PlantChoice,
@@ -99,8 +99,6 @@ struct Row {
     wall_time: f64,
 }
 
-pub(super) type BoxError = Box<dyn std::error::Error + Send + Sync>;
-
 pub fn run(args: CapabilityArgs) -> CliResult {
     let (variants, directions) = checked_lists(&args)?;
     let criteria = Criteria {
@@ -125,7 +123,7 @@ pub fn run(args: CapabilityArgs) -> CliResult {
             .map_or(0, |step| (args.max / step).ceil() as u64);
     // The Ray driver prints its own progress.
     let bar = runs_bar(
-        args.quiet || args.engine.engine == EngineKind::Ray,
+        args.quiet || args.runner.engine == RunnerKind::Ray,
         cases.len() as u64 * per_case,
     );
     let exe = std::env::current_exe()?;
@@ -134,8 +132,8 @@ pub fn run(args: CapabilityArgs) -> CliResult {
         config: &config,
         reduced,
         criteria: &criteria,
-        engine: Engine {
-            args: &args.engine,
+        runner: SweepRunner {
+            args: &args.runner,
             out: &out,
             exe: &exe,
             bar: &bar,
@@ -161,7 +159,7 @@ pub fn run(args: CapabilityArgs) -> CliResult {
             .cmp(&order(b))
             .then(a.duration.total_cmp(&b.duration))
     });
-    let engine = args.engine.describe(&out);
+    let engine = args.runner.describe(&out);
     write_outputs(
         &out,
         &args,
@@ -178,7 +176,7 @@ pub fn run(args: CapabilityArgs) -> CliResult {
         "wrote {}/capability.md ({wall:.0} s, {engine})",
         out.display()
     );
-    super::engine::failed_cells(&failed)
+    super::sweep_runner::failed_cells(&failed)
 }
 
 /// The controllers and directions named on the command line, once the search's values are
@@ -251,13 +249,13 @@ fn sweep_cases(args: &CapabilityArgs, variants: &[Variant], directions: &[Direct
 }
 
 /// What every case of the sweep shares: the reduced models run in-process, the full
-/// simulation's cells by the engine.
+/// simulation's cells by the sweep runner.
 struct Sweep<'a> {
     args: &'a CapabilityArgs,
     config: &'a upc::config::Config,
     reduced: upc::robot::ReducedModel,
     criteria: &'a Criteria,
-    engine: Engine<'a>,
+    runner: SweepRunner<'a>,
 }
 
 impl Sweep<'_> {
@@ -269,11 +267,11 @@ impl Sweep<'_> {
     ) -> Result<Vec<Row>, BoxError> {
         let (reduced, full): (Vec<Case>, Vec<Case>) =
             cases.iter().partition(|c| c.model == Model::Reduced);
-        let mut rows = pool(&reduced, self.engine.args.jobs(), |c| {
+        let mut rows = pool(&reduced, self.runner.args.jobs(), |c| {
             self.search_reduced(c)
         })?;
         let cells: Vec<CellArgs> = full.iter().map(|c| self.cell_args(c)).collect();
-        for ((case, cell), result) in full.iter().zip(&cells).zip(self.engine.run(&cells)?) {
+        for ((case, cell), result) in full.iter().zip(&cells).zip(self.runner.run(&cells)?) {
             match result.outcome {
                 Outcome::Searched { capability, .. } => rows.push(Row {
                     model: Model::Full,
@@ -293,7 +291,7 @@ impl Sweep<'_> {
     fn search_reduced(&self, case: &Case) -> Result<Row, BoxError> {
         let args = self.args;
         let t0 = Instant::now();
-        let bar = self.engine.bar;
+        let bar = self.runner.bar;
         let c = search(args.max, args.tol, args.monotone, |a: f64| {
             bar.inc(1);
             survives_reduced(
@@ -306,7 +304,7 @@ impl Sweep<'_> {
             )
         })?;
         // The bar counted the longest search: settle the difference.
-        bar.inc(self.engine.per_cell.saturating_sub(c.runs as u64));
+        bar.inc(self.runner.per_cell.saturating_sub(c.runs as u64));
         Ok(Row {
             model: Model::Reduced,
             controller: case.variant.label(),
@@ -371,7 +369,7 @@ fn write_outputs(
     let fig_dir = out.join("figures");
     std::fs::create_dir_all(&fig_dir)?;
     let mut md = preamble(args, robot, criteria, wall, engine);
-    super::engine::failed_section(&mut md, failed);
+    super::sweep_runner::failed_section(&mut md, failed);
     for model in [Model::Reduced, Model::Full] {
         let of_model: Vec<&Row> = rows.iter().filter(|r| r.model == model).collect();
         if of_model.is_empty() {
@@ -404,7 +402,7 @@ fn write_data(
             "wall_time": wall,
             "engine": engine,
             "rows": rows,
-            "failed_cells": super::engine::failed_json(failed),
+            "failed_cells": super::sweep_runner::failed_json(failed),
         }))?,
     )?;
     let mut csv =

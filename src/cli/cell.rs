@@ -12,12 +12,11 @@ use upc::capability::{Capability, Criteria, Direction, Variant, impact_toml, sur
 use upc::config::ControllerKind;
 use upc::forecast::ForecastShape;
 
-use super::CliResult;
 use super::argv::{Argv, ToArgv, fields};
-use super::capability::BoxError;
 use super::common::{CaseSetup, ConfigArgs};
 use super::run::{CpuLayout, RunArgs, Which};
 use super::sim::PlantChoice;
+use super::{BoxError, CliResult};
 
 /// One cell: what is searched, against which criteria, on which robot, plant and config.
 #[derive(clap::Args, Debug, Clone)]

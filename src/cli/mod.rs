@@ -10,7 +10,6 @@ pub mod child;
 pub mod common;
 pub mod compare;
 pub mod controller;
-pub mod engine;
 pub mod forecast;
 pub mod model;
 pub mod preview;
@@ -18,6 +17,10 @@ pub mod robot;
 pub mod robustness;
 pub mod run;
 pub mod sim;
+pub mod sweep_runner;
 
-/// Error type of the command line: any displayable cause, rendered once by `main`.
-pub type CliResult = Result<(), Box<dyn std::error::Error + Send + Sync>>;
+/// Any displayable cause of a command's failure, rendered once by `main`.
+pub type BoxError = Box<dyn std::error::Error + Send + Sync>;
+
+/// Error type of the command line.
+pub type CliResult = Result<(), BoxError>;

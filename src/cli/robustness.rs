@@ -13,12 +13,12 @@ use std::time::Instant;
 use upc::capability::{Capability, Criteria, Direction, Variant};
 use upc::forecast::ForecastShape;
 
-use super::CliResult;
-use super::capability::{BoxError, runs_bar};
+use super::capability::runs_bar;
 use super::cell::{CellArgs, Outcome};
 use super::common::CaseSetup;
-use super::engine::{Engine, EngineArgs, EngineKind};
 use super::sim::PlantChoice;
+use super::sweep_runner::{RunnerArgs, RunnerKind, SweepRunner};
+use super::{BoxError, CliResult};
 
 #[derive(clap::Args, Debug)]
 pub struct RobustnessArgs {
@@ -66,7 +66,7 @@ pub struct RobustnessArgs {
     #[arg(long, default_value_t = 0.005)]
     pub phantom_com_drop: f64,
     #[command(flatten)]
-    pub engine: EngineArgs,
+    pub runner: RunnerArgs,
     /// The plant.
     #[arg(long, value_enum, default_value = "upc")]
     pub plant: PlantChoice,
@@ -179,13 +179,13 @@ pub fn run(args: RobustnessArgs) -> CliResult {
             .map_or(0, |step| (args.max_bound() / step).ceil() as u64);
     // The Ray driver prints its own progress.
     let bar = runs_bar(
-        args.quiet || args.engine.engine == EngineKind::Ray,
+        args.quiet || args.runner.engine == RunnerKind::Ray,
         (cells.len() + phantoms) as u64 * per_case,
     );
     let sweep = Sweep {
         args: &args,
-        engine: Engine {
-            args: &args.engine,
+        runner: SweepRunner {
+            args: &args.runner,
             out: &out,
             exe: &exe,
             bar: &bar,
@@ -221,13 +221,13 @@ pub fn run(args: RobustnessArgs) -> CliResult {
         )
     };
     rows.sort_by_key(order);
-    let engine = args.engine.describe(&out);
+    let engine = args.runner.describe(&out);
     write_outputs(&out, &args, &variants, &rows, &failed, wall, &engine)?;
     println!(
         "wrote {}/robustness.md ({wall:.0} s, {engine})",
         out.display()
     );
-    super::engine::failed_cells(&failed)
+    super::sweep_runner::failed_cells(&failed)
 }
 
 /// The controllers named by `--controllers`, once the grid's values are checked.
@@ -361,10 +361,10 @@ fn phantom_cells(
     ph
 }
 
-/// What every cell of the sweep shares, and the engine that runs them.
+/// What every cell of the sweep shares, and the runner that runs them.
 struct Sweep<'a> {
     args: &'a RobustnessArgs,
-    engine: Engine<'a>,
+    runner: SweepRunner<'a>,
 }
 
 impl Sweep<'_> {
@@ -379,7 +379,7 @@ impl Sweep<'_> {
             .iter()
             .map(|(cell, max, crit)| self.cell_args(cell, *max, crit))
             .collect();
-        let results = self.engine.run(&specs)?;
+        let results = self.runner.run(&specs)?;
         let mut rows = Vec::new();
         for (((cell, max, _), spec), result) in cells.iter().zip(&specs).zip(results) {
             match result.outcome {
@@ -446,7 +446,7 @@ fn write_outputs(
     let fig_dir = out.join("figures");
     std::fs::create_dir_all(&fig_dir)?;
     let mut md = preamble(args, wall, engine);
-    super::engine::failed_section(&mut md, failed);
+    super::sweep_runner::failed_section(&mut md, failed);
     for &d in &args.durations {
         let _ = writeln!(md, "## {d} s impact\n");
         for &v in variants {
@@ -487,7 +487,7 @@ fn write_data(
             "wall_time": wall,
             "engine": engine,
             "rows": rows,
-            "failed_cells": super::engine::failed_json(failed),
+            "failed_cells": super::sweep_runner::failed_json(failed),
         }))?,
     )?;
     let mut csv = String::from(

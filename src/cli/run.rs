@@ -191,15 +191,15 @@ struct Entry {
     bridge_summary: Option<serde_json::Value>,
     /// The base estimate against the plant's truth (lockstep runs whose base was estimated).
     #[serde(skip_serializing_if = "Option::is_none")]
-    base_estimate_error: Option<upc::estimation::BaseAccuracy>,
+    base_estimate_error: Option<upc::report::BaseAccuracy>,
     /// The hand force, foot loads and CoP the controller had against the plant's truth
     /// (lockstep runs).
     #[serde(skip_serializing_if = "Option::is_none")]
-    wrench_estimate_error: Option<upc::estimation::WrenchAccuracy>,
+    wrench_estimate_error: Option<upc::report::WrenchAccuracy>,
     /// The plant's true CoP against the support the controller had (lockstep runs): the
     /// controller's `min_zmp_margin` is its measured CoP's.
     #[serde(skip_serializing_if = "Option::is_none")]
-    true_cop_margin: Option<upc::estimation::TrueMargin>,
+    true_cop_margin: Option<upc::report::TrueMargin>,
 }
 
 pub fn run(mut args: RunArgs) -> CliResult {
@@ -454,54 +454,67 @@ fn run_one(
         control_cpu,
     };
     let start = Instant::now();
-    let (out, err) = ctx.log("sim.log")?;
-    let mut sim = Participant::spawn(
-        "simulator",
-        Command::new(exe)
-            .args(Argv::of("sim", &ctx.sim_args()))
-            .stdout(out)
-            .stderr(err),
-    )?;
-    let mut bus = match args.bus {
-        Some(_) => {
-            let (out, err) = ctx.log("bus.log")?;
-            Some(Participant::spawn(
-                "bus",
-                Command::new(exe)
-                    .args(Argv::of("bus", &ctx.bus_args()))
-                    .stdout(out)
-                    .stderr(err),
-            )?)
-        }
-        None => None,
-    };
-    let (mut forecaster, mut bridge) = ctx.forecaster()?;
-    let (out, err) = ctx.log("controller.log")?;
-    let mut controller = Participant::spawn(
-        "controller",
-        Command::new(exe)
-            .args(Argv::of("controller", &ctx.controller_args(kind)))
-            .stdout(out)
-            .stderr(err),
-    )?;
+    let mut running = ctx.start(kind)?;
     let (controller_exit, died) = ctx.watch(
         kind,
-        &mut controller,
-        &mut sim,
-        forecaster.as_deref_mut(),
-        bus.as_deref_mut(),
+        &mut running.controller,
+        &mut running.sim,
+        running.forecaster.as_deref_mut(),
+        running.bus.as_deref_mut(),
     )?;
-    // The controller is done: give the others a moment, then ask them to stop (at once when one
-    // of them died).
-    let grace = |d: u64| Duration::from_secs(if died { 0 } else { d });
-    let bus_exit = bus.as_mut().and_then(|b| stop(b, grace(5)));
-    let sim_exit = stop(&mut sim, grace(5));
-    let forecaster_exit = forecaster.as_mut().and_then(|f| stop(f, grace(2)));
-    if let Some(b) = &mut bridge {
-        // SAFETY: signalling our own child; SIGTERM makes it write its summary.
-        unsafe { libc::kill(b.id() as libc::pid_t, libc::SIGTERM) };
-        stop(b, Duration::from_secs(5));
+    let exits = running.stop(died);
+    let entry = entry_of(kind, &dir, start, controller_exit, exits);
+    // Any participant still running is killed (as `running` drops) once its files are read.
+    drop(running);
+    Ok(entry)
+}
+
+/// The participants of one controller's run, running.
+struct Running {
+    sim: Participant,
+    bus: Option<Participant>,
+    forecaster: Option<Participant>,
+    bridge: Option<Participant>,
+    controller: Participant,
+}
+
+/// How the participants other than the controller ended (their exit codes).
+struct Exits {
+    sim: Option<i32>,
+    bus: Option<i32>,
+    forecaster: Option<i32>,
+}
+
+impl Running {
+    /// The controller is done: give the others a moment, then ask them to stop (at once when
+    /// one of them `died`).
+    fn stop(&mut self, died: bool) -> Exits {
+        let grace = |d: u64| Duration::from_secs(if died { 0 } else { d });
+        let bus = self.bus.as_mut().and_then(|b| stop(b, grace(5)));
+        let sim = stop(&mut self.sim, grace(5));
+        let forecaster = self.forecaster.as_mut().and_then(|f| stop(f, grace(2)));
+        if let Some(b) = &mut self.bridge {
+            // SAFETY: signalling our own child; SIGTERM makes it write its summary.
+            unsafe { libc::kill(b.id() as libc::pid_t, libc::SIGTERM) };
+            stop(b, Duration::from_secs(5));
+        }
+        Exits {
+            sim,
+            bus,
+            forecaster,
+        }
     }
+}
+
+/// One controller's entry of the run's summary, from what its participants left in `dir`
+/// (their summaries and logs) and how they ended; the run began at `start`.
+fn entry_of(
+    kind: ControllerKind,
+    dir: &Path,
+    start: Instant,
+    controller_exit: Option<i32>,
+    exits: Exits,
+) -> Entry {
     let read = |f: &str| std::fs::read_to_string(dir.join(f)).ok();
     let controller_summary = read("controller.json").and_then(|t| serde_json::from_str(&t).ok());
     let sim_summary = read("sim.json").and_then(|t| serde_json::from_str(&t).ok());
@@ -511,22 +524,22 @@ fn run_one(
         wall_time: start.elapsed().as_secs_f64(),
         controller_summary,
         sim_summary,
-        sim_exit,
-        bus_exit,
+        sim_exit: exits.sim,
+        bus_exit: exits.bus,
         bus_summary: read("bus.json").and_then(|t| serde_json::from_str(&t).ok()),
-        forecaster_exit,
+        forecaster_exit: exits.forecaster,
         controller_exit,
         failure: None,
         bridge_summary: read("bridge.json").and_then(|t| serde_json::from_str(&t).ok()),
-        base_estimate_error: upc::estimation::base_accuracy(
+        base_estimate_error: upc::report::base_accuracy(
             &dir.join("controller.csv"),
             &dir.join("sim.csv"),
         ),
-        wrench_estimate_error: upc::estimation::wrench_accuracy(
+        wrench_estimate_error: upc::report::wrench_accuracy(
             &dir.join("controller.csv"),
             &dir.join("sim.csv"),
         ),
-        true_cop_margin: upc::estimation::true_margin(
+        true_cop_margin: upc::report::true_margin(
             &dir.join("controller.csv"),
             &dir.join("sim.csv"),
         ),
@@ -537,7 +550,7 @@ fn run_one(
         .controller_summary
         .take()
         .filter(|s| s.figures.ticks > 0);
-    Ok(entry)
+    entry
 }
 
 /// s the plant on a bus runs beyond the run (it is stopped when the controller is done).
@@ -560,6 +573,52 @@ struct Launch<'a> {
 impl Launch<'_> {
     /// One open file for a child's stdout and stderr: two opens of the same path would each
     /// write from offset 0 over the other's lines.
+    /// Starts the participants: the plant (and the robot's bus participant), the forecaster
+    /// (and a bridge), then the controller.
+    fn start(
+        &self,
+        kind: ControllerKind,
+    ) -> Result<Running, Box<dyn std::error::Error + Send + Sync>> {
+        let exe = self.exe;
+        let (out, err) = self.log("sim.log")?;
+        let sim = Participant::spawn(
+            "simulator",
+            Command::new(exe)
+                .args(Argv::of("sim", &self.sim_args()))
+                .stdout(out)
+                .stderr(err),
+        )?;
+        let bus = match self.args.bus {
+            Some(_) => {
+                let (out, err) = self.log("bus.log")?;
+                Some(Participant::spawn(
+                    "bus",
+                    Command::new(exe)
+                        .args(Argv::of("bus", &self.bus_args()))
+                        .stdout(out)
+                        .stderr(err),
+                )?)
+            }
+            None => None,
+        };
+        let (forecaster, bridge) = self.forecaster()?;
+        let (out, err) = self.log("controller.log")?;
+        let controller = Participant::spawn(
+            "controller",
+            Command::new(exe)
+                .args(Argv::of("controller", &self.controller_args(kind)))
+                .stdout(out)
+                .stderr(err),
+        )?;
+        Ok(Running {
+            sim,
+            bus,
+            forecaster,
+            bridge,
+            controller,
+        })
+    }
+
     fn log(&self, file: &str) -> std::io::Result<(Stdio, Stdio)> {
         let f = std::fs::File::create(self.dir.join(file))?;
         Ok((Stdio::from(f.try_clone()?), Stdio::from(f)))
@@ -1104,7 +1163,23 @@ fn stop(child: &mut Child, grace: Duration) -> Option<i32> {
     }
 }
 
+/// The run's table: a row per controller, then what the estimates missed and which
+/// participants failed.
 fn print_table(entries: &[Entry]) {
+    print_header();
+    for e in entries {
+        print_row(e);
+    }
+    for e in entries {
+        print_estimate_errors(e);
+    }
+    for e in entries {
+        print_participant_failure(e);
+    }
+}
+
+/// The table's two header lines.
+fn print_header() {
     println!(
         "\n{:<4} {:>11} {:>10} {:>11} {:>10} {:>10} {:>9} {:>9} {:>9} {:>8} {:>9} {:>8} {:>8}",
         "ctrl",
@@ -1137,94 +1212,99 @@ fn print_table(entries: &[Entry]) {
         "(µs)",
         "(s)"
     );
-    for e in entries {
-        match &e.controller_summary {
-            Some(s) => println!(
-                "{:<4} {:>11.1} {:>10.1} {:>11.3} {:>10.2} {:>10.2} {:>9.0} {:>9.0} {:>9.0} {:>8} {:>9.2} {:>8.1} {:>8.1}",
-                e.controller,
-                s.figures.min_zmp_margin * 1e3,
-                e.true_cop_margin.map_or(f64::NAN, |m| m.min * 1e3),
-                s.figures.time_at_support_edge,
-                s.figures.hand_rms_error * 1e3,
-                s.figures.hand_peak_error * 1e3,
-                s.figures.tick_p50_us,
-                s.figures.tick_p99_us,
-                s.figures.tick_max_us,
-                s.deadlines.deadline_misses,
-                s.figures.c2_solve_mean_ms,
-                e.sim_summary
-                    .as_ref()
-                    .and_then(|j| j["ipc_overhead_p99"].as_f64())
-                    .unwrap_or(f64::NAN)
-                    * 1e6,
-                e.wall_time
-            ),
-            None => println!(
-                "{:<4} failed: {}  (see {}/)",
-                e.controller,
-                e.failure.as_deref().unwrap_or("no controller summary"),
-                e.dir
-            ),
-        }
+}
+
+/// A controller's row: its figures, or why it failed.
+fn print_row(e: &Entry) {
+    match &e.controller_summary {
+        Some(s) => println!(
+            "{:<4} {:>11.1} {:>10.1} {:>11.3} {:>10.2} {:>10.2} {:>9.0} {:>9.0} {:>9.0} {:>8} {:>9.2} {:>8.1} {:>8.1}",
+            e.controller,
+            s.figures.min_zmp_margin * 1e3,
+            e.true_cop_margin.map_or(f64::NAN, |m| m.min * 1e3),
+            s.figures.time_at_support_edge,
+            s.figures.hand_rms_error * 1e3,
+            s.figures.hand_peak_error * 1e3,
+            s.figures.tick_p50_us,
+            s.figures.tick_p99_us,
+            s.figures.tick_max_us,
+            s.deadlines.deadline_misses,
+            s.figures.c2_solve_mean_ms,
+            e.sim_summary
+                .as_ref()
+                .and_then(|j| j["ipc_overhead_p99"].as_f64())
+                .unwrap_or(f64::NAN)
+                * 1e6,
+            e.wall_time
+        ),
+        None => println!(
+            "{:<4} failed: {}  (see {}/)",
+            e.controller,
+            e.failure.as_deref().unwrap_or("no controller summary"),
+            e.dir
+        ),
     }
-    // The base estimate against the plant's truth, when the base was estimated.
-    for e in entries {
-        if let Some(a) = &e.base_estimate_error {
-            println!(
-                "{}: base estimate vs truth: position RMS {:.1} mm (height max {:.1} mm), \
-                 velocity RMS {:.1} mm/s (max {:.1}), orientation RMS {:.2}° (tilt {:.2}°, max {:.2}°)",
-                e.controller,
-                a.position_rms * 1e3,
-                a.height_max * 1e3,
-                a.velocity_rms * 1e3,
-                a.velocity_max * 1e3,
-                a.orientation_rms_deg,
-                a.tilt_rms_deg,
-                a.orientation_max_deg
-            );
-        }
-        // The wrenches, where the controller did not have them exactly (an observer, or
-        // force sensors with their errors).
-        if let Some(w) = e.wrench_estimate_error.as_ref().filter(|w| {
-            w.hand_source == upc::estimation::HandSource::Observer
-                || w.hand_x_push.rms > 1e-3
-                || w.cop_x_standing.rms > 1e-5
-        }) {
-            let feet = w.foot_load.map_or(String::new(), |f| {
-                format!(", foot load RMS {:.1} N (p99 {:.1})", f.rms, f.p99)
-            });
-            println!(
-                "{}: {} hand force vs truth: x RMS {:.1} N during pushes (p99 {:.1}), {:.1} standing, \
-                 lag {:.0} ms; CoP RMS x/y {:.1}/{:.1} mm standing, {:.1}/{:.1} mm during pushes{feet}",
-                e.controller,
-                w.hand_source,
-                w.hand_x_push.rms,
-                w.hand_x_push.p99,
-                w.hand_x_standing.rms,
-                w.hand_lag * 1e3,
-                w.cop_x_standing.rms * 1e3,
-                w.cop_y_standing.rms * 1e3,
-                w.cop_x_push.rms * 1e3,
-                w.cop_y_push.rms * 1e3,
-            );
-        }
+}
+
+/// What the controller's estimates missed against the plant's truth: the base estimate, when
+/// the base was estimated, and the wrenches.
+fn print_estimate_errors(e: &Entry) {
+    if let Some(a) = &e.base_estimate_error {
+        println!(
+            "{}: base estimate vs truth: position RMS {:.1} mm (height max {:.1} mm), \
+             velocity RMS {:.1} mm/s (max {:.1}), orientation RMS {:.2}° (tilt {:.2}°, max {:.2}°)",
+            e.controller,
+            a.position_rms * 1e3,
+            a.height_max * 1e3,
+            a.velocity_rms * 1e3,
+            a.velocity_max * 1e3,
+            a.orientation_rms_deg,
+            a.tilt_rms_deg,
+            a.orientation_max_deg
+        );
     }
-    // A simulator or forecaster that failed (a diverging simulation, a crashed plant or
-    // forecaster) says why in the last line of its log.
-    for e in entries {
-        for (what, exit, log) in [
-            ("simulator", e.sim_exit, "sim.log"),
-            ("forecaster", e.forecaster_exit, "forecaster.log"),
-        ] {
-            if let Some(code) = exit.filter(|&c| c != 0) {
-                let path = Path::new(&e.dir).join(log);
-                println!(
-                    "{}: the {what} exited with {code}: {}  ({})",
-                    e.controller,
-                    last_log_line(&path),
-                    path.display()
-                );
-            }
+    // The wrenches, where the controller did not have them exactly (an observer, or
+    // force sensors with their errors).
+    if let Some(w) = e.wrench_estimate_error.as_ref().filter(|w| {
+        w.hand_source == upc::report::HandSource::Observer
+            || w.hand_x_push.rms > 1e-3
+            || w.cop_x_standing.rms > 1e-5
+    }) {
+        let feet = w.foot_load.map_or(String::new(), |f| {
+            format!(", foot load RMS {:.1} N (p99 {:.1})", f.rms, f.p99)
+        });
+        println!(
+            "{}: {} hand force vs truth: x RMS {:.1} N during pushes (p99 {:.1}), {:.1} standing, \
+             lag {:.0} ms; CoP RMS x/y {:.1}/{:.1} mm standing, {:.1}/{:.1} mm during pushes{feet}",
+            e.controller,
+            w.hand_source,
+            w.hand_x_push.rms,
+            w.hand_x_push.p99,
+            w.hand_x_standing.rms,
+            w.hand_lag * 1e3,
+            w.cop_x_standing.rms * 1e3,
+            w.cop_y_standing.rms * 1e3,
+            w.cop_x_push.rms * 1e3,
+            w.cop_y_push.rms * 1e3,
+        );
+    }
+}
+
+/// A simulator or forecaster that failed (a diverging simulation, a crashed plant or
+/// forecaster) says why in the last line of its log.
+fn print_participant_failure(e: &Entry) {
+    for (what, exit, log) in [
+        ("simulator", e.sim_exit, "sim.log"),
+        ("forecaster", e.forecaster_exit, "forecaster.log"),
+    ] {
+        if let Some(code) = exit.filter(|&c| c != 0) {
+            let path = Path::new(&e.dir).join(log);
+            println!(
+                "{}: the {what} exited with {code}: {}  ({})",
+                e.controller,
+                last_log_line(&path),
+                path.display()
+            );
         }
     }
 }

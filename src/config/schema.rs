@@ -247,50 +247,80 @@ impl Layers {
     }
 }
 
+/// Range checks of values, each error naming the key and the layer that set it.
+struct Check<'a>(&'a Layers);
+
+impl Check<'_> {
+    fn pos(&self, key: &str, v: f64) -> Result<(), ConfigError> {
+        if v.is_finite() && v > 0.0 {
+            Ok(())
+        } else {
+            Err(self
+                .0
+                .range_error(key, format!("must be finite and > 0, got {v}")))
+        }
+    }
+
+    fn nonneg(&self, key: &str, v: f64) -> Result<(), ConfigError> {
+        if v.is_finite() && v >= 0.0 {
+            Ok(())
+        } else {
+            Err(self
+                .0
+                .range_error(key, format!("must be finite and ≥ 0, got {v}")))
+        }
+    }
+
+    fn interval(&self, key: &str, b: [f64; 2]) -> Result<(), ConfigError> {
+        if b.iter().all(|v| v.is_finite()) && b[0] < b[1] {
+            Ok(())
+        } else {
+            Err(self
+                .0
+                .range_error(key, format!("must be [min, max] with min < max, got {b:?}")))
+        }
+    }
+}
+
 impl Config {
     fn validate(&self, l: &Layers) -> Result<(), ConfigError> {
-        let pos = |key: &str, v: f64| -> Result<(), ConfigError> {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(l.range_error(key, format!("must be finite and > 0, got {v}")))
-            }
-        };
-        let nonneg = |key: &str, v: f64| -> Result<(), ConfigError> {
-            if v.is_finite() && v >= 0.0 {
-                Ok(())
-            } else {
-                Err(l.range_error(key, format!("must be finite and ≥ 0, got {v}")))
-            }
-        };
-        let interval = |key: &str, b: [f64; 2]| -> Result<(), ConfigError> {
-            if b.iter().all(|v| v.is_finite()) && b[0] < b[1] {
-                Ok(())
-            } else {
-                Err(l.range_error(key, format!("must be [min, max] with min < max, got {b:?}")))
-            }
-        };
-        pos("robot.gravity", self.robot.gravity)?;
-        pos("preview.period", self.preview.period)?;
+        let check = Check(l);
+        self.validate_preview_and_hand(&check)?;
+        self.validate_gain_search(&check)?;
+        self.validate_wbc(&check)?;
+        self.controller.validate(l)?;
+        Ok(())
+    }
+
+    /// `[robot]`'s gravity, `[preview]` and `[hand]`.
+    fn validate_preview_and_hand(&self, check: &Check) -> Result<(), ConfigError> {
+        check.pos("robot.gravity", self.robot.gravity)?;
+        check.pos("preview.period", self.preview.period)?;
         if !(2..=20_000).contains(&self.preview.horizon) {
-            return Err(l.range_error(
+            return Err(check.0.range_error(
                 "preview.horizon",
                 format!("must be in 2..=20000 steps, got {}", self.preview.horizon),
             ));
         }
-        pos("preview.q_e", self.preview.q_e)?;
-        pos("preview.r", self.preview.r)?;
-        pos("hand.kp", self.hand.kp)?;
-        pos("hand.damping_ratio", self.hand.damping_ratio)?;
-        pos("hand.kd", self.hand.kd)?;
+        check.pos("preview.q_e", self.preview.q_e)?;
+        check.pos("preview.r", self.preview.r)?;
+        check.pos("hand.kp", self.hand.kp)?;
+        check.pos("hand.damping_ratio", self.hand.damping_ratio)?;
+        check.pos("hand.kd", self.hand.kd)
+    }
+
+    /// `[gain_search]`: its weights, its bounds (holding the nominal K_p, and a stable
+    /// impedance at the stiffest gains), its knots and iterations.
+    fn validate_gain_search(&self, check: &Check) -> Result<(), ConfigError> {
+        let l = check.0;
         let g = &self.gain_search;
         for (i, q) in g.q_t.iter().enumerate() {
-            nonneg(&format!("gain_search.q_t[{i}]"), *q)?;
+            check.nonneg(&format!("gain_search.q_t[{i}]"), *q)?;
         }
-        nonneg("gain_search.s", g.s)?;
-        nonneg("gain_search.t_w", g.t_w)?;
-        interval("gain_search.kp_bounds", g.kp_bounds)?;
-        interval("gain_search.kd_bounds", g.kd_bounds)?;
+        check.nonneg("gain_search.s", g.s)?;
+        check.nonneg("gain_search.t_w", g.t_w)?;
+        check.interval("gain_search.kp_bounds", g.kp_bounds)?;
+        check.interval("gain_search.kd_bounds", g.kd_bounds)?;
         if g.kp_bounds[0] <= 0.0 {
             return Err(l.range_error(
                 "gain_search.kp_bounds",
@@ -327,9 +357,14 @@ impl Config {
         if g.max_iterations == 0 || g.nm_max_iterations == 0 {
             return Err(l.range_error("gain_search.max_iterations", "iteration limits must be ≥ 1"));
         }
-        pos("gain_search.tolerance", g.tolerance)?;
+        check.pos("gain_search.tolerance", g.tolerance)
+    }
+
+    /// `[wbc]`: friction, torque limits, weights and gains, the QP's regularisation and solver.
+    fn validate_wbc(&self, check: &Check) -> Result<(), ConfigError> {
+        let l = check.0;
         let w = &self.wbc;
-        pos("wbc.friction", w.friction)?;
+        check.pos("wbc.friction", w.friction)?;
         if !(w.torque_limit_scale > 0.0 && w.torque_limit_scale <= 1.0) {
             return Err(l.range_error(
                 "wbc.torque_limit_scale",
@@ -348,17 +383,15 @@ impl Config {
             ("wbc.posture_kd", w.posture_kd),
             ("wbc.fallback_damping", w.fallback_damping),
         ] {
-            nonneg(key, v)?;
+            check.nonneg(key, v)?;
         }
         // Strictly positive regularisation keeps the QP strictly convex (unique q̈ and f).
-        pos("wbc.w_reg_acceleration", w.w_reg_acceleration)?;
-        pos("wbc.w_reg_force", w.w_reg_force)?;
+        check.pos("wbc.w_reg_acceleration", w.w_reg_acceleration)?;
+        check.pos("wbc.w_reg_force", w.w_reg_force)?;
         if w.max_iterations == 0 {
             return Err(l.range_error("wbc.max_iterations", "must be ≥ 1"));
         }
-        pos("wbc.tolerance", w.tolerance)?;
-        self.controller.validate(l)?;
-        Ok(())
+        check.pos("wbc.tolerance", w.tolerance)
     }
 
     /// The nominal damping for a stiffness, per the configured damping mode.

@@ -69,10 +69,13 @@ pub trait PartKind {
     ) -> Result<Box<dyn ControllerPart>, BuildError>;
 }
 
+/// Builds a part from the config's tables.
+pub type BuildPart = fn(&PartSetup, &PartTables) -> Result<Box<dyn ControllerPart>, BuildError>;
+
 /// A part as the pipeline lists it: how to build it from the config's tables, and how to check
 /// its settings when the config is loaded (before any controller is built).
 pub struct PartEntry {
-    pub build: fn(&PartSetup, &PartTables) -> Result<Box<dyn ControllerPart>, BuildError>,
+    pub build: BuildPart,
     pub check: fn(&PartTables) -> Result<(), ConfigError>,
 }
 

@@ -83,7 +83,22 @@ pub(crate) fn aba_unchecked(
     tau: &[f64],
     fext: Option<&[Force]>,
 ) -> Result<(), DynamicsError> {
-    // Pass 1: kinematics, bias accelerations c, rigid inertias, bias forces p (eq. 7.36-7.38).
+    velocities_and_bias(model, data, q, v, fext);
+    articulated_inertias(model, data, tau)?;
+    accelerations(model, data);
+    Ok(())
+}
+
+/// Pass 1, root to leaves: kinematics, bias accelerations c, rigid inertias, bias forces p
+/// (eq. 7.36-7.38).
+#[inline]
+fn velocities_and_bias(
+    model: &Model,
+    data: &mut Data,
+    q: &[f64],
+    v: &[f64],
+    fext: Option<&[Force]>,
+) {
     let placed = super::kinematics::joints_placed(model, data, q);
     for (i, j) in model.joints.iter().enumerate() {
         let li = super::kinematics::joint_placement(model, data, q, i, placed);
@@ -102,7 +117,12 @@ pub(crate) fn aba_unchecked(
         }
         data.f[i] = pa;
     }
-    // Pass 2: articulated inertias and bias forces, leaves to root (eq. 7.39-7.45).
+}
+
+/// Pass 2, leaves to root: articulated inertias and bias forces, each carried to its parent
+/// (eq. 7.39-7.45).
+#[inline]
+fn articulated_inertias(model: &Model, data: &mut Data, tau: &[f64]) -> Result<(), DynamicsError> {
     for i in (0..model.joints.len()).rev() {
         let j = &model.joints[i];
         // Parents precede children: the parent's inertia is in `head`.
@@ -162,7 +182,12 @@ pub(crate) fn aba_unchecked(
             data.f[p] += li.act_force(&Force::from_vector(&pa_a));
         }
     }
-    // Pass 3: accelerations, root to leaves (eq. 7.46-7.48).
+    Ok(())
+}
+
+/// Pass 3, root to leaves: the joints' accelerations q̈ and the bodies' (eq. 7.46-7.48).
+#[inline]
+fn accelerations(model: &Model, data: &mut Data) {
     let a0 = Motion::new(-model.gravity, nalgebra::Vector3::zeros());
     for (i, j) in model.joints.iter().enumerate() {
         let li = &data.li_m_i[i];
@@ -193,5 +218,4 @@ pub(crate) fn aba_unchecked(
             }
         }
     }
-    Ok(())
 }

@@ -261,30 +261,11 @@ const REQUIRED: [(&str, &str, &[&str]); 6] = [
 /// by the wrong tag), described with the link or joint it belongs to.
 fn locate(text: &str) -> Option<String> {
     // Open elements: (tag name, its `name` attribute).
-    let mut open: Vec<(&str, Option<&str>)> = Vec::new();
-    let owner = |open: &[(&str, Option<&str>)]| {
-        open.iter()
-            .rev()
-            .find_map(|(tag, name)| {
-                matches!(*tag, "link" | "joint")
-                    .then(|| format!(" of {tag} '{}'", name.unwrap_or("?")))
-            })
-            .unwrap_or_default()
-    };
+    let mut open: Vec<OpenElement> = Vec::new();
     let mut rest = text;
     while let Some(at) = rest.find('<') {
         rest = &rest[at..];
-        let skip_to = |end: &str| rest.find(end).map(|i| i + end.len());
-        let skipped = if rest.starts_with("<!--") {
-            skip_to("-->")
-        } else if rest.starts_with("<![CDATA[") {
-            skip_to("]]>")
-        } else if rest.starts_with("<?") || rest.starts_with("<!") {
-            skip_to(">")
-        } else {
-            None
-        };
-        if let Some(n) = skipped {
+        if let Some(n) = markup_len(rest) {
             rest = &rest[n..];
             continue;
         }
@@ -298,62 +279,18 @@ fn locate(text: &str) -> Option<String> {
         let tag = &rest[1..end];
         rest = &rest[end + 1..];
         if let Some(closing) = tag.strip_prefix('/') {
-            let closing = closing.trim();
-            match open.pop() {
-                Some((name, _)) if name == closing => continue,
-                Some((name, id)) => {
-                    return Some(format!(
-                        "</{closing}> closes <{name}{}>{}",
-                        id.map(|i| format!(" name=\"{i}\"")).unwrap_or_default(),
-                        owner(&open)
-                    ));
-                }
-                None => return Some(format!("</{closing}> closes no open element")),
+            match close(&mut open, closing.trim()) {
+                None => continue,
+                fault => return fault,
             }
         }
         let self_closing = tag.ends_with('/');
         let tag = tag.trim_end_matches('/');
         let name = tag.split_whitespace().next().unwrap_or_default();
         let id = attribute(tag, "name");
-        let mut context = open.clone();
-        context.push((name, id));
-        let inside = open.last().map_or("", |(t, _)| *t);
-        for (element, within, attrs) in REQUIRED {
-            if element == name
-                && (within.is_empty() || within == inside)
-                && let Some(a) = attrs.iter().find(|a| attribute(tag, a).is_none())
-            {
-                return Some(format!(
-                    "line {}: <{name}>{} lacks the attribute `{a}`",
-                    line_of(text, rest),
-                    owner(&context)
-                ));
-            }
-        }
-        for (element, attrs, count) in NUMERIC {
-            if element != name {
-                continue;
-            }
-            for a in attrs {
-                let Some(v) = attribute(tag, a) else { continue };
-                let numbers: Vec<&str> = v.split_whitespace().collect();
-                let bad = numbers.iter().find(|x| x.parse::<f64>().is_err());
-                if let Some(x) = bad {
-                    return Some(format!(
-                        "line {}: <{name} {a}=\"{v}\">{}: `{x}` is not a number",
-                        line_of(text, rest),
-                        owner(&context)
-                    ));
-                }
-                if numbers.len() != count {
-                    return Some(format!(
-                        "line {}: <{name} {a}=\"{v}\">{}: expected {count} number(s), found {}",
-                        line_of(text, rest),
-                        owner(&context),
-                        numbers.len()
-                    ));
-                }
-            }
+        let at_line = || line_of(text, rest);
+        if let Some(fault) = attribute_fault(tag, (name, id), &open, at_line) {
+            return Some(fault);
         }
         if !self_closing {
             open.push((name, id));
@@ -366,6 +303,101 @@ fn locate(text: &str) -> Option<String> {
             owner(&open)
         )
     })
+}
+
+/// An element being read: its tag name and its `name` attribute.
+type OpenElement<'t> = (&'t str, Option<&'t str>);
+
+/// " of link 'x'" for the innermost link or joint among the open elements ("" if none).
+fn owner(open: &[OpenElement]) -> String {
+    open.iter()
+        .rev()
+        .find_map(|(tag, name)| {
+            matches!(*tag, "link" | "joint").then(|| format!(" of {tag} '{}'", name.unwrap_or("?")))
+        })
+        .unwrap_or_default()
+}
+
+/// The length of the comment, CDATA section, declaration or processing instruction `rest`
+/// starts with (`None`: an element, or markup not closed).
+fn markup_len(rest: &str) -> Option<usize> {
+    let skip_to = |end: &str| rest.find(end).map(|i| i + end.len());
+    if rest.starts_with("<!--") {
+        skip_to("-->")
+    } else if rest.starts_with("<![CDATA[") {
+        skip_to("]]>")
+    } else if rest.starts_with("<?") || rest.starts_with("<!") {
+        skip_to(">")
+    } else {
+        None
+    }
+}
+
+/// The closing tag `</closing>` against the innermost open element: `None` if it closes it,
+/// else what is wrong.
+fn close(open: &mut Vec<OpenElement>, closing: &str) -> Option<String> {
+    match open.pop() {
+        Some((name, _)) if name == closing => None,
+        Some((name, id)) => Some(format!(
+            "</{closing}> closes <{name}{}>{}",
+            id.map(|i| format!(" name=\"{i}\"")).unwrap_or_default(),
+            owner(open)
+        )),
+        None => Some(format!("</{closing}> closes no open element")),
+    }
+}
+
+/// What is wrong with the attributes of the opening tag `tag` (the element `element`, inside
+/// the `open` ones; at line `at_line()`): a required one missing, or a number that is not one
+/// or not as many as expected.
+fn attribute_fault(
+    tag: &str,
+    element: OpenElement,
+    open: &[OpenElement],
+    at_line: impl Fn() -> usize,
+) -> Option<String> {
+    let name = element.0;
+    let mut context = open.to_vec();
+    context.push(element);
+    let inside = open.last().map_or("", |(t, _)| *t);
+    for (required, within, attrs) in REQUIRED {
+        if required == name
+            && (within.is_empty() || within == inside)
+            && let Some(a) = attrs.iter().find(|a| attribute(tag, a).is_none())
+        {
+            return Some(format!(
+                "line {}: <{name}>{} lacks the attribute `{a}`",
+                at_line(),
+                owner(&context)
+            ));
+        }
+    }
+    for (numeric, attrs, count) in NUMERIC {
+        if numeric != name {
+            continue;
+        }
+        for a in attrs {
+            let Some(v) = attribute(tag, a) else { continue };
+            let numbers: Vec<&str> = v.split_whitespace().collect();
+            let bad = numbers.iter().find(|x| x.parse::<f64>().is_err());
+            if let Some(x) = bad {
+                return Some(format!(
+                    "line {}: <{name} {a}=\"{v}\">{}: `{x}` is not a number",
+                    at_line(),
+                    owner(&context)
+                ));
+            }
+            if numbers.len() != count {
+                return Some(format!(
+                    "line {}: <{name} {a}=\"{v}\">{}: expected {count} number(s), found {}",
+                    at_line(),
+                    owner(&context),
+                    numbers.len()
+                ));
+            }
+        }
+    }
+    None
 }
 
 /// Line number (1-based) of the element that ends just before `rest` in `text`.
@@ -521,79 +553,16 @@ fn build(
     if robot.links.is_empty() {
         return Err(DynamicsError::Empty);
     }
-    let mut link_index: HashMap<&str, usize> = HashMap::new();
-    for (k, l) in robot.links.iter().enumerate() {
-        if link_index.insert(l.name.as_str(), k).is_some() {
-            return Err(DynamicsError::DuplicateName {
-                what: "link",
-                name: l.name.clone(),
-            });
-        }
-    }
+    let link_index = link_indices(robot)?;
     let mut warnings = Vec::new();
     let inertias = robot
         .links
         .iter()
         .map(|l| link_inertia(l, &mut warnings))
         .collect::<Result<Vec<_>, _>>()?;
-    for j in &robot.joints {
-        if let Some(m) = j.mimic.as_ref().filter(|_| !locked.contains_key(&j.name)) {
-            warnings.push(format!(
-                "joint '{}' mimics '{}': taken as an independent joint (as Pinocchio does by default)",
-                j.name, m.joint
-            ));
-        }
-    }
-
-    // Parent joint of each link, children of each link (in listing order).
-    let mut parent_joint: Vec<Option<usize>> = vec![None; robot.links.len()];
-    let mut children: Vec<Vec<usize>> = vec![Vec::new(); robot.links.len()];
-    let mut joint_names: HashMap<&str, ()> = HashMap::new();
-    for (k, j) in robot.joints.iter().enumerate() {
-        if joint_names.insert(j.name.as_str(), ()).is_some() {
-            return Err(DynamicsError::DuplicateName {
-                what: "joint",
-                name: j.name.clone(),
-            });
-        }
-        let find = |role: &'static str, name: &str| {
-            link_index
-                .get(name)
-                .copied()
-                .ok_or_else(|| DynamicsError::MissingLink {
-                    joint: j.name.clone(),
-                    role,
-                    link: name.to_owned(),
-                })
-        };
-        let p = find("parent", &j.parent.link)?;
-        let c = find("child", &j.child.link)?;
-        if let Some(first) = parent_joint[c] {
-            return Err(DynamicsError::MultipleParents {
-                link: j.child.link.clone(),
-                first: robot.joints[first].name.clone(),
-                second: j.name.clone(),
-            });
-        }
-        if p == c {
-            return Err(DynamicsError::Cycle {
-                link: j.child.link.clone(),
-            });
-        }
-        parent_joint[c] = Some(k);
-        children[p].push(k);
-    }
-    let roots: Vec<usize> = (0..robot.links.len())
-        .filter(|&k| parent_joint[k].is_none())
-        .collect();
-    let root = match roots.as_slice() {
-        [] => return Err(DynamicsError::NoRoot),
-        [r] => *r,
-        many => {
-            let names: Vec<&str> = many.iter().map(|&k| robot.links[k].name.as_str()).collect();
-            return Err(DynamicsError::MultipleRoots(names.join(", ")));
-        }
-    };
+    warnings.extend(mimic_warnings(robot, locked));
+    let tree = Tree::of(robot, &link_index)?;
+    let root = tree.root(robot)?;
 
     let mut model = Model::new(robot.name.clone());
     model.load_warnings = warnings;
@@ -605,89 +574,18 @@ fn build(
     };
     // A `world` root with one child: that child is the robot's real root.
     let mut start = root;
-    if floating && root_name == "world" && children[root].len() == 1 {
-        start = link_index[robot.joints[children[root][0]].child.link.as_str()];
+    if floating && root_name == "world" && tree.children[root].len() == 1 {
+        start = link_index[robot.joints[tree.children[root][0]].child.link.as_str()];
     }
-
-    // Depth-first walk, preorder, children in listing order, so each sub-tree gets contiguous
-    // joint indices (legs, arms… stay together in q). Stack items: (link, URDF joint reaching
-    // it, carrying body of its parent, link placement in that body).
-    let mut visited = vec![false; robot.links.len()];
-    let mut stack: Vec<(usize, Option<usize>, Option<usize>, SE3)> =
-        vec![(start, None, None, SE3::identity())];
-    while let Some((link, via, parent_body, x)) = stack.pop() {
-        if visited[link] {
-            return Err(DynamicsError::Cycle {
-                link: robot.links[link].name.clone(),
-            });
-        }
-        visited[link] = true;
-        let name = robot.links[link].name.clone();
-        let (body, link_in_body) = match via {
-            None if floating => {
-                let id = model.add_joint(
-                    ROOT_JOINT_NAME,
-                    None,
-                    SE3::identity(),
-                    JointKind::FreeFlyer,
-                    inertias[link],
-                    name,
-                )?;
-                (Some(id), SE3::identity())
-            }
-            None => {
-                model.add_frame(name, None, SE3::identity())?;
-                (None, SE3::identity())
-            }
-            Some(k) => {
-                let j = &robot.joints[k];
-                let mut kind = joint_kind(j)?;
-                let mut x = x;
-                if let (Some((k, limits)), Some(&value)) = (&kind, locked.get(&j.name)) {
-                    if k.nq() != 1 || !(limits.lower..=limits.upper).contains(&value) {
-                        return Err(DynamicsError::InvalidJoint {
-                            joint: j.name.clone(),
-                            reason: format!(
-                                "locked at {value}, outside its limits [{}, {}]",
-                                limits.lower, limits.upper
-                            ),
-                        });
-                    }
-                    // Locked: a fixed joint at the placement the value gives.
-                    x = x.compose(&k.transform(&[value]));
-                    kind = None;
-                }
-                match kind {
-                    Some((kind, limits)) => {
-                        let id = model.add_joint(
-                            j.name.clone(),
-                            parent_body,
-                            x,
-                            kind,
-                            inertias[link],
-                            name,
-                        )?;
-                        model.set_limits(id, limits);
-                        (Some(id), SE3::identity())
-                    }
-                    None => {
-                        // Fixed joint: merge into the parent body (Pinocchio-style).
-                        if let Some(b) = parent_body {
-                            let merged = x.act_inertia(&inertias[link]);
-                            model.joints[b].inertia += merged;
-                        }
-                        model.add_frame(name, parent_body, x)?;
-                        (parent_body, x)
-                    }
-                }
-            }
-        };
-        for &k in children[link].iter().rev() {
-            let j = &robot.joints[k];
-            let child = link_index[j.child.link.as_str()];
-            stack.push((child, Some(k), body, link_in_body.compose(&pose(&j.origin))));
-        }
-    }
+    let walk = Walk {
+        robot,
+        tree: &tree,
+        link_index: &link_index,
+        inertias: &inertias,
+        locked,
+        floating,
+    };
+    let visited = walk.run(&mut model, start)?;
     // Links never reached hang on a cycle (each link has at most one parent joint).
     if let Some(k) = (0..robot.links.len()).find(|&k| !visited[k] && k != root) {
         return Err(DynamicsError::Cycle {
@@ -695,4 +593,227 @@ fn build(
         });
     }
     Ok(model)
+}
+
+/// Each link's index by name; a name given twice is an error.
+fn link_indices(robot: &urdf_rs::Robot) -> Result<HashMap<&str, usize>, DynamicsError> {
+    let mut link_index: HashMap<&str, usize> = HashMap::new();
+    for (k, l) in robot.links.iter().enumerate() {
+        if link_index.insert(l.name.as_str(), k).is_some() {
+            return Err(DynamicsError::DuplicateName {
+                what: "link",
+                name: l.name.clone(),
+            });
+        }
+    }
+    Ok(link_index)
+}
+
+/// A load warning for each mimic joint not locked: it is taken as an independent joint.
+fn mimic_warnings(robot: &urdf_rs::Robot, locked: &HashMap<String, f64>) -> Vec<String> {
+    robot
+        .joints
+        .iter()
+        .filter_map(|j| {
+            let m = j.mimic.as_ref().filter(|_| !locked.contains_key(&j.name))?;
+            Some(format!(
+                "joint '{}' mimics '{}': taken as an independent joint (as Pinocchio does by default)",
+                j.name, m.joint
+            ))
+        })
+        .collect()
+}
+
+/// The links' tree as the joints draw it (indices into the URDF's lists).
+struct Tree {
+    /// Parent joint of each link.
+    parent_joint: Vec<Option<usize>>,
+    /// Child joints of each link, in listing order.
+    children: Vec<Vec<usize>>,
+}
+
+impl Tree {
+    /// The tree of `robot`'s joints; a joint name given twice, a link missing, a link with two
+    /// parents or its own parent is an error.
+    fn of(
+        robot: &urdf_rs::Robot,
+        link_index: &HashMap<&str, usize>,
+    ) -> Result<Tree, DynamicsError> {
+        let mut parent_joint: Vec<Option<usize>> = vec![None; robot.links.len()];
+        let mut children: Vec<Vec<usize>> = vec![Vec::new(); robot.links.len()];
+        let mut joint_names: HashMap<&str, ()> = HashMap::new();
+        for (k, j) in robot.joints.iter().enumerate() {
+            if joint_names.insert(j.name.as_str(), ()).is_some() {
+                return Err(DynamicsError::DuplicateName {
+                    what: "joint",
+                    name: j.name.clone(),
+                });
+            }
+            let find = |role: &'static str, name: &str| {
+                link_index
+                    .get(name)
+                    .copied()
+                    .ok_or_else(|| DynamicsError::MissingLink {
+                        joint: j.name.clone(),
+                        role,
+                        link: name.to_owned(),
+                    })
+            };
+            let p = find("parent", &j.parent.link)?;
+            let c = find("child", &j.child.link)?;
+            if let Some(first) = parent_joint[c] {
+                return Err(DynamicsError::MultipleParents {
+                    link: j.child.link.clone(),
+                    first: robot.joints[first].name.clone(),
+                    second: j.name.clone(),
+                });
+            }
+            if p == c {
+                return Err(DynamicsError::Cycle {
+                    link: j.child.link.clone(),
+                });
+            }
+            parent_joint[c] = Some(k);
+            children[p].push(k);
+        }
+        Ok(Tree {
+            parent_joint,
+            children,
+        })
+    }
+
+    /// The one link without a parent joint.
+    fn root(&self, robot: &urdf_rs::Robot) -> Result<usize, DynamicsError> {
+        let roots: Vec<usize> = (0..robot.links.len())
+            .filter(|&k| self.parent_joint[k].is_none())
+            .collect();
+        match roots.as_slice() {
+            [] => Err(DynamicsError::NoRoot),
+            [r] => Ok(*r),
+            many => {
+                let names: Vec<&str> = many.iter().map(|&k| robot.links[k].name.as_str()).collect();
+                Err(DynamicsError::MultipleRoots(names.join(", ")))
+            }
+        }
+    }
+}
+
+/// The walk down the tree that adds the model's joints, bodies and frames.
+struct Walk<'a> {
+    robot: &'a urdf_rs::Robot,
+    tree: &'a Tree,
+    link_index: &'a HashMap<&'a str, usize>,
+    inertias: &'a [Inertia],
+    locked: &'a HashMap<String, f64>,
+    floating: bool,
+}
+
+impl Walk<'_> {
+    /// Depth-first from `start`, preorder, children in listing order, so each sub-tree gets
+    /// contiguous joint indices (legs, arms… stay together in q). Returns the links visited;
+    /// a link reached twice is a cycle.
+    fn run(&self, model: &mut Model, start: usize) -> Result<Vec<bool>, DynamicsError> {
+        let robot = self.robot;
+        let mut visited = vec![false; robot.links.len()];
+        // Stack items: (link, URDF joint reaching it, carrying body of its parent, link
+        // placement in that body).
+        let mut stack: Vec<(usize, Option<usize>, Option<usize>, SE3)> =
+            vec![(start, None, None, SE3::identity())];
+        while let Some((link, via, parent_body, x)) = stack.pop() {
+            if visited[link] {
+                return Err(DynamicsError::Cycle {
+                    link: robot.links[link].name.clone(),
+                });
+            }
+            visited[link] = true;
+            let (body, link_in_body) = match via {
+                None => self.add_root(model, link)?,
+                Some(k) => self.add_joint(model, link, k, parent_body, x)?,
+            };
+            for &k in self.tree.children[link].iter().rev() {
+                let j = &robot.joints[k];
+                let child = self.link_index[j.child.link.as_str()];
+                stack.push((child, Some(k), body, link_in_body.compose(&pose(&j.origin))));
+            }
+        }
+        Ok(visited)
+    }
+
+    /// The root link: on a free-flyer, or a frame of the world. Returns the body carrying it
+    /// and its placement in that body.
+    fn add_root(
+        &self,
+        model: &mut Model,
+        link: usize,
+    ) -> Result<(Option<usize>, SE3), DynamicsError> {
+        let name = self.robot.links[link].name.clone();
+        if self.floating {
+            let id = model.add_joint(
+                ROOT_JOINT_NAME,
+                None,
+                SE3::identity(),
+                JointKind::FreeFlyer,
+                self.inertias[link],
+                name,
+            )?;
+            Ok((Some(id), SE3::identity()))
+        } else {
+            model.add_frame(name, None, SE3::identity())?;
+            Ok((None, SE3::identity()))
+        }
+    }
+
+    /// `link`, reached by URDF joint `k` at placement `x` in `parent_body`: a moving joint and
+    /// its body, or (fixed, or locked at its value) merged into the parent body. Returns the
+    /// body carrying the link and its placement in that body.
+    fn add_joint(
+        &self,
+        model: &mut Model,
+        link: usize,
+        k: usize,
+        parent_body: Option<usize>,
+        x: SE3,
+    ) -> Result<(Option<usize>, SE3), DynamicsError> {
+        let name = self.robot.links[link].name.clone();
+        let j = &self.robot.joints[k];
+        let mut kind = joint_kind(j)?;
+        let mut x = x;
+        if let (Some((k, limits)), Some(&value)) = (&kind, self.locked.get(&j.name)) {
+            if k.nq() != 1 || !(limits.lower..=limits.upper).contains(&value) {
+                return Err(DynamicsError::InvalidJoint {
+                    joint: j.name.clone(),
+                    reason: format!(
+                        "locked at {value}, outside its limits [{}, {}]",
+                        limits.lower, limits.upper
+                    ),
+                });
+            }
+            // Locked: a fixed joint at the placement the value gives.
+            x = x.compose(&k.transform(&[value]));
+            kind = None;
+        }
+        match kind {
+            Some((kind, limits)) => {
+                let id = model.add_joint(
+                    j.name.clone(),
+                    parent_body,
+                    x,
+                    kind,
+                    self.inertias[link],
+                    name,
+                )?;
+                model.set_limits(id, limits);
+                Ok((Some(id), SE3::identity()))
+            }
+            None => {
+                // Fixed joint: merge into the parent body (Pinocchio-style).
+                if let Some(b) = parent_body {
+                    let merged = x.act_inertia(&self.inertias[link]);
+                    model.joints[b].inertia += merged;
+                }
+                model.add_frame(name, parent_body, x)?;
+                Ok((parent_body, x))
+            }
+        }
+    }
 }

@@ -15,16 +15,10 @@
 //! Model / Data: the robot's model is immutable; the estimator owns its workspace (kinematics
 //! with the base at the identity). Allocation-free after [`BaseEstimator::new`].
 
-mod accuracy;
 mod settings;
-mod true_margin;
-mod wrench_accuracy;
 pub mod wrench_observer;
 
-pub use accuracy::{BaseAccuracy, base_accuracy};
 pub use settings::{EstimatorMode, EstimatorSettings};
-pub use true_margin::{TrueMargin, true_margin};
-pub use wrench_accuracy::{ErrorStats, HandSource, WrenchAccuracy, wrench_accuracy};
 
 use nalgebra::{DVector, Matrix3, Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
 

@@ -268,12 +268,6 @@ impl WrenchObserver {
         }
     }
 
-    /// The residual of WO-2 through WO-5 (the external generalised force, filtered): what the
-    /// split reads.
-    pub fn filtered_residual(&self) -> &DVector<f64> {
-        &self.filtered
-    }
-
     /// One update on the configuration `q`, velocity `v` (Pinocchio's conventions, the base
     /// included) and the joints' torques `tau` (nv − 6), `dt` after the last one.
     pub fn update(

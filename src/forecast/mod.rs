@@ -103,6 +103,91 @@ struct Current {
     hash: u64,
 }
 
+/// What the forecaster follows of the plant's states: its run, its scenario and where the
+/// windows stand.
+#[derive(Default)]
+struct Timeline {
+    /// Chosen at the first state (the plant says how hard it pushes its robot).
+    current: Option<Current>,
+    /// The index of the last window published.
+    last_index: Option<i64>,
+    /// The plant run (0: none seen yet).
+    session: u64,
+    /// The plant time at which the scenario started.
+    scenario_start: f64,
+    /// The plant hash the current scenario was chosen for (following), or checked against
+    /// (fixed).
+    seen_hash: Option<u64>,
+}
+
+impl Timeline {
+    /// A new plant run, or its scenario started (or restarted): windows shift with it, the
+    /// next one goes out at once.
+    fn follow_run(&mut self, st: &StateMsg) {
+        if st.session != self.session {
+            if self.session != 0 {
+                tracing::info!(
+                    "new plant run (session {:016x}) at t = {:.3} s: forecasting for its timeline",
+                    st.session,
+                    st.time
+                );
+            }
+            self.session = st.session;
+            self.last_index = None;
+        }
+        if st.scenario_start >= 0.0 && st.scenario_start != self.scenario_start {
+            self.scenario_start = st.scenario_start;
+            self.last_index = None;
+        }
+    }
+
+    /// The scenario to forecast, chosen again when the plant's scenario hash changes: `source`'s
+    /// (fixed, or the plant's), scaled as the plant pushes its robot, given `shape`'s error.
+    fn choose_scenario(&mut self, st: &StateMsg, source: &Source, shape: &ForecastShape) {
+        if self.seen_hash == Some(st.scenario_hash) {
+            return;
+        }
+        self.seen_hash = Some(st.scenario_hash);
+        // The plant pushes its robot `force_scale` times the scenario's figures.
+        let scale = if st.force_scale > 0.0 {
+            st.force_scale
+        } else {
+            1.0
+        };
+        let chosen = match source {
+            Source::Fixed(sc) => Some(sc.clone()),
+            Source::FollowPlant => follow(st),
+        };
+        self.current = chosen.and_then(|sc| {
+            let scenario = sc.with_force_scale(scale);
+            match shape.apply(&scenario.force) {
+                Ok(force) => Some(Current {
+                    hash: scenario.content_hash(),
+                    force,
+                    scenario,
+                }),
+                Err(e) => {
+                    tracing::error!("`{}`: {e}; publishing nothing", scenario.name);
+                    None
+                }
+            }
+        });
+        if let Some(cur) = &self.current
+            && st.scenario_hash != 0
+            && cur.hash != st.scenario_hash
+        {
+            tracing::warn!(
+                "forecasting `{}` × {scale} (hash {:016x}) while the plant plays `{}` (hash {:016x})",
+                cur.scenario.name,
+                cur.hash,
+                st.scenario_name(),
+                st.scenario_hash
+            );
+        }
+        self.last_index = None;
+    }
+}
+
 /// Publish windows until `stop` is raised, the state stream passes `until`, or IPC fails.
 /// Paced by the plant's time: window k starts at k·period and is published as soon as a state
 /// at or past that time is seen (see [`crate::channels::window_index`]), so its content is a function of the
@@ -117,14 +202,8 @@ pub fn run(
     let notifier = bus.notifier(ServiceKind::Forecast)?;
     let states = bus.subscriber::<StateMsg>()?;
     let wake = bus.listener(ServiceKind::State)?;
-    // Chosen at the first state (the plant says how hard it pushes its robot).
-    let mut current: Option<Current> = None;
+    let mut timeline = Timeline::default();
     let mut seq = 0u64;
-    let mut last_index: Option<i64> = None;
-    let mut session = 0u64;
-    let mut scenario_start = 0.0;
-    // The plant hash the current scenario was chosen for (following), or checked against (fixed).
-    let mut seen_hash: Option<u64> = None;
     while !stop.load(Ordering::Relaxed) {
         wake.wait(Duration::from_millis(50))?;
         // A controller that subscribed after the last window gets it now, not at the next one
@@ -133,73 +212,21 @@ pub fn run(
         let Some(st) = states.latest()? else {
             continue;
         };
-        if st.session != session {
-            if session != 0 {
-                tracing::info!(
-                    "new plant run (session {:016x}) at t = {:.3} s: forecasting for its timeline",
-                    st.session,
-                    st.time
-                );
-            }
-            session = st.session;
-            last_index = None;
-        }
-        // The plant started its scenario (or restarted it): windows shift with it.
-        if st.scenario_start >= 0.0 && st.scenario_start != scenario_start {
-            scenario_start = st.scenario_start;
-            last_index = None;
-        }
-        if seen_hash != Some(st.scenario_hash) {
-            seen_hash = Some(st.scenario_hash);
-            // The plant pushes its robot `force_scale` times the scenario's figures.
-            let scale = if st.force_scale > 0.0 {
-                st.force_scale
-            } else {
-                1.0
-            };
-            let chosen = match source {
-                Source::Fixed(sc) => Some(sc.clone()),
-                Source::FollowPlant => follow(&st),
-            };
-            current = chosen.and_then(|sc| {
-                let scenario = sc.with_force_scale(scale);
-                match s.error.shape.apply(&scenario.force) {
-                    Ok(force) => Some(Current {
-                        hash: scenario.content_hash(),
-                        force,
-                        scenario,
-                    }),
-                    Err(e) => {
-                        tracing::error!("`{}`: {e}; publishing nothing", scenario.name);
-                        None
-                    }
-                }
-            });
-            if let Some(cur) = &current
-                && st.scenario_hash != 0
-                && cur.hash != st.scenario_hash
-            {
-                tracing::warn!(
-                    "forecasting `{}` × {scale} (hash {:016x}) while the plant plays `{}` (hash {:016x})",
-                    cur.scenario.name,
-                    cur.hash,
-                    st.scenario_name(),
-                    st.scenario_hash
-                );
-            }
-            last_index = None;
-        }
-        let Some(cur) = &current else { continue };
+        timeline.follow_run(&st);
+        timeline.choose_scenario(&st, source, &s.error.shape);
+        let Some(cur) = &timeline.current else {
+            continue;
+        };
         let now = st.time;
         let k = window_index(now, s.period);
-        if last_index != Some(k) {
-            last_index = Some(k);
+        if timeline.last_index != Some(k) {
+            timeline.last_index = Some(k);
             seq += 1;
             let t0 = k as f64 * s.period;
             let hash = cur.hash;
             // Before the plant starts the scenario nothing pushes: a window of zeros.
             let offset = if st.scenario_start >= 0.0 {
-                scenario_start
+                timeline.scenario_start
             } else {
                 f64::INFINITY
             };

@@ -70,25 +70,34 @@ impl<'a> ReducedLoop<'a> {
         let mut zmp =
             ZmpPreview::new(model, p.q_e, p.r, n, p.solver).with_terminal_cost(p.terminal_cost);
         zmp.check_holds_the_com()?;
-        let mut constrained = p.zmp_constraints.then(|| {
+        let constrained = p.zmp_constraints.then(|| {
             ConstrainedPreview::new(model, p.q_e, p.r, n, r.support)
                 .with_terminal_cost(p.terminal_cost)
         });
-        let mut previewer = HandPreviewer::new(t, m_e, n)?;
+        let previewer = HandPreviewer::new(t, m_e, n)?;
         let plant_hand = HandPreviewer::new(t, m_e, 1)?;
-        let mut search = match self.controller {
+        let search = match self.controller {
             ControllerKind::C2 => Some(GainSearch::from_config(c, r)?),
             _ => None,
         };
-        let nominal = GainSchedule::constant(n, c.hand.kp, c.nominal_kd(c.hand.kp));
+        let mut controller = Controller {
+            kind: self.controller,
+            zmp,
+            constrained,
+            previewer,
+            search,
+            nominal: GainSchedule::constant(n, c.hand.kp, c.nominal_kd(c.hand.kp)),
+        };
 
         let desired = HandState {
             pos: r.hand_position,
             ..Default::default()
         };
-        let hand_desired = vec![desired; n];
-        let zmp_ref = vec![self.scenario.zmp_reference; n];
-        let mut f_ext = vec![[0.0; 3]; n];
+        let mut inputs = Horizon {
+            hand_desired: vec![desired; n],
+            zmp_ref: vec![self.scenario.zmp_reference; n],
+            f_ext: vec![[0.0; 3]; n],
+        };
         let mut com: [AxisState; 2] =
             [0, 1].map(|a| Vector3::new(self.scenario.zmp_reference[a], 0.0, 0.0));
         let mut hand = desired;
@@ -101,45 +110,24 @@ impl<'a> ReducedLoop<'a> {
             let now = k as f64 * t;
             let start = Instant::now();
             // The known force forecast at k+1…k+N.
-            self.scenario.force.sample_into(now + t, t, &mut f_ext);
-            let gains = match search.as_mut() {
-                Some(s) => {
-                    let inputs = GainSearchInputs {
-                        com,
-                        zmp_ref: &zmp_ref,
-                        hand,
-                        hand_desired: &hand_desired,
-                        f_ext: &f_ext,
-                        applied,
-                    };
-                    reports.push(s.search(&inputs, 1)?);
-                    s.schedule()
-                }
-                None => &nominal,
-            };
-            let u = match self.controller {
-                ControllerKind::C0 => zmp.solve_c0(&com, &zmp_ref)?,
-                ControllerKind::C1 | ControllerKind::C2 => {
-                    previewer.predict(&hand, &hand_desired, gains, &f_ext, n)?;
-                    match constrained.as_mut() {
-                        Some(q) => q.solve(&com, &zmp_ref, previewer.disturbance())?,
-                        None => zmp.solve_c1(&com, &zmp_ref, previewer.disturbance())?,
-                    }
-                }
-            };
+            self.scenario
+                .force
+                .sample_into(now + t, t, &mut inputs.f_ext);
+            let (u, gains) = controller.command(&com, &hand, applied, &inputs, &mut reports)?;
             let solve_time = start.elapsed().as_secs_f64();
-            applied = [gains.kp[0], gains.kd[0]];
+            applied = gains;
 
             // Plants: the CoM follows the jerk; the hand feels the actual force.
             for a in 0..2 {
                 com[a] = model.step(&com[a], u[a]);
             }
+            let f_ext = inputs.f_ext[0];
             let (next_hand, f_dis) = plant_hand.step(
                 &hand,
                 &desired,
                 applied[0],
                 applied[1],
-                &Vector3::from(f_ext[0]),
+                &Vector3::from(f_ext),
             );
             hand = next_hand;
             let alpha0 = 1.0 / (model.mass * model.gravity - f_dis[2]);
@@ -148,11 +136,11 @@ impl<'a> ReducedLoop<'a> {
                 t: now + t,
                 com: [com[0][0], com[1][0]],
                 zmp: zmp_now,
-                zmp_ref: zmp_ref[0],
+                zmp_ref: inputs.zmp_ref[0],
                 hand_error: (hand.pos - desired.pos).norm(),
                 kp: applied[0],
                 kd: applied[1],
-                f_ext: f_ext[0],
+                f_ext,
                 f_dis: f_dis.into(),
                 solve_time,
             });
@@ -165,5 +153,71 @@ impl<'a> ReducedLoop<'a> {
             metrics,
             gain_search: reports,
         })
+    }
+}
+
+/// What the controller previews over the horizon (samples at k+1…k+N).
+struct Horizon {
+    hand_desired: Vec<HandState>,
+    zmp_ref: Vec<[f64; 2]>,
+    /// The known hand force forecast.
+    f_ext: Vec<[f64; 3]>,
+}
+
+/// C0, C1 or C2 on the reduced models: the ZMP preview (constrained or not), the hand
+/// previewer, and C2's gain search.
+struct Controller {
+    kind: ControllerKind,
+    zmp: ZmpPreview,
+    constrained: Option<ConstrainedPreview>,
+    previewer: HandPreviewer,
+    search: Option<GainSearch>,
+    /// The hand gains without a search.
+    nominal: GainSchedule,
+}
+
+impl Controller {
+    /// This step's CoM jerk (x, y) and the hand gains it applies (K_p, K_d), from the CoM and
+    /// hand states, the gains applied last step and the horizon. C2 searches its gains first
+    /// (its report pushed on `reports`).
+    fn command(
+        &mut self,
+        com: &[AxisState; 2],
+        hand: &HandState,
+        applied: [f64; 2],
+        inputs: &Horizon,
+        reports: &mut Vec<GainSearchReport>,
+    ) -> Result<([f64; 2], [f64; 2]), PreviewError> {
+        let n = inputs.zmp_ref.len();
+        let gains = match self.search.as_mut() {
+            Some(s) => {
+                let search_inputs = GainSearchInputs {
+                    com: *com,
+                    zmp_ref: &inputs.zmp_ref,
+                    hand: *hand,
+                    hand_desired: &inputs.hand_desired,
+                    f_ext: &inputs.f_ext,
+                    applied,
+                };
+                reports.push(s.search(&search_inputs, 1)?);
+                s.schedule()
+            }
+            None => &self.nominal,
+        };
+        let u = match self.kind {
+            ControllerKind::C0 => self.zmp.solve_c0(com, &inputs.zmp_ref)?,
+            ControllerKind::C1 | ControllerKind::C2 => {
+                self.previewer
+                    .predict(hand, &inputs.hand_desired, gains, &inputs.f_ext, n)?;
+                match self.constrained.as_mut() {
+                    Some(q) => q.solve(com, &inputs.zmp_ref, self.previewer.disturbance())?,
+                    None => {
+                        self.zmp
+                            .solve_c1(com, &inputs.zmp_ref, self.previewer.disturbance())?
+                    }
+                }
+            }
+        };
+        Ok((u, [gains.kp[0], gains.kd[0]]))
     }
 }

@@ -163,11 +163,6 @@ impl Riccati {
         }
     }
 
-    /// Whether [`Riccati::first_input`] may be called (preview gains of this factorisation).
-    pub fn has_preview_gains(&self) -> bool {
-        self.preview_valid
-    }
-
     /// [`Riccati::factor`] and the first input of each of two reference sequences (the x and y
     /// axes share the output rows) in ONE backward pass: with α0 changing every tick the gains
     /// are new each time, and the forward pass of the preview gains plus the dot products cost

@@ -85,109 +85,139 @@ pub struct Figure {
 
 /// The figure set of one section (one scenario's full-simulation or reduced-model runs).
 pub fn standard_figures(prefix: &str, what: &str) -> Vec<Figure> {
-    use Quantity::*;
-    let p = |title, y_label, scale, lines: Vec<Line>, support_axis| Panel {
+    let fig = |name: &str, title: &str, panels| Figure {
+        name: format!("{prefix}_{name}"),
+        title: format!("{title} — {what}"),
+        x_label: "t (s)",
+        panels,
+    };
+    vec![
+        fig("zmp", "ZMP and support bounds", zmp_panels()),
+        fig(
+            "zmp_pred",
+            "Preview-model ZMP one step ahead",
+            zmp_pred_panels(),
+        ),
+        fig(
+            "hand_error",
+            "Hand tracking error",
+            vec![panel(
+                "hand error",
+                "error (mm)",
+                1e3,
+                vec![Line::PerSource(Quantity::HandError)],
+                None,
+            )],
+        ),
+        fig("com", "CoM position", com_panels()),
+        fig(
+            "kp",
+            "Hand stiffness K_p",
+            vec![panel(
+                "K_p",
+                "K_p (1/s²)",
+                1.0,
+                vec![Line::PerSource(Quantity::Kp)],
+                None,
+            )],
+        ),
+        fig(
+            "force",
+            "Hand force forecast and CoM disturbance",
+            force_panels(),
+        ),
+    ]
+}
+
+fn panel(
+    title: &'static str,
+    y_label: &'static str,
+    scale: f64,
+    lines: Vec<Line>,
+    support_axis: Option<usize>,
+) -> Panel {
+    Panel {
         title,
         y_label,
         scale,
         lines,
         support_axis,
-    };
-    let fig = |name: &str, title: String, panels| Figure {
-        name: format!("{prefix}_{name}"),
-        title,
-        x_label: "t (s)",
-        panels,
-    };
+    }
+}
+
+/// The ZMP along x and y, its reference and the support bounds.
+fn zmp_panels() -> Vec<Panel> {
+    use Quantity::*;
     vec![
-        fig(
-            "zmp",
-            format!("ZMP and support bounds — {what}"),
+        panel(
+            "ZMP x",
+            "x (m)",
+            1.0,
+            vec![Line::Common(ZmpRefX, "reference"), Line::PerSource(ZmpX)],
+            Some(0),
+        ),
+        panel(
+            "ZMP y",
+            "y (m)",
+            1.0,
+            vec![Line::Common(ZmpRefY, "reference"), Line::PerSource(ZmpY)],
+            Some(1),
+        ),
+    ]
+}
+
+/// The ZMP the preview predicts one step ahead, and the support bounds.
+fn zmp_pred_panels() -> Vec<Panel> {
+    use Quantity::*;
+    vec![
+        panel(
+            "predicted ZMP x",
+            "x (m)",
+            1.0,
+            vec![Line::PerSource(ZmpPredX)],
+            Some(0),
+        ),
+        panel(
+            "predicted ZMP y",
+            "y (m)",
+            1.0,
+            vec![Line::PerSource(ZmpPredY)],
+            Some(1),
+        ),
+    ]
+}
+
+/// The CoM along x, y and z.
+fn com_panels() -> Vec<Panel> {
+    use Quantity::*;
+    vec![
+        panel("CoM x", "x (m)", 1.0, vec![Line::PerSource(ComX)], None),
+        panel("CoM y", "y (m)", 1.0, vec![Line::PerSource(ComY)], None),
+        panel("CoM z", "z (m)", 1.0, vec![Line::PerSource(ComZ)], None),
+    ]
+}
+
+/// The hand force forecast (common to all controllers) and each one's CoM disturbance.
+fn force_panels() -> Vec<Panel> {
+    use Quantity::*;
+    vec![
+        panel(
+            "hand force forecast F_ext",
+            "force (N)",
+            1.0,
             vec![
-                p(
-                    "ZMP x",
-                    "x (m)",
-                    1.0,
-                    vec![Line::Common(ZmpRefX, "reference"), Line::PerSource(ZmpX)],
-                    Some(0),
-                ),
-                p(
-                    "ZMP y",
-                    "y (m)",
-                    1.0,
-                    vec![Line::Common(ZmpRefY, "reference"), Line::PerSource(ZmpY)],
-                    Some(1),
-                ),
+                Line::Common(FExtX, "F_ext x"),
+                Line::Common(FExtY, "F_ext y"),
+                Line::Common(FExtZ, "F_ext z"),
             ],
+            None,
         ),
-        fig(
-            "zmp_pred",
-            format!("Preview-model ZMP one step ahead — {what}"),
-            vec![
-                p(
-                    "predicted ZMP x",
-                    "x (m)",
-                    1.0,
-                    vec![Line::PerSource(ZmpPredX)],
-                    Some(0),
-                ),
-                p(
-                    "predicted ZMP y",
-                    "y (m)",
-                    1.0,
-                    vec![Line::PerSource(ZmpPredY)],
-                    Some(1),
-                ),
-            ],
-        ),
-        fig(
-            "hand_error",
-            format!("Hand tracking error — {what}"),
-            vec![p(
-                "hand error",
-                "error (mm)",
-                1e3,
-                vec![Line::PerSource(HandError)],
-                None,
-            )],
-        ),
-        fig(
-            "com",
-            format!("CoM position — {what}"),
-            vec![
-                p("CoM x", "x (m)", 1.0, vec![Line::PerSource(ComX)], None),
-                p("CoM y", "y (m)", 1.0, vec![Line::PerSource(ComY)], None),
-                p("CoM z", "z (m)", 1.0, vec![Line::PerSource(ComZ)], None),
-            ],
-        ),
-        fig(
-            "kp",
-            format!("Hand stiffness K_p — {what}"),
-            vec![p("K_p", "K_p (1/s²)", 1.0, vec![Line::PerSource(Kp)], None)],
-        ),
-        fig(
-            "force",
-            format!("Hand force forecast and CoM disturbance — {what}"),
-            vec![
-                p(
-                    "hand force forecast F_ext",
-                    "force (N)",
-                    1.0,
-                    vec![
-                        Line::Common(FExtX, "F_ext x"),
-                        Line::Common(FExtY, "F_ext y"),
-                        Line::Common(FExtZ, "F_ext z"),
-                    ],
-                    None,
-                ),
-                p(
-                    "CoM disturbance F_dis x",
-                    "force (N)",
-                    1.0,
-                    vec![Line::PerSource(FDisX)],
-                    None,
-                ),
-            ],
+        panel(
+            "CoM disturbance F_dis x",
+            "force (N)",
+            1.0,
+            vec![Line::PerSource(FDisX)],
+            None,
         ),
     ]
 }
@@ -432,30 +462,105 @@ fn draw<DB: DrawingBackend>(
     .map_err(e)?;
     let areas = rest.split_evenly((panels.len(), 1));
     for (area, (panel, traces)) in areas.iter().zip(panels) {
-        let (mut y0, mut y1) = value_range(traces);
-        // A run that falls sends the ZMP metres away: keep the axis on the support (1.5 of its
-        // widths either side), draw what lies beyond on the axis edge and say whose it is.
-        let mut cut: Vec<&str> = Vec::new();
-        if let Some([lo, hi]) = support_bounds(traces) {
-            let (a, b) = (lo - 1.5 * (hi - lo), hi + 1.5 * (hi - lo));
-            if y0 < a || y1 > b {
-                for t in traces.iter().filter(|t| !t.dashed) {
-                    if t.points.iter().any(|p| p.1 < a || p.1 > b) && !cut.contains(&&*t.label) {
-                        cut.push(&t.label);
-                    }
-                }
-                (y0, y1) = (y0.max(a), y1.min(b));
-            }
+        draw_panel(area, fig.x_label, panel, traces, x_range)?;
+    }
+    Ok(())
+}
+
+/// One panel: its axes, its traces, and above them its title and legend.
+fn draw_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    x_label: &str,
+    panel: &Panel,
+    traces: &[Trace],
+    x_range: (f64, f64),
+) -> Result<(), String> {
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    let (y0, y1, cut) = y_range(traces);
+    let legend = Legend::lay_out(traces, area.dim_in_pixel().0 as i32 - 24, panel.title);
+    let mut chart = ChartBuilder::on(area)
+        .margin(8)
+        .margin_top(26 + 16 * legend.lines.len() as u32)
+        .x_label_area_size(34)
+        .y_label_area_size(72)
+        .build_cartesian_2d(x_range.0..x_range.1, y0..y1)
+        .map_err(e)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_label)
+        .y_desc(panel.y_label)
+        .label_style((FONT_FAMILY, 12))
+        .axis_desc_style((FONT_FAMILY, 13))
+        .light_line_style(RGBColor(235, 235, 235))
+        .bold_line_style(RGBColor(215, 215, 215))
+        .draw()
+        .map_err(e)?;
+    for t in traces {
+        let style = t.color.stroke_width(t.width);
+        let points = t.points.iter().map(|&(x, y)| (x, y.clamp(y0, y1)));
+        if t.dashed {
+            chart
+                .draw_series(DashedLineSeries::new(points, 6, 4, style))
+                .map_err(e)?;
+        } else {
+            chart
+                .draw_series(LineSeries::new(points, style))
+                .map_err(e)?;
         }
-        // The legend: one line beside the title when it fits, else lines of its own below it
-        // (right-aligned), the plot moved down to make room.
+    }
+    let title = if cut.is_empty() {
+        panel.title.to_string()
+    } else {
+        format!(
+            "{} (axis cut at 1.5 support widths; {} beyond, drawn on the edge)",
+            panel.title,
+            cut.join(", ")
+        )
+    };
+    legend.draw(area, &title)
+}
+
+/// The panel's value axis, and the traces drawn cut at its edges. A run that falls sends the
+/// ZMP metres away: keep the axis on the support (1.5 of its widths either side), draw what
+/// lies beyond on the axis edge and say whose it is.
+fn y_range(traces: &[Trace]) -> (f64, f64, Vec<&str>) {
+    let (mut y0, mut y1) = value_range(traces);
+    let mut cut: Vec<&str> = Vec::new();
+    if let Some([lo, hi]) = support_bounds(traces) {
+        let (a, b) = (lo - 1.5 * (hi - lo), hi + 1.5 * (hi - lo));
+        if y0 < a || y1 > b {
+            for t in traces.iter().filter(|t| !t.dashed) {
+                if t.points.iter().any(|p| p.1 < a || p.1 > b) && !cut.contains(&&*t.label) {
+                    cut.push(&t.label);
+                }
+            }
+            (y0, y1) = (y0.max(a), y1.min(b));
+        }
+    }
+    (y0, y1, cut)
+}
+
+/// A panel's legend: one line beside the title when it fits, else lines of its own below it
+/// (right-aligned), the plot moved down to make room.
+struct Legend<'a> {
+    /// The labelled traces.
+    entries: Vec<&'a Trace>,
+    /// Each entry's width (px).
+    widths: Vec<i32>,
+    /// The entries of each line of their own (none: beside the title).
+    lines: Vec<Vec<usize>>,
+    /// The width the legend may take (px).
+    full: i32,
+}
+
+impl<'a> Legend<'a> {
+    fn lay_out(traces: &'a [Trace], full: i32, title: &str) -> Legend<'a> {
         let entries: Vec<&Trace> = traces.iter().filter(|t| !t.label.is_empty()).collect();
         let widths: Vec<i32> = entries
             .iter()
             .map(|t| 30 + 8 * t.label.chars().count() as i32 + 14)
             .collect();
-        let full = area.dim_in_pixel().0 as i32 - 24;
-        let beside = widths.iter().sum::<i32>() + 80 + 8 * panel.title.chars().count() as i32;
+        let beside = widths.iter().sum::<i32>() + 80 + 8 * title.chars().count() as i32;
         let mut lines: Vec<Vec<usize>> = Vec::new();
         if beside > full {
             let mut used = full;
@@ -470,38 +575,22 @@ fn draw<DB: DrawingBackend>(
                 }
             }
         }
-        let mut chart = ChartBuilder::on(area)
-            .margin(8)
-            .margin_top(26 + 16 * lines.len() as u32)
-            .x_label_area_size(34)
-            .y_label_area_size(72)
-            .build_cartesian_2d(x_range.0..x_range.1, y0..y1)
-            .map_err(e)?;
-        chart
-            .configure_mesh()
-            .x_desc(fig.x_label)
-            .y_desc(panel.y_label)
-            .label_style((FONT_FAMILY, 12))
-            .axis_desc_style((FONT_FAMILY, 13))
-            .light_line_style(RGBColor(235, 235, 235))
-            .bold_line_style(RGBColor(215, 215, 215))
-            .draw()
-            .map_err(e)?;
-        for t in traces {
-            let style = t.color.stroke_width(t.width);
-            let points = t.points.iter().map(|&(x, y)| (x, y.clamp(y0, y1)));
-            if t.dashed {
-                chart
-                    .draw_series(DashedLineSeries::new(points, 6, 4, style))
-                    .map_err(e)?;
-            } else {
-                chart
-                    .draw_series(LineSeries::new(points, style))
-                    .map_err(e)?;
-            }
+        Legend {
+            entries,
+            widths,
+            lines,
+            full,
         }
-        // Title and legend in the strip above the plot, drawn as plain text: plotters' own
-        // legend measures text with the font, which the SVG must not need.
+    }
+
+    /// The panel's title and the legend in the strip above the plot, drawn as plain text:
+    /// plotters' own legend measures text with the font, which the SVG must not need.
+    fn draw<DB: DrawingBackend>(
+        &self,
+        area: &DrawingArea<DB, Shift>,
+        title: &str,
+    ) -> Result<(), String> {
+        let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
         let text = |s: &str, x: i32, y: i32, color: &RGBColor| {
             Text::new(
                 s.to_string(),
@@ -512,27 +601,22 @@ fn draw<DB: DrawingBackend>(
                     .pos(Pos::new(HPos::Left, VPos::Center)),
             )
         };
-        let title = if cut.is_empty() {
-            panel.title.to_string()
+        area.draw(&text(title, 80, 12, &BLACK)).map_err(e)?;
+        let one_line = [(0..self.entries.len()).collect::<Vec<usize>>()];
+        let rows: &[Vec<usize>] = if self.lines.is_empty() {
+            &one_line
         } else {
-            format!(
-                "{} (axis cut at 1.5 support widths; {} beyond, drawn on the edge)",
-                panel.title,
-                cut.join(", ")
-            )
+            &self.lines
         };
-        area.draw(&text(&title, 80, 12, &BLACK)).map_err(e)?;
-        let one_line = [(0..entries.len()).collect::<Vec<usize>>()];
-        let rows: &[Vec<usize>] = if lines.is_empty() { &one_line } else { &lines };
         for (r, row) in rows.iter().enumerate() {
-            let y = if lines.is_empty() {
+            let y = if self.lines.is_empty() {
                 12
             } else {
                 28 + 16 * r as i32
             };
-            let mut x = full + 12 - row.iter().map(|&i| widths[i]).sum::<i32>();
+            let mut x = self.full + 12 - row.iter().map(|&i| self.widths[i]).sum::<i32>();
             for &i in row {
-                let t = entries[i];
+                let t = self.entries[i];
                 let style = t.color.stroke_width(2);
                 if t.dashed {
                     area.draw(&PathElement::new(vec![(x, y), (x + 9, y)], style))
@@ -544,11 +628,11 @@ fn draw<DB: DrawingBackend>(
                         .map_err(e)?;
                 }
                 area.draw(&text(&t.label, x + 30, y, &BLACK)).map_err(e)?;
-                x += widths[i];
+                x += self.widths[i];
             }
         }
+        Ok(())
     }
-    Ok(())
 }
 
 /// The SVG backend, measuring text without a font when none is loaded: SVG text is laid out

@@ -5,6 +5,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use super::ReportError;
+use super::csv::{Columns, Reading};
 use crate::offline::RunResult;
 
 /// What a figure can plot.
@@ -90,11 +91,14 @@ pub struct CsvRun {
     pub path: PathBuf,
     pub series: Series,
     /// Raw columns by name, for metrics computed here (e.g. `com_z`).
-    raw: HashMap<String, Vec<f64>>,
+    raw: Columns,
 }
 
-/// Columns without which a run cannot be plotted at all.
-const REQUIRED: [&str; 4] = ["t", "zmp_meas_x", "zmp_meas_y", "hand_err"];
+/// The reading of `controller.csv`: strict, with the columns without which a run cannot be
+/// plotted at all.
+const STRICT: Reading = Reading::Strict {
+    required: &["t", "zmp_meas_x", "zmp_meas_y", "hand_err"],
+};
 
 const COLUMNS: [(&str, Quantity); 17] = [
     ("zmp_meas_x", Quantity::ZmpX),
@@ -119,78 +123,38 @@ const COLUMNS: [(&str, Quantity); 17] = [
 impl CsvRun {
     /// Read `path`; every error names the file (and the line for a bad value).
     pub fn read(path: &Path, label: &str) -> Result<CsvRun, ReportError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ReportError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        Self::parse(&text, path, label)
+        Self::from_columns(Columns::read(path, STRICT)?, path, label)
     }
 
     pub fn parse(text: &str, path: &Path, label: &str) -> Result<CsvRun, ReportError> {
-        let bad = |line: usize, message: String| ReportError::Csv {
-            path: path.to_path_buf(),
-            line,
-            message,
-        };
-        let mut lines = text.lines().enumerate();
-        let header: Vec<&str> = match lines.next() {
-            Some((_, h)) => h.split(',').map(str::trim).collect(),
-            None => return Err(bad(1, "the file is empty (no header)".into())),
-        };
-        for name in REQUIRED {
-            if !header.contains(&name) {
-                return Err(bad(1, format!("no `{name}` column in the header")));
-            }
-        }
-        let mut cols: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
-        for (i, line) in lines {
-            if line.trim().is_empty() {
-                continue;
-            }
-            let fields: Vec<&str> = line.split(',').collect();
-            if fields.len() != header.len() {
-                return Err(bad(
-                    i + 1,
-                    format!(
-                        "{} fields where the header has {}",
-                        fields.len(),
-                        header.len()
-                    ),
-                ));
-            }
-            for (c, f) in fields.iter().enumerate() {
-                let v: f64 = f.trim().parse().map_err(|_| {
-                    bad(
-                        i + 1,
-                        format!("`{}` in column `{}` is not a number", f.trim(), header[c]),
-                    )
-                })?;
-                cols[c].push(v);
-            }
-        }
-        if cols[0].is_empty() {
-            return Err(bad(2, "no data rows after the header".into()));
-        }
-        let raw: HashMap<String, Vec<f64>> =
-            header.iter().map(|h| h.to_string()).zip(cols).collect();
+        Self::from_columns(Columns::parse(text, path, STRICT)?, path, label)
+    }
+
+    /// The run of columns read strictly (so `t` is there).
+    fn from_columns(raw: Columns, path: &Path, label: &str) -> Result<CsvRun, ReportError> {
         let columns = COLUMNS
             .iter()
-            .filter_map(|(name, q)| raw.get(*name).map(|v| (*q, v.clone())))
+            .filter_map(|(name, q)| raw.get(name).map(|v| (*q, v.clone())))
             .collect();
         // The core latches the support at its first tick: any finite row holds it.
         let support = ["sup_x_min", "sup_x_max", "sup_y_min", "sup_y_max"]
             .iter()
             .map(|n| {
-                raw.get(*n)
+                raw.get(n)
                     .and_then(|v| v.iter().copied().find(|x| x.is_finite()))
             })
             .collect::<Option<Vec<f64>>>()
             .map(|s| [[s[0], s[1]], [s[2], s[3]]]);
+        let t = raw.get("t").cloned().ok_or_else(|| ReportError::Csv {
+            path: path.to_path_buf(),
+            line: 1,
+            message: "no `t` column in the header".into(),
+        })?;
         Ok(CsvRun {
             path: path.to_path_buf(),
             series: Series {
                 label: label.to_string(),
-                t: raw["t"].clone(),
+                t,
                 columns,
                 support,
             },

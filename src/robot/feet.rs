@@ -8,7 +8,7 @@ use std::path::Path;
 use nalgebra::{Matrix3, Vector3};
 
 use super::RobotError;
-use super::description::{ContactSpec, FootSpec};
+use super::description::{ContactSpec, FootSpec, SoleOrigin};
 use crate::dynamics::{Model, SE3};
 
 /// Corner frame suffixes, front/rear and left/right in the sole frame: the order of each foot's
@@ -180,6 +180,9 @@ fn ordered(mut p: Vec<Vector3<f64>>) -> [Vector3<f64>; 4] {
     [front[0], front[1], rear[0], rear[1]]
 }
 
+/// A frame's body (its joint) and its placement in that body.
+type OnBody = (Option<usize>, SE3);
+
 /// Adds the foot's sole frame (if new) and contact frames to `model`; returns the contact
 /// frames' names in [`CORNERS`] order.
 ///
@@ -206,87 +209,19 @@ pub fn attach(
             spec.frame
         )));
     }
-    // The made sole frame in its link's frame.
-    let made = SE3::from_xyz_rpy(origin.xyz, origin.rpy);
     let points: Vec<Vector3<f64>> = match &spec.contacts {
         ContactSpec::Keyword(k) if k == "frames" => {
-            if sole.is_none() {
-                return Err(RobotError::Feet(format!(
-                    "contacts = \"frames\" but the URDF has no sole frame `{}`",
-                    spec.frame
-                )));
-            }
-            for n in &names {
-                model.frame_id(n).map_err(|_| {
-                    RobotError::Feet(format!(
-                        "contacts = \"frames\" but the URDF has no frame `{n}`"
-                    ))
-                })?;
-            }
-            return Ok(names);
+            return corner_frames(model, spec, sole, names);
         }
         ContactSpec::Keyword(k) if k == "collision" => {
-            let link = spec.link.as_deref().unwrap_or(&spec.frame);
-            let (body_joint, link_in_body) = on_body(model, link)
-                .ok_or_else(|| RobotError::Feet(format!("no link `{link}` in the model")))?;
-            let collision = collision_points(urdf, urdf_dir, link)?;
-            match sole {
-                Some((joint, sole_in_body)) => {
-                    if joint != body_joint {
-                        return Err(RobotError::Feet(format!(
-                            "sole `{}` and link `{link}` are on different bodies",
-                            spec.frame
-                        )));
-                    }
-                    let to_sole = sole_in_body.inverse().compose(&link_in_body);
-                    lowest_four(&collision, &to_sole, link)?
-                }
-                None => {
-                    // A new sole frame at the contact points' centroid, axes of the link turned
-                    // by `origin.rpy`.
-                    if origin.xyz != [0.0; 3] {
-                        return Err(RobotError::Feet(format!(
-                            "sole `{}`: a sole made from collision geometry sits at its contact \
-                             points' centroid: give `origin` an rpy only",
-                            spec.frame
-                        )));
-                    }
-                    let p = lowest_four(&collision, &made.inverse(), link)?;
-                    let c = p.iter().sum::<Vector3<f64>>() / 4.0;
-                    let sole_in_body = link_in_body
-                        .compose(&made)
-                        .compose(&SE3::new(Matrix3::identity(), c));
-                    model.add_frame(spec.frame.clone(), body_joint, sole_in_body)?;
-                    p.iter().map(|x| x - c).collect()
-                }
-            }
+            collision_contacts(model, urdf, urdf_dir, spec, sole, &origin)?
         }
         ContactSpec::Keyword(k) => {
             return Err(RobotError::Feet(format!(
                 "contacts = \"{k}\": expected \"frames\", \"collision\" or four [x, y, z] points"
             )));
         }
-        ContactSpec::Points(p) => {
-            if p.len() != 4 || p.iter().flatten().any(|x| !x.is_finite()) {
-                return Err(RobotError::Feet(format!(
-                    "sole `{}`: four finite [x, y, z] contact points are needed, got {}",
-                    spec.frame,
-                    p.len()
-                )));
-            }
-            if sole.is_none() {
-                let link = spec.link.as_deref().ok_or_else(|| {
-                    RobotError::Feet(format!(
-                        "no sole frame `{}` in the URDF: name its `link`",
-                        spec.frame
-                    ))
-                })?;
-                let (joint, at) = on_body(model, link)
-                    .ok_or_else(|| RobotError::Feet(format!("no link `{link}` in the model")))?;
-                model.add_frame(spec.frame.clone(), joint, at.compose(&made))?;
-            }
-            p.iter().map(|x| Vector3::from(*x)).collect()
-        }
+        ContactSpec::Points(p) => listed_contacts(model, spec, sole, &origin, p)?,
     };
     let (joint, sole_in_body) = on_body(model, &spec.frame)
         .ok_or_else(|| RobotError::Feet(format!("no sole frame `{}`", spec.frame)))?;
@@ -299,4 +234,110 @@ pub fn attach(
         })?;
     }
     Ok(names)
+}
+
+/// The made sole frame in its link's frame.
+fn made_sole(origin: &SoleOrigin) -> SE3 {
+    SE3::from_xyz_rpy(origin.xyz, origin.rpy)
+}
+
+/// `contacts = "frames"`: the URDF's sole frame (`sole`) and its corner frames `names`.
+fn corner_frames(
+    model: &Model,
+    spec: &FootSpec,
+    sole: Option<OnBody>,
+    names: [String; 4],
+) -> Result<[String; 4], RobotError> {
+    if sole.is_none() {
+        return Err(RobotError::Feet(format!(
+            "contacts = \"frames\" but the URDF has no sole frame `{}`",
+            spec.frame
+        )));
+    }
+    for n in &names {
+        model.frame_id(n).map_err(|_| {
+            RobotError::Feet(format!(
+                "contacts = \"frames\" but the URDF has no frame `{n}`"
+            ))
+        })?;
+    }
+    Ok(names)
+}
+
+/// `contacts = "collision"`: the four lowest points of the link's collision geometry, in the
+/// sole frame: the URDF's (`sole`), or one made at their centroid (added to `model`), its
+/// axes the link's turned by `origin.rpy`.
+fn collision_contacts(
+    model: &mut Model,
+    urdf: &urdf_rs::Robot,
+    urdf_dir: Option<&Path>,
+    spec: &FootSpec,
+    sole: Option<OnBody>,
+    origin: &SoleOrigin,
+) -> Result<Vec<Vector3<f64>>, RobotError> {
+    let link = spec.link.as_deref().unwrap_or(&spec.frame);
+    let (body_joint, link_in_body) = on_body(model, link)
+        .ok_or_else(|| RobotError::Feet(format!("no link `{link}` in the model")))?;
+    let collision = collision_points(urdf, urdf_dir, link)?;
+    match sole {
+        Some((joint, sole_in_body)) => {
+            if joint != body_joint {
+                return Err(RobotError::Feet(format!(
+                    "sole `{}` and link `{link}` are on different bodies",
+                    spec.frame
+                )));
+            }
+            let to_sole = sole_in_body.inverse().compose(&link_in_body);
+            lowest_four(&collision, &to_sole, link)
+        }
+        None => {
+            // A new sole frame at the contact points' centroid, axes of the link turned by
+            // `origin.rpy`.
+            if origin.xyz != [0.0; 3] {
+                return Err(RobotError::Feet(format!(
+                    "sole `{}`: a sole made from collision geometry sits at its contact \
+                     points' centroid: give `origin` an rpy only",
+                    spec.frame
+                )));
+            }
+            let made = made_sole(origin);
+            let p = lowest_four(&collision, &made.inverse(), link)?;
+            let c = p.iter().sum::<Vector3<f64>>() / 4.0;
+            let sole_in_body = link_in_body
+                .compose(&made)
+                .compose(&SE3::new(Matrix3::identity(), c));
+            model.add_frame(spec.frame.clone(), body_joint, sole_in_body)?;
+            Ok(p.iter().map(|x| x - c).collect())
+        }
+    }
+}
+
+/// Four contact points listed in the sole frame: the URDF's (`sole`), or one made on the
+/// foot's `link` at `origin` (added to `model`).
+fn listed_contacts(
+    model: &mut Model,
+    spec: &FootSpec,
+    sole: Option<OnBody>,
+    origin: &SoleOrigin,
+    p: &[[f64; 3]],
+) -> Result<Vec<Vector3<f64>>, RobotError> {
+    if p.len() != 4 || p.iter().flatten().any(|x| !x.is_finite()) {
+        return Err(RobotError::Feet(format!(
+            "sole `{}`: four finite [x, y, z] contact points are needed, got {}",
+            spec.frame,
+            p.len()
+        )));
+    }
+    if sole.is_none() {
+        let link = spec.link.as_deref().ok_or_else(|| {
+            RobotError::Feet(format!(
+                "no sole frame `{}` in the URDF: name its `link`",
+                spec.frame
+            ))
+        })?;
+        let (joint, at) = on_body(model, link)
+            .ok_or_else(|| RobotError::Feet(format!("no link `{link}` in the model")))?;
+        model.add_frame(spec.frame.clone(), joint, at.compose(&made_sole(origin)))?;
+    }
+    Ok(p.iter().map(|x| Vector3::from(*x)).collect())
 }

@@ -573,61 +573,9 @@ fn derive(
     let mut data = Data::new(model);
     let com = center_of_mass(model, &mut data, home)?;
     forward_kinematics(model, &mut data, home)?;
-    let mut support = [[f64::INFINITY, f64::NEG_INFINITY]; 2];
-    let (mut zmin, mut zmax) = (f64::INFINITY, f64::NEG_INFINITY);
-    for n in contacts {
-        let p = data.o_m_f[model.frame_id(n)?].trans;
-        for a in 0..2 {
-            support[a] = [support[a][0].min(p[a]), support[a][1].max(p[a])];
-        }
-        zmin = zmin.min(p.z);
-        zmax = zmax.max(p.z);
-    }
-    let mut tilt: f64 = 0.0;
-    let mut worst = (0, Matrix3::identity());
-    let mut centres = [Vector3::zeros(); 2];
-    for (k, s) in soles.iter().enumerate() {
-        let m = data.o_m_f[model.frame_id(s)?];
-        let t = (m.rot * Vector3::z()).z.clamp(-1.0, 1.0).acos();
-        if t > tilt {
-            (tilt, worst) = (t, (k, m.rot));
-        }
-        for c in &contacts[4 * k..4 * k + 4] {
-            centres[k] += data.o_m_f[model.frame_id(c)?].trans / 4.0;
-        }
-    }
-    // A sole frame far from level is a frame whose axes are not the sole's (a made frame takes
-    // its link's axes, and an ankle link's z may point forward): no posture fixes that.
-    if tilt > 45f64.to_radians() {
-        let (k, rot) = worst;
-        let side = if k == 0 { "left" } else { "right" };
-        // The rotation about the sole frame's own axes that brings its z up: from z to the
-        // world's vertical as seen in that frame.
-        let up = rot.transpose() * Vector3::z();
-        let fix = nalgebra::Rotation3::rotation_between(&Vector3::z(), &up).unwrap_or_else(|| {
-            nalgebra::Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
-        });
-        let (r, p, y) = fix.euler_angles();
-        return Err(home_err(format!(
-            "the sole frame `{}` points its z axis {:.1}° away from the vertical at home: its \
-             axes are not the sole's (z out of the sole, x toward the toes), which no [home] \
-             posture changes. A sole frame upc makes takes its link's axes: turn it with \
-             [feet.{side}] origin = {{ rpy = [{r:.4}, {p:.4}, {y:.4}] }} (that brings z up; \
-             check that x then points to the toes), or name a sole frame of the URDF",
-            soles[k],
-            tilt.to_degrees()
-        )));
-    }
-    // A robot that does not stand flat on its eight points at home cannot be balanced by a
-    // controller that assumes it: refuse it with the figures.
-    if tilt > 2f64.to_radians() || zmax - zmin > 2e-3 {
-        return Err(home_err(format!(
-            "the soles are not flat on the ground at home (tilt {:.1}°, contact heights {:.1} mm \
-             apart): adjust [home] (hip, knee and ankle pitch)",
-            tilt.to_degrees(),
-            (zmax - zmin) * 1e3
-        )));
-    }
+    let (support, heights) = contact_box(model, &data, contacts)?;
+    let feet = FeetAtHome::of(model, &data, soles, contacts)?;
+    feet.check_level(soles, heights).map_err(home_err)?;
     if !(support[0][0] < com.x
         && com.x < support[0][1]
         && support[1][0] < com.y
@@ -641,8 +589,122 @@ fn derive(
     let hand_position = data.o_m_f[model.frame_id(&d.hand.frame)?].trans;
     let mut op = OpSpaceWorkspace::new(model, &d.hand.chain_root, &d.hand.frame)?;
     let effective_mass = *op.compute(model, &mut data, home)?;
-    let hand_force_capacity = op
-        .dofs
+    Ok(Derived {
+        mass: model.total_mass(),
+        com_height: com.z,
+        com_offset: [com.x, com.y],
+        support,
+        effective_mass,
+        hand_position,
+        hand_force_capacity: hand_force_capacity(model, &op),
+        sole_tilt: feet.tilt,
+        feet_distance: (feet.centres[0] - feet.centres[1]).norm(),
+    })
+}
+
+/// The contact points' box at the placements of `data`: the support rectangle
+/// [[x_min, x_max], [y_min, y_max]], and the lowest and highest points' heights.
+fn contact_box(
+    model: &Model,
+    data: &Data,
+    contacts: &[String; 8],
+) -> Result<([[f64; 2]; 2], [f64; 2]), RobotError> {
+    let mut support = [[f64::INFINITY, f64::NEG_INFINITY]; 2];
+    let (mut zmin, mut zmax) = (f64::INFINITY, f64::NEG_INFINITY);
+    for n in contacts {
+        let p = data.o_m_f[model.frame_id(n)?].trans;
+        for a in 0..2 {
+            support[a] = [support[a][0].min(p[a]), support[a][1].max(p[a])];
+        }
+        zmin = zmin.min(p.z);
+        zmax = zmax.max(p.z);
+    }
+    Ok((support, [zmin, zmax]))
+}
+
+/// The feet at home.
+struct FeetAtHome {
+    /// The soles' largest tilt from level (rad), and which sole it is with its rotation.
+    tilt: f64,
+    worst: (usize, Matrix3<f64>),
+    /// Each foot's contact points' centroid.
+    centres: [Vector3<f64>; 2],
+}
+
+impl FeetAtHome {
+    fn of(
+        model: &Model,
+        data: &Data,
+        soles: &[String; 2],
+        contacts: &[String; 8],
+    ) -> Result<FeetAtHome, RobotError> {
+        let mut tilt: f64 = 0.0;
+        let mut worst = (0, Matrix3::identity());
+        let mut centres = [Vector3::zeros(); 2];
+        for (k, s) in soles.iter().enumerate() {
+            let m = data.o_m_f[model.frame_id(s)?];
+            let t = (m.rot * Vector3::z()).z.clamp(-1.0, 1.0).acos();
+            if t > tilt {
+                (tilt, worst) = (t, (k, m.rot));
+            }
+            for c in &contacts[4 * k..4 * k + 4] {
+                centres[k] += data.o_m_f[model.frame_id(c)?].trans / 4.0;
+            }
+        }
+        Ok(FeetAtHome {
+            tilt,
+            worst,
+            centres,
+        })
+    }
+
+    /// Why the robot does not stand flat at home, if it does not: a sole frame whose axes are
+    /// not the sole's, or soles tilted or at different heights (`heights`: the lowest and the
+    /// highest contact point's).
+    fn check_level(&self, soles: &[String; 2], [zmin, zmax]: [f64; 2]) -> Result<(), String> {
+        let tilt = self.tilt;
+        // A sole frame far from level is a frame whose axes are not the sole's (a made frame
+        // takes its link's axes, and an ankle link's z may point forward): no posture fixes
+        // that.
+        if tilt > 45f64.to_radians() {
+            let (k, rot) = self.worst;
+            let side = if k == 0 { "left" } else { "right" };
+            // The rotation about the sole frame's own axes that brings its z up: from z to the
+            // world's vertical as seen in that frame.
+            let up = rot.transpose() * Vector3::z();
+            let fix =
+                nalgebra::Rotation3::rotation_between(&Vector3::z(), &up).unwrap_or_else(|| {
+                    nalgebra::Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+                });
+            let (r, p, y) = fix.euler_angles();
+            return Err(format!(
+                "the sole frame `{}` points its z axis {:.1}° away from the vertical at home: its \
+                 axes are not the sole's (z out of the sole, x toward the toes), which no [home] \
+                 posture changes. A sole frame upc makes takes its link's axes: turn it with \
+                 [feet.{side}] origin = {{ rpy = [{r:.4}, {p:.4}, {y:.4}] }} (that brings z up; \
+                 check that x then points to the toes), or name a sole frame of the URDF",
+                soles[k],
+                tilt.to_degrees()
+            ));
+        }
+        // A robot that does not stand flat on its eight points at home cannot be balanced by a
+        // controller that assumes it: refuse it with the figures.
+        if tilt > 2f64.to_radians() || zmax - zmin > 2e-3 {
+            return Err(format!(
+                "the soles are not flat on the ground at home (tilt {:.1}°, contact heights {:.1} mm \
+                 apart): adjust [home] (hip, knee and ankle pitch)",
+                tilt.to_degrees(),
+                (zmax - zmin) * 1e3
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// [`Derived::hand_force_capacity`]: min over the chain joints of τ_max / |J_eᵀ x̂| (`op`: the
+/// hand's operational space, computed at home).
+fn hand_force_capacity(model: &Model, op: &OpSpaceWorkspace) -> f64 {
+    op.dofs
         .iter()
         .enumerate()
         .map(|(k, &dof)| {
@@ -654,18 +716,7 @@ fn derive(
                 f64::INFINITY
             }
         })
-        .fold(f64::INFINITY, f64::min);
-    Ok(Derived {
-        mass: model.total_mass(),
-        com_height: com.z,
-        com_offset: [com.x, com.y],
-        support,
-        effective_mass,
-        hand_position,
-        hand_force_capacity,
-        sole_tilt: tilt,
-        feet_distance: (centres[0] - centres[1]).norm(),
-    })
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// A sole's orientation from its corners (front-left, front-right, rear-left, rear-right): x

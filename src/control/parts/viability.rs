@@ -131,7 +131,7 @@ pub fn keep_easing(
     believed: [f64; 2],
 ) -> [f64; 2] {
     let mut kept = [0.0; 2];
-    if !(w < 1.0) || believed == [0.0; 2] {
+    if w.is_nan() || w >= 1.0 || believed == [0.0; 2] {
         return kept;
     }
     for ((f, f_fc), m) in f.iter_mut().zip(forecast_only).zip(measured_only) {

@@ -13,14 +13,14 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use indicatif::ProgressBar;
 use sha2::{Digest, Sha256};
 
-use super::capability::BoxError;
+use super::BoxError;
 use super::cell::{CellArgs, CellResult, Outcome, search};
 
 /// The Ray driver, carried in the binary so that an installed `upc` needs no source tree.
 const RAY_DRIVER: &str = include_str!("../../scripts/ray_sweep.py");
 
 #[derive(Clone, Copy, PartialEq, Eq, Debug, Default, clap::ValueEnum)]
-pub enum EngineKind {
+pub enum RunnerKind {
     /// Threads of this process, each running its cell's cases as `upc run` processes.
     #[default]
     Local,
@@ -29,11 +29,11 @@ pub enum EngineKind {
 }
 
 #[derive(clap::Args, Debug, Clone, Default)]
-pub struct EngineArgs {
+pub struct RunnerArgs {
     /// What runs the cells: this machine (`local`), or Ray (`ray`: the cluster at
     /// `--ray-address`, else `$RAY_ADDRESS`, else a local Ray cluster started for the sweep).
     #[arg(long, value_enum, default_value = "local")]
-    pub engine: EngineKind,
+    pub engine: RunnerKind,
     /// Cells run at once on this machine (default: its cores); with `--engine ray` and no
     /// cluster to join, the CPUs of the local cluster.
     #[arg(long)]
@@ -43,7 +43,7 @@ pub struct EngineArgs {
     pub ray_address: Option<String>,
 }
 
-impl EngineArgs {
+impl RunnerArgs {
     /// Cells run at once on this machine.
     pub fn jobs(&self) -> usize {
         self.jobs
@@ -55,8 +55,8 @@ impl EngineArgs {
     /// saw it).
     pub fn describe(&self, out: &Path) -> String {
         match self.engine {
-            EngineKind::Local => format!("{} at a time", count(self.jobs() as u64, "cell")),
-            EngineKind::Ray => match ray_cluster(out) {
+            RunnerKind::Local => format!("{} at a time", count(self.jobs() as u64, "cell")),
+            RunnerKind::Ray => match ray_cluster(out) {
                 Some(c) => {
                     let n = |k: &str| c.get(k).and_then(serde_json::Value::as_u64).unwrap_or(0);
                     format!(
@@ -71,9 +71,9 @@ impl EngineArgs {
     }
 }
 
-/// A sweep's cells, run by its engine, saved under `out`.
-pub struct Engine<'a> {
-    pub args: &'a EngineArgs,
+/// Runs a sweep's cells on the engine `--engine` chose, and saves them under `out`.
+pub struct SweepRunner<'a> {
+    pub args: &'a RunnerArgs,
     pub out: &'a Path,
     /// The `upc` every case runs.
     pub exe: &'a Path,
@@ -91,7 +91,7 @@ struct Saved {
     result: CellResult,
 }
 
-impl Engine<'_> {
+impl SweepRunner<'_> {
     /// Every cell's result, in the order of `cells`: those already searched under `out` are
     /// read back, the others run (a failed cell too: what made it fail may have been mended).
     pub fn run(&self, cells: &[CellArgs]) -> Result<Vec<CellResult>, BoxError> {
@@ -117,8 +117,8 @@ impl Engine<'_> {
         if !pending.is_empty() {
             let todo: Vec<&CellArgs> = pending.iter().map(|&i| &cells[i]).collect();
             match self.args.engine {
-                EngineKind::Local => self.run_local(&todo, &store)?,
-                EngineKind::Ray => self.run_ray(&todo, &store)?,
+                RunnerKind::Local => self.run_local(&todo, &store)?,
+                RunnerKind::Ray => self.run_ray(&todo, &store)?,
             }
             for &i in &pending {
                 results[i] = Some(store.saved(&cells[i]).ok_or_else(|| {

@@ -7,6 +7,8 @@ use std::path::Path;
 
 use nalgebra::UnitQuaternion;
 
+use super::csv::{Columns, Reading};
+
 /// RMS and largest error over a run.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct BaseAccuracy {
@@ -27,23 +29,8 @@ pub struct BaseAccuracy {
     pub tilt_rms_deg: f64,
 }
 
-/// Columns by name of a CSV text (numbers only; an unparsable cell is NaN).
-pub(super) fn columns(text: &str) -> HashMap<&str, Vec<f64>> {
-    let mut lines = text.lines();
-    let names: Vec<&str> = lines.next().unwrap_or("").split(',').collect();
-    let mut cols: HashMap<&str, Vec<f64>> = names.iter().map(|n| (*n, Vec::new())).collect();
-    for line in lines {
-        for (name, cell) in names.iter().zip(line.split(',')) {
-            if let Some(c) = cols.get_mut(name) {
-                c.push(cell.trim().parse().unwrap_or(f64::NAN));
-            }
-        }
-    }
-    cols
-}
-
 /// Samples of a log by time in ms (both logs print t to 0.1 ms).
-pub(super) fn by_time(log: &HashMap<&str, Vec<f64>>) -> Option<HashMap<i64, usize>> {
+pub(super) fn by_time(log: &Columns) -> Option<HashMap<i64, usize>> {
     Some(
         log.get("t")?
             .iter()
@@ -55,16 +42,20 @@ pub(super) fn by_time(log: &HashMap<&str, Vec<f64>>) -> Option<HashMap<i64, usiz
 
 /// The estimate's error, or `None` when the logs hold no estimate (a measured base) or no truth.
 pub fn base_accuracy(controller_csv: &Path, sim_csv: &Path) -> Option<BaseAccuracy> {
-    let c = std::fs::read_to_string(controller_csv).ok()?;
-    let s = std::fs::read_to_string(sim_csv).ok()?;
-    accuracy_of(&columns(&c), &columns(&s))
+    let (c, s) = read_both(controller_csv, sim_csv)?;
+    accuracy_of(&c, &s)
 }
 
-fn accuracy_of(
-    est: &HashMap<&str, Vec<f64>>,
-    truth: &HashMap<&str, Vec<f64>>,
-) -> Option<BaseAccuracy> {
-    let get = |m: &HashMap<&str, Vec<f64>>, names: [&str; 9]| -> Option<Vec<[f64; 9]>> {
+/// Both logs, read leniently; `None` if either cannot be read.
+pub(super) fn read_both(controller_csv: &Path, sim_csv: &Path) -> Option<(Columns, Columns)> {
+    Some((
+        Columns::read(controller_csv, Reading::Lenient).ok()?,
+        Columns::read(sim_csv, Reading::Lenient).ok()?,
+    ))
+}
+
+fn accuracy_of(est: &Columns, truth: &Columns) -> Option<BaseAccuracy> {
+    let get = |m: &Columns, names: [&str; 9]| -> Option<Vec<[f64; 9]>> {
         let cols: Vec<&Vec<f64>> = names.iter().map(|n| m.get(n)).collect::<Option<_>>()?;
         let n = cols.iter().map(|c| c.len()).min()?;
         Some(
@@ -154,6 +145,7 @@ fn accuracy_of(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::report::csv::tests::lenient;
 
     /// A known offset in position, velocity and yaw is what the comparison reports; rows
     /// without an estimate (NaN) or without a truth sample are skipped.
@@ -168,7 +160,7 @@ mod tests {
                      0.0100,0,0,0.5,0,0,0,0,0,0\n\
                      0.0200,0,0,0.5,0,0,0,0,0,0\n\
                      0.0300,0,0,0.5,0,0,0,0,0,0\n";
-        let a = accuracy_of(&columns(est), &columns(truth)).unwrap();
+        let a = accuracy_of(&lenient(est), &lenient(truth)).unwrap();
         assert_eq!(a.samples, 2);
         assert!((a.position_rms - 0.003).abs() < 1e-12 && (a.velocity_max - 0.02).abs() < 1e-12);
         assert!((a.orientation_rms_deg - 0.01f64.to_degrees()).abs() < 1e-9);

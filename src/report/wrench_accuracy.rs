@@ -12,7 +12,8 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use super::accuracy::{by_time, columns};
+use super::base_accuracy::{by_time, read_both};
+use super::csv::Columns;
 
 /// A true horizontal hand force at least this large (N) is a push.
 pub const PUSH_FORCE: f64 = 5.0;
@@ -90,20 +91,16 @@ pub struct WrenchAccuracy {
 
 /// The error, or `None` when the logs hold neither a hand force nor a CoP to compare.
 pub fn wrench_accuracy(controller_csv: &Path, sim_csv: &Path) -> Option<WrenchAccuracy> {
-    let c = std::fs::read_to_string(controller_csv).ok()?;
-    let s = std::fs::read_to_string(sim_csv).ok()?;
-    accuracy_of(&columns(&c), &columns(&s))
+    let (c, s) = read_both(controller_csv, sim_csv)?;
+    accuracy_of(&c, &s)
 }
 
 /// A column that holds at least one finite value.
-fn col<'a>(m: &'a HashMap<&str, Vec<f64>>, n: &str) -> Option<&'a Vec<f64>> {
+fn col<'a>(m: &'a Columns, n: &str) -> Option<&'a Vec<f64>> {
     m.get(n).filter(|c| c.iter().any(|x| x.is_finite()))
 }
 
-fn accuracy_of(
-    est: &HashMap<&str, Vec<f64>>,
-    truth: &HashMap<&str, Vec<f64>>,
-) -> Option<WrenchAccuracy> {
+fn accuracy_of(est: &Columns, truth: &Columns) -> Option<WrenchAccuracy> {
     let (hand_source, hx, hy) = match (col(est, "wo_hand_x"), col(est, "wo_hand_y")) {
         (Some(x), Some(y)) => (HandSource::Observer, x, y),
         _ => (
@@ -221,6 +218,7 @@ fn lag(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::report::csv::tests::lenient;
 
     /// An estimate that is the truth 20 ms late plus a constant 1 N, and a CoP 3 mm off, is
     /// what the comparison reports; the feet's loads are compared when the observer ran.
@@ -245,7 +243,7 @@ mod tests {
             );
             truth += &format!("{t:.4},{},0,0,0,150,150\n", force(t));
         }
-        let a = accuracy_of(&columns(&est), &columns(&truth)).unwrap();
+        let a = accuracy_of(&lenient(&est), &lenient(&truth)).unwrap();
         assert_eq!(a.hand_source, HandSource::Observer);
         assert!((a.hand_lag - 0.02).abs() < 0.004, "lag {}", a.hand_lag);
         // Standing: the offset (the push's lagging tails below 5 N add to the RMS only).
@@ -273,7 +271,7 @@ mod tests {
     fn a_measured_hand_force_without_the_observer() {
         let est = "t,f_meas_x,f_meas_y,zmp_meas_x,zmp_meas_y\n0.0100,6,0,0,0\n0.0200,6,0,0,0\n";
         let truth = "t,hand_fx,hand_fy,zmp_x,zmp_y\n0.0100,5,0,0,0\n0.0200,5,0,0,0\n";
-        let a = accuracy_of(&columns(est), &columns(truth)).unwrap();
+        let a = accuracy_of(&lenient(est), &lenient(truth)).unwrap();
         assert_eq!(
             (a.hand_source, a.hand_x_push.samples),
             (HandSource::Measured, 2)

@@ -3,12 +3,12 @@
 //! controller's own margin (`min_zmp_margin`) is its measured CoP's; on a robot that estimates
 //! its CoP (docs/estimation.md) the two differ, and the truth decides whether it stood.
 
-use std::collections::HashMap;
 use std::path::Path;
 
 use serde::Serialize;
 
-use super::accuracy::{by_time, columns};
+use super::base_accuracy::{by_time, read_both};
+use super::csv::Columns;
 
 /// The smallest signed distance of the true CoP to the support's nearest edge (m; negative:
 /// outside), when it happened, and the smallest along each axis.
@@ -25,15 +25,11 @@ pub struct TrueMargin {
 
 /// The true CoP's margin, or `None` when the logs share no sample with a finite CoP and support.
 pub fn true_margin(controller_csv: &Path, sim_csv: &Path) -> Option<TrueMargin> {
-    let c = std::fs::read_to_string(controller_csv).ok()?;
-    let s = std::fs::read_to_string(sim_csv).ok()?;
-    margin_of(&columns(&c), &columns(&s))
+    let (c, s) = read_both(controller_csv, sim_csv)?;
+    margin_of(&c, &s)
 }
 
-fn margin_of(
-    ctrl: &HashMap<&str, Vec<f64>>,
-    truth: &HashMap<&str, Vec<f64>>,
-) -> Option<TrueMargin> {
+fn margin_of(ctrl: &Columns, truth: &Columns) -> Option<TrueMargin> {
     let [x0, x1, y0, y1] =
         ["sup_x_min", "sup_x_max", "sup_y_min", "sup_y_max"].map(|k| ctrl.get(k));
     let (x0, x1, y0, y1) = (x0?, x1?, y0?, y1?);
@@ -72,7 +68,7 @@ fn margin_of(
 mod tests {
     use super::*;
 
-    fn log(cols: &[(&'static str, Vec<f64>)]) -> HashMap<&'static str, Vec<f64>> {
+    fn log(cols: &[(&'static str, Vec<f64>)]) -> Columns {
         cols.iter().cloned().collect()
     }
 
