@@ -1,4 +1,4 @@
-//! The wrist sensor's tare (`src/control/wrist_tare.rs`, docs/sensing.md "The wrist's
+//! The wrist sensor's tare (`src/control/parts/wrist_tare.rs`, docs/sensing.md "The wrist's
 //! offset"), through `upc run` as a user runs it: every sensor exact but the wrist, which
 //! carries a constant 2 N offset per axis. Fed back to the QP untared, the offset is rendered
 //! as a push: the hand walks the door away before any force comes (and, on
