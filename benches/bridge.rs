@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use upc::bridge::{BridgeConfig, wire::encode};
-use upc::channels::{Bus, ForecastMsg, ServiceKind};
+use upc::channels::{ContractNode, ForecastMsg, ServiceKind};
 use zenoh::Wait;
 
 /// A CA and the bridge's and a forecaster's certificates, in a fresh directory.
@@ -76,9 +76,9 @@ fn across(c: &mut Criterion, pki: Option<&Path>) {
         let stop = Arc::clone(&stop);
         std::thread::spawn(move || upc::bridge::run(&cfg, stop))
     };
-    let bus = Bus::open(&prefix, "bench-controller").expect("bus");
-    let forecasts = bus.subscriber::<ForecastMsg>().expect("subscriber");
-    let wake = bus.listener(ServiceKind::Forecast).expect("listener");
+    let node = ContractNode::open(&prefix, "bench-controller").expect("contract node");
+    let forecasts = node.subscriber::<ForecastMsg>().expect("subscriber");
+    let wake = node.listener(ServiceKind::Forecast).expect("listener");
     let mut zc = zenoh::Config::default();
     zc.insert_json5("connect/endpoints", &format!("[\"{endpoint}\"]"))
         .expect("config");

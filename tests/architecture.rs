@@ -154,9 +154,15 @@ fn code_only(text: &str) -> String {
             out.push_str("\"\"");
             i += 1;
         } else if c == '\'' && is_char_literal(&b, i) {
-            let end = b[i + 1..].iter().position(|&x| x == '\'').map(|p| i + 1 + p);
+            let end = b[i + 1..]
+                .iter()
+                .position(|&x| x == '\'')
+                .map(|p| i + 1 + p);
             let end = if b.get(i + 1) == Some(&'\\') {
-                b[i + 3..].iter().position(|&x| x == '\'').map(|p| i + 3 + p)
+                b[i + 3..]
+                    .iter()
+                    .position(|&x| x == '\'')
+                    .map(|p| i + 3 + p)
             } else {
                 end
             };
@@ -189,20 +195,33 @@ fn library_files() -> Vec<SourceFile> {
     walk(&src, &mut paths);
     let mut files = Vec::new();
     for p in paths {
-        let rel = p.strip_prefix(&src).unwrap().to_string_lossy().replace('\\', "/");
+        let rel = p
+            .strip_prefix(&src)
+            .unwrap()
+            .to_string_lossy()
+            .replace('\\', "/");
         // The binary (main.rs, cli/) imports the library as `upc::`; nothing imports it.
         // Files named tests.rs are test modules.
         if rel == "main.rs" || rel.starts_with("cli/") || rel.ends_with("/tests.rs") {
             continue;
         }
-        let mut module: Vec<String> = rel.trim_end_matches(".rs").split('/').map(String::from).collect();
+        let mut module: Vec<String> = rel
+            .trim_end_matches(".rs")
+            .split('/')
+            .map(String::from)
+            .collect();
         let is_mod = matches!(module.last().map(String::as_str), Some("mod") | Some("lib"));
         if is_mod {
             module.pop();
         }
         let text = std::fs::read_to_string(&p).unwrap();
         let code = code_only(without_tests(&text));
-        files.push(SourceFile { rel, module, is_mod, code });
+        files.push(SourceFile {
+            rel,
+            module,
+            is_mod,
+            code,
+        });
     }
     files
 }
@@ -263,12 +282,19 @@ fn use_statements(code: &str) -> Vec<(bool, String)> {
         let before = code[..at].trim_end();
         let at_start = before.is_empty() || before.ends_with([';', '{', '}', ']', ')']);
         let is_pub = before.ends_with("pub") || before.ends_with("pub(crate)");
-        let word_start = at == 0 || !code[..at].ends_with(|c: char| c.is_alphanumeric() || c == '_');
+        let word_start =
+            at == 0 || !code[..at].ends_with(|c: char| c.is_alphanumeric() || c == '_');
         if !word_start || !(at_start || is_pub) {
             continue;
         }
         if let Some(end) = code[at..].find(';') {
-            out.push((is_pub, code[at + 4..at + end].split_whitespace().collect::<Vec<_>>().join(" ")));
+            out.push((
+                is_pub,
+                code[at + 4..at + end]
+                    .split_whitespace()
+                    .collect::<Vec<_>>()
+                    .join(" "),
+            ));
         }
     }
     out
@@ -282,7 +308,8 @@ fn inline_paths(code: &str) -> Vec<Vec<String>> {
         while let Some(i) = code[from..].find(root) {
             let at = from + i;
             from = at + root.len();
-            if at > 0 && code[..at].ends_with(|c: char| c.is_alphanumeric() || c == '_' || c == ':') {
+            if at > 0 && code[..at].ends_with(|c: char| c.is_alphanumeric() || c == '_' || c == ':')
+            {
                 continue;
             }
             let tail: String = code[at..]
@@ -330,7 +357,11 @@ struct Graph {
 impl Graph {
     fn build() -> Graph {
         let files = library_files();
-        let by_module: HashMap<_, _> = files.iter().enumerate().map(|(i, f)| (f.module.clone(), i)).collect();
+        let by_module: HashMap<_, _> = files
+            .iter()
+            .enumerate()
+            .map(|(i, f)| (f.module.clone(), i))
+            .collect();
         let mut reexports = HashMap::new();
         for f in files.iter().filter(|f| f.is_mod) {
             for (is_pub, tree) in use_statements(&f.code) {
@@ -338,7 +369,10 @@ impl Graph {
                 expand_use(&[], &tree, &mut paths);
                 for (p, alias) in paths {
                     let first = p.first().map(String::as_str);
-                    if !is_pub || matches!(first, Some("crate") | Some("super")) || p.last().is_some_and(|l| l == "*") {
+                    if !is_pub
+                        || matches!(first, Some("crate") | Some("super"))
+                        || p.last().is_some_and(|l| l == "*")
+                    {
                         continue;
                     }
                     let name = alias.unwrap_or_else(|| p.last().unwrap().clone());
@@ -346,18 +380,24 @@ impl Graph {
                 }
             }
         }
-        let mut g = Graph { edges: vec![BTreeSet::new(); files.len()], files, by_module, reexports };
+        let mut g = Graph {
+            edges: vec![BTreeSet::new(); files.len()],
+            files,
+            by_module,
+            reexports,
+        };
         for i in 0..g.files.len() {
             let f = &g.files[i];
             let mut paths: Vec<Vec<String>> = Vec::new();
             for (_, tree) in use_statements(&f.code) {
                 let mut ps = Vec::new();
                 expand_use(&[], &tree, &mut ps);
-                paths.extend(
-                    ps.into_iter()
-                        .map(|(p, _)| p)
-                        .filter(|p| matches!(p.first().map(String::as_str), Some("crate") | Some("super") | Some("self"))),
-                );
+                paths.extend(ps.into_iter().map(|(p, _)| p).filter(|p| {
+                    matches!(
+                        p.first().map(String::as_str),
+                        Some("crate") | Some("super") | Some("self")
+                    )
+                }));
             }
             paths.extend(inline_paths(&f.code));
             let targets: BTreeSet<usize> = paths
@@ -379,7 +419,9 @@ impl Graph {
     /// The file defining `path`: the longest module prefix that is a file, through re-exports.
     fn resolve(&self, mut path: Vec<String>) -> Option<usize> {
         for _ in 0..8 {
-            let k = (0..=path.len()).rev().find(|&k| self.by_module.contains_key(&path[..k]))?;
+            let k = (0..=path.len())
+                .rev()
+                .find(|&k| self.by_module.contains_key(&path[..k]))?;
             let module = path[..k].to_vec();
             if k < path.len() {
                 if let Some(target) = self.reexports.get(&(module.clone(), path[k].clone())) {
@@ -399,7 +441,8 @@ impl Graph {
     /// An edge between a `mod.rs` and its own descendant: a declaration or a re-export.
     fn is_family(&self, a: usize, b: usize) -> bool {
         let (fa, fb) = (&self.files[a], &self.files[b]);
-        (fa.is_mod && fb.module.starts_with(&fa.module)) || (fb.is_mod && fa.module.starts_with(&fb.module))
+        (fa.is_mod && fb.module.starts_with(&fa.module))
+            || (fb.is_mod && fa.module.starts_with(&fb.module))
     }
 
     fn top(&self, i: usize) -> &str {
@@ -435,7 +478,11 @@ fn cycles(g: &Graph) -> Vec<Vec<String>> {
         t.next += 1;
         t.stack.push(v);
         t.on[v] = true;
-        let targets: Vec<usize> = t.g.edges[v].iter().copied().filter(|&w| !t.g.is_family(v, w)).collect();
+        let targets: Vec<usize> = t.g.edges[v]
+            .iter()
+            .copied()
+            .filter(|&w| !t.g.is_family(v, w))
+            .collect();
         for w in targets {
             match t.index[w] {
                 None => {
@@ -463,7 +510,15 @@ fn cycles(g: &Graph) -> Vec<Vec<String>> {
         }
     }
     let n = g.files.len();
-    let mut t = T { g, index: vec![None; n], low: vec![0; n], stack: vec![], on: vec![false; n], next: 0, found: vec![] };
+    let mut t = T {
+        g,
+        index: vec![None; n],
+        low: vec![0; n],
+        stack: vec![],
+        on: vec![false; n],
+        next: 0,
+        found: vec![],
+    };
     for v in 0..n {
         if t.index[v].is_none() {
             visit(&mut t, v);
@@ -477,13 +532,23 @@ fn the_import_graph_is_read_and_resolves_through_re_exports() {
     // The reader itself, on edges known to exist: a plain `use crate::…`, a `super::` path, and
     // a name re-exported by a mod.rs resolved to the child that defines it.
     let g = Graph::build();
-    assert!(g.files.len() > 150, "only {} library files read", g.files.len());
+    assert!(
+        g.files.len() > 150,
+        "only {} library files read",
+        g.files.len()
+    );
     let server = g.file("control/server.rs");
     let named: Vec<_> = g.edges_named(server).collect();
-    assert!(named.contains(&"control/contract.rs"), "control/server.rs → {named:?}");
+    assert!(
+        named.contains(&"control/contract.rs"),
+        "control/server.rs → {named:?}"
+    );
     let part = g.file("control/part.rs");
     let named: Vec<_> = g.edges_named(part).collect();
-    assert!(named.contains(&"control/frame.rs") && named.contains(&"control/tick.rs"), "control/part.rs → {named:?}");
+    assert!(
+        named.contains(&"control/frame.rs") && named.contains(&"control/tick.rs"),
+        "control/part.rs → {named:?}"
+    );
     let edges: usize = g.edges.iter().map(BTreeSet::len).sum();
     assert!(edges > 500, "only {edges} import edges found");
 }
@@ -492,7 +557,10 @@ fn the_import_graph_is_read_and_resolves_through_re_exports() {
 fn no_file_imports_a_file_that_imports_it_back() {
     let g = Graph::build();
     let found = cycles(&g);
-    assert!(found.is_empty(), "file-level import cycles in src/: {found:#?}");
+    assert!(
+        found.is_empty(),
+        "file-level import cycles in src/: {found:#?}"
+    );
 }
 
 #[test]
@@ -502,17 +570,29 @@ fn modules_depend_downwards_only() {
     let mut tops = BTreeSet::new();
     let mut wrong = BTreeMap::new();
     for (i, f) in g.files.iter().enumerate() {
-        let Some(from) = f.module.first() else { continue };
+        let Some(from) = f.module.first() else {
+            continue;
+        };
         tops.insert(from.clone());
-        let lf = *layer.get(from.as_str()).unwrap_or_else(|| panic!("src/{from}: a top-level module without a layer in LAYERS (docs/architecture.md)"));
+        let lf = *layer.get(from.as_str()).unwrap_or_else(|| {
+            panic!(
+                "src/{from}: a top-level module without a layer in LAYERS (docs/architecture.md)"
+            )
+        });
         for &t in &g.edges[i] {
             let to = g.top(t);
             if to != from && layer.get(to).is_some_and(|&lt| lt > lf) {
-                wrong.entry(format!("{from} → {to}")).or_insert_with(Vec::new).push(format!("{} → {}", f.rel, g.files[t].rel));
+                wrong
+                    .entry(format!("{from} → {to}"))
+                    .or_insert_with(Vec::new)
+                    .push(format!("{} → {}", f.rel, g.files[t].rel));
             }
         }
     }
-    assert!(wrong.is_empty(), "upward dependencies (docs/architecture.md): {wrong:#?}");
+    assert!(
+        wrong.is_empty(),
+        "upward dependencies (docs/architecture.md): {wrong:#?}"
+    );
     // The table names every module there is (a removed module leaves no stale line).
     let listed: BTreeSet<String> = LAYERS.iter().map(|(m, _)| m.to_string()).collect();
     assert_eq!(listed, tops, "LAYERS vs the modules of src/");
@@ -525,12 +605,21 @@ fn no_module_uses_a_module_that_uses_it_back() {
     for (i, f) in g.files.iter().enumerate() {
         let from = f.module[0].as_str();
         let set = uses.entry(from).or_default();
-        set.extend(g.edges[i].iter().map(|&t| g.top(t)).filter(|&to| to != from));
+        set.extend(
+            g.edges[i]
+                .iter()
+                .map(|&t| g.top(t))
+                .filter(|&to| to != from),
+        );
     }
     // Peel off modules that use nothing left; what remains is on a cycle.
     let mut left = uses.clone();
     loop {
-        let sinks: Vec<&str> = left.iter().filter(|(_, to)| to.iter().all(|t| !left.contains_key(t))).map(|(m, _)| *m).collect();
+        let sinks: Vec<&str> = left
+            .iter()
+            .filter(|(_, to)| to.iter().all(|t| !left.contains_key(t)))
+            .map(|(m, _)| *m)
+            .collect();
         if sinks.is_empty() {
             break;
         }
@@ -550,7 +639,32 @@ fn the_bus_imports_nothing_of_the_plants_and_one_plant_speaks_the_bus() {
             assert!(!into("sim"), "src/{} imports sim", f.rel);
         }
         if f.module[0] == "sim" && f.rel != "sim/bus_robot.rs" {
-            assert!(!into("bus"), "src/{} imports bus (only sim/bus_robot.rs speaks the bus)", f.rel);
+            assert!(
+                !into("bus"),
+                "src/{} imports bus (only sim/bus_robot.rs speaks the bus)",
+                f.rel
+            );
+        }
+    }
+}
+
+#[test]
+fn neither_engine_imports_the_other() {
+    let g = Graph::build();
+    for (i, f) in g.files.iter().enumerate() {
+        let mujoco = f.rel.starts_with("sim/mujoco/");
+        let own = f.rel == "sim/world.rs" || f.rel == "sim/contact.rs";
+        for t in g.edges_named(i) {
+            assert!(
+                !(mujoco && (t == "sim/world.rs" || t == "sim/contact.rs")),
+                "src/{} imports src/{t}",
+                f.rel
+            );
+            assert!(
+                !(own && t.starts_with("sim/mujoco/")),
+                "src/{} imports src/{t}",
+                f.rel
+            );
         }
     }
 }
@@ -558,7 +672,14 @@ fn the_bus_imports_nothing_of_the_plants_and_one_plant_speaks_the_bus() {
 #[test]
 fn the_tick_types_import_neither_the_core_nor_the_parts() {
     let g = Graph::build();
-    for rel in ["tick.rs", "frame.rs", "part.rs", "tick_record.rs", "held_object.rs", "summary.rs"] {
+    for rel in [
+        "tick.rs",
+        "frame.rs",
+        "part.rs",
+        "tick_record.rs",
+        "held_object.rs",
+        "summary.rs",
+    ] {
         let i = g.file(&format!("control/{rel}"));
         let up: Vec<_> = g
             .edges_named(i)
@@ -570,21 +691,32 @@ fn the_tick_types_import_neither_the_core_nor_the_parts() {
 
 #[test]
 fn only_the_loop_edge_of_the_controller_sees_the_state_message() {
-    let allowed = ["control/contract.rs", "control/plant_link.rs", "control/server.rs"];
+    let allowed = [
+        "control/contract.rs",
+        "control/plant_link.rs",
+        "control/server.rs",
+    ];
     let g = Graph::build();
     let mut seen = Vec::new();
     for f in g.files.iter().filter(|f| f.rel.starts_with("control/")) {
         let word = f.code.match_indices("StateMsg").any(|(i, _)| {
             let before = f.code[..i].chars().last();
             let after = f.code[i + "StateMsg".len()..].chars().next();
-            !before.is_some_and(|c| c.is_alphanumeric() || c == '_') && !after.is_some_and(|c| c.is_alphanumeric() || c == '_')
+            !before.is_some_and(|c| c.is_alphanumeric() || c == '_')
+                && !after.is_some_and(|c| c.is_alphanumeric() || c == '_')
         });
         if word {
             seen.push(f.rel.as_str());
         }
     }
-    assert!(seen.iter().all(|r| allowed.contains(r)), "StateMsg in {seen:?}; the controller reads it in {allowed:?} only");
-    assert!(seen.contains(&"control/contract.rs"), "the contract's reader no longer reads StateMsg: {seen:?}");
+    assert!(
+        seen.iter().all(|r| allowed.contains(r)),
+        "StateMsg in {seen:?}; the controller reads it in {allowed:?} only"
+    );
+    assert!(
+        seen.contains(&"control/contract.rs"),
+        "the contract's reader no longer reads StateMsg: {seen:?}"
+    );
 }
 
 /// Functions of `code` longer than `limit` lines (signature to closing brace), as (name, line,
@@ -630,11 +762,18 @@ fn long_functions(code: &str, limit: usize) -> Vec<(String, usize, usize)> {
 fn fn_name(line: &str) -> Option<String> {
     let mut words = line.split_whitespace().peekable();
     while let Some(w) = words.next() {
-        if w.starts_with("pub") || matches!(w, "const" | "unsafe" | "async" | "extern" | "\"C\"" | "default") {
+        if w.starts_with("pub")
+            || matches!(
+                w,
+                "const" | "unsafe" | "async" | "extern" | "\"C\"" | "default"
+            )
+        {
             continue;
         }
         if w == "fn" {
-            return words.next().map(|n| n.split(['(', '<']).next().unwrap_or(n).to_string());
+            return words
+                .next()
+                .map(|n| n.split(['(', '<']).next().unwrap_or(n).to_string());
         }
         return None;
     }
@@ -645,7 +784,10 @@ fn fn_name(line: &str) -> Option<String> {
 fn the_length_reader_finds_a_long_function() {
     let body: String = (0..120).map(|k| format!("    let x{k} = {k};\n")).collect();
     let code = format!("pub fn short() {{\n}}\n\nfn long_one(a: u8) -> u8 {{\n{body}    a\n}}\n");
-    assert_eq!(long_functions(&code, 100), vec![("long_one".to_string(), 4, 123)]);
+    assert_eq!(
+        long_functions(&code, 100),
+        vec![("long_one".to_string(), 4, 123)]
+    );
     assert!(long_functions(&code, 200).is_empty());
 }
 

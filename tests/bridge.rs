@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 
 use support::procs::*;
 use upc::bridge::wire::{HEADER_LEN, encode};
-use upc::channels::{Bus, ForecastMsg, StateMsg};
+use upc::channels::{ContractNode, ForecastMsg, StateMsg};
 use zenoh::Wait;
 
 /// The Python remote forecaster, connected to `endpoint`, its log appended to `<dir>/remote.log`.
@@ -62,17 +62,17 @@ fn wait_peers(s: &Scratch, n: usize) {
 
 /// Plant time as the state channel says.
 struct Clock {
-    _bus: Bus,
+    _node: ContractNode,
     states: upc::channels::Subscriber<StateMsg>,
     t: f64,
 }
 
 impl Clock {
     fn new(prefix: &str) -> Self {
-        let bus = Bus::open(prefix, "bridge-test-clock").expect("bus");
-        let states = bus.subscriber::<StateMsg>().expect("sub");
+        let node = ContractNode::open(prefix, "bridge-test-clock").expect("contract node");
+        let states = node.subscriber::<StateMsg>().expect("sub");
         Clock {
-            _bus: bus,
+            _node: node,
             states,
             t: -1.0,
         }

@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use support::procs::*;
 use upc::bridge::wire::{decode_into, encode};
-use upc::channels::{Bus, ForecastMsg, ServiceKind, StateMsg, TorqueMsg};
+use upc::channels::{ContractNode, ForecastMsg, ServiceKind, StateMsg, TorqueMsg};
 use zenoh::Wait;
 
 /// The lab's CA, and certificates for the bridge, two forecasters and a viewer; plus a rogue CA
@@ -188,13 +188,13 @@ fn only_the_labs_identities_get_through_and_each_only_where_its_role_allows() {
     p.start(&s, "bridge", &["bridge", "--prefix", &kp, "--listen", &endpoint, "--config", &conf,
                             "--set", "bridge.decimation=1", "--summary", &summary]);
     // Behind the bridge, as the controller and the plant: forecasts in, states and torques out.
-    let bus = Bus::open(&kp, "bridge-security-test").expect("bus");
-    let forecasts = bus
+    let node = ContractNode::open(&kp, "bridge-security-test").expect("contract node");
+    let forecasts = node
         .subscriber::<ForecastMsg>()
         .expect("forecast subscriber");
-    let states = bus.publisher::<StateMsg>().expect("state");
-    let wake = bus.notifier(ServiceKind::State).expect("state notifier");
-    let torques = bus.publisher::<TorqueMsg>().expect("torques");
+    let states = node.publisher::<StateMsg>().expect("state");
+    let wake = node.notifier(ServiceKind::State).expect("state notifier");
+    let torques = node.publisher::<TorqueMsg>().expect("torques");
 
     let fc1 = Client {
         ca: Some(&lab),

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use serde_json::Value;
 use support::procs::*;
 use support::rrd::rrd_times;
-use upc::channels::{Bus, ForecastMsg, MAX_FORECAST, ServiceKind, StateMsg};
+use upc::channels::{ContractNode, ForecastMsg, MAX_FORECAST, ServiceKind, StateMsg};
 
 fn start_forecaster(p: &mut Procs, s: &Scratch, name: &str) {
     let scenario = s.scenario();
@@ -274,10 +274,10 @@ const BAD: [Kind; 12] = [
 /// Publishes forecasts on `<prefix>/forecast` every 5 ms of wall time from the simulator's
 /// time until it reaches `until`: valid ones, or valid and bad ones alternately.
 fn publish_forecasts(prefix: &str, until: f64, with_bad: bool) -> Vec<(Kind, u64)> {
-    let bus = Bus::open(prefix, "faults-forecaster").expect("bus");
-    let out = bus.publisher::<ForecastMsg>().expect("publisher");
-    let wake = bus.notifier(ServiceKind::Forecast).expect("notifier");
-    let states = bus.subscriber::<StateMsg>().expect("states");
+    let node = ContractNode::open(prefix, "faults-forecaster").expect("contract node");
+    let out = node.publisher::<ForecastMsg>().expect("publisher");
+    let wake = node.notifier(ServiceKind::Forecast).expect("notifier");
+    let states = node.subscriber::<StateMsg>().expect("states");
     let mut sent: Vec<(Kind, u64)> = Vec::new();
     let mut count = |k: Kind| match sent.iter_mut().find(|(x, _)| *x == k) {
         Some((_, n)) => *n += 1,

@@ -213,8 +213,9 @@ impl SimClock {
         let stop = Arc::new(AtomicBool::new(false));
         let (stop_t, prefix) = (Arc::clone(&stop), prefix.to_string());
         let t = std::thread::spawn(move || {
-            let bus = upc::channels::Bus::open(&prefix, "faults-clock").expect("bus");
-            let truth = bus
+            let node =
+                upc::channels::ContractNode::open(&prefix, "faults-clock").expect("contract node");
+            let truth = node
                 .subscriber::<upc::channels::GroundTruthMsg>()
                 .expect("subscriber");
             while !stop_t.load(Ordering::Relaxed) {

@@ -156,8 +156,9 @@ fn a_participant_with_another_contract_layout_is_refused_with_what_to_change() {
         .publish_subscribe::<OldStateMsg>()
         .create()
         .expect("the old participant's service");
-    let bus = upc::channels::Bus::open(&prefix, "new_participant").expect("bus");
-    let e = match bus.subscriber::<StateMsg>() {
+    let node =
+        upc::channels::ContractNode::open(&prefix, "new_participant").expect("contract node");
+    let e = match node.subscriber::<StateMsg>() {
         Ok(_) => panic!("a service of another layout was opened"),
         Err(e) => e,
     };

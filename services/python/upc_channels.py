@@ -1,7 +1,7 @@
 """The channel contract of upc (services/CHANNELS.md) for Python participants.
 
 ctypes mirrors of the `#[repr(C)]` payloads of src/channels/messages.rs, their constants, the
-service settings every upc process opens its iceoryx2 services with (src/channels/bus.rs: a
+service settings every upc process opens its iceoryx2 services with (src/channels/node.rs: a
 participant opened with other settings cannot join), and the framing of the same payloads on
 Zenoh (src/bridge/wire.rs). iceoryx2 is imported only by the iceoryx2 helpers: a participant on
 another host, over Zenoh, needs only ctypes.

@@ -33,7 +33,7 @@ pub use security::{Posture, SecurityConfig};
 use wire::{WireError, WireMessage, decode_into, encode};
 
 use crate::channels::{
-    Bus, ChannelError, ForecastMsg, GroundTruthMsg, ServiceKind, StateMsg, TorqueMsg,
+    ChannelError, ContractNode, ForecastMsg, GroundTruthMsg, ServiceKind, StateMsg, TorqueMsg,
 };
 use crate::realtime::LatencyHistogram;
 
@@ -410,9 +410,9 @@ fn forward_forecasts(
     rx: &Receiver<Inbound>,
     stop: &AtomicBool,
 ) -> Result<InboundStats, BridgeError> {
-    let bus = Bus::open(prefix, &format!("upc-bridge-in-{}", std::process::id()))?;
-    let publisher = bus.publisher::<ForecastMsg>()?;
-    let notifier = bus.notifier(ServiceKind::Forecast)?;
+    let node = ContractNode::open(prefix, &format!("upc-bridge-in-{}", std::process::id()))?;
+    let publisher = node.publisher::<ForecastMsg>()?;
+    let notifier = node.notifier(ServiceKind::Forecast)?;
     let mut stats = InboundStats::default();
     while !stop.load(Ordering::Relaxed) {
         let inbound = match rx.recv_timeout(Duration::from_millis(50)) {
@@ -479,14 +479,14 @@ fn forward_outbound(
     session: &zenoh::Session,
     stop: &AtomicBool,
 ) -> Result<OutboundStats, BridgeError> {
-    let bus = Bus::open(
+    let node = ContractNode::open(
         &cfg.prefix,
         &format!("upc-bridge-out-{}", std::process::id()),
     )?;
-    let states = bus.subscriber::<StateMsg>()?;
-    let truth = bus.subscriber::<GroundTruthMsg>()?;
-    let torques = bus.subscriber::<TorqueMsg>()?;
-    let wake = bus.listener(ServiceKind::State)?;
+    let states = node.subscriber::<StateMsg>()?;
+    let truth = node.subscriber::<GroundTruthMsg>()?;
+    let torques = node.subscriber::<TorqueMsg>()?;
+    let wake = node.listener(ServiceKind::State)?;
     let state_out = Out::declare(session, key(cfg, ServiceKind::State))?;
     let truth_out = Out::declare(session, key(cfg, ServiceKind::GroundTruth))?;
     let torque_out = Out::declare(session, key(cfg, ServiceKind::Torques))?;

@@ -33,8 +33,8 @@ use super::ros2::{
 };
 use super::unitree_hg::{LOW_CMD_TOPIC, LOW_STATE_TOPIC, LowCmd, LowState, MOTOR_SLOTS, MotorCmd};
 use crate::channels::{
-    Bus, ChannelError, N_CONTACTS, STATE_FLAG_BASE_UNMEASURED, STATE_FLAG_DAMPING, STATE_FLAG_HOLD,
-    ServiceKind, StateMsg, TORQUE_FLAG_FALLBACK, TorqueMsg,
+    ChannelError, ContractNode, N_CONTACTS, STATE_FLAG_BASE_UNMEASURED, STATE_FLAG_DAMPING,
+    STATE_FLAG_HOLD, ServiceKind, StateMsg, TORQUE_FLAG_FALLBACK, TorqueMsg,
 };
 use crate::plant::feet::fill_foot_wrenches;
 use crate::plant::{CommandGate, CommandOrigin, CommandStats, PlantInfo};
@@ -260,7 +260,7 @@ struct Endpoints {
 impl Endpoints {
     /// The robot's `bus` with upc's contract under `prefix`, as node `node_name`.
     fn open(bus: RobotBus, prefix: &str, node_name: &str) -> Result<Self, BusError> {
-        let contract = Bus::open(prefix, node_name)?;
+        let contract = ContractNode::open(prefix, node_name)?;
         Ok(Self {
             bus,
             state_out: contract.publisher()?,

@@ -5,11 +5,11 @@
 //! parallel experiments) can share a machine without seeing each other. Each publish–subscribe
 //! service has an event service of the same name + `/event` for wake-ups.
 
-mod bus;
 pub mod messages;
+mod node;
 
-pub use bus::{Bus, ChannelError, ChannelOp, Listener, Notifier, Publisher, Subscriber};
 pub use messages::*;
+pub use node::{ChannelError, ChannelOp, ContractNode, Listener, Notifier, Publisher, Subscriber};
 
 /// A fresh non-zero identifier for a run of a process (`StateMsg::session`,
 /// `TorqueMsg::controller`): wall clock and process id mixed (splitmix64), so two runs started in
@@ -41,9 +41,9 @@ pub enum ServiceKind {
     GroundTruth,
 }
 
-/// A payload of the contract and the service that carries it: the bus (and the Zenoh framing,
-/// [`crate::bridge::wire`]) take the service from the type, so a payload cannot be sent on
-/// another payload's service.
+/// A payload of the contract and the service that carries it: the contract's channels (and the
+/// Zenoh framing, [`crate::bridge::wire`]) take the service from the type, so a payload cannot
+/// be sent on another payload's service.
 pub trait Payload: iceoryx2::prelude::ZeroCopySend + std::fmt::Debug + Copy + 'static {
     const KIND: ServiceKind;
 }

@@ -1,6 +1,6 @@
 //! `upc forecast`: publish a scenario's hand force forecast.
 
-use upc::channels::{Bus, DEFAULT_PREFIX};
+use upc::channels::{ContractNode, DEFAULT_PREFIX};
 use upc::forecast::{ForecastError, ForecastSettings, ForecastShape, Source, run};
 use upc::scenario::Scenario;
 use upc::shutdown::stop_flag;
@@ -98,7 +98,7 @@ pub fn run_cli(args: ForecastArgs) -> CliResult {
             args.error_shape
         );
     }
-    let bus = Bus::open(&args.prefix, "forecaster")?;
+    let node = ContractNode::open(&args.prefix, "forecaster")?;
     tracing::info!(
         "forecasting {} on {}/forecast: {} samples every {} s of sim time",
         scenario
@@ -112,7 +112,7 @@ pub fn run_cli(args: ForecastArgs) -> CliResult {
         Some(s) => Source::Fixed(s),
         None => Source::FollowPlant,
     };
-    let sent = run(&bus, &source, &settings, stop_flag())?;
+    let sent = run(&node, &source, &settings, stop_flag())?;
     tracing::info!("forecaster stopped after {sent} windows");
     Ok(())
 }

@@ -9,7 +9,7 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressStyle};
-use upc::channels::{Bus, StateMsg};
+use upc::channels::{ContractNode, StateMsg};
 use upc::config::ControllerKind;
 use upc::control::server::ServerSummary;
 use upc::realtime::ControlCpu;
@@ -791,7 +791,7 @@ impl Launch<'_> {
         mut bus: Option<&mut Child>,
     ) -> Result<(Option<i32>, bool), Box<dyn std::error::Error + Send + Sync>> {
         let bar = progress_bar(self.args.quiet, self.duration, kind);
-        let watcher = Bus::open(&self.prefix, "launcher")
+        let watcher = ContractNode::open(&self.prefix, "launcher")
             .and_then(|b| b.subscriber::<StateMsg>().map(|s| (b, s)));
         loop {
             if let Ok((_, states)) = &watcher
@@ -1033,8 +1033,8 @@ fn first_forecast(
     forecaster: &mut Child,
     timeout: Duration,
 ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
-    let bus = Bus::open(prefix, &format!("upc-launcher-{}", std::process::id()))?;
-    let forecasts = bus.subscriber::<upc::channels::ForecastMsg>()?;
+    let node = ContractNode::open(prefix, &format!("upc-launcher-{}", std::process::id()))?;
+    let forecasts = node.subscriber::<upc::channels::ForecastMsg>()?;
     let until = Instant::now() + timeout;
     loop {
         if forecasts.has_samples() {

@@ -36,8 +36,8 @@ use super::summary::LoopEvents;
 pub use super::summary::ServerSummary;
 use super::{ControllerCore, ControllerPart, ForecastWindow, GainHandoff, TickError, Ticker};
 use crate::channels::{
-    Bus, ChannelError, ForecastMsg, Listener, MAX_DOF, Notifier, Publisher, ServiceKind, StateMsg,
-    Subscriber, TORQUE_FLAG_FALLBACK, TorqueMsg,
+    ChannelError, ContractNode, ForecastMsg, Listener, MAX_DOF, Notifier, Publisher, ServiceKind,
+    StateMsg, Subscriber, TORQUE_FLAG_FALLBACK, TorqueMsg,
 };
 use crate::col;
 use crate::config::{Config, ControllerKind, LoopMode};
@@ -253,12 +253,12 @@ impl<'a> ControlLoop<'a> {
             )
             .into());
         }
-        let bus = Bus::open(&opts.prefix, "controller")?;
+        let node = ContractNode::open(&opts.prefix, "controller")?;
         let ports = PlantPorts {
-            states: bus.subscriber::<StateMsg>()?,
-            state_events: bus.listener(ServiceKind::State)?,
-            torques: bus.publisher::<TorqueMsg>()?,
-            torque_events: bus.notifier(ServiceKind::Torques)?,
+            states: node.subscriber::<StateMsg>()?,
+            state_events: node.listener(ServiceKind::State)?,
+            torques: node.publisher::<TorqueMsg>()?,
+            torque_events: node.notifier(ServiceKind::Torques)?,
         };
         // One thread for faer (C2's normal equations): parallel reductions may sum in another
         // order from one run to the next, and on two cores rayon's workers compete with the loop.
@@ -281,7 +281,7 @@ impl<'a> ControlLoop<'a> {
             .forecast_on_free_direction
             .then(|| super::held_object::free_direction(&opts.held_mass))
             .flatten();
-        let intake = forecast_intake(config, &bus, robot_mass, horizon_time, free_dir)?;
+        let intake = forecast_intake(config, &node, robot_mass, horizon_time, free_dir)?;
         let c2 = start_c2(config, &robot.reduced(), extensions.c2_solver)?;
         let logger = start_logger(config, opts, &core)?;
         let status_every = Duration::from_secs_f64(cc.status_every);
@@ -808,7 +808,7 @@ fn initially_irreproducible(cc: &crate::config::ControllerConfig) -> Option<&'st
 /// The forecast's intake: its validation window and, in lockstep, its waits.
 fn forecast_intake(
     config: &Config,
-    bus: &Bus,
+    node: &ContractNode,
     robot_mass: f64,
     horizon_time: f64,
     free_dir: Option<nalgebra::Vector3<f64>>,
@@ -826,8 +826,8 @@ fn forecast_intake(
     }
     Ok(ForecastIntake::new(
         window,
-        bus.subscriber::<ForecastMsg>()?,
-        bus.listener(ServiceKind::Forecast)?,
+        node.subscriber::<ForecastMsg>()?,
+        node.listener(ServiceKind::Forecast)?,
         (
             (lockstep && cc.lockstep_forecast_wait > 0.0)
                 .then(|| Duration::from_secs_f64(cc.lockstep_forecast_wait)),
@@ -943,10 +943,10 @@ mod tests {
     #[test]
     fn safe_torques_reach_a_subscriber_after_a_failed_step() {
         let prefix = format!("upc_test_safe_torques_{}", std::process::id());
-        let bus = Bus::open(&prefix, "controller_test").expect("bus");
-        let torques = bus.publisher::<TorqueMsg>().expect("pub");
-        let events = bus.notifier(ServiceKind::Torques).expect("notifier");
-        let plant = bus.subscriber::<TorqueMsg>().expect("sub");
+        let node = ContractNode::open(&prefix, "controller_test").expect("contract node");
+        let torques = node.publisher::<TorqueMsg>().expect("pub");
+        let events = node.notifier(ServiceKind::Torques).expect("notifier");
+        let plant = node.subscriber::<TorqueMsg>().expect("sub");
         let qd = [0.5, -1.0, 2.0];
         let e = or_safe_torques::<()>(Err(failure()), || {
             send_damping(

@@ -11,7 +11,7 @@ mod shape;
 pub use shape::ForecastShape;
 
 use crate::channels::{
-    Bus, ChannelError, ForecastMsg, MAX_FORECAST, ServiceKind, StateMsg, window_index,
+    ChannelError, ContractNode, ForecastMsg, MAX_FORECAST, ServiceKind, StateMsg, window_index,
 };
 use crate::scenario::{ForceProfile, Scenario};
 
@@ -193,15 +193,15 @@ impl Timeline {
 /// at or past that time is seen (see [`crate::channels::window_index`]), so its content is a function of the
 /// simulated time only. A new plant run (its session changes) gets a window at once.
 pub fn run(
-    bus: &Bus,
+    node: &ContractNode,
     source: &Source,
     s: &ForecastSettings,
     stop: Arc<AtomicBool>,
 ) -> Result<u64, ChannelError> {
-    let publisher = bus.publisher::<ForecastMsg>()?;
-    let notifier = bus.notifier(ServiceKind::Forecast)?;
-    let states = bus.subscriber::<StateMsg>()?;
-    let wake = bus.listener(ServiceKind::State)?;
+    let publisher = node.publisher::<ForecastMsg>()?;
+    let notifier = node.notifier(ServiceKind::Forecast)?;
+    let states = node.subscriber::<StateMsg>()?;
+    let wake = node.listener(ServiceKind::State)?;
     let mut timeline = Timeline::default();
     let mut seq = 0u64;
     while !stop.load(Ordering::Relaxed) {

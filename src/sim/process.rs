@@ -32,8 +32,8 @@ use nalgebra::DVector;
 use crate::realtime::LatencyHistogram;
 
 use crate::channels::{
-    Bus, ChannelError, GroundTruthMsg, MAX_DOF, N_CONTACTS, STATE_FLAG_DAMPING, STATE_FLAG_HOLD,
-    STATE_FLAG_LOCKSTEP, ServiceKind, StateMsg, TORQUE_FLAG_FALLBACK, TorqueMsg,
+    ChannelError, ContractNode, GroundTruthMsg, MAX_DOF, N_CONTACTS, STATE_FLAG_DAMPING,
+    STATE_FLAG_HOLD, STATE_FLAG_LOCKSTEP, ServiceKind, StateMsg, TORQUE_FLAG_FALLBACK, TorqueMsg,
 };
 
 use super::config::{Mode, Push, SimConfig};
@@ -257,14 +257,14 @@ fn run_plant<P: Physics>(
     let lockstep = cfg.mode == Mode::Lockstep;
     let info = PlantInfo::start(&cfg.scenario, &scenario, opts.robot.hash, lockstep);
     log_start(opts, &world, &version, &scenario, &info);
-    let bus = Bus::open(&cfg.process.prefix, &opts.node_name)?;
+    let node = ContractNode::open(&cfg.process.prefix, &opts.node_name)?;
     let ep = Endpoints {
-        state: bus.publisher()?,
-        truth: bus.publisher()?,
-        torques: bus.subscriber()?,
-        state_event: bus.notifier(ServiceKind::State)?,
-        truth_event: bus.notifier(ServiceKind::GroundTruth)?,
-        torque_event: bus.listener(ServiceKind::Torques)?,
+        state: node.publisher()?,
+        truth: node.publisher()?,
+        torques: node.subscriber()?,
+        state_event: node.notifier(ServiceKind::State)?,
+        truth_event: node.notifier(ServiceKind::GroundTruth)?,
+        torque_event: node.listener(ServiceKind::Torques)?,
     };
     let mut recorder = start_recorder(opts, &world)?;
     let mut looper = Looper::new(opts, &world, info, &carrying, open_truth_csv(opts, &world)?)?;

@@ -4,7 +4,7 @@
 use std::time::Duration;
 
 use nalgebra::DVector;
-use upc::channels::{Bus, ServiceKind, StateMsg, TorqueMsg};
+use upc::channels::{ContractNode, ServiceKind, StateMsg, TorqueMsg};
 use upc::sim::PosturePd;
 
 /// Drives the plant on `prefix` until its state `steps` (or until `done()`); returns the last
@@ -18,11 +18,11 @@ pub fn drive(
     inject_bad: bool,
     done: impl Fn() -> bool,
 ) -> StateMsg {
-    let bus = Bus::open(prefix, &format!("ctrl_{tag}")).unwrap();
-    let states = bus.subscriber::<StateMsg>().unwrap();
-    let torques = bus.publisher::<TorqueMsg>().unwrap();
-    let wake_sim = bus.notifier(ServiceKind::Torques).unwrap();
-    let wake_me = bus.listener(ServiceKind::State).unwrap();
+    let node = ContractNode::open(prefix, &format!("ctrl_{tag}")).unwrap();
+    let states = node.subscriber::<StateMsg>().unwrap();
+    let torques = node.publisher::<TorqueMsg>().unwrap();
+    let wake_sim = node.notifier(ServiceKind::Torques).unwrap();
+    let wake_me = node.listener(ServiceKind::State).unwrap();
 
     let robot = upc::robot::Robot::embedded_default().expect("robot");
     let (model, q_home) = (&robot.model, &robot.home);

@@ -8,7 +8,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
-use upc::channels::{Bus, GroundTruthMsg, StateMsg};
+use upc::channels::{ContractNode, GroundTruthMsg, StateMsg};
 
 /// The real-time tests share two cores with everything else: one at a time.
 pub static SERIAL: Mutex<()> = Mutex::new(());
@@ -305,9 +305,9 @@ impl Observer {
         let stop = Arc::new(AtomicBool::new(false));
         let (seen_t, stop_t, prefix) = (Arc::clone(&seen), Arc::clone(&stop), prefix.to_string());
         let thread = std::thread::spawn(move || {
-            let bus = Bus::open(&prefix, "faults-observer").expect("observer bus");
-            let truth = bus.subscriber::<GroundTruthMsg>().expect("ground truth");
-            let state = bus.subscriber::<StateMsg>().expect("state");
+            let node = ContractNode::open(&prefix, "faults-observer").expect("observer node");
+            let truth = node.subscriber::<GroundTruthMsg>().expect("ground truth");
+            let state = node.subscriber::<StateMsg>().expect("state");
             while !stop_t.load(Ordering::Relaxed) {
                 while let Some(g) = truth.receive().expect("receive") {
                     let mut s = seen_t.lock().unwrap();

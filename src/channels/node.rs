@@ -159,15 +159,15 @@ fn err_on(
 }
 
 /// One process's connection to the services of a prefix (one iceoryx2 node).
-pub struct Bus {
+pub struct ContractNode {
     node: Node<ipc::Service>,
     prefix: String,
 }
 
-impl Bus {
-    /// Open the bus as node `node_name`. Stale resources of dead nodes (a process killed with
+impl ContractNode {
+    /// Open the contract's channels of `prefix` as node `node_name`. Stale resources of dead nodes (a process killed with
     /// SIGKILL) are removed first, so a restart never fails with "already exists".
-    pub fn open(prefix: &str, node_name: &str) -> Result<Bus, ChannelError> {
+    pub fn open(prefix: &str, node_name: &str) -> Result<ContractNode, ChannelError> {
         // iceoryx2's own logger: errors only unless IOX2_LOG_LEVEL says otherwise.
         set_log_level_from_env_or(LogLevel::Error);
         let removed = cleanup_dead_nodes();
@@ -183,7 +183,7 @@ impl Bus {
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
             .map_err(|e| err_on(ChannelOp::CreateNode, node_name, e))?;
-        Ok(Bus {
+        Ok(ContractNode {
             node,
             prefix: prefix.to_string(),
         })
