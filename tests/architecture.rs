@@ -182,11 +182,10 @@ fn ident_char(b: &[char], i: usize) -> bool {
 
 /// A `'` that opens a char literal ('x', '\n', '\u{…}'), not a lifetime ('a).
 fn is_char_literal(b: &[char], i: usize) -> bool {
-    match (b.get(i + 1), b.get(i + 2)) {
-        (Some('\\'), _) => true,
-        (Some(_), Some('\'')) => true,
-        _ => false,
-    }
+    matches!(
+        (b.get(i + 1), b.get(i + 2)),
+        (Some('\\'), _) | (Some(_), Some('\''))
+    )
 }
 
 fn library_files() -> Vec<SourceFile> {
@@ -423,14 +422,14 @@ impl Graph {
                 .rev()
                 .find(|&k| self.by_module.contains_key(&path[..k]))?;
             let module = path[..k].to_vec();
-            if k < path.len() {
-                if let Some(target) = self.reexports.get(&(module.clone(), path[k].clone())) {
-                    let mut next = target.clone();
-                    next.extend_from_slice(&path[k + 1..]);
-                    if next != path {
-                        path = next;
-                        continue;
-                    }
+            if k < path.len()
+                && let Some(target) = self.reexports.get(&(module.clone(), path[k].clone()))
+            {
+                let mut next = target.clone();
+                next.extend_from_slice(&path[k + 1..]);
+                if next != path {
+                    path = next;
+                    continue;
                 }
             }
             return self.by_module.get(&module).copied();
