@@ -90,12 +90,38 @@ pub fn again_if_starved(
             None => std::panic::resume_unwind(failure),
         };
         let waited = settle();
-        eprintln!(
-            "note: {name} failed on a machine that starved the test's own processes ({why}, \
-             steal {:.1} % during the run); run {} of {ATTEMPTS} after {:.0} s of settling",
+        let first = failure
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| failure.downcast_ref::<&str>().copied())
+            .unwrap_or("(a panic without a message)");
+        said_rerun(&format!(
+            "RERUN {name}: failed on a machine that starved the test's own processes ({why}, \
+             steal {:.1} % during the run); run {} of {ATTEMPTS} after {:.0} s of settling. \
+             The failure: {}",
             100.0 * steal,
             attempt + 1,
-            waited.as_secs_f64()
-        );
+            waited.as_secs_f64(),
+            first.replace('\n', " | ")
+        ));
+    }
+}
+
+/// Where reruns are listed, one line each with the first failure (`.ci/run` prints them).
+fn rerun_list() -> std::path::PathBuf {
+    std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("rerun-tests.txt")
+}
+
+/// Says a rerun past the harness's capture (which hides `eprintln!` of a passing test) and
+/// lists it.
+fn said_rerun(line: &str) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "{line}");
+    if let Ok(mut f) = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(rerun_list())
+    {
+        let _ = writeln!(f, "{line}");
     }
 }
