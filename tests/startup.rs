@@ -219,11 +219,48 @@ fn simulator_killed_mid_push_and_restarted_is_held_handed_over_and_stands() {
     start_unit(&mut p, &s, "upc-controller", "controller", &[]);
     start_unit(&mut p, &s, "upc-forecaster", "forecaster", &[]);
     start_sim(&mut p, &s, "sim1");
+    let torques = TorqueWatch::start(&s.prefix);
     // The 60 N push holds from 2.25 to 2.4 s of the scenario, which starts ≈ 0.2 s in.
     obs.wait_for(1, 2.55, &mut p, &s);
+    let killed = std::time::Instant::now();
     p.signal("sim1", libc::SIGKILL);
     let _ = p.wait("sim1", Duration::from_secs(5));
-    pause(&mut p, &s, 0.5);
+    pause(&mut p, &s, 0.8);
+    // What the controller does once its plant is gone (services/FAULTS.md): no control torque
+    // beyond the answer to the plant's last state, then damping torques from `state_timeout`
+    // (0.5 s) on, at its rate: its waits on the dead plant's events are bounded.
+    let after = torques.after(killed);
+    let last_control = after
+        .iter()
+        .filter(|(_, fb)| !fb)
+        .map(|(t, _)| *t)
+        .fold(0.0, f64::max);
+    let damping: Vec<f64> = after
+        .iter()
+        .filter(|(_, fb)| *fb)
+        .map(|(t, _)| *t)
+        .collect();
+    let first_damping = damping.first().copied().unwrap_or(f64::NAN);
+    let rate = (damping.len().saturating_sub(1)) as f64
+        / (damping.last().unwrap_or(&0.0) - first_damping).max(1e-9);
+    eprintln!(
+        "plant SIGKILLed: last control torque {:.1} ms after, damping from {:.1} ms, {} damping \
+         torques at {rate:.0} Hz",
+        last_control * 1e3,
+        first_damping * 1e3,
+        damping.len()
+    );
+    assert!(
+        last_control < 0.010,
+        "control torques {last_control} s after the kill"
+    );
+    assert!(
+        (0.45..0.6).contains(&first_damping),
+        "damping from {first_damping} s"
+    );
+    // A wait that overran by 10 ms on the dead plant's event would give at most 100 Hz; the
+    // loop runs at 1 kHz (a loaded 2-core machine takes some of it).
+    assert!(rate > 200.0, "damping at {rate} Hz");
     start_sim(&mut p, &s, "sim2");
     obs.wait_for(2, 3.5, &mut p, &s);
     let seen = obs.get();

@@ -47,19 +47,41 @@ pub struct BusConfig {
     pub realtime: crate::config::RealtimeSettings,
 }
 
-/// The drives' hold before the controller has the robot, and the hand-over to it.
+/// The hand-over to the controller and the brace of its silence. The drives' gains are the
+/// robot's (its description's `[bus] hold_kp`, `hold_kd`, per motor slot).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BusHold {
-    pub leg_kp: f64,
-    pub leg_kd: f64,
-    pub arm_kp: f64,
-    pub arm_kd: f64,
     pub handover: f64,
-    /// A controller silent under control for less than this (s) drives again at once when it
-    /// answers; longer, through the hold and a new hand-over.
-    pub resume: f64,
+    /// The controller silent (s of robot time) while the drives hold the posture it left the
+    /// robot in, with its last torques: its answer meanwhile gives it the robot back at once;
+    /// after this, damping, and a later answer gets the hold and a new hand-over.
+    pub brace: f64,
 }
+
+/// Keys that moved out of the bus's settings, and where to.
+const MOVED: [(&str, &str); 5] = [
+    (
+        "leg_kp",
+        "the robot description's `[bus] hold_kp` (one gain per motor slot)",
+    ),
+    (
+        "leg_kd",
+        "the robot description's `[bus] hold_kd` (one gain per motor slot)",
+    ),
+    (
+        "arm_kp",
+        "the robot description's `[bus] hold_kp` (one gain per motor slot)",
+    ),
+    (
+        "arm_kd",
+        "the robot description's `[bus] hold_kd` (one gain per motor slot)",
+    ),
+    (
+        "resume",
+        "`bus.hold.brace`: the controller's answer during the brace resumes at once",
+    ),
+];
 
 /// The simulated robot on the bus.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
@@ -78,6 +100,12 @@ pub struct BusSim {
 impl BusConfig {
     pub fn load(files: &[PathBuf], sets: &[String]) -> Result<Self, ConfigError> {
         let layers = Layers::stack("<embedded config/bus.toml>", BUS_TOML, files, sets)?;
+        for (old, new) in MOVED {
+            let key = format!("bus.hold.{old}");
+            if layers.has(&key) {
+                return Err(layers.range_error(&key, format!("moved: {new}")));
+            }
+        }
         let file: BusFile = layers.typed()?;
         file.bus.validate(&layers)?;
         Ok(file.bus)
@@ -100,12 +128,8 @@ impl BusConfig {
         };
         for (key, v) in [
             ("bus.discovery", self.discovery),
-            ("bus.hold.leg_kp", self.hold.leg_kp),
-            ("bus.hold.leg_kd", self.hold.leg_kd),
-            ("bus.hold.arm_kp", self.hold.arm_kp),
-            ("bus.hold.arm_kd", self.hold.arm_kd),
             ("bus.hold.handover", self.hold.handover),
-            ("bus.hold.resume", self.hold.resume),
+            ("bus.hold.brace", self.hold.brace),
             ("bus.sim.scenario_delay", self.sim.scenario_delay),
             ("bus.sim.silence", self.sim.silence[0]),
             ("bus.sim.silence", self.sim.silence[1]),
@@ -154,5 +178,8 @@ mod tests {
         assert_eq!(c.bad_crc, BadCrc::Refuse);
         let e = BusConfig::load(&[], &["bus.damping=-1".into()]).unwrap_err();
         assert!(e.to_string().contains("bus.damping"), "{e}");
+        // The hold's gains are the robot's now: an old setting is told where they went.
+        let e = BusConfig::load(&[], &["bus.hold.leg_kp=100.0".into()]).unwrap_err();
+        assert!(e.to_string().contains("hold_kp"), "{e}");
     }
 }

@@ -27,11 +27,14 @@ pub struct MotorMap {
     pub slots: [Slot; MOTOR_SLOTS],
     /// The joint names, by slot (for ROS 2's JointState).
     pub names: Vec<String>,
+    /// The drives' hold gains (kp, kd) by slot, from the description's `[bus]`.
+    pub hold: [(f64, f64); MOTOR_SLOTS],
 }
 
 impl MotorMap {
     /// The map of `robot`, or why it cannot be driven on a Unitree bus: no `[bus]` table, a slot
-    /// naming no joint of the URDF, a joint twice, or a joint upc moves that no slot drives.
+    /// naming no joint of the URDF, a joint twice, a joint upc moves that no slot drives, or hold
+    /// gains that are not one finite, non-negative pair per slot.
     pub fn new(robot: &Robot) -> Result<Self, String> {
         let name = robot.name();
         let spec = robot.description.bus.as_ref().ok_or_else(|| {
@@ -95,9 +98,33 @@ impl MotorMap {
                 "robot `{name}`: joints upc moves that no motor slot drives: {missing:?}"
             ));
         }
+        let mut hold = [(0.0, 0.0); MOTOR_SLOTS];
+        for (key, gains) in [("hold_kp", &spec.hold_kp), ("hold_kd", &spec.hold_kd)] {
+            if gains.len() != spec.slots.len() {
+                return Err(format!(
+                    "robot `{name}`: `[bus] {key}` has {} gains for {} motor slots (one per slot)",
+                    gains.len(),
+                    spec.slots.len()
+                ));
+            }
+            if let Some((k, g)) = gains
+                .iter()
+                .enumerate()
+                .find(|(_, g)| !(g.is_finite() && **g >= 0.0))
+            {
+                return Err(format!(
+                    "robot `{name}`: `[bus] {key}` of slot {k} (`{}`) must be finite and ≥ 0, got {g}",
+                    spec.slots[k]
+                ));
+            }
+        }
+        for (k, h) in hold.iter_mut().enumerate().take(spec.slots.len()) {
+            *h = (spec.hold_kp[k], spec.hold_kd[k]);
+        }
         Ok(Self {
             slots,
             names: spec.slots.clone(),
+            hold,
         })
     }
 

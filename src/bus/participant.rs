@@ -9,9 +9,10 @@
 //!   `rt/lowcmd` (Unitree's motion service must be released first);
 //! - until the controller's first valid torques the drives hold the start posture (kp, kd,
 //!   tau = 0), then the torques are blended in over `bus.hold.handover`;
-//! - the controller silent for `bus.command_timeout` (of this loop's live time) → damping on the
-//!   drives (kp = 0, kd = `bus.damping`, tau = 0), until it answers again: its torques at once
-//!   within `bus.hold.resume` of the damping, else a new hand-over;
+//! - the controller silent for `bus.command_timeout` (of this loop's live time) → the brace: the
+//!   drives hold the posture the robot has, with the controller's last torques, its answer
+//!   meanwhile driving at once; silent for `bus.hold.brace` → damping (kp = 0, kd =
+//!   `bus.damping`, tau = 0) until it answers again, then a new hand-over (`drive.rs`);
 //! - every torque clamped to its joint's effort limit; mode_machine echoed from the state;
 //! - a state with a bad CRC (`bus.bad_crc`), a tick that does not advance or a non-finite value
 //!   is refused and counted; no valid state for `bus.state_timeout` → damping, repeated until the
@@ -24,20 +25,22 @@ use std::time::{Duration, Instant};
 
 use nalgebra::DVector;
 
-use super::config::{BadCrc, BusConfig};
+use super::config::BusConfig;
 use super::dds::{DdsError, Inbox, Liveness, Outbox, participant};
+use super::drive::{Drive, Drives, Robot, command, tick_behind, valid};
 use super::lab::{LAB_STATE_TOPIC, LabState};
-use super::motors::{MotorMap, Slot};
+use super::motors::MotorMap;
 use super::ros2::{
     HAND_WRENCH_TOPIC, Header, JOINT_STATE_TOPIC, JointState, Time, Vector3, Wrench, WrenchStamped,
 };
-use super::unitree_hg::{LOW_CMD_TOPIC, LOW_STATE_TOPIC, LowCmd, LowState, MOTOR_SLOTS, MotorCmd};
+pub use super::summary::BusSummary;
+use super::unitree_hg::{LOW_CMD_TOPIC, LOW_STATE_TOPIC, LowCmd, LowState};
 use crate::channels::{
     ChannelError, ContractNode, N_CONTACTS, STATE_FLAG_BASE_UNMEASURED, STATE_FLAG_DAMPING,
     STATE_FLAG_HOLD, ServiceKind, StateMsg, TORQUE_FLAG_FALLBACK, TorqueMsg,
 };
 use crate::plant::feet::fill_foot_wrenches;
-use crate::plant::{CommandGate, CommandOrigin, CommandStats, PlantInfo};
+use crate::plant::{CommandGate, CommandOrigin, PlantInfo};
 use crate::realtime::LatencyHistogram;
 
 /// Errors that end a run.
@@ -77,122 +80,6 @@ pub struct BusOptions {
     pub node_name: String,
     /// Run this long (s of robot time; 0: until interrupted).
     pub duration: f64,
-}
-
-/// Who drives the robot.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Drive {
-    /// The drives hold the start posture (no controller yet).
-    Hold,
-    /// Hold blended into the controller's torques.
-    Handover,
-    /// The controller's torques.
-    Control,
-    /// Damping only (the controller went silent).
-    Damping,
-}
-
-/// Counters and figures of a run (`bus.json`).
-#[derive(Debug, Clone, Default, serde::Serialize)]
-pub struct BusSummary {
-    /// What of `bus.realtime` the OS granted.
-    pub realtime: crate::realtime::RealtimeReport,
-    pub robot: String,
-    pub domain: u16,
-    pub interface: String,
-    /// Valid states per second of the robot's ticks (Hz): the robot's rate less the refused.
-    pub robot_rate: f64,
-    pub states: u64,
-    pub commands: u64,
-    pub refused_bad_crc: u64,
-    pub counted_bad_crc: u64,
-    pub refused_stale_tick: u64,
-    pub refused_non_finite: u64,
-    pub undecodable: u64,
-    /// States dropped unread because a newer one had arrived (the loop fell behind the robot).
-    pub superseded: u64,
-    /// States whose lab sample did not arrive with them (the previous one was used).
-    pub lab_missing: u64,
-    /// States that got no new torques within `bus.late` while a controller was live, and states
-    /// answered without new torques at all (the hold, the damping, a late controller).
-    pub late_answers: u64,
-    pub unanswered: u64,
-    /// States whose answer did not come within `bus.late` but torques answering an earlier
-    /// state did (they went out).
-    pub answers_behind: u64,
-    /// Commands with at least one torque clamped to its effort limit.
-    pub clamped_commands: u64,
-    pub controller_commands: CommandStats,
-    pub handovers: u64,
-    /// Times the robot was taken from the controller: its silence, or the robot's.
-    pub losses: u64,
-    /// Of the controller's silences, those it ended within `bus.hold.resume`: its torques went
-    /// out again at once, without the hold.
-    pub resumes: u64,
-    /// Times the robot fell silent for `bus.state_timeout` (damped, then handed back when it
-    /// spoke again), and the longest silence (s).
-    pub robot_silences: u64,
-    pub robot_silence_max: f64,
-    /// Times the DDS participant's threads had ended and a new participant joined the bus.
-    pub dds_rejoins: u64,
-    pub hold_states: u64,
-    pub damping_states: u64,
-    /// The longest publication of a state on the contract and to ROS 2 (s).
-    pub publish_max: f64,
-    /// The longest a wait for the controller's answer overran its deadline (s).
-    pub wait_overshoot_max: f64,
-    /// The longest write of a command on the bus (s).
-    pub write_max: f64,
-    /// The longest time from the controller's last torques to the damping command sent for
-    /// its silence (s): the bound is `bus.command_timeout` plus one robot period.
-    pub loss_to_damping_max: f64,
-    /// Robot time at which the controller first had the robot, and the scenario started.
-    pub control_start: f64,
-    pub scenario_start: f64,
-    /// What the bus adds: the robot's state received → its command written, minus the wait
-    /// for the controller's answer (s), and the whole state → command time.
-    pub adapter_p50: f64,
-    pub adapter_p99: f64,
-    pub adapter_max: f64,
-    pub state_to_command_p50: f64,
-    pub state_to_command_p99: f64,
-    pub state_to_command_max: f64,
-    /// CPU time of this process per second of run (one core = 1).
-    pub cpu_share: f64,
-    pub wall_time: f64,
-    pub error: Option<String>,
-}
-
-/// The robot's latest state as the participant knows it.
-struct Robot {
-    map: MotorMap,
-    /// Each slot's position at the first state: the hold's target.
-    start_q: [f64; MOTOR_SLOTS],
-    /// Whether each slot's joint carries the body (the hold's stiffer gains).
-    leg: [bool; MOTOR_SLOTS],
-    /// The tick of the first state (the robot's time origin).
-    tick0: u32,
-    state: LowState,
-    lab: Option<LabState>,
-}
-
-impl Robot {
-    /// The robot as its first valid state finds it: that state's positions are the hold's.
-    fn at_first(map: MotorMap, state: LowState) -> Self {
-        let mut start_q = [0.0; MOTOR_SLOTS];
-        for (q, m) in start_q.iter_mut().zip(&state.motor_state) {
-            *q = f64::from(m.q);
-        }
-        Self {
-            leg: legs(&map),
-            map,
-            start_q,
-            tick0: state.tick,
-            state,
-            lab: None,
-        }
-    }
 }
 
 /// The poll period of the wait for the controller's answer: what it adds to an answer at most.
@@ -278,16 +165,9 @@ struct Session<'a> {
     robot: Robot,
     info: PlantInfo,
     gate: CommandGate,
-    /// The controller's last valid torques, and when they came.
+    /// The controller's last valid torques.
     tau: DVector<f64>,
-    last_command: Option<Instant>,
-    drive: Drive,
-    /// Robot time the drive began.
-    since: f64,
-    /// The damping is the controller's brief silence under control (not the robot's, nor a
-    /// silence during the hand-over): its answer within `bus.hold.resume` gives it the robot
-    /// back at once.
-    resumable: bool,
+    drives: Drives,
     msg: Box<StateMsg>,
     points: [[f64; 3]; N_CONTACTS],
     tick0: u32,
@@ -418,10 +298,7 @@ impl<'a> Session<'a> {
             gate: CommandGate::for_session(info.session),
             info,
             tau: DVector::zeros(desc.model.nv - 6),
-            last_command: None,
-            drive: Drive::Hold,
-            since: 0.0,
-            resumable: false,
+            drives: Drives::default(),
             msg: Box::default(),
             points: [[0.0; 3]; N_CONTACTS],
             step: 0,
@@ -464,12 +341,11 @@ impl<'a> Session<'a> {
                 .max((published - start).as_secs_f64());
             let waited = self.await_answer(ep, published)?;
             self.decide(t);
-            let blend = match self.drive {
-                Drive::Handover => ((t - self.since) / self.cfg.hold.handover.max(1e-9)).min(1.0),
-                _ => 0.0,
-            };
+            let blend = self.drives.blend(self.cfg, t);
             let w = Instant::now();
-            ep.bus.commands.write(self.command(self.drive, blend))?;
+            ep.bus
+                .commands
+                .write(self.command(self.drives.drive, blend))?;
             self.summary.write_max = self.summary.write_max.max(w.elapsed().as_secs_f64());
             self.summary.commands += 1;
             let total = self.received.elapsed();
@@ -522,8 +398,8 @@ impl<'a> Session<'a> {
 
     /// The contract's state and the ROS 2 messages of this robot state.
     fn publish(&mut self, ep: &mut Endpoints, t: f64) -> Result<(), BusError> {
-        self.info.flags = match self.drive {
-            Drive::Hold | Drive::Handover => STATE_FLAG_HOLD,
+        self.info.flags = match self.drives.drive {
+            Drive::Hold | Drive::Handover | Drive::Brace => STATE_FLAG_HOLD,
             Drive::Damping => STATE_FLAG_DAMPING,
             Drive::Control => 0,
         };
@@ -546,7 +422,10 @@ impl<'a> Session<'a> {
     fn take_torques(&mut self, ep: &mut Endpoints) -> Result<Option<u64>, BusError> {
         let mut fresh = None;
         while let Some(m) = ep.torques.receive()? {
-            let holding = matches!(self.drive, Drive::Hold | Drive::Damping);
+            let holding = matches!(
+                self.drives.drive,
+                Drive::Hold | Drive::Brace | Drive::Damping
+            );
             if holding && m.flags & TORQUE_FLAG_FALLBACK != 0 {
                 continue;
             }
@@ -557,7 +436,7 @@ impl<'a> Session<'a> {
             let n = self.tau.len();
             if self.gate.check(origin, m.seq, m.n, &m.tau, n).is_ok() {
                 self.tau.as_mut_slice().copy_from_slice(&m.tau[..n]);
-                self.last_command = Some(Instant::now());
+                self.drives.torques_arrived(Instant::now());
                 fresh = Some(m.state_step);
             }
         }
@@ -566,8 +445,7 @@ impl<'a> Session<'a> {
 
     /// Whether the controller's torques are recent enough to apply.
     fn current(&self) -> bool {
-        self.last_command
-            .is_some_and(|c| c.elapsed().as_secs_f64() < self.cfg.command_timeout)
+        self.drives.current(self.cfg, Instant::now())
     }
 
     /// The controller's answer to this state, until `bus.late` (no wait while there is no live
@@ -612,37 +490,8 @@ impl<'a> Session<'a> {
 
     /// Who drives the robot now.
     fn decide(&mut self, t: f64) {
-        let next = match (self.drive, self.current()) {
-            // A few ms of damping leave the robot where the controller had it: the hold would
-            // pull it toward the start posture for the hand-over's length, mid-task (a 6 ms
-            // stall of the controller under a push then ended in a fall, measured).
-            (Drive::Damping, true) if self.resumable && t - self.since < self.cfg.hold.resume => {
-                Drive::Control
-            }
-            (Drive::Hold | Drive::Damping, true) => Drive::Handover,
-            (Drive::Handover, true) if t - self.since >= self.cfg.hold.handover => Drive::Control,
-            (Drive::Handover | Drive::Control, false) => Drive::Damping,
-            (d, _) => d,
-        };
-        self.switch(next, t);
-        self.summary.hold_states += u64::from(matches!(self.drive, Drive::Hold | Drive::Handover));
-        self.summary.damping_states += u64::from(self.drive == Drive::Damping);
-    }
-
-    fn switch(&mut self, next: Drive, t: f64) {
-        if next == self.drive {
-            return;
-        }
-        if next == Drive::Damping
-            && let Some(c) = self.last_command
-        {
-            let delay = c.elapsed().as_secs_f64();
-            self.summary.loss_to_damping_max = self.summary.loss_to_damping_max.max(delay);
-        }
-        transition(self.drive, next, t - self.since, t, &mut self.summary);
-        self.resumable = self.drive == Drive::Control && next == Drive::Damping;
-        self.since = t;
-        self.drive = next;
+        let (drives, robot) = (&mut self.drives, &mut self.robot);
+        drives.decide(self.cfg, robot, t, Instant::now(), &mut self.summary);
     }
 
     /// Waits for the next valid state. A controller falling silent meanwhile is damped at once,
@@ -658,8 +507,9 @@ impl<'a> Session<'a> {
         let mut liveness_checked: Option<Instant> = None;
         loop {
             let now = Instant::now();
-            let driven = matches!(self.drive, Drive::Handover | Drive::Control);
+            let driven = matches!(self.drives.drive, Drive::Handover | Drive::Control);
             let controller = self
+                .drives
                 .last_command
                 .filter(|_| driven)
                 .map(|c| c + Duration::from_secs_f64(self.cfg.command_timeout));
@@ -678,14 +528,15 @@ impl<'a> Session<'a> {
                         counted = true;
                         self.summary.robot_silences += 1;
                         tracing::warn!(
-                            "the robot is silent (no valid rt/lowstate for {} s): damping",
-                            self.cfg.state_timeout
+                            "the robot is silent (no valid rt/lowstate for {} s): the brace, \
+                             damping after {} s",
+                            self.cfg.state_timeout,
+                            self.cfg.hold.brace
                         );
                     }
                     let t = self.time();
-                    self.switch(Drive::Damping, t);
-                    // The robot's silence: when it speaks again, the hold and a hand-over.
-                    self.resumable = false;
+                    let (drives, robot) = (&mut self.drives, &mut self.robot);
+                    drives.robot_silent(self.cfg, robot, t, Instant::now(), &mut self.summary);
                     // Our own participant may be what went silent: checked as the silence
                     // begins, then every LIVENESS_CHECK.
                     let now = Instant::now();
@@ -696,7 +547,7 @@ impl<'a> Session<'a> {
                             lost = Instant::now() + Duration::from_secs_f64(self.cfg.robot_lost);
                         }
                     }
-                    self.write_damping(ep)?;
+                    self.write_drive(ep, t)?;
                 }
                 None => {
                     // The controller's deadline: torques that came meanwhile keep it.
@@ -704,7 +555,7 @@ impl<'a> Session<'a> {
                     if !self.current() {
                         let t = self.time();
                         self.decide(t);
-                        self.write_damping(ep)?;
+                        self.write_drive(ep, t)?;
                     }
                 }
                 Some(s)
@@ -753,9 +604,13 @@ impl<'a> Session<'a> {
         Ok(true)
     }
 
-    /// A damping command between states (the controller or the robot silent), counted.
-    fn write_damping(&mut self, ep: &mut Endpoints) -> Result<(), BusError> {
-        ep.bus.commands.write(self.command(Drive::Damping, 0.0))?;
+    /// The drive's command between states at robot time `t` (the controller or the robot
+    /// silent: the brace at once, not at the robot's next state, then damping), counted.
+    fn write_drive(&mut self, ep: &mut Endpoints, t: f64) -> Result<(), BusError> {
+        let blend = self.drives.blend(self.cfg, t);
+        ep.bus
+            .commands
+            .write(self.command(self.drives.drive, blend))?;
         self.summary.commands += 1;
         Ok(())
     }
@@ -791,135 +646,6 @@ impl<'a> Session<'a> {
         s.state_to_command_max = self.round_trip.max();
         s
     }
-}
-
-/// Whether a state may be used; refusals counted.
-fn valid(s: &LowState, bad_crc: BadCrc, summary: &mut BusSummary) -> bool {
-    if !s.crc_ok() {
-        match bad_crc {
-            BadCrc::Refuse => {
-                summary.refused_bad_crc += 1;
-                return false;
-            }
-            BadCrc::Count => summary.counted_bad_crc += 1,
-        }
-    }
-    let finite = s
-        .motor_state
-        .iter()
-        .all(|m| m.q.is_finite() && m.dq.is_finite() && m.tau_est.is_finite())
-        && s.imu_state.quaternion.iter().all(|x| x.is_finite())
-        && s.imu_state.gyroscope.iter().all(|x| x.is_finite())
-        && s.imu_state.accelerometer.iter().all(|x| x.is_finite());
-    if !finite {
-        summary.refused_non_finite += 1;
-    }
-    finite
-}
-
-/// Whether tick `a` is before `b` (wrapping u32 milliseconds).
-fn tick_behind(a: u32, b: u32) -> bool {
-    b.wrapping_sub(a) < u32::MAX / 2 && a != b
-}
-
-/// Counts and logs a change of drive at robot time `t`, `held` s after the last one.
-fn transition(from: Drive, to: Drive, held: f64, t: f64, s: &mut BusSummary) {
-    match to {
-        // A resume (`Session::decide`): no new control start.
-        Drive::Control if from == Drive::Damping => {
-            s.resumes += 1;
-            tracing::info!(
-                "t = {t:.3} s: the controller answers again after {held:.3} s: its torques at once"
-            );
-        }
-        Drive::Handover => {
-            s.handovers += 1;
-            tracing::info!("t = {t:.3} s: the controller's torques arrived; handing over");
-        }
-        Drive::Control => {
-            if s.control_start < 0.0 {
-                s.control_start = t;
-            }
-            tracing::info!("t = {t:.3} s: the controller drives the robot");
-        }
-        Drive::Damping => {
-            s.losses += u64::from(from == Drive::Control || from == Drive::Handover);
-            tracing::warn!("t = {t:.3} s: the controller is silent: damping the drives");
-        }
-        Drive::Hold => {}
-    }
-}
-
-/// Whether each slot's joint carries the body (legs and waist: stiffer hold), by its name.
-fn legs(map: &MotorMap) -> [bool; MOTOR_SLOTS] {
-    let mut leg = [false; MOTOR_SLOTS];
-    for (l, name) in leg.iter_mut().zip(&map.names) {
-        *l = ["hip", "knee", "ankle", "waist", "torso"]
-            .iter()
-            .any(|p| name.contains(p));
-    }
-    leg
-}
-
-/// A command: the drives' hold, the controller's torques, a blend of both, or damping; torques
-/// clamped to the effort limits (and whether one was); mode_machine echoed; sealed.
-fn command(
-    robot: &Robot,
-    cfg: &BusConfig,
-    drive: Drive,
-    blend: f64,
-    tau: &DVector<f64>,
-) -> (LowCmd, bool) {
-    let mut cmd = LowCmd {
-        mode_pr: robot.state.mode_pr,
-        mode_machine: robot.state.mode_machine,
-        ..LowCmd::default()
-    };
-    let hold = 1.0 - blend;
-    let mut clamped = false;
-    for (k, slot) in robot.map.slots.iter().enumerate() {
-        let c = &mut cmd.motor_cmd[k];
-        let (kp, kd) = if robot.leg[k] {
-            (cfg.hold.leg_kp, cfg.hold.leg_kd)
-        } else {
-            (cfg.hold.arm_kp, cfg.hold.arm_kd)
-        };
-        match *slot {
-            Slot::Unused => {}
-            Slot::Locked { q } => {
-                *c = MotorCmd {
-                    mode: 1,
-                    q: q as f32,
-                    kp: kp as f32,
-                    kd: kd as f32,
-                    ..Default::default()
-                };
-            }
-            Slot::Joint {
-                actuated, effort, ..
-            } => {
-                let (kp, kd, ff) = match drive {
-                    Drive::Damping => (0.0, cfg.damping, 0.0),
-                    Drive::Hold => (kp, kd, 0.0),
-                    Drive::Handover => (hold * kp, hold * kd, blend * tau[actuated]),
-                    Drive::Control => (0.0, 0.0, tau[actuated]),
-                };
-                let limited = ff.clamp(-effort, effort);
-                clamped |= limited != ff;
-                *c = MotorCmd {
-                    mode: 1,
-                    q: robot.start_q[k] as f32,
-                    dq: 0.0,
-                    tau: limited as f32,
-                    kp: kp as f32,
-                    kd: kd as f32,
-                    reserve: 0,
-                };
-            }
-        }
-    }
-    cmd.seal();
-    (cmd, clamped)
 }
 
 /// The contract's state from the robot's: joints and IMU from `rt/lowstate`; the base, sole and

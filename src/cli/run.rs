@@ -462,8 +462,8 @@ fn run_one(
         running.forecaster.as_deref_mut(),
         running.bus.as_deref_mut(),
     )?;
-    let exits = running.stop(died);
-    let entry = entry_of(kind, &dir, start, controller_exit, exits);
+    let exits = running.stop(died.is_some());
+    let entry = entry_of(kind, &dir, start, controller_exit, exits, died);
     // Any participant still running is killed (as `running` drops) once its files are read.
     drop(running);
     Ok(entry)
@@ -514,6 +514,7 @@ fn entry_of(
     start: Instant,
     controller_exit: Option<i32>,
     exits: Exits,
+    died: Option<&'static str>,
 ) -> Entry {
     let read = |f: &str| std::fs::read_to_string(dir.join(f)).ok();
     let controller_summary = read("controller.json").and_then(|t| serde_json::from_str(&t).ok());
@@ -544,7 +545,15 @@ fn entry_of(
             &dir.join("sim.csv"),
         ),
     };
-    entry.failure = failure_of(&entry);
+    entry.failure = failure_of(&entry).or_else(|| {
+        // A clean exit of a participant that should have outlived the controller (the bus).
+        died.map(|what| {
+            format!(
+                "the {what} ended before the controller: {}",
+                last_log_line(&dir.join(log_of(what)))
+            )
+        })
+    });
     // A run without a tick keeps no figures (its failure says so).
     entry.controller_summary = entry
         .controller_summary
@@ -781,7 +790,7 @@ impl Launch<'_> {
 
     /// Progress from the plant's state stream until the controller exits; a participant that
     /// dies ends the run at once (the controller would otherwise wait out its own time-outs, a
-    /// minute for a vanished simulator). The controller's exit code, and whether one died.
+    /// minute for a vanished simulator). The controller's exit code, and which one died.
     fn watch(
         &self,
         kind: ControllerKind,
@@ -789,7 +798,7 @@ impl Launch<'_> {
         sim: &mut Child,
         mut forecaster: Option<&mut Child>,
         mut bus: Option<&mut Child>,
-    ) -> Result<(Option<i32>, bool), Box<dyn std::error::Error + Send + Sync>> {
+    ) -> Result<Watched, Box<dyn std::error::Error + Send + Sync>> {
         let bar = progress_bar(self.args.quiet, self.duration, kind);
         let watcher = ContractNode::open(&self.prefix, "launcher")
             .and_then(|b| b.subscriber::<StateMsg>().map(|s| (b, s)));
@@ -802,7 +811,7 @@ impl Launch<'_> {
             }
             if let Some(status) = controller.try_wait()? {
                 bar.finish_and_clear();
-                return Ok((status.code(), false));
+                return Ok((status.code(), None));
             }
             let mut others: Vec<(&'static str, &mut Child)> = vec![("simulator", &mut *sim)];
             if let Some(f) = forecaster.as_deref_mut() {
@@ -812,11 +821,7 @@ impl Launch<'_> {
                 others.push(("bus", b));
             }
             if let Some((what, status)) = failed_participant(&mut others)? {
-                let log = self.dir.join(match what {
-                    "simulator" => "sim.log",
-                    "bus" => "bus.log",
-                    _ => "forecaster.log",
-                });
+                let log = self.dir.join(log_of(what));
                 bar.suspend(|| {
                     eprintln!(
                         "{}: the {what} died ({status}): {}  ({}); stopping the run",
@@ -827,12 +832,15 @@ impl Launch<'_> {
                 });
                 let code = terminate(controller, Duration::from_secs(10));
                 bar.finish_and_clear();
-                return Ok((code, true));
+                return Ok((code, Some(what)));
             }
             std::thread::sleep(Duration::from_millis(50));
         }
     }
 }
+
+/// How a watched run ended: the controller's exit code, and the participant that ended first.
+type Watched = (Option<i32>, Option<&'static str>);
 
 fn progress_bar(quiet: bool, duration: f64, kind: ControllerKind) -> ProgressBar {
     let bar = if quiet {
@@ -1096,13 +1104,24 @@ fn failed_participant(
     children: &mut [(&'static str, &mut Child)],
 ) -> std::io::Result<Option<(&'static str, ExitStatus)>> {
     for (what, child) in children.iter_mut() {
+        // The bus participant outlives the controller's run (its duration has a margin): its
+        // end before the controller's, even a clean one, leaves the controller without a plant.
         if let Some(status) = child.try_wait()?
-            && !status.success()
+            && (!status.success() || *what == "bus")
         {
             return Ok(Some((what, status)));
         }
     }
     Ok(None)
+}
+
+/// The log file of a participant the run watches.
+fn log_of(what: &str) -> &'static str {
+    match what {
+        "simulator" => "sim.log",
+        "bus" => "bus.log",
+        _ => "forecaster.log",
+    }
 }
 
 /// The last non-empty line of a log file (empty when it cannot be read).

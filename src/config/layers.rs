@@ -116,6 +116,20 @@ impl Layers {
         Ok(())
     }
 
+    /// Whether any layer sets `key` (a dotted path).
+    pub fn has(&self, key: &str) -> bool {
+        let mut t = &self.merged;
+        let mut parts = key.split('.').peekable();
+        while let Some(p) = parts.next() {
+            match (t.get(p), parts.peek()) {
+                (Some(_), None) => return true,
+                (Some(toml::Value::Table(inner)), Some(_)) => t = inner,
+                _ => return false,
+            }
+        }
+        false
+    }
+
     /// Where the value at `key` came from.
     pub fn origin_of(&self, key: &str) -> String {
         // The deepest recorded prefix of the key: unknown keys are recorded too.

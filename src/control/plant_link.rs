@@ -97,6 +97,17 @@ impl PlantLink {
         self.last_step
     }
 
+    /// How long the plant has been silent at `now` (s since its last fresh state, or the last
+    /// answer in lockstep); 0 before its first state.
+    pub fn quiet_at(&self, now: Instant) -> f64 {
+        match self.last_step {
+            Some(_) => now
+                .saturating_duration_since(self.last_state_at)
+                .as_secs_f64(),
+            None => 0.0,
+        }
+    }
+
     /// The plant run (session) of the last state.
     pub fn session(&self) -> u64 {
         self.session

@@ -417,7 +417,12 @@ impl<'a> ControlLoop<'a> {
         // robot's bus at 500 Hz, unlocked, the answer came up to a period after the state
         // (1.5 ms p50 in one run of two), which the bus cannot wait for.
         let grace = t.period().mul_f64(self.config.controller.state_grace);
-        if !grace.is_zero() {
+        // A plant silent for two periods is not about to publish: no wait for it. Its process
+        // may be gone, and iceoryx2's wait on a dead notifier's event overruns by ~8 ms (measured:
+        // a SIGKILLed plant's controller ran at 124 Hz instead of 1 kHz); the ticker's own
+        // deadlines keep the loop, and its damping, at its rate.
+        let silent = self.link.quiet_at(Instant::now()) > 2.0 * t.period().as_secs_f64();
+        if !grace.is_zero() && !silent {
             if self.ports.states.has_samples() {
                 t.advance(t.period() / PHASE_STEP);
             } else {

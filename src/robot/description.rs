@@ -93,6 +93,12 @@ pub struct BusSpec {
     pub kind: String,
     /// The joint each motor slot drives, slot 0 first (checked against the URDF at start-up).
     pub slots: Vec<String>,
+    /// The drives' hold gains, one per slot (N·m/rad, N·m·s/rad): the stiffness that holds the
+    /// start posture before the controller has the robot, and the posture it has while its
+    /// controller is silent (docs/bus.md, "Safety"). The robot's, not upc's: a joint that carries
+    /// the body needs more than a wrist, and only the description knows which is which.
+    pub hold_kp: Vec<f64>,
+    pub hold_kd: Vec<f64>,
 }
 
 /// Where the URDF is.

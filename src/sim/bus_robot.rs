@@ -14,7 +14,9 @@
 //! posture, as `[sim.hold]`); the scenario's push starts `bus.sim.scenario_delay` after it. A
 //! command with a bad CRC is ignored (as the robot does) and counted; no valid command for
 //! `bus.sim.command_loss` lets the drives go limp (the robot's own watchdog).
-//! `bus.sim.silence` withholds the states for a while, as a wire that loses them.
+//! `bus.sim.silence` withholds the states for a while, as a wire that loses them. Stopped and
+//! continued (a debugger, Ctrl-Z), rustdds's threads end on the interrupted poll: the robot then
+//! hears no command, checks its participant and joins the bus again, as `upc bus` does.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -33,7 +35,7 @@ use super::record::Recorder;
 use super::scene::DoorDrive;
 use super::sensors::{ImuMount, RobotSensors, Sensors};
 use crate::bus::BusConfig;
-use crate::bus::dds::{DdsError, Inbox, Outbox, participant};
+use crate::bus::dds::{BusNetwork, DdsError, Inbox, Liveness, Outbox, participant};
 use crate::bus::lab::{LAB_STATE_TOPIC, LabState};
 use crate::bus::motors::{MotorMap, Slot};
 use crate::bus::unitree_hg::{LOW_CMD_TOPIC, LOW_STATE_TOPIC, LowCmd, LowState};
@@ -84,6 +86,8 @@ pub struct SimRobotSummary {
     pub damping_steps: u64,
     pub damping_starts: Vec<f64>,
     pub overruns: u64,
+    /// Times the DDS participant's threads had ended and a new participant joined the bus.
+    pub dds_rejoins: u64,
     pub max_penetration: f64,
     pub error: Option<String>,
 }
@@ -114,8 +118,7 @@ fn run_on_bus<P: Physics>(
     // A robot's loop has its own computer: `bus.realtime` gives the simulated one its priority
     // (before the participant, whose threads inherit it).
     crate::realtime::apply(&bus.realtime);
-    let dp = participant(bus.network()).map_err(dds)?;
-    let mut robot = BusRobot::new(opts, plant, map, &dp)?;
+    let mut robot = BusRobot::new(opts, plant, map, RobotEnd::open(bus.network())?)?;
     tracing::info!(
         "simulated {} on the bus: domain {} via {}, rt/lowstate at {:.0} Hz, physics at {:.0} Hz",
         opts.robot.name(),
@@ -138,6 +141,7 @@ fn run_on_bus<P: Physics>(
             robot.publish()?;
         }
         robot.take_commands()?;
+        robot.rejoin_if_ended()?;
         if let Err(e) = robot.step() {
             robot.summary.error = Some(e.to_string());
             break;
@@ -166,15 +170,50 @@ fn run_on_bus<P: Physics>(
     Ok(robot.summary)
 }
 
+/// The robot's side of the bus: its participant, readers and writers, replaced whole when the
+/// participant's threads end.
+struct RobotEnd {
+    states: Outbox<LowState>,
+    labs: Outbox<LabState>,
+    commands: Inbox<LowCmd>,
+    live: Liveness,
+    network: BusNetwork,
+    /// When a valid command last came, and the participant was last checked (wall time).
+    heard: Instant,
+    checked: Instant,
+    /// Last: dropped after the readers and writers that belong to it.
+    #[expect(dead_code, reason = "held for its readers and writers, never read")]
+    dp: rustdds::DomainParticipant,
+}
+
+/// Without a command for this long (wall time), the robot checks its participant's threads,
+/// then every this long: /proc is read, which a silent bus can afford.
+const LIVENESS_CHECK: Duration = Duration::from_millis(20);
+
+impl RobotEnd {
+    fn open(network: BusNetwork) -> Result<Self, ProcessError> {
+        let dp = participant(network).map_err(dds)?;
+        let now = Instant::now();
+        Ok(Self {
+            states: Outbox::new(&dp, LOW_STATE_TOPIC).map_err(dds)?,
+            labs: Outbox::new(&dp, LAB_STATE_TOPIC).map_err(dds)?,
+            commands: Inbox::new(&dp, LOW_CMD_TOPIC).map_err(dds)?,
+            live: Liveness::of_new_participant(),
+            network,
+            heard: now,
+            checked: now,
+            dp,
+        })
+    }
+}
+
 /// The simulated robot: the plant, its drives and harness, its bus endpoints.
 struct BusRobot<'a, P> {
     opts: &'a SimRobotOptions,
     world: P,
     drive: DoorDrive,
     map: MotorMap,
-    states: Outbox<LowState>,
-    labs: Outbox<LabState>,
-    commands: Inbox<LowCmd>,
+    bus: RobotEnd,
     /// The plant's hold until the first command (the robot's harness).
     harness: Supervisor,
     sensors: Sensors,
@@ -201,7 +240,7 @@ impl<'a, P: Physics> BusRobot<'a, P> {
         opts: &'a SimRobotOptions,
         plant: Plant<P>,
         map: MotorMap,
-        dp: &rustdds::DomainParticipant,
+        end: RobotEnd,
     ) -> Result<Self, ProcessError> {
         let (cfg, bus) = (&opts.sim, &opts.bus);
         let Plant {
@@ -266,9 +305,7 @@ impl<'a, P: Physics> BusRobot<'a, P> {
                 opts.robot.hash,
                 cfg.mode == Mode::Lockstep,
             ),
-            states: Outbox::new(dp, LOW_STATE_TOPIC).map_err(dds)?,
-            labs: Outbox::new(dp, LAB_STATE_TOPIC).map_err(dds)?,
-            commands: Inbox::new(dp, LOW_CMD_TOPIC).map_err(dds)?,
+            bus: end,
             opts,
             world,
             drive,
@@ -314,7 +351,7 @@ impl<'a, P: Physics> BusRobot<'a, P> {
             if self.sensors.realistic() {
                 lab.unmeasured();
             }
-            self.labs.write(lab).map_err(dds)?;
+            self.bus.labs.write(lab).map_err(dds)?;
         }
         // The models' step is the plant's (their latencies and the accelerometer's difference
         // count plant steps); they are sampled every `every` of them.
@@ -324,7 +361,7 @@ impl<'a, P: Physics> BusRobot<'a, P> {
         put_applied_torques(&mut self.msg, &self.applied);
         self.sensors.apply(&mut self.msg, dt, &self.points);
         let state = low_state(&self.msg, &self.map, bus.sim.mode_machine, t);
-        self.states.write(state).map_err(dds)?;
+        self.bus.states.write(state).map_err(dds)?;
         self.summary.states += 1;
         Ok(())
     }
@@ -333,7 +370,7 @@ impl<'a, P: Physics> BusRobot<'a, P> {
     /// push started `bus.sim.scenario_delay` after the first.
     fn take_commands(&mut self) -> Result<(), ProcessError> {
         let (bus, t) = (&self.opts.bus, self.world.time());
-        while let Some(c) = self.commands.try_take().map_err(dds)? {
+        while let Some(c) = self.bus.commands.try_take().map_err(dds)? {
             if !c.crc_ok() {
                 self.summary.bad_crc_commands += 1;
                 continue;
@@ -345,6 +382,7 @@ impl<'a, P: Physics> BusRobot<'a, P> {
                 tracing::info!("t = {t:.3} s: first command; out of the harness");
             }
             self.latest = Some((c, t));
+            self.bus.heard = Instant::now();
         }
         if self.summary.scenario_start < 0.0
             && self.summary.first_command >= 0.0
@@ -353,6 +391,31 @@ impl<'a, P: Physics> BusRobot<'a, P> {
             self.summary.scenario_start = t;
             tracing::info!("t = {t:.3} s: scenario `{}` starts", self.opts.sim.scenario);
         }
+        Ok(())
+    }
+
+    /// A new participant in place of one whose threads ended, checked while no command comes
+    /// (before the first too: a robot stopped and continued before its controller came).
+    fn rejoin_if_ended(&mut self) -> Result<(), ProcessError> {
+        let now = Instant::now();
+        if now - self.bus.heard < LIVENESS_CHECK || now - self.bus.checked < LIVENESS_CHECK {
+            return Ok(());
+        }
+        self.bus.checked = now;
+        if !self.bus.live.ended() {
+            return Ok(());
+        }
+        tracing::warn!(
+            "t = {:.3} s: the DDS participant's threads ended (rustdds stops on an interrupted \
+             poll: this process was stopped and continued?): joining the bus again",
+            self.world.time()
+        );
+        // The liveness is taken again once the old participant is gone: its surviving threads
+        // must not count as the new one's.
+        let network = self.bus.network;
+        drop(std::mem::replace(&mut self.bus, RobotEnd::open(network)?));
+        self.bus.live = Liveness::of_new_participant();
+        self.summary.dds_rejoins += 1;
         Ok(())
     }
 

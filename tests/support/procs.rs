@@ -8,7 +8,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
-use upc::channels::{ContractNode, GroundTruthMsg, StateMsg};
+use upc::channels::{ContractNode, GroundTruthMsg, StateMsg, TORQUE_FLAG_FALLBACK, TorqueMsg};
 
 /// The real-time tests share two cores with everything else: one at a time.
 pub static SERIAL: Mutex<()> = Mutex::new(());
@@ -389,6 +389,56 @@ impl Observer {
                 "simulator run {run} did not reach {what}: {seen:?}"
             );
             std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+}
+
+/// The controller's torques as a thread of the test process receives them: when each came and
+/// whether it was a fallback (damping) command.
+pub struct TorqueWatch {
+    seen: Arc<Mutex<Vec<(Instant, bool)>>>,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl TorqueWatch {
+    pub fn start(prefix: &str) -> Self {
+        let seen = Arc::new(Mutex::new(Vec::with_capacity(1 << 16)));
+        let stop = Arc::new(AtomicBool::new(false));
+        let (seen_t, stop_t, prefix) = (Arc::clone(&seen), Arc::clone(&stop), prefix.to_string());
+        let thread = std::thread::spawn(move || {
+            let node = ContractNode::open(&prefix, "torque-watch").expect("watch node");
+            let torques = node.subscriber::<TorqueMsg>().expect("torques");
+            while !stop_t.load(Ordering::Relaxed) {
+                while let Some(m) = torques.receive().expect("receive") {
+                    let fallback = m.flags & TORQUE_FLAG_FALLBACK != 0;
+                    seen_t.lock().unwrap().push((Instant::now(), fallback));
+                }
+                std::thread::sleep(Duration::from_micros(200));
+            }
+        });
+        TorqueWatch {
+            seen,
+            stop,
+            thread: Some(thread),
+        }
+    }
+
+    /// The torques received after `from`: (s after `from`, fallback).
+    pub fn after(&self, from: Instant) -> Vec<(f64, bool)> {
+        let seen = self.seen.lock().unwrap();
+        seen.iter()
+            .filter(|(t, _)| *t >= from)
+            .map(|(t, f)| ((*t - from).as_secs_f64(), *f))
+            .collect()
+    }
+}
+
+impl Drop for TorqueWatch {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
         }
     }
 }

@@ -1,8 +1,9 @@
 //! A real-time test's verdict is the machine's as much as the code's. On a shared 2-core VM the
 //! host takes the CPUs now and then (the guest sees it as steal time in /proc/stat) and the
 //! test's own processes then miss their deadlines by tens of ms, which no code change can
-//! prevent. [`again_if_starved`] runs such a test again while, and only while, its failures come
-//! with evidence of that; a failure without it stands at once.
+//! prevent. [`checked_then_timed`] runs such a test's timed checks again while, and only while,
+//! their failures come with evidence of that from outside the processes under test; a failure
+//! without it stands at once, and the checks that no clock decides are never rerun.
 
 use super::procs::Scratch;
 use std::time::{Duration, Instant};
@@ -63,6 +64,24 @@ pub fn again_if_starved(
     starved: impl Fn(&Scratch) -> Option<String>,
     body: impl Fn(&Scratch),
 ) {
+    checked_then_timed(name, starved, |s| body(s), |_| {}, |_| {});
+}
+
+/// A real-time test in three parts: `run` starts the processes and collects what they left
+/// (a failure there reruns on evidence, like a timed check); `correct` checks what no clock
+/// decides (CRC, mode echo, clamps, refusals, counts of events the test caused), once, never
+/// rerun: its failure stands at once; `timed` checks what the machine's timing decides, and
+/// runs again only on evidence from outside the processes under test: the host's steal, a
+/// stall of the test harness itself (a thread of this process oversleeping [`HARNESS_STALL`]),
+/// or what `starved` finds in what the test's own peers left (never a process under test
+/// excusing itself). Each rerun is said and listed with its first failure.
+pub fn checked_then_timed<T>(
+    name: &str,
+    starved: impl Fn(&Scratch) -> Option<String>,
+    run: impl Fn(&Scratch) -> T,
+    correct: impl Fn(&T),
+    timed: impl Fn(&T),
+) {
     // The failed runs' directories stay until the verdict (for a look if it is a failure).
     let mut runs: Vec<Scratch> = Vec::with_capacity(ATTEMPTS);
     for attempt in 1..=ATTEMPTS {
@@ -72,39 +91,110 @@ pub fn again_if_starved(
             format!("{name}_again{attempt}")
         }));
         let scratch = &runs[attempt - 1];
+        let before = cpu_ticks();
+        let watch = HarnessWatch::start();
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            let out = run(scratch);
+            (correct)(&out);
+            out
+        }));
+        let out = match outcome {
+            Ok(out) => out,
+            Err(f) if attempt < ATTEMPTS => {
+                let stall = watch.stop();
+                let Some(why) = outside_evidence(before, stall, || starved(scratch)) else {
+                    std::panic::resume_unwind(f);
+                };
+                said_rerun(name, attempt, &why, &f);
+                continue;
+            }
+            Err(f) => std::panic::resume_unwind(f),
+        };
         if attempt == ATTEMPTS {
-            body(scratch);
+            timed(&out);
             return;
         }
-        let before = cpu_ticks();
-        let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| body(scratch)));
-        let Err(failure) = run else {
+        let checked = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| timed(&out)));
+        let stall = watch.stop();
+        let Err(failure) = checked else {
             return;
         };
-        let steal = steal_share(before, cpu_ticks()).unwrap_or(0.0);
-        let why = match starved(scratch) {
-            Some(why) => why,
-            None if steal > STEAL_STARVED => {
-                format!("the host took {:.1} % of the CPUs", 100.0 * steal)
-            }
-            None => std::panic::resume_unwind(failure),
+        let Some(why) = outside_evidence(before, stall, || starved(scratch)) else {
+            std::panic::resume_unwind(failure);
         };
-        let waited = settle();
-        let first = failure
-            .downcast_ref::<String>()
-            .map(String::as_str)
-            .or_else(|| failure.downcast_ref::<&str>().copied())
-            .unwrap_or("(a panic without a message)");
-        said_rerun(&format!(
-            "RERUN {name}: failed on a machine that starved the test's own processes ({why}, \
-             steal {:.1} % during the run); run {} of {ATTEMPTS} after {:.0} s of settling. \
-             The failure: {}",
-            100.0 * steal,
-            attempt + 1,
-            waited.as_secs_f64(),
-            first.replace('\n', " | ")
+        said_rerun(name, attempt, &why, &failure);
+    }
+}
+
+/// A stall of the test harness's own watch thread above which the machine starved the test.
+pub const HARNESS_STALL: Duration = Duration::from_millis(20);
+
+/// A thread of the test process that sleeps 1 ms at a time and keeps its worst oversleep:
+/// when the harness itself stalls, the machine (not the code under test) took the CPUs.
+struct HarnessWatch {
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: std::thread::JoinHandle<Duration>,
+}
+
+impl HarnessWatch {
+    fn start() -> Self {
+        use std::sync::atomic::Ordering;
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let flag = std::sync::Arc::clone(&stop);
+        let thread = std::thread::spawn(move || {
+            let mut worst = Duration::ZERO;
+            while !flag.load(Ordering::Relaxed) {
+                let t = Instant::now();
+                std::thread::sleep(Duration::from_millis(1));
+                worst = worst.max(t.elapsed().saturating_sub(Duration::from_millis(1)));
+            }
+            worst
+        });
+        Self { stop, thread }
+    }
+
+    fn stop(self) -> Duration {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        self.thread.join().unwrap_or(Duration::ZERO)
+    }
+}
+
+/// Why a failed run may be the machine's: the host's steal, the harness's own stall, or what
+/// the test's own peers left (`peers`); `None`: the failure stands.
+fn outside_evidence(
+    before: Option<(u64, u64)>,
+    stall: Duration,
+    peers: impl FnOnce() -> Option<String>,
+) -> Option<String> {
+    let steal = steal_share(before, cpu_ticks()).unwrap_or(0.0);
+    if steal > STEAL_STARVED {
+        return Some(format!("the host took {:.1} % of the CPUs", 100.0 * steal));
+    }
+    if stall > HARNESS_STALL {
+        return Some(format!(
+            "the test harness itself stalled {:.1} ms",
+            stall.as_secs_f64() * 1e3
         ));
     }
+    peers()
+}
+
+/// Says and lists a rerun after `attempt` failed with `failure` for `why`, once the machine
+/// has settled.
+fn said_rerun(name: &str, attempt: usize, why: &str, failure: &(dyn std::any::Any + Send)) {
+    let waited = settle();
+    let first = failure
+        .downcast_ref::<String>()
+        .map(String::as_str)
+        .or_else(|| failure.downcast_ref::<&str>().copied())
+        .unwrap_or("(a panic without a message)");
+    list_rerun(&format!(
+        "RERUN {name}: failed on a starved machine ({why}); run {} of {ATTEMPTS} after {:.0} s \
+         of settling. The failure: {}",
+        attempt + 1,
+        waited.as_secs_f64(),
+        first.replace('\n', " | ")
+    ));
 }
 
 /// Where reruns are listed, one line each with the first failure (`.ci/run` prints them).
@@ -114,7 +204,7 @@ fn rerun_list() -> std::path::PathBuf {
 
 /// Says a rerun past the harness's capture (which hides `eprintln!` of a passing test) and
 /// lists it.
-fn said_rerun(line: &str) {
+fn list_rerun(line: &str) {
     use std::io::Write;
     let _ = writeln!(std::io::stderr(), "{line}");
     if let Ok(mut f) = std::fs::OpenOptions::new()

@@ -119,6 +119,11 @@ pub struct CorrectionCounts {
     /// Gaps in plant time longer than two bins between ticks (a stalled controller), across
     /// which no hand acceleration was taken (FC-1c).
     pub time_gaps: u64,
+    /// Ticks that followed a gap in the controller's own ticks (more than 2.5 periods: it
+    /// stalled) or whose state the plant's drives held (its brace of a silent controller): the
+    /// measurement around them is the stall's, not the push's, so κ̂ and τ̂ were kept as they
+    /// were for a settling time and a window after (FC-2d).
+    pub stalls: u64,
 }
 
 type V3 = [f64; 3];
@@ -127,6 +132,10 @@ type V3 = [f64; 3];
 const EVIDENCE_SD: f64 = 0.1;
 /// Time constant (s) of the model error's scale after a push: the door and the arm ring on.
 const DYNAMICS_TIME: f64 = 0.5;
+/// FC-2d: how long the measured push takes to settle after a stall (s): not only the wrench
+/// observer's and the acceleration window's tens of ms but the robot's sag under the drives'
+/// switch and its recovery, a tenth of a second and more.
+const STALL_SETTLE: f64 = 0.2;
 /// Memory of the bins' residual variance (s).
 const NOISE_TIME: f64 = 1.0;
 /// A window is remembered when its forecast energy is at least this fraction of the recent
@@ -226,6 +235,8 @@ pub struct ForecastCorrector {
     /// Plant time of the last tick with a measurement: a gap longer than two bins (a stalled
     /// controller) restarts the velocity history, whose differences assume contiguous bins.
     last_t: f64,
+    /// FC-2d: no estimation of κ̂, τ̂ before this bin (a stall's window is not fitted).
+    fit_from_bin: u64,
     vel_hist: [V3; MAX_ACCELERATION_BINS + 1],
     vel_known: usize,
     last_acc: V3,
@@ -321,6 +332,7 @@ impl ForecastCorrector {
             acc_vel: [0.0; 3],
             acc_vel_n: 0,
             last_t: f64::NEG_INFINITY,
+            fit_from_bin: 0,
             vel_hist: [[0.0; 3]; MAX_ACCELERATION_BINS + 1],
             vel_known: 0,
             last_acc: [0.0; 3],
@@ -418,6 +430,7 @@ impl ForecastCorrector {
         self.acc_vel = [0.0; 3];
         self.acc_vel_n = 0;
         self.last_t = f64::NEG_INFINITY;
+        self.fit_from_bin = 0;
         self.vel_known = 0;
         self.last_acc = [0.0; 3];
         self.est = CorrectionEstimate::default();
@@ -479,10 +492,37 @@ impl ForecastCorrector {
         self.meas[(self.bins as usize - 1 - k) % len]
     }
 
+    /// FC-2d: a stall of the controller (a gap of more than 2.5 periods in its ticks: two
+    /// states or more missed; one superseded state is a loaded machine's routine) or a
+    /// state its plant held (the bus's brace of a silent controller) leaves a transient in the
+    /// measured push — the drives' switch, the hand's lurch, an observer's step over the gap —
+    /// that the fit can explain only by sliding the forecast's next push under it (measured: a
+    /// 2–14 ms stall read as a push 340 ms early, κ̂ 0.16–0.31, and a fall). κ̂ and τ̂ stay as
+    /// they were until the window holds no bin of the stall and its settling
+    /// ([`STALL_SETTLE`]); the offset observer (FC-3) still takes the transient. A hold before
+    /// the first estimate (the plant's start) has no estimate to protect.
+    fn watch_for_stalls(&mut self, t: f64, held: bool) {
+        let gap = self.last_t.is_finite() && t - self.last_t > 2.5 * self.dt;
+        if gap || (held && self.counts.estimations > 0) {
+            self.counts.stalls += 1;
+            let settle = (STALL_SETTLE / self.bin).ceil() as u64;
+            self.fit_from_bin = self.bins + settle + self.n_w as u64;
+        }
+    }
+
     /// One control tick at plant time `t` with the force measured at the hand (`None`: no
-    /// measurement this tick) and the hand's measured velocity (world). Updates the offset
-    /// observer every tick and κ̂, τ̂ once a bin.
-    pub fn update(&mut self, t: f64, window: &ForecastWindow, measured: Option<V3>, hand_vel: V3) {
+    /// measurement this tick) and the hand's measured velocity (world); `held`: the plant's
+    /// drives, not this controller's torques, moved the robot up to this state. Updates the
+    /// offset observer every tick and κ̂, τ̂ once a bin.
+    pub fn update(
+        &mut self,
+        t: f64,
+        window: &ForecastWindow,
+        measured: Option<V3>,
+        hand_vel: V3,
+        held: bool,
+    ) {
+        self.watch_for_stalls(t, held);
         let finite = |y: &V3| y.iter().all(|v| v.is_finite());
         let Some(y) = measured.filter(|y| finite(y) && finite(&hand_vel)) else {
             if measured.is_some() {
@@ -561,12 +601,15 @@ impl ForecastCorrector {
         let centre = self.last_bin_t - 0.5 * self.bin;
         let explained = self.forecast_at(window, centre - self.est.shift - self.lag);
         let e: V3 = [0, 1, 2].map(|c| self.meas[i_m][c] - self.est.factor * explained[c]);
-        if let Some(e0) = self.last_residual {
+        if let Some(e0) = self
+            .last_residual
+            .filter(|_| self.bins >= self.fit_from_bin)
+        {
             let d2 = (0..3).map(|c| (e[c] - e0[c]).powi(2)).sum::<f64>() / 6.0;
             self.residual_var += (1.0 - (-self.bin / NOISE_TIME).exp()) * (d2 - self.residual_var);
         }
         self.last_residual = Some(e);
-        if self.bins as usize >= self.n_w {
+        if self.bins as usize >= self.n_w && self.bins >= self.fit_from_bin {
             self.estimate_factor_and_shift(window);
         }
         self.fit_trend(window);

@@ -76,7 +76,13 @@ impl ControllerPart for Correction {
             false => 0.0,
         });
         let measured = hand.force_used(&inputs.sensed.hand_force);
-        c.update(t, inputs.forecast, Some(measured), hand.vel);
+        c.update(
+            t,
+            inputs.forecast,
+            Some(measured),
+            hand.vel,
+            inputs.sensed.held,
+        );
         let p = &mut hand.prediction;
         c.fill(
             t,
@@ -169,6 +175,10 @@ pub struct CorrectionSummary {
     /// Gaps in plant time across which no hand acceleration was taken.
     #[serde(default)]
     pub time_gaps: u64,
+    /// Stalls of the controller (gaps in its ticks) or states its plant held after the first
+    /// estimate, after which κ̂ and τ̂ were kept for a window (FC-2d).
+    #[serde(default)]
+    pub stalls: u64,
 }
 
 impl CorrectionSummary {
@@ -189,6 +199,7 @@ impl CorrectionSummary {
             discounts: c.discounts,
             discounted_time: c.discounted_time,
             time_gaps: c.time_gaps,
+            stalls: c.stalls,
         }
     }
 }
