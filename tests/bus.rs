@@ -41,6 +41,18 @@ struct BusRun {
     sim: serde_json::Value,
 }
 
+impl BusRun {
+    /// Stops the participant and the robot (each writes its summary) and reads what they left.
+    fn stopped(p: &mut Procs, s: &Scratch) -> Self {
+        p.stop(s, "bus", libc::SIGTERM);
+        p.stop(s, "sim", libc::SIGTERM);
+        BusRun {
+            bus: json(&s.path("bus.json")),
+            sim: json(&s.path("sim.json")),
+        }
+    }
+}
+
 /// The checks no clock decides, on every run of the bus: no error, every command the robot got
 /// sealed and echoed, no feed-forward above an effort limit, no state refused (upc's robot
 /// sends none bad), no torque clamped (the controller keeps to the limits); `killed`: the run
@@ -87,12 +99,7 @@ fn a_g1_on_the_bus_stands_its_silent_controller_braced_within_10_ms_and_damped_a
         // Its death: the brace within the bound, damping after `bus.hold.brace` (0.5 s).
         p.signal("controller", libc::SIGKILL);
         std::thread::sleep(Duration::from_millis(1500));
-        p.stop(s, "bus", libc::SIGTERM);
-        p.stop(s, "sim", libc::SIGTERM);
-        BusRun {
-            bus: json(&s.path("bus.json")),
-            sim: json(&s.path("sim.json")),
-        }
+        BusRun::stopped(&mut p, s)
     };
     let correct = |r: &BusRun| {
         bus_correct(r, true);
@@ -159,12 +166,7 @@ fn a_g1_participant_or_robot_stopped_and_continued_joins_the_bus_again_and_the_r
         std::thread::sleep(Duration::from_secs(3));
         p.freeze(&["sim"], 0.015);
         std::thread::sleep(Duration::from_secs(3));
-        p.stop(s, "bus", libc::SIGTERM);
-        p.stop(s, "sim", libc::SIGTERM);
-        BusRun {
-            bus: json(&s.path("bus.json")),
-            sim: json(&s.path("sim.json")),
-        }
+        BusRun::stopped(&mut p, s)
     };
     let correct = |r: &BusRun| {
         bus_correct(r, false);

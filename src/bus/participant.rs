@@ -15,9 +15,9 @@
 //!   `bus.damping`, tau = 0) until it answers again, then a new hand-over (`drive.rs`);
 //! - every torque clamped to its joint's effort limit; mode_machine echoed from the state;
 //! - a state with a bad CRC (`bus.bad_crc`), a tick that does not advance or a non-finite value
-//!   is refused and counted; no valid state for `bus.state_timeout` → damping, repeated until the
-//!   robot speaks again (then a new hand-over); none for `bus.robot_lost` ends the run (the
-//!   robot is gone: there is nothing to command).
+//!   is refused and counted; no valid state for `bus.state_timeout` → the brace at the last
+//!   state's posture, repeated every 2 ms, damping after `bus.hold.brace`, until the robot speaks
+//!   again; none for `bus.robot_lost` ends the run (the robot is gone: nothing to command).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -85,8 +85,9 @@ pub struct BusOptions {
 /// The poll period of the wait for the controller's answer: what it adds to an answer at most.
 const ANSWER_POLL: Duration = Duration::from_micros(50);
 
-/// How often damping is written while the robot is silent: a G1's state period, so that a
-/// robot whose states are lost on the way but which still listens keeps receiving it.
+/// How often the brace (then damping) is written while the robot is silent: a G1's state
+/// period, so that a robot whose states are lost on the way but which still listens keeps
+/// receiving it.
 const SILENT_REPEAT: Duration = Duration::from_millis(2);
 
 /// How often, while the robot is silent, the participant checks that its own DDS threads run.
@@ -341,13 +342,7 @@ impl<'a> Session<'a> {
                 .max((published - start).as_secs_f64());
             let waited = self.await_answer(ep, published)?;
             self.decide(t);
-            let blend = self.drives.blend(self.cfg, t);
-            let w = Instant::now();
-            ep.bus
-                .commands
-                .write(self.command(self.drives.drive, blend))?;
-            self.summary.write_max = self.summary.write_max.max(w.elapsed().as_secs_f64());
-            self.summary.commands += 1;
+            self.write_drive(ep, t)?;
             let total = self.received.elapsed();
             self.round_trip.record(total);
             self.adapter.record(total.saturating_sub(waited));
@@ -494,11 +489,10 @@ impl<'a> Session<'a> {
         drives.decide(self.cfg, robot, t, Instant::now(), &mut self.summary);
     }
 
-    /// Waits for the next valid state. A controller falling silent meanwhile is damped at once,
+    /// Waits for the next valid state. A controller falling silent meanwhile is braced at once,
     /// without waiting for the robot: the bound is `bus.command_timeout`, not a robot period.
-    /// A robot silent for `bus.state_timeout` is damped too, every [`SILENT_REPEAT`], and handed
-    /// back to the controller through the hold when it speaks again; silent for
-    /// `bus.robot_lost`, it is gone.
+    /// A robot silent for `bus.state_timeout` is braced too, every [`SILENT_REPEAT`] (damped
+    /// after `bus.hold.brace`); silent for `bus.robot_lost`, it is gone.
     fn next_state(&mut self, ep: &mut Endpoints) -> Result<(), BusError> {
         let waiting = Instant::now();
         let silent = waiting + Duration::from_secs_f64(self.cfg.state_timeout);
@@ -604,13 +598,15 @@ impl<'a> Session<'a> {
         Ok(true)
     }
 
-    /// The drive's command between states at robot time `t` (the controller or the robot
-    /// silent: the brace at once, not at the robot's next state, then damping), counted.
+    /// The drive's command at robot time `t`: the answer to a state, or between states when the
+    /// controller or the robot is silent (the brace at once, not at the robot's next state, then
+    /// damping); counted and its write timed.
     fn write_drive(&mut self, ep: &mut Endpoints, t: f64) -> Result<(), BusError> {
         let blend = self.drives.blend(self.cfg, t);
-        ep.bus
-            .commands
-            .write(self.command(self.drives.drive, blend))?;
+        let cmd = self.command(self.drives.drive, blend);
+        let w = Instant::now();
+        ep.bus.commands.write(cmd)?;
+        self.summary.write_max = self.summary.write_max.max(w.elapsed().as_secs_f64());
         self.summary.commands += 1;
         Ok(())
     }

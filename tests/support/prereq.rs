@@ -6,11 +6,24 @@
 //! cargo's test scratch directory, which `.ci/run` prints at the end.
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Whether this run is CI's: `CI` set to anything but empty, `0` or `false`.
 pub fn in_ci() -> bool {
     std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "0" && v != "false")
+}
+
+/// Says `line` past the harness's output capture (`eprintln!` is captured for a passing test; a
+/// write to the handle is not) and appends it to `list`, which `.ci/run` prints.
+pub fn said_and_listed(line: &str, list: &Path) {
+    let _ = writeln!(std::io::stderr(), "{line}");
+    if let Ok(mut f) = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(list)
+    {
+        let _ = writeln!(f, "{line}");
+    }
 }
 
 /// Where skipped tests are listed, one line each (the test, what was missing).
@@ -30,16 +43,10 @@ pub fn missing(what: &str, install: &str) {
         "{test}: {what}. Under CI every prerequisite of the tests must be installed: run \
          `{install}`"
     );
-    let line = format!("SKIPPED {test}: {what} (install: {install})");
-    // `eprintln!` is captured by the harness for passing tests; a write to the handle is not.
-    let _ = writeln!(std::io::stderr(), "{line}");
-    if let Ok(mut f) = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(skip_list())
-    {
-        let _ = writeln!(f, "{line}");
-    }
+    said_and_listed(
+        &format!("SKIPPED {test}: {what} (install: {install})"),
+        &skip_list(),
+    );
 }
 
 /// The install command of everything the tests need.

@@ -5,6 +5,7 @@
 //! their failures come with evidence of that from outside the processes under test; a failure
 //! without it stands at once, and the checks that no clock decides are never rerun.
 
+use super::prereq::said_and_listed;
 use super::procs::Scratch;
 use std::time::{Duration, Instant};
 
@@ -188,30 +189,19 @@ fn said_rerun(name: &str, attempt: usize, why: &str, failure: &(dyn std::any::An
         .map(String::as_str)
         .or_else(|| failure.downcast_ref::<&str>().copied())
         .unwrap_or("(a panic without a message)");
-    list_rerun(&format!(
-        "RERUN {name}: failed on a starved machine ({why}); run {} of {ATTEMPTS} after {:.0} s \
+    said_and_listed(
+        &format!(
+            "RERUN {name}: failed on a starved machine ({why}); run {} of {ATTEMPTS} after {:.0} s \
          of settling. The failure: {}",
-        attempt + 1,
-        waited.as_secs_f64(),
-        first.replace('\n', " | ")
-    ));
+            attempt + 1,
+            waited.as_secs_f64(),
+            first.replace('\n', " | ")
+        ),
+        &rerun_list(),
+    );
 }
 
 /// Where reruns are listed, one line each with the first failure (`.ci/run` prints them).
 fn rerun_list() -> std::path::PathBuf {
     std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("rerun-tests.txt")
-}
-
-/// Says a rerun past the harness's capture (which hides `eprintln!` of a passing test) and
-/// lists it.
-fn list_rerun(line: &str) {
-    use std::io::Write;
-    let _ = writeln!(std::io::stderr(), "{line}");
-    if let Ok(mut f) = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(rerun_list())
-    {
-        let _ = writeln!(f, "{line}");
-    }
 }
