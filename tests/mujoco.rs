@@ -14,6 +14,7 @@ use nalgebra::{DMatrix, Matrix3};
 use serde_json::Value;
 use support::pd_driver::{drive, state_bits};
 use support::procs::*;
+use support::starved::checked_then_timed;
 use upc::channels::{STATE_FLAG_HOLD, StateMsg};
 use upc::dynamics::{Data, crba, forward_kinematics};
 use upc::robot::Robot;
@@ -230,55 +231,66 @@ fn mujoco_real_time_holds_hands_over_and_holds_again_when_the_controller_dies() 
         return;
     }
     let _serial = serial();
-    let s = Scratch::new("mujoco_rt");
-    let mut p = Procs::default();
-    let obs = Observer::start(&s.prefix);
-    let bundle = s.path("bundle").display().to_string();
-    start_plant(
-        &mut p,
-        &s,
-        "sim",
-        &["--plant", "mujoco", "--bundle", &bundle],
-    );
-    obs.wait_for(1, 0.5, &mut p, &s);
-    let before = obs.get();
-    assert_ne!(
-        before.flags & STATE_FLAG_HOLD,
-        0,
-        "held before a controller: {before:?}"
-    );
-    start_controller(&mut p, &s, &[]);
-    obs.wait_for(1, before.time + 2.0, &mut p, &s);
-    let driven = obs.get();
-    assert_eq!(driven.flags & STATE_FLAG_HOLD, 0, "handed over: {driven:?}");
-    // A stall of both processes (twice the command timeout) is not a lost controller.
-    p.freeze(&["sim", "controller"], 0.1);
-    obs.wait_for(1, driven.time + 0.5, &mut p, &s);
-    let stalled = obs.get();
-    assert_eq!(
-        stalled.flags & STATE_FLAG_HOLD,
-        0,
-        "after a stall: {stalled:?}"
-    );
-    p.signal("controller", libc::SIGKILL);
-    let _ = p.wait("controller", Duration::from_secs(5));
-    obs.wait_for(1, stalled.time + 1.0, &mut p, &s);
-    let lost = obs.get();
-    assert_ne!(lost.flags & STATE_FLAG_HOLD, 0, "held again: {lost:?}");
-    p.stop(&s, "sim", libc::SIGTERM);
-    let drop = lost.com_drop();
-    assert!(drop < 5e-3, "the CoM dropped {drop} m: {lost:?}");
-    assert!(lost.max_slip < 0.05, "the feet slid: {lost:?}");
-    let sim = json(&s.path("sim.json"));
-    assert_eq!(sim["plant"], "mujoco");
-    assert_eq!(u(&sim["hold"], "handovers"), 1, "{sim}");
-    assert_eq!(u(&sim["hold"], "losses"), 1, "{sim}");
-    assert_eq!(
-        u(&sim["commands"], "foreign") + u(&sim["commands"], "non_finite"),
-        0,
-        "{sim}"
-    );
-    assert!(f(&sim, "scenario_start") > 0.0, "{sim}");
+    let run = |s: &Scratch| {
+        let mut p = Procs::default();
+        let obs = Observer::start(&s.prefix);
+        let bundle = s.path("bundle").display().to_string();
+        start_plant(
+            &mut p,
+            s,
+            "sim",
+            &["--plant", "mujoco", "--bundle", &bundle],
+        );
+        obs.wait_for(1, 0.5, &mut p, s);
+        let before = obs.get();
+        start_controller(&mut p, s, &[]);
+        obs.wait_for(1, before.time + 2.0, &mut p, s);
+        let driven = obs.get();
+        // A stall of both processes (twice the command timeout) is not a lost controller.
+        p.freeze(&["sim", "controller"], 0.1);
+        obs.wait_for(1, driven.time + 0.5, &mut p, s);
+        let stalled = obs.get();
+        p.signal("controller", libc::SIGKILL);
+        let _ = p.wait("controller", Duration::from_secs(5));
+        obs.wait_for(1, stalled.time + 1.0, &mut p, s);
+        let lost = obs.get();
+        p.stop(s, "sim", libc::SIGTERM);
+        let sim = json(&s.path("sim.json"));
+        ([before, driven, stalled, lost], sim)
+    };
+    // What no clock decides: held before any controller and again once it is dead, the
+    // plant's commands all its own, the scenario started.
+    let correct = |([before, _, _, lost], sim): &([Seen; 4], Value)| {
+        assert_ne!(
+            before.flags & STATE_FLAG_HOLD,
+            0,
+            "held before a controller: {before:?}"
+        );
+        assert_ne!(lost.flags & STATE_FLAG_HOLD, 0, "held again: {lost:?}");
+        assert_eq!(sim["plant"], "mujoco");
+        assert_eq!(
+            u(&sim["commands"], "foreign") + u(&sim["commands"], "non_finite"),
+            0,
+            "{sim}"
+        );
+        assert!(f(sim, "scenario_start") > 0.0, "{sim}");
+    };
+    // What the machine's timing decides: the stall kept the controller, the robot stood, one
+    // hand-over and one loss.
+    let timed = |([_, driven, stalled, lost], sim): &([Seen; 4], Value)| {
+        assert_eq!(driven.flags & STATE_FLAG_HOLD, 0, "handed over: {driven:?}");
+        assert_eq!(
+            stalled.flags & STATE_FLAG_HOLD,
+            0,
+            "after a stall: {stalled:?}"
+        );
+        let drop = lost.com_drop();
+        assert!(drop < 5e-3, "the CoM dropped {drop} m: {lost:?}");
+        assert!(lost.max_slip < 0.05, "the feet slid: {lost:?}");
+        assert_eq!(u(&sim["hold"], "handovers"), 1, "{sim}");
+        assert_eq!(u(&sim["hold"], "losses"), 1, "{sim}");
+    };
+    checked_then_timed("mujoco_rt", |_| None, run, correct, timed);
 }
 
 /// `upc run --plant mujoco` for `duration` s; the controller's summary.

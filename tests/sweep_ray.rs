@@ -61,6 +61,18 @@ fn ok(o: &Output) -> String {
     err
 }
 
+/// The local pool's map of [`MAP`], computed once for the tests that compare with it (under
+/// the build's test directory: it outlives the tests that share it).
+fn local_map() -> &'static Path {
+    static LOCAL: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    LOCAL.get_or_init(|| {
+        let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("sweep_ray_local_map");
+        let _ = std::fs::remove_dir_all(&dir);
+        ok(&upc(&[&MAP[..], &["--jobs", "2"]].concat(), &dir, &[]));
+        dir
+    })
+}
+
 fn read(p: &Path) -> Vec<u8> {
     std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
@@ -264,8 +276,7 @@ fn a_two_node_ray_cluster_gives_the_local_map_even_when_a_node_dies() {
     let _one = serial();
     let Some(ray) = ray_bin() else { return };
     let s = Scratch::new("sweep_ray");
-    let local = s.path("local");
-    ok(&upc(&[&MAP[..], &["--jobs", "2"]].concat(), &local, &[]));
+    let local = local_map();
 
     let cluster = Cluster::start(&ray, &s, 1);
     let on_ray = |out: &Path| {
@@ -289,7 +300,7 @@ fn a_two_node_ray_cluster_gives_the_local_map_even_when_a_node_dies() {
     };
     let whole = s.path("ray");
     ok(&on_ray(&whole).wait_with_output().expect("upc"));
-    assert_same_map(&local, &whole);
+    assert_same_map(local, &whole);
     let runs = std::fs::read_to_string(whole.join("ray/runs.jsonl")).expect("runs.jsonl");
     assert!(runs.contains("\"nodes\": 2"), "{runs}");
 
@@ -324,7 +335,7 @@ fn a_two_node_ray_cluster_gives_the_local_map_even_when_a_node_dies() {
     let left = survivors(&pids, Duration::from_secs(10));
     assert!(left.is_empty(), "outlived their node: {left:?} of {upcs:?}");
     let err = ok(&sweep.wait_with_output().expect("upc"));
-    assert_same_map(&local, &killed);
+    assert_same_map(local, &killed);
     eprintln!("{err}");
 }
 
@@ -387,8 +398,7 @@ fn a_stopped_ray_sweep_resumes_from_the_cells_done() {
         return;
     }
     let s = Scratch::new("sweep_ray_resume");
-    let local = s.path("local");
-    ok(&upc(&[&MAP[..], &["--jobs", "2"]].concat(), &local, &[]));
+    let local = local_map();
     let out = s.path("sweep");
     let args = [
         &MAP[..],
@@ -443,7 +453,7 @@ fn a_stopped_ray_sweep_resumes_from_the_cells_done() {
         err.contains(&format!("{before} of 3 cells already done")),
         "{err}"
     );
-    assert_same_map(&local, &out);
+    assert_same_map(local, &out);
     let err = ok(&upc(
         &[&MAP[..], &["--engine", "ray", "--jobs", "1"]].concat(),
         &out,
@@ -451,7 +461,7 @@ fn a_stopped_ray_sweep_resumes_from_the_cells_done() {
     ));
     assert!(err.contains("3 of 3 cells already done"), "{err}");
     assert!(!err.contains("ray_sweep"), "the driver ran again: {err}");
-    assert_same_map(&local, &out);
+    assert_same_map(local, &out);
 }
 
 /// A node whose `upc` is another build refuses the sweep's tasks, naming itself.

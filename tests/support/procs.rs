@@ -121,9 +121,11 @@ impl Procs {
                 return st;
             }
             if Instant::now() > until {
+                // Say what it was doing before it is gone: its threads and its log.
+                let seen = where_it_hangs(child.id() as i32);
                 let _ = child.kill();
                 let _ = child.wait();
-                panic!("{name} did not exit within {limit:?}");
+                panic!("{name} did not exit within {limit:?}: {seen}");
             }
             std::thread::sleep(Duration::from_millis(20));
         }
@@ -507,4 +509,33 @@ pub fn unit_args(unit: &str, s: &Scratch) -> Vec<String> {
         .unwrap_or_else(|| panic!("{path}: no --prefix"));
     args[p + 1] = s.prefix.clone();
     args
+}
+
+/// A process that does not exit, as /proc shows it: each thread's name, state and kernel wait
+/// channel, and the end of what it wrote to its stderr (its log).
+pub fn where_it_hangs(pid: i32) -> String {
+    let read = |p: String| std::fs::read_to_string(p).unwrap_or_default();
+    let mut out = String::from("threads:");
+    let tasks = std::fs::read_dir(format!("/proc/{pid}/task"))
+        .into_iter()
+        .flatten();
+    for task in tasks.flatten() {
+        let t = task.path();
+        let stat = read(format!("{}/stat", t.display()));
+        // The state follows the parenthesised name.
+        let state = stat.rsplit(") ").next().and_then(|r| r.split(' ').next());
+        out.push_str(&format!(
+            " [{} {} {}]",
+            read(format!("{}/comm", t.display())).trim(),
+            state.unwrap_or("?"),
+            read(format!("{}/wchan", t.display())).trim()
+        ));
+    }
+    let log = std::fs::read_link(format!("/proc/{pid}/fd/2"))
+        .ok()
+        .and_then(|f| std::fs::read_to_string(f).ok())
+        .unwrap_or_default();
+    let tail: Vec<&str> = log.lines().rev().take(20).collect();
+    let tail: Vec<&str> = tail.into_iter().rev().collect();
+    format!("{out}\nits log's end:\n{}", tail.join("\n"))
 }

@@ -56,18 +56,6 @@ fn settle() -> Duration {
     start.elapsed()
 }
 
-/// Run `body` in a scratch directory named `name`. If it fails and either `starved` finds, in
-/// what the run left there, that the machine starved the test's own processes, or the host
-/// took more than [`STEAL_STARVED`] of the CPUs during the run, it runs again in a fresh one
-/// once the machine has settled, saying so, up to [`ATTEMPTS`] runs; the last verdict stands.
-pub fn again_if_starved(
-    name: &str,
-    starved: impl Fn(&Scratch) -> Option<String>,
-    body: impl Fn(&Scratch),
-) {
-    checked_then_timed(name, starved, |s| body(s), |_| {}, |_| {});
-}
-
 /// A real-time test in three parts: `run` starts the processes and collects what they left
 /// (a failure there reruns on evidence, like a timed check); `correct` checks what no clock
 /// decides (CRC, mode echo, clamps, refusals, counts of events the test caused), once, never
