@@ -176,6 +176,28 @@ fn window(seq: u64) -> Vec<u8> {
     buf
 }
 
+/// A publisher on `key`, once the bridge's subscription for it has reached this client: a
+/// client drops a put for which it knows no subscriber, so a put before that is lost, not late.
+fn matched(session: &zenoh::Session, key: String) -> zenoh::pubsub::Publisher<'static> {
+    let publisher = session.declare_publisher(key).wait().expect("publisher");
+    until(
+        &format!("the bridge's subscription for {}", publisher.key_expr()),
+        Duration::from_secs(10),
+        || {
+            publisher
+                .matching_status()
+                .wait()
+                .is_ok_and(|m| m.matching())
+        },
+    );
+    publisher
+}
+
+fn publish(publisher: &zenoh::pubsub::Publisher<'_>, bytes: Vec<u8>) {
+    publisher.put(bytes).wait().expect("put");
+    std::thread::sleep(Duration::from_millis(10));
+}
+
 fn put(session: &zenoh::Session, key: &str, bytes: Vec<u8>) {
     // The ACL refuses silently on the bridge's side: a put always succeeds locally.
     session.put(key, bytes).wait().expect("put");
@@ -355,14 +377,12 @@ fn only_the_labs_identities_get_through_and_each_only_where_its_role_allows() {
         }
     };
     drain(&mut delivered);
+    let fc1_key = matched(&fc1_session, format!("{kp}/forecast/fc1"));
+    let fc2_key = matched(&fc2, format!("{kp}/forecast/fc2"));
     let fc1_windows = 20u64;
     for seq in 1..=fc1_windows {
-        put(
-            &fc1_session,
-            &format!("{kp}/forecast/fc1"),
-            window(1000 + seq),
-        );
-        put(&fc2, &format!("{kp}/forecast/fc2"), window(2000 + seq));
+        publish(&fc1_key, window(1000 + seq));
+        publish(&fc2_key, window(2000 + seq));
         drain(&mut delivered);
     }
     put(&fc1_session, &format!("{kp}/forecast/fc2"), window(3000));
@@ -488,7 +508,10 @@ fn with_passwords_on_top_a_wrong_or_missing_password_is_refused() {
         }
     }
     std::thread::sleep(REFUSED_PUT_GRACE);
-    put(&good, &format!("{}/forecast/fc1", s.prefix), window(9));
+    publish(
+        &matched(&good, format!("{}/forecast/fc1", s.prefix)),
+        window(9),
+    );
     // Behind the bridge, the good login's window arrives (and nothing before it).
     let mut delivered = vec![];
     until(
