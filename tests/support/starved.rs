@@ -94,7 +94,7 @@ pub fn checked_then_timed<T>(
                 let Some(why) = outside_evidence(before, stall, || starved(scratch)) else {
                     std::panic::resume_unwind(f);
                 };
-                said_rerun(name, attempt, &why, &f);
+                said_rerun(name, attempt, &why, &*f);
                 continue;
             }
             Err(f) => std::panic::resume_unwind(f),
@@ -111,7 +111,7 @@ pub fn checked_then_timed<T>(
         let Some(why) = outside_evidence(before, stall, || starved(scratch)) else {
             std::panic::resume_unwind(failure);
         };
-        said_rerun(name, attempt, &why, &failure);
+        said_rerun(name, attempt, &why, &*failure);
     }
 }
 
