@@ -71,6 +71,13 @@ fn assert_stands(seen: &Seen, what: &str) {
     );
 }
 
+/// The simulator (as `sim`), then the controller and the forecaster, without a pause.
+fn start_all(p: &mut Procs, s: &Scratch) {
+    start_sim(p, s, "sim");
+    start_unit(p, s, "upc-controller", "controller", &[]);
+    start_unit(p, s, "upc-forecaster", "forecaster", &[]);
+}
+
 fn stop_all(p: &mut Procs, s: &Scratch, names: &[&str]) {
     for n in names {
         p.stop(s, n, libc::SIGTERM);
@@ -340,9 +347,7 @@ fn controller_killed_and_restarted_plant_holds_and_the_new_one_takes_over() {
     let run = |s: &Scratch| {
         let mut p = Procs::default();
         let obs = Observer::start(&s.prefix);
-        start_sim(&mut p, s, "sim");
-        start_unit(&mut p, s, "upc-controller", "controller", &[]);
-        start_unit(&mut p, s, "upc-forecaster", "forecaster", &[]);
+        start_all(&mut p, s);
         // Between the 60 N push (ends at 2.75 s of the scenario) and the 40 N one (3.6 s):
         // killed once the robot is back from the first, the controller is lost 0.05 s later,
         // and the new one's 0.2 s handover ends ≈ 3.4 s. A push that lands while the plant
@@ -403,9 +408,7 @@ fn a_machine_stall_is_not_a_lost_controller_but_a_frozen_controller_is() {
     let run = |s: &Scratch| {
         let mut p = Procs::default();
         let obs = Observer::start(&s.prefix);
-        start_sim(&mut p, s, "sim");
-        start_unit(&mut p, s, "upc-controller", "controller", &[]);
-        start_unit(&mut p, s, "upc-forecaster", "forecaster", &[]);
+        start_all(&mut p, s);
         obs.wait_for(1, 1.0, &mut p, s);
         p.freeze(&["sim", "controller", "forecaster"], 0.1);
         let after_stall = obs.get().time + 0.5;
