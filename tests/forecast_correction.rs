@@ -459,9 +459,9 @@ fn the_robustness_sweep_writes_its_map() {
         "--max",
         "1.0=80",
         "--tol",
-        "10",
+        "20",
         "--monotone",
-        "10",
+        "20",
         "--quiet",
         "--out",
     ];
@@ -474,19 +474,19 @@ fn the_robustness_sweep_writes_its_map() {
             .and_then(|r| r["survived"].as_f64())
             .unwrap_or_else(|| panic!("no {c} in {j}"))
     };
-    // C1 (exact forecast, 55 N monotone) beats C0 (30 N) by more than the bisection's 10 N
-    // resolution: C0 below 40 N, C1 at 40 N or more.
+    // C1 (exact forecast, 55 N monotone) beats C0 (30 N) by at least the bisection's 20 N
+    // resolution: C0 falls at 40 N, C1 stands it.
     eprintln!("C0 {} N, C1 {} N", survived("C0"), survived("C1"));
     assert!(survived("C0") < 40.0, "{j}");
     assert!(survived("C1") >= 40.0, "{j}");
-    assert!(survived("C1") >= survived("C0") + 10.0, "{j}");
-    // `--monotone 10`: each cell's grid ran below its bisection (the bisection's case at
-    // least, plus one per 10 N below its result), and never reads above it (the shape cell too).
+    assert!(survived("C1") >= survived("C0") + 20.0, "{j}");
+    // `--monotone 20`: each cell's grid ran below its bisection (the bisection's case at
+    // least, plus one per 20 N below its result), and never reads above it (the shape cell too).
     for r in rows {
         let num = |k: &str| r[k].as_f64().unwrap_or_else(|| panic!("no {k} in {r}"));
         let (survived, monotone) = (num("survived"), num("monotone"));
-        assert!(monotone <= survived && monotone >= 10.0, "{r}");
-        assert!(num("runs") >= (survived / 10.0).ceil(), "{r}");
+        assert!(monotone <= survived && monotone >= 20.0, "{r}");
+        assert!(num("runs") >= (survived / 20.0).ceil(), "{r}");
     }
     let csv = std::fs::read_to_string(out.join("robustness.csv")).expect("csv");
     assert!(

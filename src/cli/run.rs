@@ -462,7 +462,7 @@ fn run_one(
         running.forecaster.as_deref_mut(),
         running.bus.as_deref_mut(),
     )?;
-    let exits = running.stop(died.is_some());
+    let exits = running.stop(died.is_some(), ctx.bus_grace());
     let entry = entry_of(kind, &dir, start, controller_exit, exits, died);
     // Any participant still running is killed (as `running` drops) once its files are read.
     drop(running);
@@ -487,12 +487,22 @@ struct Exits {
 
 impl Running {
     /// The controller is done: give the others a moment, then ask them to stop (at once when
-    /// one of them `died`).
-    fn stop(&mut self, died: bool) -> Exits {
-        let grace = |d: u64| Duration::from_secs(if died { 0 } else { d });
-        let bus = self.bus.as_mut().and_then(|b| stop(b, grace(5)));
-        let sim = stop(&mut self.sim, grace(5));
-        let forecaster = self.forecaster.as_mut().and_then(|f| stop(f, grace(2)));
+    /// one of them `died`). A bus participant gets `bus_grace`, to brace then damp the robot
+    /// its controller left (what a robot would get); the plant on a bus, which runs beyond the
+    /// controller's time, is stopped after it at once.
+    fn stop(&mut self, died: bool, bus_grace: Duration) -> Exits {
+        let grace = |d: Duration| if died { Duration::ZERO } else { d };
+        let bus = self.bus.as_mut().and_then(|b| stop(b, grace(bus_grace)));
+        let sim_grace = if self.bus.is_some() {
+            Duration::ZERO
+        } else {
+            Duration::from_secs(5)
+        };
+        let sim = stop(&mut self.sim, grace(sim_grace));
+        let forecaster = self
+            .forecaster
+            .as_mut()
+            .and_then(|f| stop(f, grace(Duration::from_secs(2))));
         if let Some(b) = &mut self.bridge {
             // SAFETY: signalling our own child; SIGTERM makes it write its summary.
             unsafe { libc::kill(b.id() as libc::pid_t, libc::SIGTERM) };
@@ -673,6 +683,14 @@ impl Launch<'_> {
             bus: args.bus,
             bus_settings: args.bus_settings.clone(),
         }
+    }
+
+    /// How long the bus participant is left running once the controller is done: its time-out
+    /// for the controller's silence, the brace, then 0.2 s of damping.
+    fn bus_grace(&self) -> Duration {
+        let b = self.args.bus_settings.load().ok();
+        let s = b.map_or(1.0, |b| b.command_timeout + b.hold.brace + 0.2);
+        Duration::from_secs_f64(s.clamp(0.0, 5.0))
     }
 
     /// `upc bus` between the plant on the bus and the controller.
