@@ -48,3 +48,34 @@ fn per_tick_preview_path_does_not_allocate() {
     assert!(checksum.is_finite());
     assert_eq!(n_alloc, 0, "the tick path allocated {n_alloc} times");
 }
+
+/// The simulator's recording on the stepping loop: a frame offered every step allocates and
+/// frees nothing once the pool's frames have their sizes (a frame freed by the logger thread,
+/// idle class, once held the allocator's lock from the real-time loop for 0.66 s).
+#[test]
+fn offering_a_frame_to_the_recording_does_not_allocate() {
+    let config = upc::sim::SimConfig::embedded().unwrap();
+    let scene = upc::sim::humanoid_scene(&config, None).unwrap();
+    let mut world = scene.world;
+    let robot = upc::robot::Robot::embedded_default().unwrap();
+    let dir = std::env::temp_dir().join(format!("upc_alloc_rec_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut rec =
+        upc::sim::record::Recorder::spawn(&dir.join("sim.rrd"), None, None, &world, &robot, false)
+            .unwrap();
+    let hand = [1.0, -2.0, 3.0];
+    // The first round of the pool sizes its frames (once each, at most).
+    for _ in 0..64 {
+        rec.offer(&mut world, &hand);
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    let n_alloc = allocations(|| {
+        for _ in 0..200 {
+            rec.offer(&mut world, &hand);
+        }
+    });
+    let stats = rec.finish();
+    let _ = std::fs::remove_dir_all(&dir);
+    assert_eq!(n_alloc, 0, "{n_alloc} allocations offering 200 frames");
+    assert!(stats.written > 0, "{stats:?}");
+}

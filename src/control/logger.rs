@@ -170,6 +170,7 @@ impl ControlLogger {
 
     /// Flush and close the file (the last tick is in it once this returns).
     pub fn finish(mut self) {
+        crate::realtime::leave_background();
         self.tx.take();
         if let Some(h) = self.handle.take() {
             let _ = h.join();

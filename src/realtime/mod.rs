@@ -108,6 +108,37 @@ pub fn in_background<T>(f: impl FnOnce() -> T) -> T {
     out
 }
 
+/// The run is over: every thread of this process in the idle class (the log threads that
+/// [`in_background`] started, the rerun SDK's among them) back in the normal class, and those
+/// [`lower_priority`] lowered back to nice 0 (where allowed), so that they flush and end on a
+/// loaded machine, where the idle class hardly runs (two busy loops held a controller's end,
+/// and its summary, until they stopped). Returns how many moved.
+pub fn leave_background() -> usize {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
+        return 0;
+    };
+    let normal = libc::sched_param { sched_priority: 0 };
+    let mut moved = 0;
+    for tid in tasks
+        .flatten()
+        .filter_map(|e| e.file_name().to_str()?.parse().ok())
+    {
+        // SAFETY: sched_getscheduler/setscheduler on a thread of this process with a valid
+        // sched_param; a thread that ended meanwhile gives an error, ignored.
+        unsafe {
+            if libc::sched_getscheduler(tid) == libc::SCHED_IDLE
+                && libc::sched_setscheduler(tid, libc::SCHED_OTHER, &normal) == 0
+            {
+                moved += 1;
+            }
+            if libc::getpriority(libc::PRIO_PROCESS, tid as libc::id_t) > 0 {
+                libc::setpriority(libc::PRIO_PROCESS, tid as libc::id_t, 0);
+            }
+        }
+    }
+    moved
+}
+
 /// A log thread's receive loop: every `period`, handle what has been queued, until every
 /// sender is gone (then the rest). Why not `recv`: a blocked receiver makes each `try_send` of
 /// the real-time loop a futex wake-up of this thread, which then lands on the core the other
@@ -137,5 +168,33 @@ pub fn lower_priority(nice: i32) {
     unsafe {
         let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
         libc::setpriority(libc::PRIO_PROCESS, tid, nice);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// A thread started in the background (the idle class) is back in the normal class once
+    /// the run is over, so that it can flush on a loaded machine.
+    #[test]
+    fn threads_started_in_the_background_leave_it_at_the_end() {
+        let (tid_tx, tid_rx) = std::sync::mpsc::channel();
+        let (done_tx, done_rx) = std::sync::mpsc::channel::<()>();
+        let t = super::in_background(|| {
+            std::thread::spawn(move || {
+                // SAFETY: gettid has no arguments.
+                let tid = unsafe { libc::syscall(libc::SYS_gettid) } as libc::pid_t;
+                tid_tx.send(tid).expect("send");
+                let _ = done_rx.recv();
+            })
+        });
+        let tid = tid_rx.recv().expect("tid");
+        // SAFETY: sched_getscheduler on a thread of this process.
+        let policy = || unsafe { libc::sched_getscheduler(tid) };
+        // Any thread may enter the idle class (no privilege needed).
+        assert_eq!(policy(), libc::SCHED_IDLE);
+        assert!(super::leave_background() >= 1);
+        assert_eq!(policy(), libc::SCHED_OTHER);
+        done_tx.send(()).expect("send");
+        t.join().expect("join");
     }
 }

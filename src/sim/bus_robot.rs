@@ -10,8 +10,12 @@
 //! lab has no motion capture or force plates: its sample carries the scenario's clock and the
 //! door only, so the controller runs on what the G1 measures (docs/bus.md, "Sensing").
 //!
-//! Until the first valid command the robot hangs in its harness (the plant's hold at the start
-//! posture, as `[sim.hold]`); the scenario's push starts `bus.sim.scenario_delay` after it. A
+//! Until the first valid command that carries torques (a controller's, through `upc bus`'s
+//! hand-over) the robot hangs in its harness (the plant's hold at the start posture, as
+//! `[sim.hold]`), as a lab keeps a robot on its gantry until its controller has it: the drives'
+//! hold alone (`upc bus` before any controller: kp, kd, tau = 0) does not keep a standing G1
+//! up, and a loaded machine can start the controller seconds after the bus. The scenario's push
+//! starts `bus.sim.scenario_delay` after the first torques. A
 //! command with a bad CRC is ignored (as the robot does) and counted; no valid command for
 //! `bus.sim.command_loss` lets the drives go limp (the robot's own watchdog).
 //! `bus.sim.silence` withholds the states for a while, as a wire that loses them. Stopped and
@@ -75,9 +79,11 @@ pub struct SimRobotSummary {
     /// Commands whose feed-forward `tau` alone is above a joint's effort limit (a controller
     /// that clamps sends none).
     pub feedforward_over_limit: u64,
-    /// Plant time of the first valid command, of the scenario's start, and of each time the
-    /// drives went limp for want of commands.
+    /// Plant time of the first valid command, of the first that carries torques (out of the
+    /// harness), of the scenario's start, and of each time the drives went limp for want of
+    /// commands.
     pub first_command: f64,
+    pub first_torques: f64,
     pub scenario_start: f64,
     pub limp_steps: u64,
     pub harness_steps: u64,
@@ -273,15 +279,14 @@ impl<'a, P: Physics> BusRobot<'a, P> {
         let push_frame = push_frame(cfg, &opts.robot)?;
         let recorder = match &opts.rrd {
             Some(path) => Some(
-                crate::realtime::in_background(|| {
-                    Recorder::spawn(
-                        path,
-                        opts.recording_id.as_deref(),
-                        None,
-                        &world,
-                        &opts.robot,
-                    )
-                })
+                Recorder::spawn(
+                    path,
+                    opts.recording_id.as_deref(),
+                    None,
+                    &world,
+                    &opts.robot,
+                    true,
+                )
                 .map_err(|e| {
                     ProcessError::Setup(format!("rerun recording {}: {e}", path.display()))
                 })?,
@@ -295,6 +300,7 @@ impl<'a, P: Physics> BusRobot<'a, P> {
                 robot: opts.robot.name().into(),
                 rate: 1.0 / (every as f64 * cfg.dt),
                 first_command: -1.0,
+                first_torques: -1.0,
                 scenario_start: -1.0,
                 ..Default::default()
             },
@@ -366,8 +372,9 @@ impl<'a, P: Physics> BusRobot<'a, P> {
         Ok(())
     }
 
-    /// The commands that arrived: the valid ones counted and the newest kept; the scenario's
-    /// push started `bus.sim.scenario_delay` after the first.
+    /// The commands that arrived: the valid ones counted and the newest kept; the harness
+    /// left at the first with torques, and the scenario's push started
+    /// `bus.sim.scenario_delay` after it.
     fn take_commands(&mut self) -> Result<(), ProcessError> {
         let (bus, t) = (&self.opts.bus, self.world.time());
         while let Some(c) = self.bus.commands.try_take().map_err(dds)? {
@@ -379,14 +386,18 @@ impl<'a, P: Physics> BusRobot<'a, P> {
             self.summary.wrong_mode_machine += u64::from(c.mode_machine != bus.sim.mode_machine);
             if self.summary.first_command < 0.0 {
                 self.summary.first_command = t;
-                tracing::info!("t = {t:.3} s: first command; out of the harness");
+                tracing::info!("t = {t:.3} s: first command");
+            }
+            if self.summary.first_torques < 0.0 && carries_torques(&c, &self.map) {
+                self.summary.first_torques = t;
+                tracing::info!("t = {t:.3} s: the first command with torques; out of the harness");
             }
             self.latest = Some((c, t));
             self.bus.heard = Instant::now();
         }
         if self.summary.scenario_start < 0.0
-            && self.summary.first_command >= 0.0
-            && t >= self.summary.first_command + bus.sim.scenario_delay
+            && self.summary.first_torques >= 0.0
+            && t >= self.summary.first_torques + bus.sim.scenario_delay
         {
             self.summary.scenario_start = t;
             tracing::info!("t = {t:.3} s: scenario `{}` starts", self.opts.sim.scenario);
@@ -425,7 +436,7 @@ impl<'a, P: Physics> BusRobot<'a, P> {
         let loss = self.opts.bus.sim.command_loss;
         let live = self.latest.as_ref().filter(|(_, at)| t - at < loss);
         match live {
-            None if self.summary.first_command < 0.0 => {
+            _ if self.summary.first_torques < 0.0 => {
                 let (q, v) = (self.world.q(), self.world.v());
                 self.harness.torques(t, q, v, None, &mut self.tau);
                 self.summary.harness_steps += 1;
@@ -451,6 +462,13 @@ impl<'a, P: Physics> BusRobot<'a, P> {
         self.summary.max_penetration = self.summary.max_penetration.max(self.rep.max_penetration);
         Ok(())
     }
+}
+
+/// Whether a command carries feed-forward torques on an enabled joint (a controller drives),
+/// not only the drives' hold or damping.
+fn carries_torques(c: &LowCmd, map: &MotorMap) -> bool {
+    map.joints()
+        .any(|(k, ..)| c.motor_cmd[k].mode == 1 && c.motor_cmd[k].tau != 0.0)
 }
 
 /// The drives under a command: τ = tau + kp (q − q_meas) + kd (dq − dq_meas) on enabled slots,

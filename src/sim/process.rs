@@ -372,23 +372,18 @@ fn start_recorder(
     let Some(path) = &opts.rrd else {
         return Ok(None);
     };
-    let spawn = || {
-        Recorder::spawn(
-            path,
-            opts.recording_id.as_deref(),
-            opts.live.as_deref(),
-            world,
-            &opts.robot,
-        )
-    };
     // Real time: its threads in the idle class, they must not delay the steps. Lockstep must
     // end on a loaded machine too, where idle-class threads hardly run.
-    let rec = match opts.config.mode {
-        Mode::Realtime => crate::realtime::in_background(spawn),
-        Mode::Lockstep => spawn(),
-    };
-    rec.map(Some)
-        .map_err(|e| ProcessError::Setup(format!("rerun recording {}: {e}", path.display())))
+    Recorder::spawn(
+        path,
+        opts.recording_id.as_deref(),
+        opts.live.as_deref(),
+        world,
+        &opts.robot,
+        opts.config.mode == Mode::Realtime,
+    )
+    .map(Some)
+    .map_err(|e| ProcessError::Setup(format!("rerun recording {}: {e}", path.display())))
 }
 
 /// The lockstep ground-truth CSV, its header written (the columns of `world`'s truth record),

@@ -8,8 +8,10 @@
 //! Time line `sim_time` (simulated seconds, as in the controller's recording).
 //!
 //! The loop offers a frame every `record_period`; the frame goes through a bounded channel and
-//! is dropped (and counted) if the logger is behind. Building a frame allocates a few small
-//! vectors at the logging rate (100 Hz by default), never at the stepping rate.
+//! is dropped (and counted) if the logger is behind. Frames are recycled: the loop fills one
+//! from a pool the logger hands them back to, so the stepping loop neither allocates nor frees.
+//! Why: a frame freed by the logger (idle class) takes the allocator's lock of the loop's
+//! arena, and preempted while holding it, stalled the real-time loop for 0.66 s under load.
 
 use std::path::Path;
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
@@ -41,9 +43,14 @@ struct Frame {
     hand_force: [f32; 3],
 }
 
+/// Frames in flight: the queue to the logger (0.64 s at 100 Hz) and the pool.
+const FRAMES: usize = 64;
+
 /// A running logger thread.
 pub struct Recorder {
     tx: Option<SyncSender<Frame>>,
+    /// Frames the logger is done with, to fill again.
+    free: Receiver<Frame>,
     thread: Option<JoinHandle<u64>>,
     robot_links: Vec<(usize, String)>,
     door_links: Vec<(usize, String)>,
@@ -291,6 +298,7 @@ fn write_frame(
 fn logger(
     rec: rerun::RecordingStream,
     rx: Receiver<Frame>,
+    free: SyncSender<Frame>,
     robot: Vec<(usize, String)>,
     door: Vec<(usize, String)>,
 ) -> u64 {
@@ -306,6 +314,8 @@ fn logger(
             }
             Err(_) => {}
         }
+        // Back to the loop's pool (never full: it holds at most the frames there are).
+        let _ = free.try_send(f);
     });
     if let Err(e) = rec.flush_blocking() {
         tracing::warn!("rerun flush failed: {e}");
@@ -313,50 +323,140 @@ fn logger(
     written
 }
 
-impl Recorder {
-    /// Opens the `.rrd`, logs the static geometry of the robot and the door (their URDFs'
-    /// visuals: primitives, and the meshes whose files resolve) and starts the logger thread.
-    pub fn spawn(
-        path: &Path,
-        recording_id: Option<&str>,
-        live: Option<&str>,
-        world: &impl Physics,
-        robot: &crate::robot::Robot,
-    ) -> Result<Recorder, Box<dyn std::error::Error + Send + Sync>> {
-        let rec = crate::recording::open(path, recording_id, live)?;
-        let robot_urdf = crate::dynamics::parse_urdf(&robot.urdf)?;
+/// What the recording draws still: the robot's URDF (and where its meshes are looked up) and
+/// the door's.
+struct SceneGeometry {
+    robot_urdf: urdf_rs::Robot,
+    urdf_dir: Option<std::path::PathBuf>,
+    name: String,
+    door_urdf: Option<urdf_rs::Robot>,
+}
+
+impl SceneGeometry {
+    /// Logs the world's axes and the robot's and the door's visuals (static).
+    fn log(&self, rec: &rerun::RecordingStream) -> rerun::RecordingStreamResult<()> {
         rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
-        let urdf_dir = robot.urdf_path.as_deref().and_then(Path::parent);
+        let urdf_dir = self.urdf_dir.as_deref();
         let dirs = crate::robot::packages::package_search_dirs();
-        let (missing, first) = log_geometry(&rec, "world/robot", &robot_urdf, urdf_dir, &dirs)?;
+        let (missing, first) = log_geometry(rec, "world/robot", &self.robot_urdf, urdf_dir, &dirs)?;
         if let Some(first) = first {
             let looked: Vec<String> = dirs.iter().map(|d| d.display().to_string()).collect();
             tracing::info!(
                 "rerun: {missing} mesh files of `{}` not found, not drawn (the first: {first}); \
                  relative paths are looked up next to the URDF ({}), package:// in [{}] \
                  (ROS_PACKAGE_PATH, AMENT_PREFIX_PATH's share/, UPC_ROBOT_VENV's share/)",
-                robot.name(),
+                self.name,
                 urdf_dir.map_or("<embedded>".into(), |d| d.display().to_string()),
                 looked.join(", ")
             );
         }
+        if let Some(door) = &self.door_urdf {
+            log_geometry(rec, "world/door", door, None, &[])?;
+        }
+        Ok(())
+    }
+}
+
+/// Runs `f` in the idle class when `idle` (threads it starts inherit it: see
+/// `realtime::in_background`), else as it is.
+fn in_class<T>(idle: bool, f: impl FnOnce() -> T) -> T {
+    if idle {
+        crate::realtime::in_background(f)
+    } else {
+        f()
+    }
+}
+
+impl Recorder {
+    /// Opens the `.rrd` and starts the logger thread, which logs the static geometry of the
+    /// robot and the door (their URDFs' visuals: primitives, and the meshes whose files
+    /// resolve), then the frames. The recording is opened and written on that thread only:
+    /// every buffer of it is that thread's or rerun's threads', never the stepping loop's (a
+    /// buffer the loop had allocated, grown by rerun's file writer in the idle class, held the
+    /// allocator's lock from the loop for 62 ms and more under load). `idle_threads` (real
+    /// time): rerun's threads and the frames' logging run in the idle class
+    /// (`realtime::in_background`), the meshes are read at nice 19 (in the idle class, on the
+    /// loop's thread, a loaded machine once held a G1's start-up for 13 s).
+    pub fn spawn(
+        path: &Path,
+        recording_id: Option<&str>,
+        live: Option<&str>,
+        world: &impl Physics,
+        robot: &crate::robot::Robot,
+        idle_threads: bool,
+    ) -> Result<Recorder, Box<dyn std::error::Error + Send + Sync>> {
+        let robot_urdf = crate::dynamics::parse_urdf(&robot.urdf)?;
         let robot_links = link_frames(world.robot(), &robot_urdf);
-        let door_links = match world.door_model() {
+        let (door_urdf, door_links) = match world.door_model() {
             Some(model) => {
                 let door_urdf = crate::dynamics::parse_urdf(crate::dynamics::icub_like::DOOR_URDF)?;
-                log_geometry(&rec, "world/door", &door_urdf, None, &[])?;
-                link_frames(model, &door_urdf)
+                let links = link_frames(model, &door_urdf);
+                (Some(door_urdf), links)
             }
-            None => Vec::new(),
+            None => (None, Vec::new()),
+        };
+        let scene = SceneGeometry {
+            robot_urdf,
+            urdf_dir: robot
+                .urdf_path
+                .as_deref()
+                .and_then(Path::parent)
+                .map(Path::to_path_buf),
+            name: robot.name().to_string(),
+            door_urdf,
         };
         let hand_frame = world.robot().frame_id(&robot.description.hand.frame).ok();
-        let (tx, rx) = sync_channel::<Frame>(64);
+        let (tx, rx) = sync_channel::<Frame>(FRAMES);
+        let (free_tx, free) = sync_channel::<Frame>(FRAMES);
+        let contacts = world.contact_points().len().max(16);
+        for _ in 0..FRAMES {
+            let _ = free_tx.try_send(Frame {
+                time: 0.0,
+                robot: Vec::with_capacity(robot_links.len()),
+                door: Vec::with_capacity(door_links.len()),
+                points: Vec::with_capacity(contacts),
+                forces: Vec::with_capacity(contacts),
+                hand: [0.0; 3],
+                hand_force: [0.0; 3],
+            });
+        }
         let (rl, dl) = (robot_links.clone(), door_links.clone());
+        let (path, id, live) = (
+            path.to_path_buf(),
+            recording_id.map(str::to_string),
+            live.map(str::to_string),
+        );
+        let (opened_tx, opened) = sync_channel::<Result<(), String>>(1);
         let thread = std::thread::Builder::new()
             .name("sim-rerun".into())
-            .spawn(move || logger(rec, rx, rl, dl))?;
+            .spawn(move || {
+                let open = || crate::recording::open(&path, id.as_deref(), live.as_deref());
+                let rec = match in_class(idle_threads, open) {
+                    Ok(rec) => rec,
+                    Err(e) => {
+                        let _ = opened_tx.send(Err(e.to_string()));
+                        return 0;
+                    }
+                };
+                let _ = opened_tx.send(Ok(()));
+                if idle_threads {
+                    // The meshes are read beside the loop's first steps: at the lowest normal
+                    // priority, not the idle class, which a loaded machine hardly runs.
+                    crate::realtime::lower_priority(19);
+                }
+                if let Err(e) = scene.log(&rec) {
+                    tracing::warn!("rerun: the scene's geometry was not logged: {e}");
+                }
+                in_class(idle_threads, || logger(rec, rx, free_tx, rl, dl))
+            })?;
+        match opened.recv() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(e.into()),
+            Err(_) => return Err("the recording's thread ended before it opened the file".into()),
+        }
         Ok(Recorder {
             tx: Some(tx),
+            free,
             thread: Some(thread),
             robot_links,
             door_links,
@@ -365,40 +465,37 @@ impl Recorder {
         })
     }
 
-    /// Offers the current state; dropped (and counted) if the logger is behind.
+    /// Offers the current state in a frame of the pool; dropped (and counted) if the logger is
+    /// behind (the pool is empty). Allocates nothing once the frames have their sizes.
     pub fn offer(&mut self, world: &mut impl Physics, hand_force: &[f64; 3]) {
         let Some(tx) = &self.tx else { return };
+        let Ok(mut frame) = self.free.try_recv() else {
+            self.dropped += 1;
+            return;
+        };
         let placements = world.robot_frame_placements();
-        let robot = self
-            .robot_links
-            .iter()
-            .map(|(f, _)| pose(&placements[*f]))
-            .collect();
+        frame.robot.clear();
+        frame
+            .robot
+            .extend(self.robot_links.iter().map(|(f, _)| pose(&placements[*f])));
         let hand = self
             .hand_frame
             .map(|f| placements[f].trans)
             .unwrap_or_else(Vector3::zeros);
-        let door = match world.door_frame_placements() {
-            Some(p) => self.door_links.iter().map(|(f, _)| pose(&p[*f])).collect(),
-            None => Vec::new(),
-        };
-        let frame = Frame {
-            time: world.time(),
-            robot,
-            door,
-            points: world
-                .contact_points()
-                .iter()
-                .map(|p| [p.x as f32, p.y as f32, p.z as f32])
-                .collect(),
-            forces: world
-                .contact_forces()
-                .iter()
-                .map(|p| [p.x as f32, p.y as f32, p.z as f32])
-                .collect(),
-            hand: [hand.x as f32, hand.y as f32, hand.z as f32],
-            hand_force: hand_force.map(|x| x as f32),
-        };
+        frame.door.clear();
+        if let Some(p) = world.door_frame_placements() {
+            frame
+                .door
+                .extend(self.door_links.iter().map(|(f, _)| pose(&p[*f])));
+        }
+        let f32s = |p: &Vector3<f64>| [p.x as f32, p.y as f32, p.z as f32];
+        frame.points.clear();
+        frame.points.extend(world.contact_points().iter().map(f32s));
+        frame.forces.clear();
+        frame.forces.extend(world.contact_forces().iter().map(f32s));
+        frame.time = world.time();
+        frame.hand = f32s(&hand);
+        frame.hand_force = hand_force.map(|x| x as f32);
         match tx.try_send(frame) {
             Ok(()) => {}
             Err(TrySendError::Full(_)) => self.dropped += 1,
@@ -410,6 +507,7 @@ impl Recorder {
 
     /// Closes the channel, waits for the logger to flush the file.
     pub fn finish(mut self) -> RecorderStats {
+        crate::realtime::leave_background();
         self.tx = None;
         let written = self.thread.take().and_then(|t| t.join().ok()).unwrap_or(0);
         RecorderStats {
