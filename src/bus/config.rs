@@ -22,6 +22,17 @@ pub enum BadCrc {
     Count,
 }
 
+/// When the simulated robot leaves its harness (`bus.sim.harness`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HarnessRelease {
+    /// At the first command that carries torques: a torque controller has the robot (through
+    /// `upc bus`, whose hold before a controller is kp, kd and tau = 0).
+    Torques,
+    /// At the first valid command: a controller that drives the drives with their PD only.
+    Command,
+}
+
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct BusFile {
@@ -95,6 +106,7 @@ pub struct BusSim {
     /// [start, length] (s of robot time): no state goes out meanwhile, as states lost on the
     /// wire (a test of `upc bus`'s safety); length 0: never.
     pub silence: [f64; 2],
+    pub harness: HarnessRelease,
 }
 
 impl BusConfig {
@@ -181,5 +193,15 @@ mod tests {
         // The hold's gains are the robot's now: an old setting is told where they went.
         let e = BusConfig::load(&[], &["bus.hold.leg_kp=100.0".into()]).unwrap_err();
         assert!(e.to_string().contains("hold_kp"), "{e}");
+    }
+
+    #[test]
+    fn the_simulated_robot_leaves_its_harness_on_torques_unless_told_otherwise() {
+        let c = BusConfig::load(&[], &[]).unwrap();
+        assert_eq!(c.sim.harness, HarnessRelease::Torques);
+        let c = BusConfig::load(&[], &["bus.sim.harness=\"command\"".into()]).unwrap();
+        assert_eq!(c.sim.harness, HarnessRelease::Command);
+        let e = BusConfig::load(&[], &["bus.sim.harness=\"never\"".into()]).unwrap_err();
+        assert!(e.to_string().contains("harness"), "{e}");
     }
 }

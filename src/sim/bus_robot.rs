@@ -11,11 +11,12 @@
 //! door only, so the controller runs on what the G1 measures (docs/bus.md, "Sensing").
 //!
 //! Until the first valid command that carries torques (a controller's, through `upc bus`'s
-//! hand-over) the robot hangs in its harness (the plant's hold at the start posture, as
-//! `[sim.hold]`), as a lab keeps a robot on its gantry until its controller has it: the drives'
-//! hold alone (`upc bus` before any controller: kp, kd, tau = 0) does not keep a standing G1
-//! up, and a loaded machine can start the controller seconds after the bus. The scenario's push
-//! starts `bus.sim.scenario_delay` after the first torques. A
+//! hand-over; or the first command at all, `bus.sim.harness = "command"`, for a controller
+//! that drives the drives' PD only) the robot hangs in its harness (the plant's hold at the
+//! start posture, as `[sim.hold]`), as a lab keeps a robot on its gantry until its controller
+//! has it: the drives' hold alone (`upc bus` before any controller: kp, kd, tau = 0) does not
+//! keep a standing G1 up, and a loaded machine can start the controller seconds after the bus.
+//! The scenario's push starts `bus.sim.scenario_delay` after the release. A
 //! command with a bad CRC is ignored (as the robot does) and counted; no valid command for
 //! `bus.sim.command_loss` lets the drives go limp (the robot's own watchdog).
 //! `bus.sim.silence` withholds the states for a while, as a wire that loses them. Stopped and
@@ -39,6 +40,7 @@ use super::record::Recorder;
 use super::scene::DoorDrive;
 use super::sensors::{ImuMount, RobotSensors, Sensors};
 use crate::bus::BusConfig;
+use crate::bus::config::HarnessRelease;
 use crate::bus::dds::{BusNetwork, DdsError, Inbox, Liveness, Outbox, participant};
 use crate::bus::lab::{LAB_STATE_TOPIC, LabState};
 use crate::bus::motors::{MotorMap, Slot};
@@ -79,11 +81,11 @@ pub struct SimRobotSummary {
     /// Commands whose feed-forward `tau` alone is above a joint's effort limit (a controller
     /// that clamps sends none).
     pub feedforward_over_limit: u64,
-    /// Plant time of the first valid command, of the first that carries torques (out of the
-    /// harness), of the scenario's start, and of each time the drives went limp for want of
-    /// commands.
+    /// Plant time of the first valid command, of the robot's release from its harness (the
+    /// first command with torques, or the first, as `bus.sim.harness` says), of the scenario's
+    /// start, and of each time the drives went limp for want of commands.
     pub first_command: f64,
-    pub first_torques: f64,
+    pub released: f64,
     pub scenario_start: f64,
     pub limp_steps: u64,
     pub harness_steps: u64,
@@ -300,7 +302,7 @@ impl<'a, P: Physics> BusRobot<'a, P> {
                 robot: opts.robot.name().into(),
                 rate: 1.0 / (every as f64 * cfg.dt),
                 first_command: -1.0,
-                first_torques: -1.0,
+                released: -1.0,
                 scenario_start: -1.0,
                 ..Default::default()
             },
@@ -372,9 +374,9 @@ impl<'a, P: Physics> BusRobot<'a, P> {
         Ok(())
     }
 
-    /// The commands that arrived: the valid ones counted and the newest kept; the harness
-    /// left at the first with torques, and the scenario's push started
-    /// `bus.sim.scenario_delay` after it.
+    /// The commands that arrived: the valid ones counted and the newest kept; the harness left
+    /// as `bus.sim.harness` says, and the scenario's push started `bus.sim.scenario_delay`
+    /// after it.
     fn take_commands(&mut self) -> Result<(), ProcessError> {
         let (bus, t) = (&self.opts.bus, self.world.time());
         while let Some(c) = self.bus.commands.try_take().map_err(dds)? {
@@ -388,16 +390,20 @@ impl<'a, P: Physics> BusRobot<'a, P> {
                 self.summary.first_command = t;
                 tracing::info!("t = {t:.3} s: first command");
             }
-            if self.summary.first_torques < 0.0 && carries_torques(&c, &self.map) {
-                self.summary.first_torques = t;
-                tracing::info!("t = {t:.3} s: the first command with torques; out of the harness");
+            let release = match bus.sim.harness {
+                HarnessRelease::Torques => carries_torques(&c, &self.map),
+                HarnessRelease::Command => true,
+            };
+            if self.summary.released < 0.0 && release {
+                self.summary.released = t;
+                tracing::info!("t = {t:.3} s: out of the harness ({:?})", bus.sim.harness);
             }
             self.latest = Some((c, t));
             self.bus.heard = Instant::now();
         }
         if self.summary.scenario_start < 0.0
-            && self.summary.first_torques >= 0.0
-            && t >= self.summary.first_torques + bus.sim.scenario_delay
+            && self.summary.released >= 0.0
+            && t >= self.summary.released + bus.sim.scenario_delay
         {
             self.summary.scenario_start = t;
             tracing::info!("t = {t:.3} s: scenario `{}` starts", self.opts.sim.scenario);
@@ -436,7 +442,7 @@ impl<'a, P: Physics> BusRobot<'a, P> {
         let loss = self.opts.bus.sim.command_loss;
         let live = self.latest.as_ref().filter(|(_, at)| t - at < loss);
         match live {
-            _ if self.summary.first_torques < 0.0 => {
+            _ if self.summary.released < 0.0 => {
                 let (q, v) = (self.world.q(), self.world.v());
                 self.harness.torques(t, q, v, None, &mut self.tau);
                 self.summary.harness_steps += 1;
